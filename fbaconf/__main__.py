@@ -1,0 +1,5 @@
+import sys
+
+from fbaconf.harness.cli import main
+
+sys.exit(main())
