@@ -1,0 +1,506 @@
+"""Reference encoder: FapFrames (values + which FAPs are coded + high-level fields) -> bytes.
+
+Closed-loop quantisation (predicts from its own reconstruction). Intra planes are placed
+at the first frame, wherever the coded set or mask types change (masks change only in
+intra planes), where fap_quant changes, every ``intra_period`` planes, and wherever a
+predicted symbol would not fit the largest codable P range. Ranges are chosen so that no
+symbol is ever out of range; a value that no range can code is refused with an
+EncodeError naming FAP, frame and value — never clipped.
+
+Input semantics: a FAP with status SET in frame k is coded in k. For the others the
+group mask type decides what the decoder does (D3); by default the encoder picks type 11
+when the whole group is coded, 10 when an uncoded FAP of the group is FREE although it
+was set before, 00 when nothing is coded, else 01.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+
+from . import tables
+from .arith import ArithEncoder, UniformModel, make_model
+from .bitio import FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE, BitWriter
+from .errors import EncodeError
+from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
+from .syntax import (EXPRESSION_SELECT_MAX, FAPS_MASK, INTENSITY_MAX, LIST_ORDER, MASK_ALL, MASK_INTERPOLATE,
+                     MASK_NONE, MASK_RETAIN, VISEME_SELECT_MAX, FrameRateCode, _tdiv, frame_rate_code,
+                     intensity_bound, intensity_step, low_level_step, quant_div, quantise, skip_chunks)
+from .tables import MAX_RANGE, MAX_RANGE_CODE, NUM_FAPS, RANGE_DELTA
+
+PLANE_START_CODE_MODES = ("none", "intra", "all")
+RANGE_MODES = ("auto", "persist")
+
+
+@dataclass
+class EncoderOptions:
+    fap_quant: int = 1  # 0 = no quantisation, 1..31 scale the default steps
+    intra_period: int = 0  # 0 = intra planes only where needed; N = at least every N planes
+    frame_rate: float | str | Fraction | None = None  # output rate; None = the input's
+    time_codes: bool = False  # write a time code in every intra plane
+    plane_start_codes: str = "intra"  # none | intra | all
+    ranges: str = "auto"  # auto: tight lists in every intra plane; persist: defaults, lists when needed
+    bounds: np.ndarray | None = None  # explicit int[68, 4] (i_max, i_min, p_max, p_min), fap_quant=1 units
+    partial_mask_type: int | None = None  # force 1 or 2 for partially coded groups
+    group_types: np.ndarray | None = None  # explicit int[n, 10] mask types (frames after resampling)
+    fap_quant_per_frame: np.ndarray | None = None  # int[n]; changes force an intra plane
+    gender: int = 0
+    coding: str = "arithmetic"  # arithmetic | dct
+    end_code: bool = True
+
+    def validate(self) -> None:
+        if not 0 <= self.fap_quant <= 31:
+            raise EncodeError(f"fap_quant {self.fap_quant} outside 0..31", rule="option")
+        if self.intra_period < 0:
+            raise EncodeError("intra period must be >= 0", rule="option")
+        if self.plane_start_codes not in PLANE_START_CODE_MODES:
+            raise EncodeError(f"plane_start_codes must be one of {PLANE_START_CODE_MODES}", rule="option")
+        if self.ranges not in RANGE_MODES:
+            raise EncodeError(f"ranges must be one of {RANGE_MODES}", rule="option")
+        if self.partial_mask_type not in (None, MASK_RETAIN, MASK_INTERPOLATE):
+            raise EncodeError("partial_mask_type must be 1 or 2", rule="option")
+        if self.gender not in (0, 1):
+            raise EncodeError("gender must be 0 or 1", rule="option")
+        if self.coding not in ("arithmetic", "dct"):
+            raise EncodeError("coding must be 'arithmetic' or 'dct'", rule="option")
+
+
+@dataclass
+class EncodeResult:
+    data: bytes
+    recon: FapFrames  # the encoder's own reconstruction (what a conformant decoder outputs)
+    intra_frames: list[int]
+    plane_offsets: list[int]
+
+
+# ---------------------------------------------------------------------------- input preparation
+
+def resample(frames: FapFrames, rate: float) -> FapFrames:
+    """Temporal subsampling to ``rate``: output frame j (time j/rate) is the latest input frame
+    at or before that time, kept as it is (its coded FAPs stay coded)."""
+    if len(frames) == 0:
+        return frames.copy()
+    t_in = frames.frame_number / frames.frame_rate
+    t_end = t_in[-1]
+    n_out = int(np.floor(t_end * rate + 1e-9)) + 1
+    t_out = np.arange(n_out) / rate
+    idx = np.searchsorted(t_in, t_out + 1e-9, side="right") - 1
+    keep = idx >= 0
+    idx, jn = idx[keep], np.arange(n_out)[keep]
+    out = frames.select(idx)
+    out.frame_number = jn.astype(np.int64)
+    out.frame_rate = float(rate)
+    out.time_ms = jn * 1000.0 / rate
+    return out
+
+
+def _derive_group_types(frames: FapFrames, partial: int | None) -> np.ndarray:
+    n = len(frames)
+    types = np.zeros((n, 10), dtype=np.int64)
+    coded = frames.status == SET
+    ever = np.zeros(NUM_FAPS, dtype=bool)
+    for k in range(n):
+        for gi, g in enumerate(tables.groups()):
+            sl = slice(g.first_fap - 1, g.last_fap)
+            c = coded[k, sl]
+            if c.all():
+                t = MASK_ALL
+            else:
+                freed = ((frames.status[k, sl] == FREE) & ever[sl] & ~c).any()
+                if c.any():
+                    t = partial if partial is not None else (MASK_INTERPOLATE if freed else MASK_RETAIN)
+                else:
+                    t = MASK_INTERPOLATE if freed else MASK_NONE
+            types[k, gi] = t
+        ever |= coded[k]
+    return types
+
+
+def _check_input(frames: FapFrames) -> None:
+    fn = frames.frame_number
+    if len(fn) and fn[0] < 0:
+        raise EncodeError("frame numbers must be >= 0", rule="frame-order", frame=0, value=int(fn[0]))
+    bad = np.nonzero(np.diff(fn) <= 0)[0]
+    if len(bad):
+        k = int(bad[0]) + 1
+        raise EncodeError(f"frame numbers must increase (frame {int(fn[k - 1])} is followed by {int(fn[k])})",
+                          rule="frame-order", frame=k, value=int(fn[k]))
+    limits = {"viseme_select1": VISEME_SELECT_MAX, "viseme_select2": VISEME_SELECT_MAX,
+              "viseme_blend": INTENSITY_MAX, "viseme_def": 1,
+              "expression_select1": EXPRESSION_SELECT_MAX, "expression_intensity1": INTENSITY_MAX,
+              "expression_select2": EXPRESSION_SELECT_MAX, "expression_intensity2": INTENSITY_MAX,
+              "init_face": 1, "expression_def": 1}
+    for j, name in enumerate(HIGH_LEVEL_FIELDS):
+        fap = 1 if j < 4 else 2
+        col = frames.high[:, j]
+        live = frames.status[:, fap - 1] == SET
+        bad = np.nonzero(live & ((col < 0) | (col > limits[name])))[0]
+        if len(bad):
+            k = int(bad[0])
+            raise EncodeError(f"{name} = {int(col[k])} outside 0..{limits[name]}", rule="high-level-range",
+                              frame=k, fap=fap, value=int(col[k]))
+
+
+# ---------------------------------------------------------------------------- encoder
+
+class _Plan:
+    """Intra placement, closed-loop reconstruction and the symbols of every plane."""
+
+    def __init__(self, frames: FapFrames, opts: EncoderOptions, quants: np.ndarray, types: np.ndarray,
+                 forced: set[int]) -> None:
+        n = len(frames)
+        coded = frames.status == SET
+        self.coded = coded
+        self.intra = np.zeros(n, dtype=bool)
+        for k in range(n):
+            if k == 0 or k in forced:
+                self.intra[k] = True
+            elif (coded[k] != coded[k - 1]).any() or (types[k] != types[k - 1]).any() or quants[k] != quants[k - 1]:
+                self.intra[k] = True
+        if opts.intra_period > 0:
+            last = 0
+            for k in range(n):
+                if self.intra[k]:
+                    last = k
+                elif k - last >= opts.intra_period:
+                    self.intra[k] = True
+                    last = k
+        # closed loop
+        vals = frames.values.astype(np.int64)
+        high = frames.high.astype(np.int64)
+        self.sym = np.zeros((n, NUM_FAPS), dtype=np.int64)  # low-level symbol value Q (intra: level, P: delta)
+        self.hsym = np.zeros((n, len(HIGH_LEVEL_FIELDS)), dtype=np.int64)
+        self.recon = np.zeros((n, NUM_FAPS), dtype=np.int64)
+        self.rhigh = np.zeros((n, len(HIGH_LEVEL_FIELDS)), dtype=np.int64)
+        cur = np.zeros(NUM_FAPS, dtype=np.int64)
+        hcur = np.zeros(len(HIGH_LEVEL_FIELDS), dtype=np.int64)
+        steps_by_q: dict[int, np.ndarray] = {}
+        for k in range(n):
+            q = int(quants[k])
+            steps = steps_by_q.get(q)
+            if steps is None:
+                steps = steps_by_q[q] = np.array([1, 1] + [low_level_step(f, q) for f in range(3, NUM_FAPS + 1)],
+                                                 dtype=np.int64)
+            c = coded[k]
+            idx = np.nonzero(c[2:])[0] + 2
+            if self.intra[k]:
+                target = vals[k, idx]
+            else:
+                target = vals[k, idx] - cur[idx]
+            st = steps[idx]
+            h = st // 2
+            a = np.abs(target)
+            lvl = np.where(a <= h, 0, (a + h) // st) * np.sign(target)
+            self.sym[k, idx] = lvl
+            cur[idx] = (0 if self.intra[k] else cur[idx]) + lvl * st
+            istep = intensity_step(q)
+            if c[0]:
+                for j in (0, 1):
+                    self.hsym[k, j] = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
+                    hcur[j] = high[k, j]
+                j = 2
+                t = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
+                self.hsym[k, j] = quantise(int(t), istep)
+                hcur[j] = (0 if self.intra[k] else hcur[j]) + self.hsym[k, j] * istep
+                hcur[3] = high[k, 3]
+            if c[1]:
+                for j in (4, 6):
+                    self.hsym[k, j] = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
+                    hcur[j] = high[k, j]
+                for j in (5, 7):
+                    t = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
+                    self.hsym[k, j] = quantise(int(t), istep)
+                    hcur[j] = (0 if self.intra[k] else hcur[j]) + self.hsym[k, j] * istep
+                hcur[8] = high[k, 8]
+                hcur[9] = high[k, 9]
+            self.recon[k] = cur
+            self.rhigh[k] = hcur
+        # needed bounds per segment, in fap_quant = 1 units: (i_max, i_min, p_max, p_min)
+        self.segments: list[tuple[int, int]] = []
+        starts = list(np.nonzero(self.intra)[0]) + [n]
+        for a, b in zip(starts[:-1], starts[1:]):
+            self.segments.append((int(a), int(b)))
+        self.need = {}
+        self.p_overflow: list[int] = []
+        for a, b in self.segments:
+            d = quant_div(int(quants[a]))
+            isym = self.sym[a]
+            need = np.zeros((NUM_FAPS, 4), dtype=np.int64)
+            need[:, 0] = np.maximum(isym, 0) * d
+            need[:, 1] = np.minimum(isym, 0) * d
+            if b > a + 1:
+                ps = self.sym[a + 1:b]
+                need[:, 2] = np.maximum(ps.max(axis=0), 0) * d
+                need[:, 3] = np.minimum(ps.min(axis=0), 0) * d
+                over = (np.abs(ps) * d > MAX_RANGE) & coded[a + 1:b]
+                rows = np.nonzero(over.any(axis=1))[0]
+                if len(rows):
+                    self.p_overflow.append(a + 1 + int(rows[0]))
+            self.need[a] = need
+
+
+def _bound_code(v: int) -> int:
+    """Smallest 5-bit list value whose bound (x 60) covers magnitude v."""
+    return -(-abs(int(v)) // RANGE_DELTA)
+
+
+def encode(frames: FapFrames, options: EncoderOptions | None = None) -> EncodeResult:
+    opts = options or EncoderOptions()
+    opts.validate()
+    if opts.coding == "dct":
+        raise EncodeError("DCT segment coding is not available in this build", rule="option")
+    _check_input(frames)
+    src = frames
+    if opts.frame_rate is not None:
+        code = _rate_code(opts.frame_rate)
+        if abs(code.rate - frames.frame_rate) > 1e-9 * max(1.0, code.rate):
+            src = resample(frames, code.rate)
+    else:
+        code = _rate_code(frames.frame_rate)
+    n = len(src)
+    if n == 0:
+        raise EncodeError("no frames to encode", rule="empty")
+    quants = (np.asarray(opts.fap_quant_per_frame, dtype=np.int64) if opts.fap_quant_per_frame is not None
+              else np.full(n, opts.fap_quant, dtype=np.int64))
+    if quants.shape != (n,) or (quants < 0).any() or (quants > 31).any():
+        raise EncodeError("fap_quant_per_frame must hold one value 0..31 per frame", rule="option")
+    if opts.group_types is not None:
+        types = np.asarray(opts.group_types, dtype=np.int64)
+        if types.shape != (n, 10) or (types < 0).any() or (types > 3).any():
+            raise EncodeError("group_types must be int[n_frames, 10] with values 0..3", rule="option")
+        coded = src.status == SET
+        for gi, g in enumerate(tables.groups()):
+            sl = slice(g.first_fap - 1, g.last_fap)
+            bad = np.nonzero(((types[:, gi] == MASK_ALL) & ~coded[:, sl].all(axis=1))
+                             | ((types[:, gi] == MASK_NONE) & coded[:, sl].any(axis=1)))[0]
+            if len(bad):
+                raise EncodeError(f"group {g.group} mask type contradicts the coded FAPs", rule="option",
+                                  frame=int(bad[0]))
+    else:
+        types = _derive_group_types(src, opts.partial_mask_type)
+    forced: set[int] = set()
+    while True:
+        plan = _Plan(src, opts, quants, types, forced)
+        if not plan.p_overflow:
+            break
+        forced.update(plan.p_overflow)
+    # intra symbol magnitudes that no range can code
+    coded = plan.coded
+    for a, _ in plan.segments:
+        d = quant_div(int(quants[a]))
+        over = (np.abs(plan.sym[a]) * d > MAX_RANGE) & coded[a]
+        over[:2] = False
+        if over.any():
+            f = int(np.nonzero(over)[0][0])
+            q = int(quants[a])
+            lim = MAX_RANGE // d * low_level_step(f + 1, q)
+            raise EncodeError(
+                f"value {int(src.values[a, f])} of FAP {f + 1} at frame {int(src.frame_number[a])} is outside the "
+                f"codable range +-{lim} at fap_quant {q} (+-1860 x step; spec notes 1.4)",
+                rule="value-range", frame=int(src.frame_number[a]), fap=f + 1, value=int(src.values[a, f]))
+    return _write(src, opts, code, quants, types, plan)
+
+
+def _rate_code(rate) -> FrameRateCode:
+    try:
+        return frame_rate_code(rate)
+    except (ValueError, ZeroDivisionError) as e:
+        raise EncodeError(str(e), rule="frame-rate") from None
+
+
+def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, types, plan: _Plan) -> EncodeResult:
+    n = len(src)
+    w = BitWriter()
+    w.start_code(FACE_OBJECT_START_CODE)
+    bounds = tables.default_bounds().copy()
+    explicit = None
+    if opts.bounds is not None:
+        explicit = np.asarray(opts.bounds, dtype=np.int64)
+        if explicit.shape != (NUM_FAPS, 4) or (explicit[:, [0, 2]] < 0).any() or (explicit[:, [1, 3]] > 0).any() \
+                or (explicit % RANGE_DELTA).any() or (np.abs(explicit) > MAX_RANGE).any():
+            raise EncodeError("bounds must be int[68, 4] (i_max>=0, i_min<=0, p_max>=0, p_min<=0), multiples of 60 "
+                              "within +-1860", rule="option")
+    offsets: list[int] = []
+    prev_q = None
+    status_rows = np.zeros((n, NUM_FAPS), dtype=np.uint8)
+    ever = np.zeros(NUM_FAPS, dtype=bool)
+    tmpl = np.zeros(NUM_FAPS, dtype=np.uint8)
+    time_ms = np.zeros(n)
+    group_of = tables.group_of_fap()
+    p_models: dict = {}
+    fn = src.frame_number
+    t_prev = None
+    rate = code.rate
+    for k in range(n):
+        intra = bool(plan.intra[k])
+        q = int(quants[k])
+        start = w.position
+        if opts.plane_start_codes == "all" or (opts.plane_start_codes == "intra" and intra):
+            w.next_start_code()
+            w.start_code(FACE_OBJECT_PLANE_START_CODE)
+        offsets.append(start)
+        w.bit(1 if intra else 0)
+        w.write(FAPS_MASK, 2)
+        skip = int(fn[0]) if k == 0 else int(fn[k] - fn[k - 1] - 1)
+        tc = None
+        if intra:
+            # frame rate: signalled in every intra plane (conformance streams never rely on the default)
+            w.bit(1)
+            w.write(code.frame_rate, 8)
+            w.write(code.seconds, 4)
+            w.bit(1 if code.frequency_offset else 0)
+            if opts.time_codes:
+                t = Fraction(int(fn[k])) / code.exact
+                secs = int(t)
+                h, m, s = secs // 3600, (secs // 60) % 60, secs % 60
+                if h > 31:
+                    raise EncodeError("time code hours exceed 31", rule="time-code", frame=int(fn[k]))
+                w.bit(1)
+                w.write(h, 5)
+                w.write(m, 6)
+                w.bit(1)
+                w.write(s, 6)
+                tc = (h, m, s)
+            else:
+                w.bit(0)
+        if skip:
+            w.bit(1)
+            for ch in skip_chunks(skip):
+                w.write(ch, 4)
+        else:
+            w.bit(0)
+        # timing exactly as the decoder computes it (D6)
+        if tc is not None:
+            t_prev = (3600.0 * tc[0] + 60.0 * tc[1] + tc[2]) * 1000.0
+        elif t_prev is None:
+            t_prev = skip * 1000.0 / rate
+        else:
+            t_prev = t_prev + (skip + 1) * 1000.0 / rate
+        time_ms[k] = t_prev
+        c = plan.coded[k]
+        if intra:
+            w.write(q, 5)
+            for gi, g in enumerate(tables.groups()):
+                w.bit(1)
+                t = int(types[k, gi])
+                w.write(t, 2)
+                if t in (MASK_RETAIN, MASK_INTERPOLATE):
+                    for fap in g.faps:
+                        w.bit(1 if c[fap - 1] else 0)
+            w.bit(opts.gender)
+            w.bit(0)  # coding_type 0: arithmetic
+            lists = _choose_lists(opts, explicit, bounds, plan.need[k], c, q, prev_q)
+            for name in LIST_ORDER:
+                w.bit(1 if name in lists else 0)
+            for li, name in enumerate(LIST_ORDER):
+                if name not in lists:
+                    continue
+                vals = lists[name]
+                for g in tables.groups()[1:]:
+                    for j, fap in enumerate(g.faps):
+                        if j % 4 == 0:
+                            w.bit(1)
+                        if c[fap - 1]:
+                            v = vals[fap - 1]
+                            w.write(v, 5)
+                            bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
+            prev_q = q
+            ever |= c
+            ta = types[k][group_of - 1]
+            tmpl = np.where(c, SET, np.where((ta == MASK_INTERPOLATE) | ~ever, FREE, RETAINED)).astype(np.uint8)
+            p_models = {}
+        status_rows[k] = tmpl
+        _write_payload(w, plan, k, intra, q, c, bounds, p_models)
+    if opts.end_code:
+        w.next_start_code()
+        w.start_code(VISUAL_OBJECT_SEQUENCE_END_CODE)
+    recon = FapFrames(values=plan.recon.astype(np.int32), status=status_rows, high=plan.rhigh.astype(np.int32),
+                      frame_number=fn.copy(), time_ms=time_ms, frame_rate=rate, is_intra=plan.intra.copy(),
+                      fap_quant=quants.astype(np.int16), coding_type=np.zeros(n, np.int8),
+                      bit_offset=np.array(offsets, dtype=np.int64), gender=opts.gender)
+    recon.values[:, :2] = 0
+    return EncodeResult(data=w.getvalue(), recon=recon, intra_frames=[int(i) for i in np.nonzero(plan.intra)[0]],
+                        plane_offsets=offsets)
+
+
+def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, prev_q) -> dict[str, list[int]]:
+    """Which new min/max lists an intra plane sends, as 5-bit codes per FAP (index FAP-1)."""
+    codes = {}
+    if explicit is not None:
+        insufficient = (np.abs(need) > np.abs(explicit)) & coded[:, None]
+        insufficient[:2] = False
+        if insufficient.any():
+            f, li = map(int, np.argwhere(insufficient)[0])
+            raise EncodeError(f"explicit {LIST_ORDER[li]} bound {int(explicit[f, li])} of FAP {f + 1} is too small "
+                              f"(needs {int(need[f, li])})", rule="value-range", fap=f + 1)
+        for li, name in enumerate(LIST_ORDER):
+            codes[name] = [abs(int(v)) // RANGE_DELTA for v in explicit[:, li]]
+        return codes
+    send_all = opts.ranges == "auto" or (prev_q is not None and prev_q != q)
+    for li, name in enumerate(LIST_ORDER):
+        needed = [_bound_code(v) for v in need[:, li]]
+        if send_all:
+            if opts.ranges == "auto":
+                codes[name] = needed
+            else:
+                codes[name] = [max(n_, abs(int(b)) // RANGE_DELTA) for n_, b in zip(needed, bounds[:, li])]
+            continue
+        short = [f for f in range(2, NUM_FAPS) if coded[f] and _tdiv(abs(int(bounds[f, li])), quant_div(q))
+                 < _tdiv(abs(int(need[f, li])), quant_div(q))]
+        if short:
+            codes[name] = [max(n_, abs(int(b)) // RANGE_DELTA) for n_, b in zip(needed, bounds[:, li])]
+    for vals in codes.values():
+        if max(vals[2:], default=0) > MAX_RANGE_CODE:  # cannot happen: symbols were range-checked
+            raise EncodeError("range list value exceeds 31", rule="value-range")
+    return codes
+
+
+def _write_payload(w: BitWriter, plan: _Plan, k: int, intra: bool, q: int, c, bounds, p_models: dict) -> None:
+    from .syntax import alphabet
+    hs = plan.hsym[k]
+    src_high = plan.rhigh[k]
+    ib = intensity_bound(q)
+    if c[0]:
+        enc = ArithEncoder(w)
+        if intra:
+            enc.encode(UniformModel(VISEME_SELECT_MAX + 1), int(hs[0]))
+            enc.encode(UniformModel(VISEME_SELECT_MAX + 1), int(hs[1]))
+            enc.encode(UniformModel(ib + 1), int(hs[2]))
+        else:
+            V = VISEME_SELECT_MAX
+            for key, j, lim in (("vs1", 0, V), ("vs2", 1, V), ("vb", 2, ib)):
+                m = p_models.get(key) or p_models.setdefault(key, make_model(2 * lim + 1))
+                enc.encode(m, int(hs[j]) + lim)
+        enc.flush()
+        w.bit(int(src_high[3]))
+    if c[1]:
+        enc = ArithEncoder(w)
+        if intra:
+            enc.encode(UniformModel(EXPRESSION_SELECT_MAX + 1), int(hs[4]))
+            enc.encode(UniformModel(ib + 1), int(hs[5]))
+            enc.encode(UniformModel(EXPRESSION_SELECT_MAX + 1), int(hs[6]))
+            enc.encode(UniformModel(ib + 1), int(hs[7]))
+        else:
+            E = EXPRESSION_SELECT_MAX
+            for key, j, lim in (("es1", 4, E), ("ei1", 5, ib), ("es2", 6, E), ("ei2", 7, ib)):
+                m = p_models.get(key) or p_models.setdefault(key, make_model(2 * lim + 1))
+                enc.encode(m, int(hs[j]) + lim)
+        enc.flush()
+        w.bit(int(src_high[8]))
+        w.bit(int(src_high[9]))
+    enc = ArithEncoder(w)
+    sym = plan.sym[k]
+    for f in range(3, NUM_FAPS + 1):
+        if not c[f - 1]:
+            continue
+        if intra:
+            lo, hi = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)
+            enc.encode(UniformModel(hi - lo + 1), int(sym[f - 1]) - lo)
+        else:
+            lo, hi = alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q)
+            m = p_models.get(f)
+            if m is None:
+                m = p_models[f] = make_model(hi - lo + 1)
+            enc.encode(m, int(sym[f - 1]) - lo)
+    enc.flush()
