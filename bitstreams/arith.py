@@ -295,6 +295,9 @@ class ArithDecoder:
         used = self.count - LOOKAHEAD
         for count, at in self.bad_stuffing:
             if count <= used:
+                if at >= self.r.nbits:  # the "zeros" were read past the end of the data
+                    self.r.pos = self.r.nbits
+                    raise self.r.error("stream ends inside an arithmetic-coded block", "truncated")
                 self.r.pos = at
                 raise self.r.error("stuffing bit after 22 consecutive zeros is not '1'", "stuffing")
         end = self.start + used + sum(1 for c in self.stuffing if c <= used)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import tables
+from . import dct, tables
 from .arith import ArithDecoder, UniformModel, make_model
 from .bitio import (FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, START_CODE_NAMES,
                     VISUAL_OBJECT_SEQUENCE_END_CODE, BitReader)
@@ -64,6 +64,7 @@ class _Decoder:
         self.rows_high: list[list[int]] = []
         self.rows_meta: list[tuple] = []
         self.seen_intra = False
+        self.dct_dc: dict[int, int] = {}  # DCT mode: DC level of the previous segment per FAP
 
     # ------------------------------------------------------------------ helpers
     def err(self, msg: str, rule: str, *, at: int | None = None, fap: int | None = None) -> BitstreamError:
@@ -187,8 +188,11 @@ class _Decoder:
             info.coding_type = self.coding_type
             info.coded = self.coded
             info.group_types = self.group_types
-        if self.coding_type == CODING_DCT:
-            raise self.err("coding_type 1 (DCT segment mode) is not supported by this decoder", "dct-unsupported")
+        if self.coding_type == CODING_DCT:  # one plane group: up to 16 frames (dct.py)
+            dct.decode_group(self, info)
+            info.end_offset = r.pos
+            self.planes.append(info)
+            return
         self.payload(info)
         info.end_offset = r.pos
         self.planes.append(info)
@@ -218,6 +222,7 @@ class _Decoder:
         self.gender = info.gender = r.bit("suggested_gender")
         self.coding_type = info.coding_type = r.bit("coding_type")
         if self.coding_type == CODING_DCT:
+            self._mask_state(types, coded)
             return
         flags = [r.bit(f"is_{name.replace('_', '_new_')}") for name in LIST_ORDER]
         for li, name in enumerate(LIST_ORDER):
@@ -234,16 +239,20 @@ class _Decoder:
                         self.bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
             info.new_lists[name] = values
         # segment state: status template, coded list, P alphabets (models created lazily)
+        self._mask_state(types, coded)
+        q = self.fap_quant
+        self.p_alphabets = {f: alphabet(int(self.bounds[f - 1, 3]), int(self.bounds[f - 1, 2]), q)
+                            for f in self.coded_low}
+        self.p_models = {}
+
+    def _mask_state(self, types, coded) -> None:
+        """Status template (D3) and coded low-level FAPs of the planes that follow an intra header."""
         group_of = tables.group_of_fap()
         types_arr = np.array(types)[group_of - 1]
         self.ever_set |= coded
         tmpl = np.where(coded, SET, np.where((types_arr == MASK_INTERPOLATE) | ~self.ever_set, FREE, RETAINED))
         self.status_template = tmpl.astype(np.uint8)
         self.coded_low = [f for f in range(3, NUM_FAPS + 1) if coded[f - 1]]
-        q = self.fap_quant
-        self.p_alphabets = {f: alphabet(int(self.bounds[f - 1, 3]), int(self.bounds[f - 1, 2]), q)
-                            for f in self.coded_low}
-        self.p_models = {}
 
     # ------------------------------------------------------------------ payload (arithmetic mode)
     def _p_model(self, key, lo: int, hi: int):
@@ -341,7 +350,9 @@ def decode(data: bytes, *, file: str | None = None) -> DecodeResult:
     d = _Decoder(data, file)
     try:
         return d.run()
-    except BitstreamError:
+    except BitstreamError as e:
+        if e.partial is None and d.rows_values:
+            e.partial = d._frames()
         raise
     except (ValueError, IndexError, OverflowError, MemoryError, RecursionError) as e:  # defensive: never escape
         raise d.err(f"internal decoder failure on malformed input: {type(e).__name__}: {e}", "internal")

@@ -30,6 +30,7 @@ from .syntax import (EXPRESSION_SELECT_MAX, FAPS_MASK, INTENSITY_MAX, LIST_ORDER
 from .tables import MAX_RANGE, MAX_RANGE_CODE, NUM_FAPS, RANGE_DELTA
 
 PLANE_START_CODE_MODES = ("none", "intra", "all")
+CODING_MODES = ("arithmetic", "dct")  # coding_type 0 and 1
 RANGE_MODES = ("auto", "persist")
 
 
@@ -46,8 +47,10 @@ class EncoderOptions:
     group_types: np.ndarray | None = None  # explicit int[n, 10] mask types (frames after resampling)
     fap_quant_per_frame: np.ndarray | None = None  # int[n]; changes force an intra plane
     gender: int = 0
-    coding: str = "arithmetic"  # arithmetic | dct
+    coding: str = "arithmetic"  # arithmetic | dct (DCT: fap_quant is the scaling index 0..31, dct.py)
     end_code: bool = True
+    coding_per_frame: np.ndarray | list | None = None  # per frame 'arithmetic'/'dct' (or 0/1); a change
+    # starts an intra plane in the other mode (overrides ``coding``)
 
     def validate(self) -> None:
         if not 0 <= self.fap_quant <= 31:
@@ -62,7 +65,7 @@ class EncoderOptions:
             raise EncodeError("partial_mask_type must be 1 or 2", rule="option")
         if self.gender not in (0, 1):
             raise EncodeError("gender must be 0 or 1", rule="option")
-        if self.coding not in ("arithmetic", "dct"):
+        if self.coding not in CODING_MODES:
             raise EncodeError("coding must be 'arithmetic' or 'dct'", rule="option")
 
 
@@ -223,12 +226,17 @@ class _Plan:
             self.segments.append((int(a), int(b)))
         self.need = {}
         self.p_overflow: list[int] = []
+        self.levels = np.zeros((n, NUM_FAPS), dtype=np.int64)  # reconstructed value / step
+        for k in range(n):
+            self.levels[k] = self.recon[k] // steps_by_q[int(quants[k])]
         for a, b in self.segments:
             d = quant_div(int(quants[a]))
-            isym = self.sym[a]
+            # the intra range is the value range: it covers every value of the segment, also those
+            # reached by prediction (a decoded value outside it is a semantic violation)
+            lv = np.where(coded[a:b], self.levels[a:b], 0)
             need = np.zeros((NUM_FAPS, 4), dtype=np.int64)
-            need[:, 0] = np.maximum(isym, 0) * d
-            need[:, 1] = np.minimum(isym, 0) * d
+            need[:, 0] = np.maximum(lv.max(axis=0), 0) * d
+            need[:, 1] = np.minimum(lv.min(axis=0), 0) * d
             if b > a + 1:
                 ps = self.sym[a + 1:b]
                 need[:, 2] = np.maximum(ps.max(axis=0), 0) * d
@@ -248,8 +256,6 @@ def _bound_code(v: int) -> int:
 def encode(frames: FapFrames, options: EncoderOptions | None = None) -> EncodeResult:
     opts = options or EncoderOptions()
     opts.validate()
-    if opts.coding == "dct":
-        raise EncodeError("DCT segment coding is not available in this build", rule="option")
     _check_input(frames)
     src = frames
     if opts.frame_rate is not None:
@@ -279,27 +285,35 @@ def encode(frames: FapFrames, options: EncoderOptions | None = None) -> EncodeRe
                                   frame=int(bad[0]))
     else:
         types = _derive_group_types(src, opts.partial_mask_type)
+    if opts.coding_per_frame is not None or opts.coding == "dct":
+        return _encode_sections(src, opts, code, quants, types)
+    plan = _plan_arithmetic(src, opts, quants, types)
+    return _write(src, opts, code, quants, types, plan)
+
+
+def _plan_arithmetic(src: FapFrames, opts: EncoderOptions, quants, types) -> "_Plan":
     forced: set[int] = set()
     while True:
         plan = _Plan(src, opts, quants, types, forced)
         if not plan.p_overflow:
             break
         forced.update(plan.p_overflow)
-    # intra symbol magnitudes that no range can code
+    # values that no intra (value) range can hold
     coded = plan.coded
-    for a, _ in plan.segments:
+    for a, b in plan.segments:
         d = quant_div(int(quants[a]))
-        over = (np.abs(plan.sym[a]) * d > MAX_RANGE) & coded[a]
-        over[:2] = False
+        over = (np.abs(plan.levels[a:b]) * d > MAX_RANGE) & coded[a:b]
+        over[:, :2] = False
         if over.any():
-            f = int(np.nonzero(over)[0][0])
+            k, f = (int(v) for v in np.argwhere(over)[0])
+            k += a
             q = int(quants[a])
             lim = MAX_RANGE // d * low_level_step(f + 1, q)
             raise EncodeError(
-                f"value {int(src.values[a, f])} of FAP {f + 1} at frame {int(src.frame_number[a])} is outside the "
+                f"value {int(src.values[k, f])} of FAP {f + 1} at frame {int(src.frame_number[k])} is outside the "
                 f"codable range +-{lim} at fap_quant {q} (+-1860 x step; spec notes 1.4)",
-                rule="value-range", frame=int(src.frame_number[a]), fap=f + 1, value=int(src.values[a, f]))
-    return _write(src, opts, code, quants, types, plan)
+                rule="value-range", frame=int(src.frame_number[k]), fap=f + 1, value=int(src.values[k, f]))
+    return plan
 
 
 def _rate_code(rate) -> FrameRateCode:
@@ -309,11 +323,95 @@ def _rate_code(rate) -> FrameRateCode:
         raise EncodeError(str(e), rule="frame-rate") from None
 
 
-def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, types, plan: _Plan) -> EncodeResult:
+@dataclass
+class _StreamContext:
+    """State of one face object stream shared by its sections (a mode switch starts a section)."""
+    w: BitWriter
+    bounds: np.ndarray  # current (i_max, i_min, p_max, p_min) per FAP (D4)
+    ever: np.ndarray  # FAPs ever coded (D3 status)
+    prev_q: int | None = None
+    t_prev: float | None = None  # time of the previous frame (D6)
+    prev_fn: int | None = None  # frame number of the previous frame
+    cur: np.ndarray | None = None  # last reconstructed values / high-level fields (carried)
+    hcur: np.ndarray | None = None
+
+    @classmethod
+    def new(cls) -> "_StreamContext":
+        w = BitWriter()
+        w.start_code(FACE_OBJECT_START_CODE)
+        return cls(w=w, bounds=tables.default_bounds().copy(), ever=np.zeros(NUM_FAPS, dtype=bool),
+                   cur=np.zeros(NUM_FAPS, dtype=np.int64), hcur=np.zeros(len(HIGH_LEVEL_FIELDS), dtype=np.int64))
+
+
+def _plane_header(ctx: _StreamContext, opts: EncoderOptions, code: FrameRateCode, intra: bool, frame_no: int,
+                  q: int, types_row, c) -> float:
+    """Write a plane header up to (excluding) coding_type, shared by both modes; return the time of
+    the plane (of a DCT group's first frame) exactly as the decoder computes it (D6)."""
+    w = ctx.w
+    if opts.plane_start_codes == "all" or (opts.plane_start_codes == "intra" and intra):
+        w.next_start_code()
+        w.start_code(FACE_OBJECT_PLANE_START_CODE)
+    w.bit(1 if intra else 0)
+    w.write(FAPS_MASK, 2)
+    skip = frame_no if ctx.prev_fn is None else frame_no - ctx.prev_fn - 1
+    tc = None
+    if intra:
+        # frame rate: signalled in every intra plane (conformance streams never rely on the default)
+        w.bit(1)
+        w.write(code.frame_rate, 8)
+        w.write(code.seconds, 4)
+        w.bit(1 if code.frequency_offset else 0)
+        if opts.time_codes:
+            t = Fraction(frame_no) / code.exact
+            secs = int(t)
+            h, m, s = secs // 3600, (secs // 60) % 60, secs % 60
+            if h > 31:
+                raise EncodeError("time code hours exceed 31", rule="time-code", frame=frame_no)
+            w.bit(1)
+            w.write(h, 5)
+            w.write(m, 6)
+            w.bit(1)
+            w.write(s, 6)
+            tc = (h, m, s)
+        else:
+            w.bit(0)
+    if skip:
+        w.bit(1)
+        for ch in skip_chunks(skip):
+            w.write(ch, 4)
+    else:
+        w.bit(0)
+    rate = code.rate
+    if tc is not None:
+        ctx.t_prev = (3600.0 * tc[0] + 60.0 * tc[1] + tc[2]) * 1000.0
+    elif ctx.t_prev is None:
+        ctx.t_prev = skip * 1000.0 / rate
+    else:
+        ctx.t_prev = ctx.t_prev + (skip + 1) * 1000.0 / rate
+    ctx.prev_fn = frame_no
+    if intra:
+        w.write(q, 5)
+        for gi, g in enumerate(tables.groups()):
+            w.bit(1)
+            t = int(types_row[gi])
+            w.write(t, 2)
+            if t in (MASK_RETAIN, MASK_INTERPOLATE):
+                for fap in g.faps:
+                    w.bit(1 if c[fap - 1] else 0)
+        w.bit(opts.gender)
+    return ctx.t_prev
+
+
+def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, types, plan: _Plan,
+           ctx: _StreamContext | None = None) -> EncodeResult:
+    """Write the planes of the frame-based (arithmetic) mode. Without ``ctx`` the frames are a
+    whole stream (object start code ... end code); with it, one section of a mode-switching stream."""
     n = len(src)
-    w = BitWriter()
-    w.start_code(FACE_OBJECT_START_CODE)
-    bounds = tables.default_bounds().copy()
+    own = ctx is None
+    if own:
+        ctx = _StreamContext.new()
+    w = ctx.w
+    bounds = ctx.bounds
     explicit = None
     if opts.bounds is not None:
         explicit = np.asarray(opts.bounds, dtype=np.int64)
@@ -322,75 +420,23 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
             raise EncodeError("bounds must be int[68, 4] (i_max>=0, i_min<=0, p_max>=0, p_min<=0), multiples of 60 "
                               "within +-1860", rule="option")
     offsets: list[int] = []
-    prev_q = None
     status_rows = np.zeros((n, NUM_FAPS), dtype=np.uint8)
-    ever = np.zeros(NUM_FAPS, dtype=bool)
+    ever = ctx.ever
     tmpl = np.zeros(NUM_FAPS, dtype=np.uint8)
     time_ms = np.zeros(n)
     group_of = tables.group_of_fap()
     p_models: dict = {}
     fn = src.frame_number
-    t_prev = None
     rate = code.rate
     for k in range(n):
         intra = bool(plan.intra[k])
         q = int(quants[k])
-        start = w.position
-        if opts.plane_start_codes == "all" or (opts.plane_start_codes == "intra" and intra):
-            w.next_start_code()
-            w.start_code(FACE_OBJECT_PLANE_START_CODE)
-        offsets.append(start)
-        w.bit(1 if intra else 0)
-        w.write(FAPS_MASK, 2)
-        skip = int(fn[0]) if k == 0 else int(fn[k] - fn[k - 1] - 1)
-        tc = None
-        if intra:
-            # frame rate: signalled in every intra plane (conformance streams never rely on the default)
-            w.bit(1)
-            w.write(code.frame_rate, 8)
-            w.write(code.seconds, 4)
-            w.bit(1 if code.frequency_offset else 0)
-            if opts.time_codes:
-                t = Fraction(int(fn[k])) / code.exact
-                secs = int(t)
-                h, m, s = secs // 3600, (secs // 60) % 60, secs % 60
-                if h > 31:
-                    raise EncodeError("time code hours exceed 31", rule="time-code", frame=int(fn[k]))
-                w.bit(1)
-                w.write(h, 5)
-                w.write(m, 6)
-                w.bit(1)
-                w.write(s, 6)
-                tc = (h, m, s)
-            else:
-                w.bit(0)
-        if skip:
-            w.bit(1)
-            for ch in skip_chunks(skip):
-                w.write(ch, 4)
-        else:
-            w.bit(0)
-        # timing exactly as the decoder computes it (D6)
-        if tc is not None:
-            t_prev = (3600.0 * tc[0] + 60.0 * tc[1] + tc[2]) * 1000.0
-        elif t_prev is None:
-            t_prev = skip * 1000.0 / rate
-        else:
-            t_prev = t_prev + (skip + 1) * 1000.0 / rate
-        time_ms[k] = t_prev
         c = plan.coded[k]
+        offsets.append(w.position)
+        time_ms[k] = _plane_header(ctx, opts, code, intra, int(fn[k]), q, types[k], c)
         if intra:
-            w.write(q, 5)
-            for gi, g in enumerate(tables.groups()):
-                w.bit(1)
-                t = int(types[k, gi])
-                w.write(t, 2)
-                if t in (MASK_RETAIN, MASK_INTERPOLATE):
-                    for fap in g.faps:
-                        w.bit(1 if c[fap - 1] else 0)
-            w.bit(opts.gender)
             w.bit(0)  # coding_type 0: arithmetic
-            lists = _choose_lists(opts, explicit, bounds, plan.need[k], c, q, prev_q)
+            lists = _choose_lists(opts, explicit, bounds, plan.need[k], c, q, ctx.prev_q)
             for name in LIST_ORDER:
                 w.bit(1 if name in lists else 0)
             for li, name in enumerate(LIST_ORDER):
@@ -405,14 +451,14 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
                             v = vals[fap - 1]
                             w.write(v, 5)
                             bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
-            prev_q = q
+            ctx.prev_q = q
             ever |= c
             ta = types[k][group_of - 1]
             tmpl = np.where(c, SET, np.where((ta == MASK_INTERPOLATE) | ~ever, FREE, RETAINED)).astype(np.uint8)
             p_models = {}
         status_rows[k] = tmpl
         _write_payload(w, plan, k, intra, q, c, bounds, p_models)
-    if opts.end_code:
+    if own and opts.end_code:
         w.next_start_code()
         w.start_code(VISUAL_OBJECT_SEQUENCE_END_CODE)
     recon = FapFrames(values=plan.recon.astype(np.int32), status=status_rows, high=plan.rhigh.astype(np.int32),
@@ -422,6 +468,85 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
     recon.values[:, :2] = 0
     return EncodeResult(data=w.getvalue(), recon=recon, intra_frames=[int(i) for i in np.nonzero(plan.intra)[0]],
                         plane_offsets=offsets)
+
+
+def _coding_modes(opts: EncoderOptions, n: int) -> np.ndarray:
+    """int8[n]: coding_type per frame (0 arithmetic, 1 DCT)."""
+    if opts.coding_per_frame is None:
+        return np.full(n, CODING_MODES.index(opts.coding), dtype=np.int8)
+    raw = list(opts.coding_per_frame)
+    if len(raw) != n:
+        raise EncodeError(f"coding_per_frame must hold one entry per frame ({n})", rule="option")
+    out = np.zeros(n, dtype=np.int8)
+    for k, v in enumerate(raw):
+        if isinstance(v, str) and v in CODING_MODES:
+            out[k] = CODING_MODES.index(v)
+        elif not isinstance(v, str) and int(v) in (0, 1) and int(v) == v:
+            out[k] = int(v)
+        else:
+            raise EncodeError(f"coding_per_frame[{k}] = {v!r}: use 'arithmetic'/'dct' or 0/1", rule="option")
+    return out
+
+
+def _encode_sections(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, types) -> EncodeResult:
+    """DCT mode, or a stream that switches mode: one section per run of frames with the same
+    coding type, each starting with an intra plane. Values not coded in a section carry over
+    from the previous one (as the decoder keeps them)."""
+    from . import dct
+
+    n = len(src)
+    modes = _coding_modes(opts, n)
+    if opts.ranges == "persist" and len(set(modes.tolist())) > 1:
+        raise EncodeError("ranges='persist' is not supported in a mode-switching stream", rule="option")
+    ctx = _StreamContext.new()
+    values = np.zeros((n, NUM_FAPS), dtype=np.int64)
+    high = np.zeros((n, len(HIGH_LEVEL_FIELDS)), dtype=np.int64)
+    status = np.zeros((n, NUM_FAPS), dtype=np.uint8)
+    time_ms = np.zeros(n)
+    is_intra = np.zeros(n, dtype=bool)
+    bit_offset = np.zeros(n, dtype=np.int64)
+    offsets: list[int] = []
+    intra_frames: list[int] = []
+    cuts = [0] + [k for k in range(1, n) if modes[k] != modes[k - 1]] + [n]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        sub = src.select(slice(a, b))
+        if modes[a] == 0:
+            plan = _plan_arithmetic(sub, opts, quants[a:b], types[a:b])
+            res = _write(sub, opts, code, quants[a:b], types[a:b], plan, ctx)
+            r = res.recon
+            v, h = r.values.astype(np.int64), r.high.astype(np.int64)
+            # the section's planes start from zero values: FAPs / fields it does not code keep
+            # the values carried from earlier sections instead
+            low_set = r.status == SET
+            prev_v, prev_h = ctx.cur.copy(), ctx.hcur.copy()
+            for k in range(b - a):
+                v[k] = np.where(low_set[k], v[k], prev_v)
+                for fap, sl in ((1, slice(0, 4)), (2, slice(4, 10))):
+                    if not low_set[k, fap - 1]:
+                        h[k, sl] = prev_h[sl]
+                prev_v, prev_h = v[k], h[k]
+            ctx.cur, ctx.hcur = prev_v.copy(), prev_h.copy()
+            values[a:b], high[a:b], status[a:b] = v, h, r.status
+            time_ms[a:b], is_intra[a:b], bit_offset[a:b] = r.time_ms, r.is_intra, r.bit_offset
+            offsets += res.plane_offsets
+            intra_frames += [a + i for i in res.intra_frames]
+        else:
+            res = dct.write_section(ctx, sub, opts, code, quants[a:b], types[a:b],
+                                    lambda c_, intra, fno, q, trow, crow: _plane_header(c_, opts, code, intra, fno,
+                                                                                       q, trow, crow))
+            values[a:b], high[a:b], status[a:b] = res.values, res.high, res.status
+            time_ms[a:b], is_intra[a:b], bit_offset[a:b] = res.time_ms, res.is_intra, res.bit_offset
+            offsets += res.plane_offsets
+            intra_frames += [a + i for i in res.intra_frames]
+    if opts.end_code:
+        ctx.w.next_start_code()
+        ctx.w.start_code(VISUAL_OBJECT_SEQUENCE_END_CODE)
+    recon = FapFrames(values=values.astype(np.int32), status=status, high=high.astype(np.int32),
+                      frame_number=src.frame_number.copy(), time_ms=time_ms, frame_rate=code.rate, is_intra=is_intra,
+                      fap_quant=quants.astype(np.int16), coding_type=modes.copy(), bit_offset=bit_offset,
+                      gender=opts.gender)
+    recon.values[:, :2] = 0
+    return EncodeResult(data=ctx.w.getvalue(), recon=recon, intra_frames=intra_frames, plane_offsets=offsets)
 
 
 def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, prev_q) -> dict[str, list[int]]:

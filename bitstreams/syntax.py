@@ -153,5 +153,6 @@ class PlaneInfo:
     marker_offsets: list[tuple[int, int]] = field(default_factory=list)  # (bit offset, value)
     blocks: list[tuple[str, int, int]] = field(default_factory=list)  # (name, start bit, length)
     symbols: dict[int, int] = field(default_factory=dict)  # fap -> decoded symbol value (Q)
-    frame_number: int = 0
+    frame_number: int = 0  # first frame of the plane (of the group in DCT mode)
     time_ms: float = 0.0
+    segment_length: int = 1  # DCT mode: frames in this plane group
