@@ -102,7 +102,7 @@ class FastModel(Model):
         if self.uniform:
             k = self.n - target
             return (k if k > 1 else 1) - 1
-        return int(np.searchsorted(self.arr, -target, "left")) - 1
+        return int(self.arr.searchsorted(-target)) - 1
 
     def update(self, s: int) -> None:
         if not self.adaptive:
@@ -221,13 +221,17 @@ class ArithDecoder:
     """Decodes one block from a BitReader positioned at the block's first bit.
 
     Call :meth:`finish` after the last symbol: it moves the reader to the first bit after
-    the block (D7) and raises for a stuffing violation inside the block."""
+    the block (D7) and raises for a stuffing violation inside the block. Bits past the end
+    of the data read as 0 (look-ahead); :meth:`finish` checks the block itself is complete."""
 
-    __slots__ = ("r", "low", "high", "value", "zeros", "count", "start", "stuffing", "bad_stuffing")
+    __slots__ = ("r", "bits", "nb", "pos", "low", "high", "value", "zeros", "count", "start", "stuffing",
+                 "bad_stuffing")
 
     def __init__(self, reader: BitReader) -> None:
         self.r = reader
-        self.start = reader.pos
+        self.bits = reader.bits
+        self.nb = reader.nbits
+        self.start = self.pos = reader.pos
         self.low = 0
         self.high = TOP
         self.zeros = 0
@@ -240,22 +244,27 @@ class ArithDecoder:
         self.value = v
 
     def _bit(self) -> int:
-        r = self.r
-        b = r.bit_lenient()
+        pos = self.pos
+        b = self.bits[pos] if pos < self.nb else 0
+        self.pos = pos + 1
         self.count += 1
         if b:
             self.zeros = 0
         else:
             self.zeros += 1
             if self.zeros == ZERO_RUN_LIMIT:
-                at = r.pos
-                if r.bit_lenient() != 1:
-                    self.bad_stuffing.append((self.count, at))
-                self.stuffing.append(self.count)
-                self.zeros = 0
+                self._stuffing()
         return b
 
-    def decode(self, model: Model) -> int:
+    def _stuffing(self) -> None:
+        at = self.pos
+        if (self.bits[at] if at < self.nb else 0) != 1:
+            self.bad_stuffing.append((self.count, at))
+        self.pos = at + 1
+        self.stuffing.append(self.count)
+        self.zeros = 0
+
+    def decode(self, model) -> int:
         low = self.low
         high = self.high
         value = self.value
@@ -263,11 +272,17 @@ class ArithDecoder:
         total = model.total()
         target = ((value - low + 1) * total - 1) // length
         if not 0 <= target < total:
+            self.r.pos = self.pos
             raise self.r.error("arithmetic decoder state out of range (corrupt block)", "arith-state")
         s = model.find(target)
         hi_c, lo_c, _ = model.bounds(s)
         high = low - 1 + (length * hi_c) // total
         low = low + (length * lo_c) // total
+        bits = self.bits
+        nb = self.nb
+        pos = self.pos
+        zeros = self.zeros
+        count = self.count
         while True:
             if high < Q2:
                 pass
@@ -283,7 +298,22 @@ class ArithDecoder:
                 break
             low <<= 1
             high = (high << 1) | 1
-            value = (value << 1) | self._bit()
+            b = bits[pos] if pos < nb else 0
+            pos += 1
+            count += 1
+            if b:
+                zeros = 0
+            else:
+                zeros += 1
+                if zeros == ZERO_RUN_LIMIT:
+                    self.pos, self.count = pos, count
+                    self._stuffing()
+                    pos = self.pos
+                    zeros = 0
+            value = (value << 1) | b
+        self.pos = pos
+        self.zeros = zeros
+        self.count = count
         self.low = low
         self.high = high
         self.value = value
@@ -292,19 +322,20 @@ class ArithDecoder:
 
     def finish(self) -> int:
         """Reposition the reader after the block; return the block's length in bits."""
+        r = self.r
         used = self.count - LOOKAHEAD
         for count, at in self.bad_stuffing:
             if count <= used:
-                if at >= self.r.nbits:  # the "zeros" were read past the end of the data
-                    self.r.pos = self.r.nbits
-                    raise self.r.error("stream ends inside an arithmetic-coded block", "truncated")
-                self.r.pos = at
-                raise self.r.error("stuffing bit after 22 consecutive zeros is not '1'", "stuffing")
+                if at >= r.nbits:  # the "zeros" were read past the end of the data
+                    r.pos = r.nbits
+                    raise r.error("stream ends inside an arithmetic-coded block", "truncated")
+                r.pos = at
+                raise r.error("stuffing bit after 22 consecutive zeros is not '1'", "stuffing")
         end = self.start + used + sum(1 for c in self.stuffing if c <= used)
-        if end > self.r.nbits:
-            self.r.pos = self.r.nbits
-            raise self.r.error("stream ends inside an arithmetic-coded block", "truncated")
-        self.r.pos = end
+        if end > r.nbits:
+            r.pos = r.nbits
+            raise r.error("stream ends inside an arithmetic-coded block", "truncated")
+        r.pos = end
         return end - self.start
 
 

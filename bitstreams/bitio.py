@@ -79,7 +79,7 @@ class BitReader:
     :meth:`peek_bit_lenient`, which returns 0 past the end (the arithmetic decoder's
     look-ahead may run past the last byte; the block end it computes is checked)."""
 
-    __slots__ = ("data", "pos", "nbits", "plane", "frame", "file")
+    __slots__ = ("data", "pos", "nbits", "plane", "frame", "file", "_bits")
 
     def __init__(self, data: bytes, *, file: str | None = None) -> None:
         self.data = bytes(data)
@@ -88,6 +88,15 @@ class BitReader:
         self.plane: int | None = None
         self.frame: int | None = None
         self.file = file
+        self._bits: bytes | None = None
+
+    @property
+    def bits(self) -> bytes:
+        """The stream as one byte (0 or 1) per bit, for the arithmetic decoder's inner loop."""
+        if self._bits is None:
+            import numpy as np
+            self._bits = np.unpackbits(np.frombuffer(self.data, dtype=np.uint8)).tobytes()
+        return self._bits
 
     def error(self, message: str, rule: str, *, bit_offset: int | None = None, fap: int | None = None):
         return BitstreamError(message, bit_offset=self.pos if bit_offset is None else bit_offset, rule=rule,

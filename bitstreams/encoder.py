@@ -202,19 +202,14 @@ class _Plan:
                 for j in (0, 1):
                     self.hsym[k, j] = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
                     hcur[j] = high[k, j]
-                j = 2
-                t = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
-                self.hsym[k, j] = quantise(int(t), istep)
-                hcur[j] = (0 if self.intra[k] else hcur[j]) + self.hsym[k, j] * istep
+                self._intensity(k, 2, high, hcur, istep)
                 hcur[3] = high[k, 3]
             if c[1]:
                 for j in (4, 6):
                     self.hsym[k, j] = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
                     hcur[j] = high[k, j]
                 for j in (5, 7):
-                    t = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
-                    self.hsym[k, j] = quantise(int(t), istep)
-                    hcur[j] = (0 if self.intra[k] else hcur[j]) + self.hsym[k, j] * istep
+                    self._intensity(k, j, high, hcur, istep)
                 hcur[8] = high[k, 8]
                 hcur[9] = high[k, 9]
             self.recon[k] = cur
@@ -246,6 +241,23 @@ class _Plan:
                 if len(rows):
                     self.p_overflow.append(a + 1 + int(rows[0]))
             self.need[a] = need
+
+
+    def _intensity(self, k: int, j: int, high, hcur, istep: int) -> None:
+        """Quantise a blend/intensity closed-loop, keeping the reconstruction inside 0..63.
+
+        D5's alphabet allows floor((63 + floor(q/2)) / q) x q, which can exceed 63 (64 at
+        q = 2); a decoder must output it, but this encoder never produces it: the level is
+        lowered to the largest multiple of q <= 63 instead (error < q there, else <= q/2)."""
+        base = 0 if self.intra[k] else int(hcur[j])
+        level = quantise(int(high[k, j]) - base, istep)
+        r = base + level * istep
+        if r > INTENSITY_MAX:
+            level = (INTENSITY_MAX - base) // istep
+        elif r < 0:
+            level = -(base // istep)
+        self.hsym[k, j] = level
+        hcur[j] = base + level * istep
 
 
 def _bound_code(v: int) -> int:

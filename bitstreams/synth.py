@@ -31,7 +31,7 @@ def synthetic_sequence(n_frames: int, rate: float = 25.0, *, visemes: bool = Tru
     # shared drivers
     speech = np.maximum(0.0, np.sin(2 * np.pi * 3.1 * t + phase)) * (0.6 + 0.4 * np.sin(2 * np.pi * 0.23 * t))
     blink_period = 3.3
-    blink = np.exp(-(((t + phase) % blink_period) - 0.15) ** 2 / (2 * 0.05 ** 2))
+    blink = np.exp(np.maximum(-60.0, -(((t + phase) % blink_period) - 0.15) ** 2 / (2 * 0.05 ** 2)))
     gaze = np.sin(2 * np.pi * 0.17 * t + phase)
     brow = np.maximum(0.0, np.sin(2 * np.pi * 0.11 * t + 1.3 + phase)) ** 2
     for fap in chosen:
