@@ -33,9 +33,10 @@ from importlib import resources
 import numpy as np
 
 from . import tables
-from .errors import BitstreamError, EncodeError
+from .errors import EncodeError
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET
-from .syntax import (CODING_DCT, DEFAULT_FRAME_RATE, EXPRESSION_SELECT_MAX, INTENSITY_MAX, MASK_INTERPOLATE, VISEME_SELECT_MAX)
+from .syntax import (CODING_DCT, DEFAULT_FRAME_RATE, EXPRESSION_SELECT_MAX, INTENSITY_MAX, MASK_INTERPOLATE,
+                     VISEME_SELECT_MAX)
 from .tables import NUM_FAPS
 
 DATA_FILE = "dct_provisional.toml"

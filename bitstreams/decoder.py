@@ -2,7 +2,8 @@
 
 Any byte string ends as a :class:`DecodeResult` or a :class:`BitstreamError` naming the
 bit offset, plane/frame, FAP and the rule broken. Work is bounded by the input length
-(every plane costs at least 6 bits, every skip-chain chunk 4 bits) and so is memory
+(every plane costs at least 6 bits, every skip-chain chunk 4 bits; a DCT plane group
+at least 8 bits for at most 16 frames) and so is memory
 (alphabets are bounded by the 5-bit range lists; no allocation depends on a coded count).
 """
 from __future__ import annotations
@@ -132,7 +133,7 @@ class _Decoder:
         r = self.r
         idx = len(self.planes)
         r.plane = idx
-        r.frame = idx
+        r.frame = len(self.rows_values)  # output row (= plane index unless DCT groups came before)
         info = PlaneInfo(index=idx, bit_offset=start, header_offset=r.pos, start_code=has_sc)
         info.is_intra = bool(r.bit("is_intra"))
         at = r.pos
