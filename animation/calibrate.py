@@ -1,0 +1,164 @@
+"""FDP calibration: adapt the default model to received feature points (Calibration profile).
+
+Method (fbaconf's choice; the standard leaves the adaptation to the decoder):
+
+* Source points = the model's own feature points (neutral, world), target points = the
+  received ones (any subset of the 84, at least 1).
+* The displacement field ``target - source`` is interpolated over space with radial basis
+  functions (``scipy.interpolate.RBFInterpolator``): thin-plate spline kernel + affine
+  polynomial (degree 1) when >= 4 points whose source positions are not coplanar; the
+  ``linear`` kernel + constant (degree 0) for 2-3 points or coplanar sets; a pure
+  translation for 1 point. No smoothing, so the field interpolates the data points.
+  Feature points that coincide on the model (lips in contact: 2.2/2.3, 2.6/2.8, 2.7/2.9)
+  form one data point with their mean displacement; afterwards every received feature
+  point's vertex is set exactly onto the received point (this removes the solver's
+  rounding residual, ~1e-9 of the model size, and opens coinciding points that received
+  different targets).
+* Every vertex of every part is moved by the field at its neutral world position;
+  a Transform's translation is moved by the field at the Transform's origin (so eyes
+  follow the warp); parts are then expressed back in their Transform's local frame
+  (translation-only chains, as in the default head).
+* FAPU are recomputed from the calibrated feature points; the FaceDefTables keep their
+  displacements (they are in FAPU units, so motions scale with the new face).
+* Texture coordinates (FDP.textureCoord: one (u, v) per feature point, same order and
+  subset as featurePointsCoord): the vertex's projection -- orthographic onto the x-y plane
+  when ``useOrthoTexture`` is TRUE, else cylindrical (angle atan2(x, z) around the y axis
+  through the feature points' centroid, and y) -- is mapped to (u, v) by a 2D thin-plate
+  RBF through the feature points' projections; applied to the skin part(s) (parts whose
+  vertices carry feature points), clipped to [0, 1].
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import SceneError
+from .faceparams import NUM_FEATURE_POINTS, fapu_from_feature_points
+
+
+def rbf_warp(src: np.ndarray, dst: np.ndarray):
+    """A function R^3 -> R^3 displacement, interpolating dst - src at src (exactly)."""
+    from scipy.interpolate import RBFInterpolator
+    src = np.asarray(src, dtype=np.float64)
+    dst = np.asarray(dst, dtype=np.float64)
+    d = dst - src
+    n = len(src)
+    if n == 0:
+        raise SceneError("calibration needs at least one feature point", rule="calibration-empty")
+    if n == 1:
+        return lambda p: np.broadcast_to(d[0], np.shape(p)).copy()
+    # feature points that coincide on the model (lips in contact ...) share one data point: the
+    # mean of their displacements (the vertices are put exactly on their own targets afterwards)
+    key, inv = np.unique(np.round(src, 9), axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    if len(key) != n:
+        src = np.array([src[inv == g][0] for g in range(len(key))])
+        d = np.array([d[inv == g].mean(0) for g in range(len(key))])
+        n = len(src)
+        if n == 1:
+            return lambda p: np.broadcast_to(d[0], np.shape(p)).copy()
+    scale = float(np.ptp(src, axis=0).max()) or 1.0
+    c = src.mean(0)
+    s_src = (src - c) / scale
+    rank = np.linalg.matrix_rank(np.c_[s_src, np.ones(n)], tol=1e-9)
+    if n >= 4 and rank == 4:
+        f = RBFInterpolator(s_src, d, kernel="thin_plate_spline", degree=1)
+    else:
+        f = RBFInterpolator(s_src, d, kernel="linear", degree=0)
+    return lambda p: f((np.asarray(p, dtype=np.float64).reshape(-1, 3) - c) / scale).reshape(np.shape(p))
+
+
+def _uv_map(proj_fp: np.ndarray, uv_fp: np.ndarray):
+    from scipy.interpolate import RBFInterpolator
+    n = len(proj_fp)
+    rank = np.linalg.matrix_rank(np.c_[proj_fp, np.ones(n)], tol=1e-9)
+    scale = float(np.ptp(proj_fp, axis=0).max()) or 1.0
+    c = proj_fp.mean(0)
+    if n >= 3 and rank == 3:
+        f = RBFInterpolator((proj_fp - c) / scale, uv_fp, kernel="thin_plate_spline", degree=1)
+    else:
+        f = RBFInterpolator((proj_fp - c) / scale, uv_fp, kernel="linear", degree=0)
+    return lambda q: f((q - c) / scale)
+
+
+def _project(P: np.ndarray, ortho: bool, centre: np.ndarray) -> np.ndarray:
+    if ortho:
+        return P[:, :2].copy()
+    q = P - centre
+    return np.stack([np.arctan2(q[:, 0], q[:, 2]), q[:, 1]], axis=1)
+
+
+def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None = None, ortho: bool = False,
+              texture: str | None = None):
+    """Warp a CompiledFace (engine.CompiledFace) to received feature points.
+
+    ``received``: float64[84, 3] in label order, NaN rows = not sent. Returns a new
+    CompiledFace (the input is not modified)."""
+    from .engine import CompiledFace, neutral_world
+    received = np.asarray(received, dtype=np.float64).reshape(NUM_FEATURE_POINTS, 3)
+    sent = np.all(np.isfinite(received), axis=1)
+    have = np.all(np.isfinite(model.feature_points), axis=1)
+    use = sent & have
+    if not use.any():
+        raise SceneError("no received feature point is defined on the model", rule="calibration-empty")
+    warp = rbf_warp(model.feature_points[use], received[use])
+    # transform origins (world), parents first
+    parent = {}
+    for p in model.parts:
+        for i, k in enumerate(p.chain):
+            parent[k] = p.chain[i - 1] if i else None
+    for k, tr in model.transforms.items():
+        if tr["rotation"][3] != 0 or tuple(tr["scale"]) != (1.0, 1.0, 1.0):
+            raise SceneError(f"calibration supports translation-only Transforms ({tr['name']} rotates or scales)",
+                             rule="calibration-transform")
+
+    def world_origin(k):
+        o = np.asarray(model.transforms[k]["translation"], dtype=np.float64)
+        return o + (world_origin(parent[k]) if parent.get(k) is not None else 0.0)
+
+    new_tr = {}
+    warped_origin = {}
+    for k in model.transforms:
+        o = world_origin(k)
+        warped_origin[k] = o + warp(o[None])[0]
+    for k, tr in model.transforms.items():
+        par = parent.get(k)
+        t = warped_origin[k] - (warped_origin[par] if par is not None else 0.0)
+        new_tr[k] = dict(tr, translation=tuple(float(v) for v in t))
+    world = neutral_world(model)
+    new_points = {}
+    for p, W in zip(model.parts, world):
+        if p.ifs in new_points:
+            continue
+        Wn = W + warp(W)
+        origin = warped_origin[p.chain[-1]] if p.chain else 0.0
+        new_points[p.ifs] = Wn - origin
+    # put every received feature point's vertex exactly on the received point (removes the RBF's
+    # rounding residual and separates coinciding model points that received different targets)
+    if model.fp_vertices is not None:
+        for k, (pi, v) in enumerate(model.fp_vertices):
+            if sent[k]:
+                p = model.parts[pi]
+                origin = warped_origin[p.chain[-1]] if p.chain else 0.0
+                new_points[p.ifs][v] = received[k] - origin
+    # feature points: received where sent, warped model points elsewhere
+    fps = model.feature_points.copy()
+    fps[have] = fps[have] + warp(fps[have])
+    fps[sent] = received[sent]
+    parts = list(model.parts)
+    out = CompiledFace(new_points, dict(model.ifs_names), new_tr, parts, list(model.mesh_tables),
+                       list(model.transform_tables), fapu_from_feature_points(fps), fps, model.fit,
+                       model.high_level_tables, model.fp_vertices, ortho)
+    if texture_coords is not None:
+        tc = np.asarray(texture_coords, dtype=np.float64).reshape(-1, 2)
+        if tc.shape[0] != NUM_FEATURE_POINTS or not np.all(np.isfinite(tc[sent])):
+            raise SceneError("textureCoord must hold one (u, v) per feature point (84, label order)",
+                             rule="fdp-texture-coord-count")
+        centre = fps[sent].mean(0)
+        uvmap = _uv_map(_project(fps[sent], ortho, centre), tc[sent])
+        fp_parts = {pi for pi, _ in (model.fp_vertices or [])} or {0}
+        new_world = neutral_world(out)
+        from dataclasses import replace
+        for pi in sorted(fp_parts):
+            uv = np.clip(uvmap(_project(new_world[pi], ortho, centre)), 0.0, 1.0)
+            parts[pi] = replace(parts[pi], texcoords=uv, texture=texture or parts[pi].texture)
+    return out
