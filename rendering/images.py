@@ -71,6 +71,8 @@ def _write(path: Path, pixels: np.ndarray, fmt: str) -> None:
         err = out.geterror() if not ok else ""
         if not out.close() or not ok:
             raise ImageIOError(f"write failed: {err or out.geterror()}", file=str(path))
+        from fbaconf._atomic import _umask
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
         os.replace(tmp, path)
     except BaseException:
         try:
