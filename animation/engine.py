@@ -38,12 +38,11 @@ from fbaconf.bitstreams.tables import NUM_FAPS
 from . import bt
 from .errors import SceneError
 from .facedef import MeshTable, TransformTable, axis_angle_matrices, transform_fields
-from .faceparams import FEATURE_POINTS, NUM_FEATURE_POINTS, Fapu, fapu_from_feature_points
+from .faceparams import FEATURE_POINTS, NUM_FEATURE_POINTS, UNSENT, Fapu, fapu_from_feature_points, fdp_point_rows
 from .facestate import FaceState, MeshPart
 from .highlevel import apply_high_level, high_level_weights
 from .interp import FitGraph, lr_fill
 
-UNSENT = 3.4e38
 
 
 @dataclass
@@ -95,12 +94,11 @@ def feature_points_from_fdp(scene: bt.Scene, fdp: bt.Node | None, path: str) -> 
     c = scene.resolve(fdp.get("featurePointsCoord"))
     if c is None:
         return out
-    pts = np.asarray(c.get("point"), dtype=np.float64).reshape(-1, 3)
+    pts, sent = fdp_point_rows(c.get("point"))
     if pts.shape[0] != NUM_FEATURE_POINTS:
         raise SceneError(f"featurePointsCoord must list the 84 feature points in label order (unsent ones as "
                          f"{UNSENT:g}), got {pts.shape[0]}", rule="fdp-feature-point-count",
                          node_path=f"{path}.featurePointsCoord")
-    sent = ~np.all(pts >= UNSENT, axis=1)
     out[sent] = pts[sent]
     return out
 

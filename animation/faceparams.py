@@ -27,6 +27,18 @@ FAPU_NAMES = ("IRISD", "ES", "ENS", "MNS", "MW", "AU")
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
 
+# fbaconf's convention for FDP subsets (docs/animation.md): featurePointsCoord lists the 84
+# points in label order; a point whose three coordinates are all >= UNSENT (the SFFloat
+# maximum) is "not sent". Shared by the engine and the checker.
+UNSENT = 3.4e38
+
+
+def fdp_point_rows(points) -> tuple[np.ndarray, np.ndarray]:
+    """(float64[k, 3] rows, bool[k] sent) of a featurePointsCoord point list (k should be 84)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    return pts, ~np.all(pts >= UNSENT, axis=1)
+
+
 def fp_index(label: str) -> int:
     """Index of a feature point label ("3.5") in the canonical 84-point order."""
     try:

@@ -1,0 +1,659 @@
+"""The stream checker: face object bytes (+ optional scene) + optional claim -> diagnostics.
+
+Parsing is the reference decoder's (``fbaconf.bitstreams.decoder``); the checker reads the
+per-plane records it keeps (:class:`PlaneInfo`: offsets, header fields, new lists, block
+spans) and adds its own light-weight checks on top. What the decoder refuses becomes one
+diagnostic at the bit offset where parsing stopped (``BitstreamError.rule`` -> code, see
+``RULE_CODES``); everything parsed before that point is still checked.
+
+``check_stream`` never raises: an unexpected exception becomes ``FAP-CHECK-002``.
+
+Checks that the syntax makes impossible and that therefore have no code: masks, fap_quant
+and min/max lists outside intra planes (predicted planes carry no such fields); new lists
+for unmasked FAPs (a list carries values only for masked FAPs); symbols outside the
+signalled ranges (the alphabet is built from the ranges, so no symbol can leave them).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE
+from fbaconf.bitstreams.errors import BitstreamError
+from fbaconf.bitstreams.syntax import (CODING_DCT, INTENSITY_MAX, LIST_ORDER, MASK_INTERPOLATE, _tdiv, alphabet,
+                                       intensity_bound, intensity_step, quant_div)
+from fbaconf.bitstreams.tables import NUM_FAPS, RANGE_DELTA
+
+from . import diagnostics as D
+from .diagnostics import Diagnostic, diag
+from .model import Claim, ProfileSet, load_profiles
+
+# Decoder rule id -> diagnostic code.
+RULE_CODES = {
+    "truncated": D.SYNTAX_TRUNCATED,
+    "marker": D.SYNTAX_MARKER,
+    "object-mask": D.SYNTAX_OBJECT_MASK,
+    "first-plane-intra": D.SYNTAX_FIRST_PREDICTED,
+    "stuffing": D.SYNTAX_STUFFING,
+    "arith-state": D.SYNTAX_ARITH_STATE,
+    "start-code": D.SYNTAX_NOT_FACE,
+    "frame-rate-zero": D.SEM_FRAME_RATE_ZERO,
+    "viseme-select-range": D.SEM_VISEME_SELECT,
+    "expression-select-range": D.SEM_EXPRESSION_SELECT,
+    "value-overflow": D.SEM_VALUE_OVERFLOW,
+    "dct-unsupported": D.CHECK_DCT,
+    "invalid-vlc": D.SYNTAX_DCT,
+    "run-overflow": D.SYNTAX_DCT,
+    "segment-length": D.SYNTAX_DCT,
+    "coefficient-overflow": D.SYNTAX_DCT,
+    "dct-prediction": D.SYNTAX_DCT,
+}
+
+# Level limit id -> diagnostic code (limits with bounds = stream | scene).
+LIMIT_CODES = {
+    "bitrate": D.LEVEL_BITRATE,
+    "coded_frame_rate": D.LEVEL_FRAME_RATE,
+    "faces": D.LEVEL_FACES,
+    "fdp_feature_points": D.LEVEL_FDP_POINTS,
+    "fit_nodes": D.LEVEL_FIT_NODES,
+    "fit_links": D.LEVEL_FIT_LINKS,
+    "fit_terms": D.LEVEL_FIT_TERMS,
+    "texture_width": D.LEVEL_TEXTURE,
+    "texture_height": D.LEVEL_TEXTURE,
+    "mesh_vertices": D.LEVEL_MESH_VERTICES,
+    "facedeftables_entries": D.LEVEL_FDT_ENTRIES,
+    "intervals_per_facedefmesh": D.LEVEL_INTERVALS,
+}
+
+# Unit of a limit in the data file -> factor to the checker's measure.
+UNIT_FACTORS = {"kbit/s": 1000.0}
+
+ARITH_BLOCKS = frozenset({"viseme", "expression", "low-level"})  # PlaneInfo.blocks of the arithmetic mode
+UNREADABLE_CODES = frozenset({D.INPUT_UNREADABLE, D.SYNTAX_TOO_SHORT, D.SYNTAX_NOT_FACE})
+UNIDIRECTIONAL = tuple(f.number for f in tables.fap_table() if f.direction == "U")
+WINDOW_MS = 1000.0
+_EPS_MS = 1e-6
+
+
+# ---------------------------------------------------------------------------- scene summary
+@dataclass
+class SceneSummary:
+    """What the profile/level checks need from a scene: tools used and measured sizes.
+
+    ``tools``: tool id -> node path of its first use. ``measures``: limit id -> (value,
+    node path of the worst case). ``faces``: Face nodes in the scene."""
+    faces: int = 0
+    tools: dict[str, str] = field(default_factory=dict)
+    measures: dict[str, tuple[float, str]] = field(default_factory=dict)
+
+    def measure(self, key: str, value: float, path: str) -> None:
+        cur = self.measures.get(key)
+        if cur is None or value > cur[0]:
+            self.measures[key] = (float(value), path)
+
+
+def image_size(path: Path) -> tuple[int, int] | None:
+    """(width, height) of an image file: the PNG header directly, other formats through
+    OpenImageIO when installed; None when unknown."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(24)
+    except OSError:
+        return None
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    try:
+        import OpenImageIO as oiio
+        inp = oiio.ImageInput.open(str(path))
+        if not inp:
+            return None
+        spec = inp.spec()
+        inp.close()
+        return int(spec.width), int(spec.height)
+    except Exception:
+        return None
+
+
+class SceneStructureError(ValueError):
+    """A scene the reader accepts but whose Face nodes break fbaconf's conventions."""
+
+    def __init__(self, message: str, node_path: str | None = None) -> None:
+        super().__init__(message)
+        self.node_path = node_path
+
+
+def summarize_scene(scene: Any, base_dir: Path | None = None) -> SceneSummary:
+    """SceneSummary of a parsed ``fbaconf.animation.bt.Scene`` (duck-typed). Texture sizes are
+    read from the image files of ImageTexture nodes under an FDP (URLs relative to
+    ``base_dir``, default: the scene file's folder)."""
+    s = SceneSummary()
+    if base_dir is None and getattr(scene, "file", None):
+        base_dir = Path(scene.file).parent
+    resolve = scene.resolve
+    nodes = list(scene.walk())
+    s.faces = sum(1 for n, _ in nodes if n.type == "Face")
+    for n, path in nodes:
+        if n.type == "FDP":
+            fpc = resolve(n.get("featurePointsCoord"))
+            if fpc is not None:
+                s.tools.setdefault("fdp_feature_points", f"{path}.featurePointsCoord")
+                from fbaconf.animation.faceparams import NUM_FEATURE_POINTS, fdp_point_rows
+                rows, sent = fdp_point_rows(fpc.get("point") if fpc.type == "Coordinate" else [])
+                if len(rows) != NUM_FEATURE_POINTS:
+                    raise SceneStructureError(
+                        f"featurePointsCoord must list the 84 feature points in label order (unsent ones as "
+                        f"3.4e38), got {len(rows)}", node_path=f"{path}.featurePointsCoord")
+                s.measure("fdp_feature_points", int(sent.sum()), f"{path}.featurePointsCoord")
+            if resolve(n.get("textureCoord")) is not None or n.get("useOrthoTexture"):
+                s.tools.setdefault("fdp_texture", f"{path}.textureCoord")
+            tables_ = n.get("faceDefTables")
+            if len(tables_):
+                s.tools.setdefault("downloaded_model", f"{path}.faceDefTables")
+            entries = 0
+            for t in tables_:
+                t = resolve(t)
+                if t is not None:
+                    entries += len(t.get("faceDefMesh")) + len(t.get("faceDefTransform"))
+            if len(tables_):
+                s.measure("facedeftables_entries", entries, f"{path}.faceDefTables")
+        elif n.type == "FaceDefMesh":
+            nb = len(n.get("intervalBorders"))
+            s.measure("intervals_per_facedefmesh", max(nb - 1, 0), f"{path}.intervalBorders")
+        elif n.type == "FIT":
+            s.tools.setdefault("fit", path)
+            faps = [int(x) for x in n.get("FAPs")]
+            nodes_n, cur = 0, 0
+            for x in faps:
+                if x == -1:
+                    nodes_n += cur > 0
+                    cur = 0
+                else:
+                    cur += 1
+            nodes_n += cur > 0
+            s.measure("fit_nodes", nodes_n, f"{path}.FAPs")
+            s.measure("fit_links", len(n.get("Graph")) // 2, f"{path}.Graph")
+            terms = [int(x) for x in n.get("numeratorTerms")] + [int(x) for x in n.get("denominatorTerms")]
+            s.measure("fit_terms", max(terms, default=0), f"{path}.numeratorTerms")
+    for n, path in nodes:
+        if n.type == "ImageTexture" and "FDP" in re.split(r"[.\[\]]", path):
+            for url in n.get("url")[:1]:
+                p = Path(url)
+                if not p.is_absolute() and base_dir is not None:
+                    p = base_dir / p
+                size = image_size(p)
+                if size is not None:
+                    s.measure("texture_width", size[0], f"{path}.url")
+                    s.measure("texture_height", size[1], f"{path}.url")
+    vertices, vpath = 0, ""
+    for n, path in nodes:
+        if n.type == "IndexedFaceSet" and "faceSceneGraph" in path:
+            s.tools.setdefault("downloaded_model", path)
+            coord = resolve(n.get("coord"))
+            if coord is not None and coord.type == "Coordinate":
+                vertices += len(coord.get("point"))
+                vpath = vpath or path
+    if vertices:
+        s.measure("mesh_vertices", vertices, vpath)
+    return s
+
+
+def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
+    if scene is None:
+        return None
+    if isinstance(scene, SceneSummary):
+        return scene
+    if isinstance(scene, (str, Path)):
+        try:
+            import importlib
+            bt = importlib.import_module("fbaconf.animation.bt")  # optional: the animation stage's reader
+        except Exception as e:  # ImportError, or a reader that fails to import
+            out.append(diag(D.SCENE_UNAVAILABLE, f"scene {scene}: no scene reader in this build "
+                            f"({type(e).__name__}: {e}); the scene was not checked"))
+            return None
+        try:
+            parsed = bt.read(scene)
+        except OSError as e:
+            out.append(diag(D.SCENE_INVALID, f"scene {scene} cannot be read: {e.strerror or e}"))
+            return None
+        except Exception as e:  # TextFormatError / SceneError / anything the reader raises
+            path = getattr(e, "node_path", None)
+            line = getattr(e, "line", None)
+            where = f" (line {line}, column {getattr(e, 'column', '?')})" if line is not None else ""
+            out.append(diag(D.SCENE_INVALID, f"scene {scene}{where}: {getattr(e, 'message', e)}",
+                            node_path=path))
+            return None
+        scene = parsed
+    try:
+        return summarize_scene(scene)
+    except SceneStructureError as e:
+        out.append(diag(D.SCENE_INVALID, f"scene: {e}", node_path=e.node_path))
+        return None
+    except Exception as e:
+        out.append(diag(D.SCENE_INVALID, f"scene structure not understood: {type(e).__name__}: {e}"))
+        return None
+
+
+# ---------------------------------------------------------------------------- report
+@dataclass
+class Report:
+    diagnostics: list[Diagnostic]
+    summary: dict
+    unreadable: bool = False
+    claim: Claim | None = None
+    smallest_claim: Claim | None = None
+    fits: dict[str, bool] = field(default_factory=dict)
+
+
+def check_stream(data: bytes, *, scene=None, claim: Claim | str | None = None, file: str | None = None,
+                 profiles: ProfileSet | None = None) -> list[Diagnostic]:
+    """All diagnostics for a face object stream, in stream order. Never raises on any stream or
+    scene content; only a malformed ``claim`` string raises ValueError (a usage error).
+
+    ``scene``: None, a BT file path (read with ``fbaconf.animation.bt`` when available), a
+    parsed ``bt.Scene``, or a :class:`SceneSummary`."""
+    return analyse(data, scene=scene, claim=claim, file=file, profiles=profiles).diagnostics
+
+
+def analyse(data: bytes, *, scene=None, claim: Claim | str | None = None, file: str | None = None,
+            profiles: ProfileSet | None = None, smallest_claim: bool = False) -> Report:
+    """The full check: diagnostics, a summary, the smallest admissible claim. Never raises."""
+    out: list[Diagnostic] = []
+    summary: dict = {"bytes": len(data) if isinstance(data, (bytes, bytearray)) else 0}
+    rep = Report(out, summary)
+    if isinstance(claim, str):  # a bad claim is a usage error (ValueError), not a stream problem
+        claim = Claim.parse(claim, profiles or load_profiles())
+    try:
+        _analyse(bytes(data), scene, claim, file, profiles, smallest_claim, rep)
+    except Exception as e:  # a checker bug must not crash the caller
+        out.append(diag(D.CHECK_INTERNAL, f"internal checker failure: {type(e).__name__}: {e}"))
+    out.sort(key=lambda d: d.location.sort_key())
+    rep.unreadable = any(d.code in UNREADABLE_CODES for d in out)
+    return rep
+
+
+class _Stream:
+    """What was parsed: plane records, decoded frames, the error that stopped parsing."""
+
+    def __init__(self, data: bytes, file: str | None) -> None:
+        from fbaconf.bitstreams import decoder as dec
+        self.data = data
+        self.error: BitstreamError | None = None
+        self.result = None
+        self.dct_plane: int | None = None
+        dobj = dec._Decoder(data, file) if hasattr(dec, "_Decoder") else None
+        try:
+            if dobj is not None:
+                self.result = dobj.run()
+            else:  # pragma: no cover - decoder without the internal class
+                self.result = dec.decode(data, file=file)
+        except BitstreamError as e:
+            self.error = e
+        if self.result is not None:
+            self.planes = list(self.result.planes)
+            self.frames = self.result.frames
+        elif dobj is not None:
+            self.planes = list(dobj.planes)
+            self.frames = dobj._frames()
+        else:  # pragma: no cover
+            self.planes = []
+            self.frames = self.error.partial
+        if self.error is not None and self.error.rule == "dct-unsupported":
+            self.dct_plane = self.error.plane
+
+
+def _analyse(data: bytes, scene, claim, file, profiles, want_smallest: bool, rep: Report) -> None:
+    out = rep.diagnostics
+    ps = profiles or load_profiles()
+    if isinstance(claim, str):
+        claim = Claim.parse(claim, ps)
+    rep.claim = claim
+    summary = rep.summary
+    if len(data) < 4:
+        out.append(diag(D.SYNTAX_TOO_SHORT, f"input has {len(data)} byte(s): not a face object stream",
+                        bit_offset=0))
+        return
+    first = int.from_bytes(data[:4], "big")
+    if first != FACE_OBJECT_START_CODE:
+        out.append(diag(D.SYNTAX_NOT_FACE, f"input starts with 0x{first:08X}, not face_object_start_code "
+                        "0x000001BA", bit_offset=0))
+        return
+    st = _Stream(data, file)
+    planes = st.planes
+    _syntax(st, out)
+    _semantics(st, out)
+    _decisions(st, out)
+    tools = _tools(st)
+    measures = _measures(st, summary)
+    sc = _load_scene(scene, out)
+    if sc is not None:
+        for t, path in sc.tools.items():
+            tools.setdefault(t, {"node_path": path})
+        for k, (v, path) in sc.measures.items():
+            measures[k] = (v, {"node_path": path})
+    faces = max(1, sc.faces if sc is not None else 1)
+    measures["faces"] = (float(faces), {"node_path": "Face"} if sc is not None and sc.faces > 1 else {})
+    summary.update(
+        planes=len(planes), frames=len(_rows(st)), intra_planes=sum(1 for p in planes if p.is_intra),
+        complete=st.error is None, parsed_to_bit=(st.error.bit_offset if st.error is not None
+                                                  else st.result.end_offset),
+        frame_rate=_first_rate(planes), faces=faces, tools=sorted(tools),
+        end_code=(f"0x{st.result.end_code:08X}" if st.result is not None and st.result.end_code is not None
+                  else None))
+    # claims
+    fits = {}
+    for c in ps.claims():
+        fits[str(c)] = not _claim_violations(ps, c, tools, measures)
+    rep.fits = fits
+    smallest = next((c for c in ps.claims() if fits[str(c)]), None)
+    rep.smallest_claim = smallest
+    summary["smallest_claim"] = str(smallest) if smallest is not None else None
+    if claim is not None:
+        out.extend(_claim_violations(ps, claim, tools, measures))
+        summary["limits"] = _limit_table(ps, claim, measures)
+    if want_smallest and smallest is None:
+        top = ps.claims()[-1]
+        why = sorted({d.code for d in _claim_violations(ps, top, tools, measures)})
+        out.append(diag(D.CLAIM_NONE, f"no profile@level defined in profiles.toml admits this stream (even {top} "
+                        f"is violated: {', '.join(why)})"))
+
+
+def _first_rate(planes) -> float | None:
+    for p in planes:
+        if p.frame_rate is not None:
+            return round(float(p.frame_rate.rate), 6)
+    return None
+
+
+# ---------------------------------------------------------------------------- syntax
+def _syntax(st: _Stream, out: list[Diagnostic]) -> None:
+    e = st.error
+    if e is not None:
+        code = RULE_CODES.get(e.rule, D.SYNTAX_OTHER)
+        if code == D.CHECK_DCT:
+            msg = (f"plane {e.plane} uses coding_type 1 (DCT segment mode), which this checker cannot parse; "
+                   "the rest of the stream was not checked")
+        elif code == D.SYNTAX_OTHER:
+            msg = f"parsing stopped: {e.message} [rule {e.rule}]"
+        else:
+            msg = f"parsing stopped: {e.message}"
+        out.append(diag(code, msg, bit_offset=e.bit_offset, plane=e.plane, fap=e.fap))
+        return
+    res = st.result
+    nbits = len(st.data) * 8
+    if res.end_code is None:
+        out.append(diag(D.SYNTAX_NO_END_CODE, "the stream ends without the end code 0x000001B1",
+                        bit_offset=res.end_offset))
+    elif res.end_code != VISUAL_OBJECT_SEQUENCE_END_CODE:
+        out.append(diag(D.SYNTAX_UNEXPECTED_START_CODE,
+                        f"start code 0x{res.end_code:08X} ends the face object (expected a plane start code or "
+                        "the end code 0x000001B1); the data after it was not checked",
+                        bit_offset=res.end_offset - 32))
+    elif res.end_offset < nbits:
+        extra = (nbits - res.end_offset) // 8
+        out.append(diag(D.SYNTAX_TRAILING, f"{extra} byte(s) after the end code", bit_offset=res.end_offset))
+
+
+# ---------------------------------------------------------------------------- semantics
+def _time_code_offset(p) -> int:
+    return p.header_offset + 3 + 1 + (13 if p.frame_rate is not None else 0) + 1
+
+
+def _semantics(st: _Stream, out: list[Diagnostic]) -> None:
+    planes = st.planes
+    prev_t = None
+    for p in planes:
+        if p.time_code is not None:
+            h, m, _, s = p.time_code
+            bad = [f"{name} {v} > {lim}" for name, v, lim in (("hours", h, 23), ("minutes", m, 59),
+                                                                ("seconds", s, 59)) if v > lim]
+            if bad:
+                out.append(diag(D.SEM_TIME_CODE_RANGE, "time code out of range: " + ", ".join(bad),
+                                bit_offset=_time_code_offset(p), plane=p.index, frame=p.frame_number))
+        # a time code has whole-second resolution: it goes backwards only when it is earlier
+        # than the whole second the previous plane lies in
+        if (prev_t is not None and p.time_code is not None
+                and p.time_ms < np.floor((prev_t + _EPS_MS) / 1000.0) * 1000.0 - _EPS_MS):
+            out.append(diag(D.SEM_TIME_BACKWARDS, f"time code {p.time_ms / 1000.0:g} s is earlier than the second "
+                            f"of the previous plane ({prev_t:.3f} ms)", bit_offset=p.bit_offset, plane=p.index,
+                            frame=p.frame_number, time_ms=p.time_ms))
+        prev_t = p.time_ms
+    rows = _rows(st)
+    if not rows:
+        return
+    fr = st.frames
+    ks = np.array([k for k, _ in rows], dtype=np.int64)
+    rp = [p for _, p in rows]
+    coded = np.array([p.coded if p.coded is not None else np.zeros(NUM_FAPS, bool) for p in rp])
+    high = fr.high[ks]
+    top = np.array([max(INTENSITY_MAX, intensity_bound(int(p.fap_quant)) * intensity_step(int(p.fap_quant)))
+                    if p.coding_type != CODING_DCT else INTENSITY_MAX for p in rp])
+    for col, fap, name in ((2, 0, "viseme_blend"), (5, 1, "expression_intensity1"),
+                           (7, 1, "expression_intensity2")):
+        bad = np.nonzero(coded[:, fap] & ((high[:, col] < 0) | (high[:, col] > top)))[0]
+        for j in bad:
+            p = rp[j]
+            out.append(diag(D.SEM_INTENSITY, f"{name} = {int(high[j, col])} outside 0..{int(top[j])}",
+                            bit_offset=p.bit_offset, plane=p.index, frame=int(fr.frame_number[ks[j]]), fap=fap + 1))
+    # negative values of unidirectional FAPs (D4 warning)
+    vals = fr.values[ks]
+    for f in UNIDIRECTIONAL:
+        bad = np.nonzero(coded[:, f - 1] & (vals[:, f - 1] < 0))[0]
+        for j in bad:
+            p = rp[j]
+            out.append(diag(D.DECISION_UNIDIRECTIONAL_NEGATIVE,
+                            f"unidirectional FAP {f} decodes to {int(vals[j, f - 1])} < 0",
+                            bit_offset=p.bit_offset, plane=p.index, frame=int(fr.frame_number[ks[j]]), fap=f))
+
+
+def _rows(st: _Stream) -> list[tuple[int, Any]]:
+    """(frame row, plane) for every decoded frame row (a DCT plane group has several rows)."""
+    fr = st.frames
+    if fr is None or len(fr) == 0:
+        return []
+    by_off = {p.bit_offset: p for p in st.planes}
+    out = []
+    for k, off in enumerate(fr.bit_offset.tolist()):
+        p = by_off.get(int(off))
+        if p is not None:
+            out.append((k, p))
+    return out
+
+
+# ---------------------------------------------------------------------------- decisions
+def _bits(data: bytes, at: int, n: int) -> int | None:
+    end = at + n
+    if at < 0 or end > len(data) * 8:
+        return None
+    first, last = at >> 3, (end + 7) >> 3
+    return (int.from_bytes(data[first:last], "big") >> ((last << 3) - end)) & ((1 << n) - 1)
+
+
+def lookahead_stuffing(data: bytes, start: int, length: int) -> int | None:
+    """Stream offset of a stuffing position inside the 14-bit look-ahead after an arithmetic
+    block [start, start+length), or None. There the D7 reading (next field right after the
+    block) and a plain 14-bit rewind (S1) disagree: the decoder removed (or, for a '0',
+    rejected) a stuffing bit among the look-ahead bits that belong to the next field."""
+    from fbaconf.bitstreams.arith import LOOKAHEAD, ZERO_RUN_LIMIT
+    end = start + length
+    n = min(length, ZERO_RUN_LIMIT)
+    tail = _bits(data, end - n, n) if n else 0
+    if tail is None:
+        return None
+    z = n if tail == 0 else (tail & -tail).bit_length() - 1  # zero run at the block end (< 22)
+    k = ZERO_RUN_LIMIT - z  # look-ahead zeros needed to complete a run of 22
+    if k > LOOKAHEAD or k <= 0:
+        return None
+    nxt = _bits(data, end, k)
+    if nxt is None or nxt != 0:
+        return None
+    return end + k
+
+
+def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
+    planes = st.planes
+    data = st.data
+    if planes and all(p.frame_rate is None for p in planes):
+        out.append(diag(D.DECISION_NO_FRAME_RATE, "no plane signals a frame rate: timed at 25 Hz (D6)",
+                        bit_offset=planes[0].bit_offset, plane=0))
+    bounds = tables.default_bounds().copy()
+    replaced = np.zeros((NUM_FAPS, 4), dtype=bool)
+    raw = np.zeros((NUM_FAPS, 4), dtype=np.int64)
+    for f in tables.fap_table()[2:]:
+        raw[f.number - 1] = (f.intra_range, -f.intra_range, f.pred_range, -f.pred_range)
+    ever = np.zeros(NUM_FAPS, dtype=bool)
+    prev_q = None
+    for i, p in enumerate(planes):
+        for name, start, length in getattr(p, "blocks", ()):
+            if name not in ARITH_BLOCKS:
+                continue
+            at = lookahead_stuffing(data, start, length)
+            if at is not None:
+                out.append(diag(D.DECISION_LOOKAHEAD_STUFFING,
+                                f"{name} block ending at bit {start + length}: a stuffing position (bit {at}) lies "
+                                "in the 14-bit look-ahead; D7 and a plain 14-bit rewind read the next field "
+                                "differently", bit_offset=at, plane=p.index, frame=p.frame_number))
+        if not p.is_intra or p.coded is None:
+            continue
+        coded = np.asarray(p.coded, dtype=bool)
+        q = int(p.fap_quant)
+        loc = dict(bit_offset=p.bit_offset, plane=p.index, frame=p.frame_number)
+        low = [f for f in range(3, NUM_FAPS + 1) if coded[f - 1]]
+        has_p = i + 1 < len(planes) and not planes[i + 1].is_intra
+        if p.coding_type != CODING_DCT:
+            if prev_q is not None and q != prev_q and low and len(p.new_lists) < 4:
+                missing = [n for n in LIST_ORDER if n not in p.new_lists]
+                out.append(diag(D.DECISION_QUANT_NO_LISTS, f"fap_quant changes {prev_q} -> {q} without new "
+                                f"{', '.join(missing)} lists (D4 recomputes the alphabets; S1 would not)", **loc))
+            for li, name in enumerate(LIST_ORDER):
+                for fap, v in p.new_lists.get(name, {}).items():
+                    bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
+                    replaced[fap - 1, li] = True
+            d = quant_div(q)
+            for f in low:
+                for kind, (ih, il) in (("intra", (0, 1)), ("predicted", (2, 3))):
+                    if kind == "predicted" and not has_p:
+                        continue
+                    lo, hi = alphabet(int(bounds[f - 1, il]), int(bounds[f - 1, ih]), q)
+                    if lo == hi:
+                        out.append(diag(D.SEM_SINGLE_SYMBOL, f"FAP {f}: {kind} alphabet is the single symbol {lo} "
+                                        f"(bounds {int(bounds[f - 1, il])}..{int(bounds[f - 1, ih])}, fap_quant {q})",
+                                        fap=f, **loc))
+                    for li in (ih, il):
+                        if not replaced[f - 1, li] and _tdiv(int(raw[f - 1, li]), d) != _tdiv(int(bounds[f - 1, li]), d):
+                            out.append(diag(D.DECISION_DEFAULT_ROUNDING,
+                                            f"FAP {f} uses the default {LIST_ORDER[li]} bound {int(raw[f - 1, li])}, "
+                                            f"rounded to {int(bounds[f - 1, li])} by D4 (alphabet differs)",
+                                            fap=f, **loc))
+            prev_q = q
+        types = tuple(p.group_types)
+        for gi, g in enumerate(tables.groups()):
+            if gi < len(types) and types[gi] == MASK_INTERPOLATE:
+                freed = [f for f in g.faps if not coded[f - 1] and ever[f - 1]]
+                if freed:
+                    out.append(diag(D.DECISION_MASK_INTERPOLATE, f"group {g.group} mask type 10 leaves FAP(s) "
+                                    f"{', '.join(map(str, freed))} uncoded after they were set: FREE under D3, "
+                                    "retained under S1's reading", fap=freed[0], **loc))
+        if (coded[0] or coded[1]) and q > 1 and p.coding_type != CODING_DCT:
+            out.append(diag(D.DECISION_HIGH_LEVEL_QUANT, f"visemes/expressions coded with fap_quant {q}: blend/"
+                            f"intensity alphabet 0..{intensity_bound(q)} per D5", fap=1 if coded[0] else 2, **loc))
+        ever |= coded
+
+
+# ---------------------------------------------------------------------------- tools and measures
+def _tools(st: _Stream) -> dict[str, dict]:
+    tools: dict[str, dict] = {}
+    for p in st.planes:
+        loc = {"bit_offset": p.bit_offset, "plane": p.index, "frame": p.frame_number}
+        tools.setdefault("dct" if p.coding_type == CODING_DCT else "arithmetic", loc)
+        if p.coded is not None and (p.coded[0] or p.coded[1]):
+            tools.setdefault("high_level_faps", {**loc, "fap": 1 if p.coded[0] else 2})
+    if st.dct_plane is not None:
+        tools.setdefault("dct", {"bit_offset": st.error.bit_offset, "plane": st.dct_plane})
+    return tools
+
+
+def _measures(st: _Stream, summary: dict) -> dict[str, tuple[float, dict]]:
+    """Peak bits and peak frames over a sliding one-second window [t, t + 1 s).
+
+    Plane bits run from the plane's first bit to the next plane's (the object start code
+    counts with the first plane); a DCT plane group's bits are spread evenly over its frames."""
+    planes = st.planes
+    m: dict[str, tuple[float, dict]] = {}
+    rows = _rows(st)
+    if not planes or not rows:
+        summary.update(peak_bitrate_bps=0, peak_frame_rate_hz=0, duration_s=0.0)
+        return m
+    starts = np.array([p.bit_offset for p in planes], dtype=np.int64)
+    ends = np.append(starts[1:], planes[-1].end_offset)
+    pbits = (ends - starts).astype(np.float64)
+    pbits[0] += starts[0]
+    index_of = {p.index: i for i, p in enumerate(planes)}
+    pi = np.array([index_of[p.index] for _, p in rows], dtype=np.int64)
+    nrows = np.bincount(pi, minlength=len(planes))
+    bits = pbits[pi] / nrows[pi]
+    t = st.frames.time_ms[np.array([k for k, _ in rows], dtype=np.int64)]
+    order = np.argsort(t, kind="stable")
+    ts, bs = t[order], bits[order]
+    cum = np.concatenate(([0.0], np.cumsum(bs)))
+    hi = np.searchsorted(ts, ts + WINDOW_MS - _EPS_MS, side="left")
+    idx = np.arange(len(ts))
+    win_bits = cum[hi] - cum[idx]
+    win_frames = hi - idx
+    kb = int(np.argmax(win_bits))
+    kf = int(np.argmax(win_frames))
+
+    def loc(j: int) -> dict:
+        k, p = rows[int(order[j])]
+        return {"bit_offset": p.bit_offset, "plane": p.index, "frame": int(st.frames.frame_number[k]),
+                "time_ms": float(ts[j])}
+
+    peak_bits = float(np.round(win_bits[kb], 6))
+    m["bitrate"] = (peak_bits, loc(kb))
+    m["coded_frame_rate"] = (float(win_frames[kf]), loc(kf))
+    summary.update(peak_bitrate_bps=int(round(peak_bits)), peak_frame_rate_hz=int(win_frames[kf]),
+                   duration_s=round(float(ts[-1] - ts[0]) / 1000.0, 6))
+    return m
+
+
+def _limit_table(ps: ProfileSet, claim: Claim, measures: dict) -> list[dict]:
+    """Every limit of the claim with its provenance and, for stream/scene limits, the measure."""
+    rows = []
+    for lim in ps.limits_for(claim):
+        f = UNIT_FACTORS.get(lim.unit, 1.0)
+        m = measures.get(lim.id)
+        measured = None if m is None or lim.bounds == "decoder" else round(m[0] / f, 6)
+        rows.append({"limit": lim.id, "kind": lim.kind, "value": lim.value(claim.level), "unit": lim.unit,
+                     "provenance": lim.provenance, "bounds": lim.bounds, "measured": measured,
+                     "ok": None if measured is None else bool(measured <= lim.value(claim.level) + 1e-9)})
+    return rows
+
+
+def _claim_violations(ps: ProfileSet, claim: Claim, tools: dict, measures: dict) -> list[Diagnostic]:
+    out = []
+    prof = ps.profiles[claim.profile]
+    for t, loc in tools.items():
+        if t not in prof.tools:
+            desc = ps.tools[t].description if t in ps.tools else t
+            out.append(diag(D.PROFILE_TOOL, f"tool {t!r} ({desc}) is not in profile {prof.name}", **loc))
+    for lim in ps.limits_for(claim):
+        if lim.bounds == "decoder" or lim.kind != "max" or lim.id not in measures:
+            continue
+        code = LIMIT_CODES.get(lim.id)
+        if code is None:
+            continue
+        value, loc = measures[lim.id]
+        limit = lim.value(claim.level) * UNIT_FACTORS.get(lim.unit, 1.0)
+        if value > limit + 1e-9:
+            shown = value / UNIT_FACTORS.get(lim.unit, 1.0)
+            out.append(diag(code, f"{lim.description}: {shown:g} {lim.unit} > {lim.value(claim.level):g} {lim.unit} "
+                            f"allowed at {prof.name}@{claim.level} ({lim.provenance} limit)", **loc))
+    return out
+
+
+__all__ = ["Report", "SceneSummary", "analyse", "check_stream", "lookahead_stuffing", "summarize_scene",
+           "RULE_CODES", "LIMIT_CODES"]
