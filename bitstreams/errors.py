@@ -7,6 +7,18 @@ Callers catch :class:`FbaconfInputError`; anything else escaping a parser is a b
 from __future__ import annotations
 
 
+def join_location(*parts: str | tuple[str, object]) -> str:
+    """Comma-separated location: a str part as it is, a (label, value) part as 'label value'
+    unless the value is None or empty."""
+    out = []
+    for p in parts:
+        if isinstance(p, str):
+            out.append(p)
+        elif p[1] is not None and p[1] != "":
+            out.append(f"{p[0]} {p[1]}")
+    return ", ".join(out)
+
+
 class FbaconfInputError(Exception):
     """Base class: bad input, reported with a precise location and the rule broken."""
 
@@ -51,14 +63,8 @@ class BitstreamError(FbaconfInputError):
         return self.bit_offset // 8
 
     def location(self) -> str:
-        parts = [f"byte {self.byte_offset} bit {self.bit_offset % 8} (bit offset {self.bit_offset})"]
-        if self.plane is not None:
-            parts.append(f"plane {self.plane}")
-        if self.frame is not None:
-            parts.append(f"frame {self.frame}")
-        if self.fap is not None:
-            parts.append(f"FAP {self.fap}")
-        return ", ".join(parts)
+        return join_location(f"byte {self.byte_offset} bit {self.bit_offset % 8} (bit offset {self.bit_offset})",
+                             ("plane", self.plane), ("frame", self.frame), ("FAP", self.fap))
 
     def to_dict(self) -> dict:
         d = super().to_dict()
@@ -102,14 +108,7 @@ class EncodeError(FbaconfInputError):
         self.value = value
 
     def location(self) -> str:
-        parts = []
-        if self.frame is not None:
-            parts.append(f"frame {self.frame}")
-        if self.fap is not None:
-            parts.append(f"FAP {self.fap}")
-        if self.value is not None:
-            parts.append(f"value {self.value}")
-        return ", ".join(parts)
+        return join_location(("frame", self.frame), ("FAP", self.fap), ("value", self.value))
 
     def to_dict(self) -> dict:
         d = super().to_dict()

@@ -6,7 +6,7 @@ catch them as bad values).
 """
 from __future__ import annotations
 
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.bitstreams.errors import FbaconfInputError, join_location
 
 
 class RenderInputError(FbaconfInputError, ValueError):
@@ -49,14 +49,8 @@ class GeometryError(RenderInputError):
         self.frame = frame
 
     def location(self) -> str:
-        bits = []
-        if self.frame is not None:
-            bits.append(f"frame {self.frame}")
-        if self.part is not None:
-            bits.append(f"part '{self.part}'")
-        if self.vertex is not None:
-            bits.append(f"vertex {self.vertex}")
-        return ", ".join(bits)
+        return join_location(("frame", self.frame), ("part", None if self.part is None else f"'{self.part}'"),
+                             ("vertex", self.vertex))
 
     def to_dict(self) -> dict:
         d = super().to_dict()

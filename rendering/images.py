@@ -12,12 +12,12 @@ no partial image is ever left under the final name.
 """
 from __future__ import annotations
 
-import os
-import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
+
+from fbaconf._atomic import atomic_path
 
 from .errors import ImageIOError, TextureError
 
@@ -49,11 +49,8 @@ def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
 
 def _write(path: Path, pixels: np.ndarray, fmt: str) -> None:
     oiio = _oiio()
-    path.parent.mkdir(parents=True, exist_ok=True)
     h, w, c = pixels.shape
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path, suffix=path.suffix) as tmp:
         out = oiio.ImageOutput.create(tmp)
         if out is None:
             raise ImageIOError(f"no OpenImageIO writer: {oiio.geterror()}", file=str(path))
@@ -71,15 +68,6 @@ def _write(path: Path, pixels: np.ndarray, fmt: str) -> None:
         err = out.geterror() if not ok else ""
         if not out.close() or not ok:
             raise ImageIOError(f"write failed: {err or out.geterror()}", file=str(path))
-        from fbaconf._atomic import _umask
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual mode
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
 
 
 def write_png(path, linear: np.ndarray) -> Path:
