@@ -5,7 +5,6 @@ import argparse
 import json
 from pathlib import Path
 
-from .errors import SceneError
 
 
 def register(subparsers) -> None:
@@ -22,20 +21,9 @@ def register(subparsers) -> None:
 
 
 def load_fap_frames(path: Path):
-    from fbaconf.bitstreams.errors import FbaconfInputError
-    if not path.is_file():
-        raise SceneError(f"FAP file not found: {path}", rule="faps-missing", file=str(path))
-    if path.suffix.lower() == ".npz":
-        from fbaconf.bitstreams.frames import FapFrames
-        try:
-            return FapFrames.load_npz(path)
-        except FbaconfInputError:
-            raise
-        except Exception as e:  # damaged or foreign .npz
-            raise SceneError(f"not a FapFrames .npz: {e}", rule="faps-npz", file=str(path)) from None
-    from fbaconf.bitstreams import faptext  # written by another stage; imported lazily
-    res = faptext.read_fap_file(path)
-    return res[0] if isinstance(res, tuple) else res
+    """FapFrames from ``.npz`` or ``.fap`` text (the bitstream stage's loader)."""
+    from fbaconf.bitstreams.cli import load_faps
+    return load_faps(path)[0]
 
 
 def run_animate(args: argparse.Namespace) -> int:

@@ -17,13 +17,15 @@ from .frames import FapFrames
 def load_faps(path: str | Path) -> tuple[FapFrames, list]:
     """FapFrames from a .fap text file or an fbaconf .npz; returns (frames, warnings)."""
     p = Path(path)
-    if not p.exists():
-        raise FbaconfInputError(f"no such file: {p}", rule="io", file=str(p))
+    if not p.is_file():
+        raise FbaconfInputError(f"FAP file not found: {p}", rule="faps-missing", file=str(p))
     if p.suffix.lower() == ".npz":
         try:
             return FapFrames.load_npz(p), []
-        except (ValueError, OSError, KeyError) as e:
-            raise FbaconfInputError(f"cannot read FapFrames .npz: {e}", rule="npz", file=str(p)) from None
+        except FbaconfInputError:
+            raise
+        except Exception as e:  # np.load / zipfile errors of a damaged or foreign file
+            raise FbaconfInputError(f"not a FapFrames .npz: {e}", rule="faps-npz", file=str(p)) from None
     from .faptext import read_fap_file
     frames, _header, warnings = read_fap_file(p)
     return frames, warnings

@@ -27,21 +27,9 @@ def register(subparsers) -> None:
 
 
 def load_fap_frames(path: Path):
-    """FapFrames from ``.npz`` or ``.fap`` text."""
-    if not path.is_file():
-        raise RenderInputError(f"FAP file not found: {path}", file=str(path), rule="faps-missing")
-    if path.suffix.lower() == ".npz":
-        from fbaconf.bitstreams.frames import FapFrames
-        from fbaconf.bitstreams.errors import FbaconfInputError
-        try:
-            return FapFrames.load_npz(path)
-        except FbaconfInputError:
-            raise
-        except Exception as e:  # np.load / zipfile errors of a damaged or foreign file
-            raise RenderInputError(f"not a FapFrames .npz: {e}", file=str(path), rule="faps-npz") from None
-    from fbaconf.bitstreams import faptext
-    res = faptext.read_fap_file(path)
-    return res[0] if isinstance(res, tuple) else res
+    """FapFrames from ``.npz`` or ``.fap`` text (the bitstream stage's loader)."""
+    from fbaconf.bitstreams.cli import load_faps
+    return load_faps(path)[0]
 
 
 def run_render(args: argparse.Namespace) -> int:

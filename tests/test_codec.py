@@ -149,9 +149,9 @@ def test_plane_start_code_modes_decode_identically():
 def test_large_prediction_error_forces_an_intra_plane():
     f = FapFrames.empty(3)
     f.status[:, 2] = SET  # open_jaw, QP 4
-    f.values[:, 2] = [0, 1800 * 4, 0]  # a delta of 1800 steps does not fit the largest P range? it does (<=1860)
-    f.values[1, 2] = 1850 * 4
-    f.values[2, 2] = -1850 * 4  # delta of 3700 steps: only an intra plane can code it
+    # 0 -> 1850 steps: a delta within the largest P range (1860); 1850 -> -1850: a delta of
+    # 3700 steps that only an intra plane can code
+    f.values[:, 2] = [0, 1850 * 4, -1850 * 4]
     res = encode(f, EncoderOptions(fap_quant=1))
     assert res.intra_frames == [0, 2]
     assert first_difference(res.recon, decode(res.data).frames) is None
