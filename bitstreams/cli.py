@@ -50,6 +50,9 @@ def _summary(frames: FapFrames, nbytes: int) -> dict:
 
 
 def cmd_encode(args) -> int:
+    if Path(args.input).suffix.lower() == ".bt":  # a BT scene -> binary BIFS (issue 9)
+        from .bifs import cmd_encode_scene
+        return cmd_encode_scene(args)
     from .encoder import EncoderOptions, encode
     frames, warnings = load_faps(args.input)
     for w in warnings:
@@ -77,6 +80,13 @@ def cmd_encode(args) -> int:
 def cmd_decode(args) -> int:
     from .decoder import decode
     p = Path(args.input)
+    if p.suffix.lower() in (".bifs", ".bif"):  # a binary BIFS scene -> BT text and/or a bit trace (issue 9)
+        from .bifs import cmd_decode_scene
+        return cmd_decode_scene(args)
+    if getattr(args, "trace", False):
+        raise FbaconfInputError("--trace is for .bifs scenes", rule="usage", file=str(p))
+    if not args.output:
+        raise FbaconfInputError("-o/--output is required", rule="usage", file=str(p))
     if not p.exists():
         raise FbaconfInputError(f"no such file: {p}", rule="io", file=str(p))
     res = decode(p.read_bytes(), file=str(p))
@@ -130,8 +140,8 @@ def cmd_demo(args) -> int:
 
 def register(sub) -> None:
     p = sub.add_parser("encode", help="reference encoder: .fap/.npz FAP sequence -> face object bitstream (.fba)")
-    p.add_argument("input", help="FAP sequence (.fap text or fbaconf .npz)")
-    p.add_argument("-o", "--output", required=True, help="output .fba")
+    p.add_argument("input", help="FAP sequence (.fap text or fbaconf .npz), or a BT scene (.bt -> .bifs)")
+    p.add_argument("-o", "--output", required=True, help="output .fba (.bifs for a .bt scene)")
     p.add_argument("--quant", type=int, default=1, help="fap_quant 0..31 (0 = lossless, default 1)")
     p.add_argument("--coding", choices=("arithmetic", "dct"), default="arithmetic")
     p.add_argument("--intra-every", type=int, default=0, metavar="N", help="an intra plane at least every N planes")
@@ -145,9 +155,11 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_encode)
 
-    p = sub.add_parser("decode", help="reference decoder: .fba -> FapFrames (.fap text or .npz)")
+    p = sub.add_parser("decode", help="reference decoder: .fba -> FapFrames (.fap text or .npz); .bifs scene -> .bt")
     p.add_argument("input")
-    p.add_argument("-o", "--output", required=True, help="output .fap or .npz")
+    p.add_argument("-o", "--output", help="output .fap or .npz (.bt for a .bifs scene)")
+    p.add_argument("--trace", action="store_true", help=".bifs only: print every node and field with its bit "
+                   "offset and width")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_decode)
 

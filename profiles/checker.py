@@ -216,7 +216,11 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
                             f"({type(e).__name__}: {e}); the scene was not checked"))
             return None
         try:
-            parsed = bt.read(scene)
+            if str(scene).lower().endswith((".bifs", ".bif")):  # binary BIFS (issue 9)
+                from fbaconf.bitstreams import bifs
+                parsed = bifs.read(scene)
+            else:
+                parsed = bt.read(scene)
         except OSError as e:
             out.append(diag(D.SCENE_INVALID, f"scene {scene} cannot be read: {e.strerror or e}"))
             return None
@@ -224,6 +228,8 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
             path = getattr(e, "node_path", None)
             line = getattr(e, "line", None)
             where = f" (line {line}, column {getattr(e, 'column', '?')})" if line is not None else ""
+            if getattr(e, "bit_offset", None) is not None:  # a binary BIFS scene
+                where = f" (BIFS bit offset {e.bit_offset}, rule {getattr(e, 'rule', '?')})"
             out.append(diag(D.SCENE_INVALID, f"scene {scene}{where}: {getattr(e, 'message', e)}",
                             node_path=path))
             return None

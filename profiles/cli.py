@@ -25,7 +25,8 @@ def register(subparsers) -> None:
         description="Check a face object bitstream: syntax, semantics, decision dependence, and (with --claim) "
                     "the tools and limits of a profile@level. Exit 0 clean, 1 errors, 2 unreadable input.")
     p.add_argument("input", metavar="IN.fba", help="face object bitstream")
-    p.add_argument("--scene", metavar="S.bt", help="scene file (FDP/FIT/FaceDefTables) for profile/level checks")
+    p.add_argument("--scene", metavar="S.bt", help="scene file (FDP/FIT/FaceDefTables) for profile/level checks: BT "
+                   "text, or binary BIFS (.bifs)")
     p.add_argument("--claim", metavar="PROFILE@LEVEL", help="check against a claim, e.g. simple@1")
     p.add_argument("--json", action="store_true", help="JSON report (schema: profiles/data/check-report.schema.json)")
     p.add_argument("--max-issues", type=int, default=0, metavar="N",
