@@ -314,7 +314,7 @@ class _Reader:
         if integer:
             if not _INT.match(v):
                 raise self.error(f"expected an integer, got {v!r}", off, "bt-number", path)
-            n = int(v, 0) if not v.lstrip("+-").startswith(("0x", "0X")) else int(v, 16)
+            n = int(v, 10) if not v.lstrip("+-").startswith(("0x", "0X")) else int(v, 16)
             if n > 0xFFFFFFFF or n < -2147483648:
                 raise self.error(f"integer {v} out of SFInt32 range", off, "bt-number", path)
             if n > 2147483647:  # hex written unsigned (0x80000000)

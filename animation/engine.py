@@ -393,9 +393,9 @@ def animate_model(frames: FapFrames, model: CompiledFace) -> FaceState:
 
     def amp(t) -> np.ndarray:
         if t.fap == 1:
-            return wv[:, t.high_level_select] * 63.0 if t.high_level_select <= 14 else np.zeros(F)
+            return wv[:, t.high_level_select] * 63.0 if 0 <= t.high_level_select <= 14 else np.zeros(F)
         if t.fap == 2:
-            return we[:, t.high_level_select] * 63.0 if t.high_level_select <= 6 else np.zeros(F)
+            return we[:, t.high_level_select] * 63.0 if 0 <= t.high_level_select <= 6 else np.zeros(F)
         return values[:, t.fap - 1]
 
     def unit(t) -> float:
