@@ -1,0 +1,144 @@
+"""Verbs ``fbaconf suites list|build`` and ``fbaconf golden regenerate|verify``."""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("suites", help="show or regenerate the conformance suites",
+                       description="Conformance suites: list them, or rebuild every stream/scene from "
+                                   "conformance/data/suites.toml (deterministic).")
+    ss = p.add_subparsers(dest="suites_cmd", metavar="CMD", required=True)
+    ls = ss.add_parser("list", help="list suites and cases")
+    ls.add_argument("--cases", action="store_true", help="also list each case")
+    ls.add_argument("--json", action="store_true")
+    ls.set_defaults(func=cmd_list)
+    b = ss.add_parser("build", help="regenerate the suites (then run `fbaconf golden verify`)")
+    b.add_argument("names", nargs="*", help="only these suites")
+    b.add_argument("--goldens", action="store_true", help="also regenerate the goldens")
+    b.add_argument("--external", type=Path, metavar="DIR",
+                   help="also build the optional external suite from the real .fap files in DIR "
+                        "(never committed; written to --external-out or a temporary folder)")
+    b.add_argument("--external-out", type=Path, metavar="DIR",
+                   help="where the external suite goes (default: a new temporary folder, printed)")
+    b.set_defaults(func=cmd_build)
+    cv = ss.add_parser("coverage", help="which coverage points each case hits (coverage: K/N points)",
+                       description="Decode and inspect every case of the built suites and report which points "
+                                   "of the coverage model (conformance/data/coverage.toml) they hit.")
+    cv.add_argument("--json", action="store_true", help="the full report as JSON")
+    cv.add_argument("--cases", action="store_true", help="also list the points of each case")
+    cv.set_defaults(func=cmd_coverage)
+    mu = ss.add_parser("mutants", help="run every mutant decoder against the suites (mutation score)",
+                       description="Run each mutant decoder (the reference with one realistic bug, "
+                                   "conformance/mutants.py) against the required cases of the claim, each "
+                                   "mutant in its own process, and print the case that kills it; the last "
+                                   "line is `mutation score: K/N`.")
+    mu.add_argument("names", nargs="*", help="only these mutants")
+    mu.add_argument("-j", "--jobs", type=int, default=None, help="mutants run in parallel (default: CPU cores)")
+    mu.add_argument("--claim", default="predictable@2", help="claim whose required cases are run")
+    mu.add_argument("--all-cases", action="store_true",
+                    help="run every case against each mutant (default: stop at the first killing case)")
+    mu.add_argument("--list", action="store_true", help="only list the mutants")
+    mu.add_argument("--json", action="store_true")
+    mu.set_defaults(func=cmd_mutants)
+    g = sub.add_parser("golden", help="regenerate or verify the golden outputs",
+                       description="Goldens come only from the reference pipeline: `regenerate` writes them and "
+                                   "golden/MANIFEST.json; `verify` checks digests and that regeneration is bit-identical.")
+    gs = g.add_subparsers(dest="golden_cmd", metavar="CMD", required=True)
+    r = gs.add_parser("regenerate", help="write goldens from the reference")
+    r.set_defaults(func=cmd_regenerate)
+    v = gs.add_parser("verify", help="check digests and bit-identical regeneration")
+    v.add_argument("--no-regenerate", action="store_true", help="only check digests (fast)")
+    v.set_defaults(func=cmd_verify)
+
+
+def cmd_list(args) -> int:
+    from .suite import load_suites
+    suites = load_suites()
+    if args.json:
+        print(json.dumps([{"name": s.name, "claim": s.claim, "group": s.group, "version": s.version,
+                           "cases": [c.id for c in s.cases]} for s in suites], indent=1))
+        return 0
+    for s in suites:
+        print(f"{s.name:28s} {s.claim:16s} {s.group:8s} {len(s.cases):3d} case(s)  {s.description}")
+        if args.cases:
+            for c in s.cases:
+                print(f"    {c.id:34s} {c.kind:7s} {c.frames:4d} frames  {c.description}")
+    print(f"{len(suites)} suite(s), {sum(len(s.cases) for s in suites)} case(s)")
+    return 0
+
+
+def cmd_build(args) -> int:
+    from .build import build, build_external
+    if args.external is not None:
+        ext = build_external(args.external, args.external_out)
+        if ext is None:
+            print(f"external suite: {args.external} holds no .fap files; skipped")
+        else:
+            print(f"external suite: {ext.name}: {len(ext.cases)} case(s) in {ext.path} "
+                  f"(run: FBACONF_SUITES={ext.path.parent} fbaconf run ...)")
+        if not args.names and not args.goldens:
+            return 0
+    suites = build(names=args.names or None)
+    if args.goldens:
+        from .golden import regenerate
+        from .suite import load_suites
+        regenerate(load_suites())
+    print(f"{len(suites)} suite(s) built")
+    return 0
+
+
+def cmd_regenerate(args) -> int:
+    from .golden import regenerate
+    from .suite import load_suites
+    m = regenerate(load_suites())
+    print(f"wrote {len(m['files'])} golden file(s)")
+    return 0
+
+
+def cmd_verify(args) -> int:
+    from .golden import verify
+    problems = verify(regenerate_check=not args.no_regenerate)
+    for p in problems:
+        print(f"golden verify: {p}", file=sys.stderr)
+    if problems:
+        print(f"golden verify: FAILED ({len(problems)} problem(s))")
+        return 1
+    print("golden verify: OK")
+    return 0
+
+
+def cmd_coverage(args) -> int:
+    from .coverage import compute, format_table
+    rep = compute()
+    if args.json:
+        print(json.dumps(rep, indent=1))
+        return 0
+    if args.cases:
+        for c in rep["cases"]:
+            print(f"{c['case']}: {len(c['points'])} point(s): {' '.join(c['points'])}")
+        print()
+    print(format_table(rep))
+    return 0
+
+
+def cmd_mutants(args) -> int:
+    from . import mutants
+    if args.list:
+        for m in mutants.MUTANTS.values():
+            print(f"{m.name:32s} {m.where:40s} {m.description}")
+        print(f"{len(mutants.MUTANTS)} mutant(s)")
+        return 0
+    unknown = [n for n in args.names if n not in mutants.MUTANTS]
+    if unknown:
+        print(f"fbaconf suites mutants: error: unknown mutant(s) {', '.join(unknown)}", file=sys.stderr)
+        return 2
+    results = mutants.run_all(args.names or None, claim=args.claim, jobs=args.jobs,
+                              stop_at_first=not args.all_cases)
+    if args.json:
+        print(json.dumps(results, indent=1))
+    else:
+        print(mutants.format_results(results))
+    return 0

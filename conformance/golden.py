@@ -1,0 +1,160 @@
+"""``fbaconf golden regenerate|verify``: golden outputs of the reference, with sha256 digests.
+
+Goldens are written only here, from the reference pipeline (``harness.refdecoder``):
+``golden/<suite>/<case>/faps.npz`` (decoded FapFrames), ``vertices.npz`` (FaceState),
+``frame_NNNNN.png`` (images), ``face<i>.npz`` (multi-face cases). ``golden/MANIFEST.json``
+lists every file with its sha256 and the digest of the suite manifest it was made from.
+
+``.npz`` files are rewritten in a canonical form (fixed zip timestamps, sorted members,
+deflate) so that regeneration is bit-identical; ``verify`` proves (1) every golden file
+matches its digest and nothing is missing or extra, (2) every suite's input files match
+their digests, and (3) regenerating into a temporary folder reproduces every file byte
+for byte.
+"""
+from __future__ import annotations
+
+import io
+import json
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from fbaconf._atomic import atomic_write_bytes, atomic_write_text
+
+from .suite import Suite, SuiteError, golden_root, load_suites, sha256_file
+
+MANIFEST = "MANIFEST.json"
+FORMAT = "fbaconf.golden/1"
+
+
+def canonical_npz(path: Path, keep: list[str] | None = None) -> None:
+    """Rewrite an .npz with fixed metadata so equal arrays give equal bytes. Float64 vertex
+    arrays are stored as float32 (their comparison has a tolerance far above float32's
+    resolution; halves the repository). ``keep``: store only these arrays (what the case
+    compares)."""
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files if keep is None or k in keep or k == "format"}
+        if "format" in arrays and str(arrays["format"]).startswith("fbaconf.FaceState"):
+            for k in ("vertices", "extra_feature_points"):
+                if k in arrays:
+                    arrays[k] = arrays[k].astype(np.float32)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name in sorted(arrays):
+            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            data = io.BytesIO()
+            np.lib.format.write_array(data, np.array(arrays[name], order="C"), allow_pickle=False)
+            zf.writestr(info, data.getvalue(), compresslevel=9)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def generate_case(case, out: Path) -> list[Path]:
+    """Write one case's goldens into ``out``; returns the files written."""
+    from fbaconf.harness.refdecoder import multi_outputs, reference_outputs
+    out.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    if case.kind == "error":
+        return written
+    if case.kind == "multi":
+        tmp = out / ".faces"
+        multi_outputs(case.face_paths(), tmp, "npz")
+        for src, name in zip(case.face_paths(), case.goldens["faces"]):
+            (tmp / f"{src.stem}.npz").replace(out / name)
+            written.append(out / name)
+        shutil.rmtree(tmp, ignore_errors=True)
+    else:
+        stream = case.input_path("fba") or case.input_path("fap")
+        kw = {}
+        if "faps" in case.stages:
+            kw["faps_out"] = out / case.goldens["faps"]
+        if "vertices" in case.stages:
+            kw["vertices_out"] = out / case.goldens["vertices"]
+        if "images" in case.stages:
+            kw["images_dir"] = out
+            kw["scenario"] = case.input_path("scenario")
+        reference_outputs(stream, scene=case.input_path("scene"), **kw)
+        for k in ("faps_out", "vertices_out"):
+            if k in kw:
+                written.append(kw[k])
+        written += [out / n for n in case.goldens.get("images", [])]
+    key = case.tolerances.get("vertices", {}).get("key")
+    for p in written:
+        if p.suffix == ".npz":
+            canonical_npz(p, keep=[key] if (key and p.name == case.goldens.get("vertices")) else None)
+    return written
+
+
+def regenerate(suites: list[Suite], root: Path | None = None, log=print) -> dict:
+    root = root or golden_root()
+    for s in suites:
+        d = root / s.name
+        if d.exists():
+            shutil.rmtree(d)
+    files: dict[str, str] = {}
+    for s in suites:
+        for c in s.cases:
+            for p in generate_case(c, c.golden_dir(root)):
+                files[p.relative_to(root).as_posix()] = sha256_file(p)
+        log(f"goldens for {s.name}: {sum(1 for k in files if k.startswith(s.name + '/'))} file(s)")
+    manifest = {"format": FORMAT, "suites": {s.name: {"version": s.version, "manifest_sha256": s.digest()}
+                                             for s in suites},
+                "files": dict(sorted(files.items()))}
+    atomic_write_text(root / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+    return manifest
+
+
+def verify(root: Path | None = None, *, regenerate_check: bool = True, log=print) -> list[str]:
+    """Problems found (empty list = goldens verified)."""
+    root = root or golden_root()
+    mp = root / MANIFEST
+    try:
+        manifest = json.loads(mp.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return [f"no golden manifest {mp}: run `fbaconf golden regenerate`"]
+    except ValueError as e:
+        return [f"golden manifest {mp} is not valid JSON: {e}"]
+    problems: list[str] = []
+    files = manifest.get("files", {})
+    for rel, digest in files.items():
+        p = root / rel
+        if not p.is_file():
+            problems.append(f"missing golden file {rel}")
+        elif sha256_file(p) != digest:
+            problems.append(f"golden file {rel} does not match its sha256")
+    on_disk = {p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file() and p.name != MANIFEST
+               and not p.name.startswith(".")}
+    for extra in sorted(on_disk - set(files)):
+        problems.append(f"golden file {extra} is not in the manifest")
+    try:
+        suites = load_suites()
+    except SuiteError as e:
+        return problems + [str(e)]
+    by_name = {s.name: s for s in suites}
+    for name, info in manifest.get("suites", {}).items():
+        s = by_name.get(name)
+        if s is None:
+            problems.append(f"goldens name suite {name}, which is not built")
+            continue
+        if s.digest() != info.get("manifest_sha256"):
+            problems.append(f"suite {name}: suite.json changed since the goldens were made (regenerate them)")
+        problems += [f"suite {name}: {p}" for p in s.verify_inputs()]
+    for s in suites:
+        if s.name not in manifest.get("suites", {}):
+            problems.append(f"suite {s.name} has no goldens")
+    log(f"digests: {len(files)} golden file(s) checked")
+    if regenerate_check and not problems:
+        with tempfile.TemporaryDirectory(prefix="fbaconf-golden-") as tmp:
+            t = Path(tmp)
+            regen = regenerate(suites, t, log=lambda *_: None)
+            for rel, digest in files.items():
+                if regen["files"].get(rel) != digest:
+                    problems.append(f"regenerating {rel} does not reproduce it bit for bit")
+            for rel in set(regen["files"]) - set(files):
+                problems.append(f"regeneration writes {rel}, which the goldens lack")
+        log(f"regeneration: {len(files)} file(s) compared byte for byte")
+    return problems

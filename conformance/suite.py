@@ -1,0 +1,192 @@
+"""Suite and case model: what a conformance case is, and where its files live.
+
+A suite is a folder ``conformance/suites/<name>/`` holding ``suite.json`` and the case
+input files (streams ``.fba``, FAP text ``.fap``, scenes ``.bt``/``.bifs``, scenarios
+``.toml``). Goldens live in ``golden/<suite>/<case>/`` (written only by
+``fbaconf golden regenerate``). Every file a case names carries its sha256, so a run can
+prove it used exactly the suite version it reports.
+
+A case::
+
+    {"id": "simple-core-arith-q8", "claim": "simple@1", "group": "core",
+     "kind": "decode" | "error" | "multi",
+     "description": "...", "tools": ["arithmetic"], "covers": ["quant:8", ...],
+     "inputs": {"fba": "x.fba", "fap": "x.fap", "scene": "x.bt", "bifs": "x.bifs",
+                "scenario": "x.toml", "faces": ["a.fba", "b.fba"]},
+     "sha256": {"x.fba": "..."},
+     "frames": 30,
+     "stages": ["faps", "vertices", "images"],        # what the goldens cover
+     "goldens": {"faps": "faps.npz", "vertices": "vertices.npz", "images": ["frame_00000.png", ...],
+                 "faces": ["face0.npz", ...]},      # paths relative to golden/<suite>/<case>/
+     "tolerances": {"vertices": {...}, "images": {...}},
+     "expect": {"diagnostics": ["FAP-SYNTAX-003"]}} # error cases: what the checker must say
+
+``claim`` is the lowest profile@level whose certification requires the case: a decoder
+claiming P@L runs every case whose claim is P'@L' with P' included in P and L' <= L.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fbaconf.bitstreams.errors import FbaconfInputError
+
+SUITE_FORMAT = "fbaconf.suite/1"
+KINDS = ("decode", "error", "multi")
+STAGES = ("faps", "vertices", "images")
+INPUT_KEYS = ("fba", "fap", "scene", "bifs", "scenario", "faces")
+
+
+class SuiteError(FbaconfInputError):
+    """A suite manifest or one of its files is missing, malformed or does not match its digest."""
+
+
+def package_root() -> Path:
+    return Path(__file__).resolve().parent
+
+
+def suites_root() -> Path:
+    """Where suites are built and read: ``FBACONF_SUITES`` or ``conformance/suites``."""
+    env = os.environ.get("FBACONF_SUITES")
+    return Path(env) if env else package_root() / "suites"
+
+
+def golden_root() -> Path:
+    """Where goldens live: ``FBACONF_GOLDEN`` or the repository's ``golden/`` folder."""
+    env = os.environ.get("FBACONF_GOLDEN")
+    return Path(env) if env else package_root().parent / "golden"
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+@dataclass
+class Case:
+    id: str
+    suite: str
+    claim: str
+    group: str = "core"
+    kind: str = "decode"
+    description: str = ""
+    tools: list[str] = field(default_factory=list)
+    covers: list[str] = field(default_factory=list)
+    inputs: dict[str, Any] = field(default_factory=dict)
+    sha256: dict[str, str] = field(default_factory=dict)
+    frames: int = 0
+    stages: list[str] = field(default_factory=list)
+    goldens: dict[str, Any] = field(default_factory=dict)
+    tolerances: dict[str, dict] = field(default_factory=dict)
+    expect: dict[str, Any] = field(default_factory=dict)
+    suite_dir: Path | None = None
+
+    @property
+    def full_id(self) -> str:
+        return f"{self.suite}/{self.id}"
+
+    def input_path(self, key: str) -> Path | None:
+        v = self.inputs.get(key)
+        if v is None or self.suite_dir is None:
+            return None
+        return self.suite_dir / v
+
+    def face_paths(self) -> list[Path]:
+        return [self.suite_dir / p for p in self.inputs.get("faces", [])] if self.suite_dir else []
+
+    def golden_dir(self, root: Path | None = None) -> Path:
+        return (root or golden_root()) / self.suite / self.id
+
+    def to_json(self) -> dict:
+        d = {k: getattr(self, k) for k in ("id", "claim", "group", "kind", "description", "tools", "covers",
+                                            "inputs", "sha256", "frames", "stages", "goldens", "tolerances",
+                                            "expect")}
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict, suite: str, suite_dir: Path | None) -> "Case":
+        try:
+            c = cls(suite=suite, suite_dir=suite_dir, **{k: d[k] for k in d if k in cls.__dataclass_fields__
+                                                         and k not in ("suite", "suite_dir")})
+        except TypeError as e:
+            raise SuiteError(f"suite {suite}: malformed case {d.get('id')!r}: {e}", rule="suite-case") from None
+        if c.kind not in KINDS:
+            raise SuiteError(f"suite {suite}: case {c.id}: kind {c.kind!r} not one of {KINDS}", rule="suite-case")
+        bad = [s for s in c.stages if s not in STAGES]
+        if bad:
+            raise SuiteError(f"suite {suite}: case {c.id}: unknown stage(s) {bad}", rule="suite-case")
+        return c
+
+
+@dataclass
+class Suite:
+    name: str
+    description: str
+    claim: str  # the profile@level group this suite belongs to
+    group: str
+    version: str
+    cases: list[Case]
+    path: Path | None = None
+
+    def to_json(self) -> dict:
+        return {"format": SUITE_FORMAT, "name": self.name, "description": self.description, "claim": self.claim,
+                "group": self.group, "version": self.version, "cases": [c.to_json() for c in self.cases]}
+
+    def manifest_path(self) -> Path:
+        assert self.path is not None
+        return self.path / "suite.json"
+
+    def digest(self) -> str:
+        return sha256_file(self.manifest_path())
+
+    @classmethod
+    def load(cls, directory: Path) -> "Suite":
+        directory = Path(directory)
+        mf = directory / "suite.json"
+        try:
+            d = json.loads(mf.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise SuiteError(f"no suite manifest: {mf}", rule="suite-missing", file=str(mf)) from None
+        except (OSError, ValueError) as e:
+            raise SuiteError(f"unreadable suite manifest: {e}", rule="suite-manifest", file=str(mf)) from None
+        if d.get("format") != SUITE_FORMAT:
+            raise SuiteError(f"not an {SUITE_FORMAT} manifest", rule="suite-manifest", file=str(mf))
+        name = d["name"]
+        return cls(name=name, description=d.get("description", ""), claim=d["claim"], group=d.get("group", ""),
+                   version=d.get("version", ""), path=directory,
+                   cases=[Case.from_json(c, name, directory) for c in d["cases"]])
+
+    def verify_inputs(self) -> list[str]:
+        """Problems with the suite's input files (missing, digest mismatch); empty when sound."""
+        problems = []
+        for c in self.cases:
+            for rel, digest in c.sha256.items():
+                p = self.path / rel
+                if not p.is_file():
+                    problems.append(f"{c.full_id}: missing {rel}")
+                elif sha256_file(p) != digest:
+                    problems.append(f"{c.full_id}: {rel} does not match its sha256")
+        return problems
+
+
+def load_suites(root: Path | None = None, names: list[str] | None = None) -> list[Suite]:
+    root = root or suites_root()
+    if not root.is_dir():
+        raise SuiteError(f"no suites at {root}: run `fbaconf suites build` first", rule="suite-missing",
+                         file=str(root))
+    suites = [Suite.load(p) for p in sorted(root.iterdir()) if (p / "suite.json").is_file()]
+    if names:
+        known = {s.name for s in suites}
+        missing = [n for n in names if n not in known]
+        if missing:
+            raise SuiteError(f"unknown suite(s): {', '.join(missing)} (known: {', '.join(sorted(known))})",
+                             rule="suite-missing")
+        suites = [s for s in suites if s.name in names]
+    return suites

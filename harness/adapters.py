@@ -1,0 +1,316 @@
+"""Decoder adapters: a TOML manifest for command-line decoders (any language) or a Python class.
+
+Manifest (``architecture.md``)::
+
+    name = "example"
+    description = "..."
+    claims = ["simple@1"]                 # profile@level claimed
+    tools = ["arithmetic", "dct"]         # optional: tools supported (default: all of the claimed profile)
+    inputs = ["fba", "fap", "scene", "bifs"]
+    outputs = ["faps", "vertices", "images"]
+    faps_format = "fap"                   # or "npz": the FAP output file the decoder writes
+    python = "package.module:Class"       # optional: an in-process adapter instead of commands
+    [commands]                            # argv lists, {placeholders} filled by the harness
+    decode = ["exampledec", "{input}", ["--scene", "{scene}"], "--out", "{faps_out}"]
+    decode_multi = ["exampledec", "--out-dir", "{faps_out_dir}", "{inputs}"]
+    [limits]
+    timeout_s = 30
+    memory_mb = 2048
+    memory_kind = "address-space"         # or "rss" (JVM etc.) or "none"
+    output_mb = 256
+    [env]                                 # extra environment variables for the decoder
+    EXAMPLE_MODE = "strict"
+
+Placeholders: ``{input}`` (the stream the decoder gets: ``.fba`` when it accepts ``fba``,
+else the ``.fap`` text), ``{fba}``, ``{fap}``, ``{scene}`` (BT, or BIFS when the decoder
+accepts only ``bifs``), ``{scene_bt}``, ``{scene_bifs}``, ``{scenario}``, ``{faps_out}``,
+``{vertices_out}``, ``{images_dir}``, ``{frames}``, ``{workdir}``, ``{manifest_dir}``,
+``{python}`` (this Python), and for multi-face cases ``{faps_out_dir}`` and ``{inputs}``
+(an argv element that is exactly ``{inputs}`` expands to one element per face stream;
+each face's output is ``{faps_out_dir}/<stream stem>.fap|.npz``). A nested list in an argv
+is an optional group: included only when every placeholder in it has a value (e.g.
+``["--scene", "{scene}"]`` for cases without a scene) and, for output placeholders, when
+the case compares that output (``["--images-dir", "{images_dir}"]`` is dropped for cases
+without image goldens, so the decoder need not render them). One command is run per case; it
+must write every output whose placeholder it names.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib
+import re
+import sys
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fbaconf.bitstreams.errors import FbaconfInputError
+
+from .sandbox import Limits
+
+INPUT_KINDS = ("fba", "fap", "scene", "bifs")
+OUTPUT_KINDS = ("faps", "vertices", "images")
+FAPS_FORMATS = ("fap", "npz")
+PLACEHOLDERS = ("input", "fba", "fap", "scene", "scene_bt", "scene_bifs", "scenario", "faps_out", "vertices_out",
+                "images_dir", "frames", "workdir", "manifest_dir", "python", "faps_out_dir", "inputs")
+OUTPUT_PLACEHOLDER = {"faps": "faps_out", "vertices": "vertices_out", "images": "images_dir"}
+_PH = re.compile(r"\{([a-z_]+)\}")
+BUNDLED_DIR = Path(__file__).resolve().parent / "adapters"
+
+
+class ManifestError(FbaconfInputError):
+    """A decoder manifest is malformed (names file, key and rule)."""
+
+
+@dataclass
+class Job:
+    """One decoder invocation's files: inputs copied into its own directory, output paths."""
+    workdir: Path
+    values: dict[str, str]  # placeholder -> value (only those available)
+    faces: list[str] = field(default_factory=list)  # multi-face input paths
+    frames: int = 0
+    # output placeholders the case does not compare: an optional argv group naming one is
+    # dropped (a decoder that needs them unconditionally still gets a path to write to)
+    unwanted: frozenset[str] = frozenset()
+
+    def path(self, name: str) -> Path | None:
+        v = self.values.get(name)
+        return Path(v) if v is not None else None
+
+
+class Adapter:
+    """Common interface of decoder adapters."""
+    name: str = "decoder"
+    description: str = ""
+    claims: list[str]
+    tools: list[str] | None = None
+    inputs: list[str]
+    outputs: list[str]
+    faps_format: str = "npz"
+    limits: Limits
+    kind: str = "python"
+    supports_multi: bool = False
+    manifest_path: Path | None = None
+    manifest_text: str = ""
+
+    def digest(self) -> str:
+        return hashlib.sha256(self.manifest_text.encode("utf-8")).hexdigest()
+
+    def describe(self) -> dict:
+        return {"name": self.name, "kind": self.kind, "description": self.description, "claims": list(self.claims),
+                "tools": self.tools, "inputs": list(self.inputs), "outputs": list(self.outputs),
+                "faps_format": self.faps_format, "manifest": str(self.manifest_path) if self.manifest_path else None,
+                "manifest_sha256": self.digest(),
+                "limits": {"timeout_s": self.limits.timeout_s, "memory_mb": self.limits.memory_mb,
+                           "memory_kind": self.limits.memory_kind, "output_mb": self.limits.output_mb}}
+
+
+class PythonAdapter(Adapter):
+    """Base class for in-process decoders: override :meth:`run` (write the outputs named in
+    ``job.values``: ``faps_out``, ``vertices_out``, ``images_dir``, ``faps_out_dir``).
+    Raise :class:`NotSupportedError` for "not supported"; any other exception is a Fail
+    (the decoder rejected or crashed on the input) with its message. In-process decoders
+    share the harness's process: the timeout is checked after the call returns, and memory
+    is not limited — use a command manifest for untrusted code."""
+    kind = "python"
+
+    def __init__(self) -> None:
+        if not hasattr(self, "claims"):
+            self.claims = []
+        if not hasattr(self, "inputs"):
+            self.inputs = ["fba"]
+        if not hasattr(self, "outputs"):
+            self.outputs = ["faps"]
+        if not hasattr(self, "limits"):
+            self.limits = Limits()
+
+    def run(self, job: Job) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+class NotSupportedError(Exception):
+    """Raised by an in-process adapter for input it does not support (= exit code 69)."""
+
+
+class CommandAdapter(Adapter):
+    kind = "command"
+
+    def __init__(self, data: dict, path: Path | None, text: str) -> None:
+        self.manifest_path = path
+        self.manifest_text = text
+        self.name = data["name"]
+        self.description = data.get("description", "")
+        self.claims = list(data["claims"])
+        self.tools = list(data["tools"]) if "tools" in data else None
+        self.inputs = list(data["inputs"])
+        self.outputs = list(data["outputs"])
+        self.faps_format = data.get("faps_format", "fap")
+        self.commands = data["commands"]
+        self.env = {str(k): str(v) for k, v in data.get("env", {}).items()}
+        self.limits = _limits(data.get("limits", {}), path)
+        self.supports_multi = "decode_multi" in self.commands
+
+    def argv(self, command: str, job: Job) -> list[str]:
+        return expand(self.commands[command], job, self.manifest_path)
+
+
+def _limits(d: dict, path) -> Limits:
+    try:
+        return Limits(timeout_s=float(d.get("timeout_s", 60)), memory_mb=int(d.get("memory_mb", 2048)),
+                      memory_kind=str(d.get("memory_kind", "address-space")), output_mb=int(d.get("output_mb", 256)))
+    except (TypeError, ValueError) as e:
+        raise ManifestError(f"[limits]: {e}", rule="manifest-limits", file=str(path)) from None
+
+
+def expand(template: list, job: Job, manifest_path: Path | None) -> list[str]:
+    """Fill an argv template (see module doc). Raises KeyError(name) for a missing placeholder
+    outside an optional group."""
+    values = dict(job.values)
+    if manifest_path is not None:
+        values.setdefault("manifest_dir", str(Path(manifest_path).resolve().parent))
+    values.setdefault("python", sys.executable)
+    values.setdefault("workdir", str(job.workdir))
+    values.setdefault("frames", str(job.frames))
+
+    def fill(s: str) -> str:
+        return _PH.sub(lambda m: values[m.group(1)], s)
+
+    out: list[str] = []
+    for item in template:
+        if isinstance(item, list):
+            names = [n for s in item for n in _PH.findall(s)]
+            if all(n in values for n in names) and not (("inputs" in names) and not job.faces) \
+                    and not (set(names) & job.unwanted):
+                out.extend(fill(s) for s in item)
+            continue
+        if item == "{inputs}":
+            out.extend(job.faces)
+            continue
+        out.append(fill(item))
+    return out
+
+
+def _check_manifest(data: dict, path: Path | None) -> None:
+    where = str(path) if path else "<manifest>"
+
+    def bad(msg: str, rule: str) -> ManifestError:
+        return ManifestError(msg, rule=rule, file=where)
+
+    for key in ("name", "claims", "inputs", "outputs"):
+        if key not in data:
+            raise bad(f"missing required key {key!r}", "manifest-key")
+    if not isinstance(data["name"], str) or not data["name"]:
+        raise bad("name must be a non-empty string", "manifest-key")
+    from fbaconf.profiles.model import Claim
+    if not isinstance(data["claims"], list) or not data["claims"]:
+        raise bad("claims must be a non-empty list like [\"simple@1\"]", "manifest-claims")
+    for c in data["claims"]:
+        try:
+            Claim.parse(c)
+        except ValueError as e:
+            raise bad(f"claims: {e}", "manifest-claims") from None
+    for key, allowed in (("inputs", INPUT_KINDS), ("outputs", OUTPUT_KINDS)):
+        vals = data[key]
+        if not isinstance(vals, list) or not vals or any(v not in allowed for v in vals):
+            raise bad(f"{key} must be a non-empty list of {', '.join(allowed)}; got {vals!r}", f"manifest-{key}")
+    if not ({"fba", "fap"} & set(data["inputs"])):
+        raise bad("inputs must include a stream form: fba and/or fap", "manifest-inputs")
+    if data.get("faps_format", "fap") not in FAPS_FORMATS:
+        raise bad(f"faps_format must be one of {FAPS_FORMATS}", "manifest-faps-format")
+    if "tools" in data:
+        from fbaconf.profiles.model import load_profiles
+        known = load_profiles().tools
+        unknown = [t for t in data["tools"] if t not in known]
+        if unknown:
+            raise bad(f"unknown tool(s) {unknown} (known: {', '.join(known)})", "manifest-tools")
+    if "python" in data:
+        return
+    cmds = data.get("commands")
+    if not isinstance(cmds, dict) or "decode" not in cmds:
+        raise bad("[commands] must define decode (an argv list), or give python = \"module:Class\"",
+                  "manifest-commands")
+    for cname, argv in cmds.items():
+        if cname not in ("decode", "decode_multi"):
+            raise bad(f"[commands] {cname}: unknown command (decode, decode_multi)", "manifest-commands")
+        if not isinstance(argv, list) or not argv or not isinstance(argv[0], str):
+            raise bad(f"[commands] {cname} must be an argv list starting with the program", "manifest-commands")
+        for item in argv:
+            parts = item if isinstance(item, list) else [item]
+            for s in parts:
+                if not isinstance(s, str):
+                    raise bad(f"[commands] {cname}: argv items must be strings or lists of strings", "manifest-commands")
+                for n in _PH.findall(s):
+                    if n not in PLACEHOLDERS:
+                        raise bad(f"[commands] {cname}: unknown placeholder {{{n}}} (known: "
+                                  f"{', '.join('{' + p + '}' for p in PLACEHOLDERS)})", "manifest-placeholder")
+    text = " ".join(str(x) for x in _flatten(cmds["decode"]))
+    for out in data["outputs"]:
+        ph = "{" + OUTPUT_PLACEHOLDER[out] + "}"
+        if ph not in text:
+            raise bad(f"outputs lists {out!r} but [commands] decode never names {ph}", "manifest-outputs")
+
+
+def _flatten(argv):
+    for x in argv:
+        if isinstance(x, list):
+            yield from x
+        else:
+            yield x
+
+
+def load_manifest(path: Path) -> Adapter:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise ManifestError(f"cannot read decoder manifest: {e.strerror}", rule="manifest-missing",
+                            file=str(path)) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ManifestError(f"not valid TOML: {e}", rule="manifest-toml", file=str(path)) from None
+    _check_manifest(data, path)
+    if "python" in data:
+        return _python_adapter(data, path, text)
+    return CommandAdapter(data, path, text)
+
+
+def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
+    target = data["python"]
+    mod_name, _, cls_name = target.partition(":")
+    try:
+        cls = getattr(importlib.import_module(mod_name), cls_name)
+    except (ImportError, AttributeError) as e:
+        raise ManifestError(f"python = {target!r}: cannot import: {e}", rule="manifest-python",
+                            file=str(path)) from None
+    kwargs = data.get("options", {})
+    adapter = cls(**kwargs)
+    adapter.name = data["name"]
+    adapter.description = data.get("description", getattr(adapter, "description", ""))
+    adapter.claims = list(data["claims"])
+    adapter.tools = list(data["tools"]) if "tools" in data else None
+    adapter.inputs = list(data["inputs"])
+    adapter.outputs = list(data["outputs"])
+    adapter.faps_format = data.get("faps_format", getattr(adapter, "faps_format", "npz"))
+    adapter.limits = _limits(data.get("limits", {}), path)
+    adapter.manifest_path = path
+    adapter.manifest_text = text
+    return adapter
+
+
+def bundled() -> dict[str, Path]:
+    return {p.stem: p for p in sorted(BUNDLED_DIR.glob("*.toml"))}
+
+
+def resolve(spec: str | Path) -> Adapter:
+    """``--decoder`` value: a manifest path, or the name of a bundled adapter (``reference``,
+    ``reference-inprocess``, ``dummy``...)."""
+    p = Path(spec)
+    if p.suffix == ".toml" or p.exists():
+        return load_manifest(p)
+    names = bundled()
+    if str(spec) in names:
+        return load_manifest(names[str(spec)])
+    raise ManifestError(f"no decoder manifest {spec!r}: give a .toml path or one of the bundled adapters "
+                        f"({', '.join(names)})", rule="manifest-missing", file=str(spec))

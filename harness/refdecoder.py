@@ -1,0 +1,123 @@
+"""The bundled reference decoder, as a program and as an in-process adapter.
+
+As a program (what ``adapters/reference.toml`` runs in a subprocess)::
+
+    python -m fbaconf.harness.refdecoder decode IN.fba|IN.fap [--scene S.bt|S.bifs] [--scenario SC.toml]
+        [--faps-out F.npz|F.fap] [--vertices-out V.npz] [--images-dir DIR]
+    python -m fbaconf.harness.refdecoder decode-multi --out-dir DIR IN1.fba IN2.fba ...
+
+Exit codes: 0 done, 2 the input was rejected (a typed error on stderr), 69 not supported.
+The same function, :func:`reference_outputs`, makes the goldens, so the reference passes
+by construction only if the whole pipeline is deterministic — which the golden tooling
+checks by regenerating bit for bit.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from fbaconf.bitstreams.errors import FbaconfInputError
+
+from .adapters import Job, PythonAdapter
+
+
+def load_stream(path: Path):
+    """FapFrames from a ``.fba`` stream (reference decoder) or ``.fap`` text."""
+    path = Path(path)
+    if path.suffix.lower() == ".fap":
+        from fbaconf.bitstreams.faptext import read_fap_file
+        return read_fap_file(path)[0]
+    from fbaconf.bitstreams.decoder import decode
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise FbaconfInputError(f"cannot read stream: {e.strerror}", rule="io", file=str(path)) from None
+    return decode(data, file=str(path)).frames
+
+
+def load_scene(path: Path | None):
+    if path is None:
+        return None
+    path = Path(path)
+    if path.suffix.lower() == ".bifs":
+        from fbaconf.bitstreams import bifs  # binary BIFS scene (issue 9)
+        return bifs.read(path)
+    from fbaconf.animation.engine import load_scene as load_bt
+    return load_bt(path)
+
+
+def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path | None = None,
+                      faps_out: Path | None = None, vertices_out: Path | None = None,
+                      images_dir: Path | None = None) -> None:
+    """Decode (and animate, render) one stream with the reference, writing the requested outputs."""
+    from fbaconf.bitstreams.cli import save_faps
+    frames = load_stream(stream)
+    if faps_out is not None:
+        save_faps(frames, faps_out)
+    if vertices_out is None and images_dir is None:
+        return
+    from fbaconf.animation.engine import animate
+    from fbaconf.animation.stateio import save_npz
+    state = animate(frames, scene=load_scene(scene))
+    if vertices_out is not None:
+        save_npz(state, vertices_out)
+    if images_dir is not None:
+        from fbaconf.rendering.render import render_frames
+        from fbaconf.rendering.scenario import Scenario
+        sc = Scenario.load(scenario) if scenario is not None else Scenario.default()
+        render_frames(state, sc, images_dir, scene_dir=Path(scene).resolve().parent if scene else None)
+
+
+def multi_outputs(streams: list[Path], out_dir: Path, fmt: str = "npz") -> None:
+    from fbaconf.bitstreams.cli import save_faps
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for s in streams:
+        save_faps(load_stream(s), out_dir / f"{Path(s).stem}.{fmt}")
+
+
+class ReferenceAdapter(PythonAdapter):
+    """The reference decoder in-process (``adapters/reference-inprocess.toml``)."""
+    description = "fbaconf reference decoder, in-process"
+    supports_multi = True
+
+    def run(self, job: Job) -> None:
+        if job.faces:
+            multi_outputs([Path(f) for f in job.faces], job.path("faps_out_dir"), self.faps_format)
+            return
+        def want(out: str, ph: str):
+            return job.path(ph) if out in self.outputs and ph not in job.unwanted else None
+        reference_outputs(job.path("input"), scene=job.path("scene"), scenario=job.path("scenario"),
+                          faps_out=want("faps", "faps_out"), vertices_out=want("vertices", "vertices_out"),
+                          images_dir=want("images", "images_dir"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="fbaconf-refdecoder", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    d = sub.add_parser("decode")
+    d.add_argument("input", type=Path)
+    d.add_argument("--scene", type=Path)
+    d.add_argument("--scenario", type=Path)
+    d.add_argument("--faps-out", type=Path)
+    d.add_argument("--vertices-out", type=Path)
+    d.add_argument("--images-dir", type=Path)
+    m = sub.add_parser("decode-multi")
+    m.add_argument("--out-dir", type=Path, required=True)
+    m.add_argument("--format", choices=("npz", "fap"), default="npz")
+    m.add_argument("inputs", type=Path, nargs="+")
+    a = ap.parse_args(argv)
+    try:
+        if a.cmd == "decode":
+            reference_outputs(a.input, scene=a.scene, scenario=a.scenario, faps_out=a.faps_out,
+                              vertices_out=a.vertices_out, images_dir=a.images_dir)
+        else:
+            multi_outputs(a.inputs, a.out_dir, a.format)
+    except FbaconfInputError as e:
+        print(f"fbaconf-refdecoder: error: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

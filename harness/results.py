@@ -1,0 +1,219 @@
+"""Per-case results of a harness run, and the run record that reports are made from.
+
+A :class:`CaseResult` is written (one JSON line) the moment it is known, so an interrupted
+run loses nothing and ``--resume`` skips cases already recorded. A :class:`RunRecord`
+is what every report (terminal, JSON, JUnit XML, HTML) and the certificate are built from.
+
+Outcome classes (architecture "Results"): Pass, Fail, QualityWarning, NotSupported,
+Timeout, Crash, Error, Skipped. ``Pass``/``QualityWarning`` and, for cases outside the
+claim, ``NotSupported`` do not count against a claim; everything else does.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any, Iterable, Iterator
+
+
+class Outcome(str, Enum):
+    PASS = "Pass"
+    FAIL = "Fail"
+    QUALITY_WARNING = "QualityWarning"
+    NOT_SUPPORTED = "NotSupported"
+    TIMEOUT = "Timeout"
+    CRASH = "Crash"
+    ERROR = "Error"
+    SKIPPED = "Skipped"
+
+    @property
+    def ok(self) -> bool:
+        """True when this outcome does not fail a required case."""
+        return self in (Outcome.PASS, Outcome.QUALITY_WARNING)
+
+    @property
+    def failing(self) -> bool:
+        """True for outcomes that mean the decoder misbehaved or the case could not run."""
+        return self in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH, Outcome.ERROR)
+
+
+# Order used in summaries (worst first).
+OUTCOME_ORDER = (Outcome.CRASH, Outcome.TIMEOUT, Outcome.FAIL, Outcome.ERROR, Outcome.QUALITY_WARNING,
+                 Outcome.NOT_SUPPORTED, Outcome.SKIPPED, Outcome.PASS)
+
+
+@dataclass
+class StageResult:
+    """One rung of the comparison ladder for one case (``faps``, ``vertices``, ``images``, ``process``).
+
+    ``first_difference`` names where the decoder first departs from the golden output, e.g.
+    ``{"frame": 12, "fap": 31, "name": "raise_l_i_eyebrow", "expected": 120, "got": 121}`` or
+    ``{"frame": 3, "vertex": 88, "part": "skin", "expected": [..], "got": [..], "distance": 0.02}``
+    or ``{"frame": 0, "pixel": [x, y], "expected": [r,g,b], "got": [r,g,b]}``.
+    ``metrics`` holds the numbers (max/rms error, PSNR, ΔE mean/p95, failing pixel share...);
+    ``series`` per-frame error curves for the HTML plots (name -> list of floats);
+    ``artefacts`` paths (relative to the run's output folder) of expected/got/diff images.
+    """
+    stage: str
+    outcome: Outcome
+    message: str = ""
+    first_difference: dict[str, Any] | None = None
+    metrics: dict[str, float] = field(default_factory=dict)
+    series: dict[str, list[float]] = field(default_factory=dict)
+    artefacts: dict[str, str] = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["outcome"] = self.outcome.value
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict) -> "StageResult":
+        d = dict(d)
+        d["outcome"] = Outcome(d["outcome"])
+        return cls(**d)
+
+
+@dataclass
+class CaseResult:
+    """The verdict for one test case against one decoder."""
+    case_id: str  # "<suite>/<case>"
+    suite: str
+    claim: str  # the profile@level the case belongs to, e.g. "simple@1"
+    outcome: Outcome
+    message: str = ""
+    required: bool = True  # required by the claim under test (False: optional tool / informative)
+    stages: list[StageResult] = field(default_factory=list)
+    duration_s: float = 0.0
+    command: list[str] | None = None  # argv actually run (for reproduction)
+    exit_code: int | None = None
+    signal: str | None = None
+    stderr_tail: str = ""
+    baseline: str | None = None  # "known-failure", "flake", "fixed" (known failure that now passes)
+
+    @property
+    def first_difference(self) -> dict | None:
+        for s in self.stages:
+            if s.first_difference:
+                return s.first_difference
+        return None
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["outcome"] = self.outcome.value
+        d["stages"] = [s.to_json() for s in self.stages]
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict) -> "CaseResult":
+        d = dict(d)
+        d["outcome"] = Outcome(d["outcome"])
+        d["stages"] = [StageResult.from_json(s) for s in d.get("stages", [])]
+        return cls(**d)
+
+
+@dataclass
+class SpeedResult:
+    """Measured per-frame cost of one operation (decode or render) against a level minimum."""
+    operation: str  # "decode" | "render"
+    claim: str
+    per_frame_s: float
+    startup_s: float
+    rate_fps: float  # 1 / per_frame_s (x faces where the level counts all faces together)
+    required_fps: float
+    passed: bool
+    provenance: str  # provenance of the level minimum (seed / iso-via-implementation / provisional)
+    samples: list[dict] = field(default_factory=list)  # {"frames": n, "seconds": t} per run
+    fit_r2: float = 0.0
+    message: str = ""
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict) -> "SpeedResult":
+        return cls(**d)
+
+
+@dataclass
+class RunRecord:
+    """Everything a report needs: who ran what, on what, and the verdicts."""
+    decoder: dict  # {"name", "manifest_sha256", "kind", "claims", "inputs", "outputs"}
+    claim: str | None
+    suites: list[dict]  # [{"name", "version", "sha256", "cases"}]
+    system: dict
+    results: list[CaseResult] = field(default_factory=list)
+    speed: list[SpeedResult] = field(default_factory=list)
+    started: str = ""
+    finished: str = ""
+    duration_s: float = 0.0
+    provisional: list[str] = field(default_factory=list)  # statements of provisional rules/limits
+    exit_code: int = 0
+
+    def counts(self, results: Iterable[CaseResult] | None = None) -> dict[str, int]:
+        c = {o.value: 0 for o in OUTCOME_ORDER}
+        for r in (self.results if results is None else results):
+            c[r.outcome.value] += 1
+        return c
+
+    def to_json(self) -> dict:
+        return {
+            "format": "fbaconf.run/1",
+            "decoder": self.decoder, "claim": self.claim, "suites": self.suites, "system": self.system,
+            "started": self.started, "finished": self.finished, "duration_s": self.duration_s,
+            "counts": self.counts(), "exit_code": self.exit_code, "provisional": self.provisional,
+            "results": [r.to_json() for r in self.results],
+            "speed": [s.to_json() for s in self.speed],
+        }
+
+    @classmethod
+    def from_json(cls, d: dict) -> "RunRecord":
+        return cls(decoder=d["decoder"], claim=d.get("claim"), suites=d.get("suites", []),
+                   system=d.get("system", {}), results=[CaseResult.from_json(r) for r in d.get("results", [])],
+                   speed=[SpeedResult.from_json(s) for s in d.get("speed", [])],
+                   started=d.get("started", ""), finished=d.get("finished", ""),
+                   duration_s=d.get("duration_s", 0.0), provisional=d.get("provisional", []),
+                   exit_code=d.get("exit_code", 0))
+
+
+class ResultLog:
+    """Append-only JSON-lines log of case results: written and flushed per case (``--resume``).
+
+    A line cut short by an interruption is ignored on reading (the case simply runs again).
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+
+    def read(self) -> dict[str, CaseResult]:
+        done: dict[str, CaseResult] = {}
+        if not self.path.is_file():
+            return done
+        with open(self.path, encoding="utf-8") as f:
+            for line in f:
+                try:
+                    r = CaseResult.from_json(json.loads(line))
+                except (ValueError, KeyError, TypeError):
+                    continue
+                done[r.case_id] = r
+        return done
+
+    def append(self, result: CaseResult) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        line = json.dumps(result.to_json(), sort_keys=True) + "\n"
+        try:  # a line cut short by an interruption must not swallow the next record
+            with open(self.path, "rb") as f:
+                f.seek(-1, os.SEEK_END)
+                if f.read(1) != b"\n":
+                    line = "\n" + line
+        except OSError:
+            pass
+        with open(self.path, "a", encoding="utf-8") as f:
+            f.write(line)
+            f.flush()
+            os.fsync(f.fileno())
+
+    def __iter__(self) -> Iterator[CaseResult]:
+        return iter(self.read().values())

@@ -1,0 +1,517 @@
+"""Decoder speed: per-frame decode and render cost, free of process start-up, against the
+claimed level's minimum rates (``decode_rate``, ``render_rate`` in ``profiles.toml``).
+
+Method. The decoder runs the same content at several lengths ``n`` (frames); every run is
+timed (wall clock of the whole invocation, or of ``adapter.run(job)`` for in-process
+adapters) and a straight line ``time = startup + n * per_frame`` is fitted by least
+squares. The series of lengths is repeated ``repeats`` times (alternately ascending and
+descending, so slow drift does not bias the slope); the reported per-frame cost and
+start-up are the medians over the repeats, and ``fit_r2`` is the coefficient of
+determination of that median line over every sample. The measured rate is
+``1 / per_frame``; it passes when it is at least the level minimum.
+
+Lengths. Unless given, they adapt to the decoder: after one discarded warm-up run, the
+length grows (by the measured slope, at least x2 and at most x8 per step) until the
+frame-dependent part of the largest run (its time minus the smallest run's) reaches
+``target_s`` and the smallest run's time (mostly start-up) — so it dominates start-up
+noise — or a run would pass ``max_run_s`` or the length ``max_frames``. The series is then ``n/10, n/2, n``.
+
+Content. A procedural sequence (all low-level and high-level FAPs, 25 Hz) encoded by the
+reference encoder. Long streams are built without re-encoding: a 100-frame block encoded
+once is repeated (every copy starts with an intra plane and its plane start code, so the
+decoder's state resets; the result decodes to the block's frames tiled), plus a tail
+block for the remainder. Decoders that accept only ``.fap`` text get the reference
+decoding of that stream as text.
+
+Operations. ``decode``: the adapter's ``decode`` command with the FAP output (outputs a
+command names unconditionally are supplied too and their cost is included; a named
+``{images_dir}`` gets a one-frame 8x8 scenario so rendering stays out of the per-frame
+cost as far as the decoder honours ``{scenario}``). ``render``: the same command with
+``{images_dir}`` and a scenario that renders every frame at ``render_size`` (64x64,
+no supersampling); skipped (``None``, see :func:`skip_reason`) for adapters without the
+``images`` output. A scene is written (the bundled default head, BT) only when the command
+requires ``{scene}``.
+
+A run that fails (non-zero exit, crash, timeout, missing output) raises
+:class:`SpeedRunError`; :func:`measure_claim` turns it into a failed :class:`SpeedResult`.
+"""
+from __future__ import annotations
+
+import math
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from fbaconf.bitstreams.errors import FbaconfInputError
+
+from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
+from .results import Outcome, SpeedResult
+
+OPERATIONS = ("decode", "render")
+LIMIT_FOR = {"decode": "decode_rate", "render": "render_rate"}
+CONTENT_RATE = 25.0  # Hz of the generated content
+CONTENT_QUANT = 4  # fap_quant of the generated stream
+BLOCK_FRAMES = 100  # long streams repeat one encoded block of this many frames
+START_FRAMES = 8  # first length of the adaptive search
+SERIES = (0.1, 0.5, 1.0)  # the measured lengths, as fractions of the largest
+DEFAULT_RENDER_SIZE = (64, 64)
+
+
+class SpeedError(FbaconfInputError):
+    """The speed measurement cannot be set up (unknown operation or claim, impossible command)."""
+    rule = "speed-setup"
+
+
+class SpeedRunError(Exception):
+    """A decoder run failed during the speed measurement (exit code, crash, timeout, no output)."""
+
+    def __init__(self, operation: str, frames: int, outcome: Outcome, message: str,
+                 argv: list[str] | None = None, stderr_tail: str = "") -> None:
+        super().__init__(f"{operation} of {frames} frames: {message}")
+        self.operation = operation
+        self.frames = frames
+        self.outcome = outcome
+        self.message = message
+        self.argv = argv
+        self.stderr_tail = stderr_tail
+
+
+# --------------------------------------------------------------------------- content
+
+class _Content:
+    """Generated streams (and .fap text, scenes, scenarios) in one directory, by length."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = Path(root)
+        self.root.mkdir(parents=True, exist_ok=True)
+        self._enc: dict[int, bytes] = {}
+        self._fba: dict[int, Path] = {}
+        self._fap: dict[int, Path] = {}
+        self._scene: Path | None = None
+
+    def _encoded(self, n: int) -> bytes:
+        if n not in self._enc:
+            from fbaconf.bitstreams.encoder import EncoderOptions, encode
+            from fbaconf.bitstreams.synth import synthetic_sequence
+            self._enc[n] = encode(synthetic_sequence(n, CONTENT_RATE),
+                                  EncoderOptions(fap_quant=CONTENT_QUANT)).data
+        return self._enc[n]
+
+    def stream_bytes(self, n: int) -> bytes:
+        """An ``n``-frame .fba stream (``n`` >= 1)."""
+        if n <= BLOCK_FRAMES:
+            return self._encoded(n)
+        m, r = divmod(n, BLOCK_FRAMES)
+        head, body, end = _split(self._encoded(BLOCK_FRAMES))
+        parts = [head, body * m]
+        if r:
+            h2, tail, _e = _split(self._encoded(r))
+            if h2 != head:  # pragma: no cover - the object header does not depend on content
+                return self._direct(n)
+            parts.append(tail)
+        parts.append(end)
+        return b"".join(parts)
+
+    def _direct(self, n: int) -> bytes:  # pragma: no cover - fallback
+        return self._encoded(n)
+
+    def fba(self, n: int) -> Path:
+        if n not in self._fba:
+            p = self.root / f"content-{n}.fba"
+            p.write_bytes(self.stream_bytes(n))
+            self._fba[n] = p
+        return self._fba[n]
+
+    def fap(self, n: int) -> Path:
+        if n not in self._fap:
+            from fbaconf.bitstreams.decoder import decode
+            from fbaconf.bitstreams.faptext import write_fap
+            frames = decode(self.stream_bytes(n)).frames
+            p = self.root / f"content-{n}.fap"
+            p.write_text(write_fap(frames), encoding="utf-8")
+            self._fap[n] = p
+        return self._fap[n]
+
+    def scene(self) -> Path:
+        if self._scene is None:
+            from fbaconf.animation import bt
+            from fbaconf.animation.models import default_head_scene
+            p = self.root / "default-head.bt"
+            p.write_text(bt.write(default_head_scene()), encoding="utf-8")
+            self._scene = p
+        return self._scene
+
+    def scenario(self, name: str, **changes) -> Path:
+        from fbaconf.rendering.scenario import Scenario
+        p = self.root / f"{name}.toml"
+        if not p.exists():
+            p.write_text(Scenario.default().with_(**changes).to_toml(), encoding="utf-8")
+        return p
+
+
+_PLANE_START = b"\x00\x00\x01\xbb"
+_END = b"\x00\x00\x01\xb1"
+
+
+def _split(data: bytes) -> tuple[bytes, bytes, bytes]:
+    """(object header, planes, end code) of a stream written with plane start codes."""
+    i = data.find(_PLANE_START)
+    if i < 0 or not data.endswith(_END):  # pragma: no cover - encoder options fixed above
+        raise SpeedError("generated stream lacks plane start codes / end code", rule="speed-content")
+    return data[:i], data[i:-len(_END)], data[-len(_END):]
+
+
+def content_stream(n: int) -> bytes:
+    """The ``n``-frame stream the speed measurement feeds decoders (for tests and tools)."""
+    with tempfile.TemporaryDirectory(prefix="fbaconf-speed-") as d:
+        return _Content(Path(d)).stream_bytes(n)
+
+
+# --------------------------------------------------------------------------- one run
+
+def skip_reason(adapter: Adapter, operation: str) -> str | None:
+    """Why ``operation`` cannot be measured for this adapter (None when it can)."""
+    if operation not in OPERATIONS:
+        raise SpeedError(f"unknown operation {operation!r} (decode, render)")
+    if operation == "render" and "images" not in adapter.outputs:
+        return f"{adapter.name} does not output images (outputs: {', '.join(adapter.outputs)})"
+    if not ({"fba", "fap"} & set(adapter.inputs)):
+        return f"{adapter.name} accepts no stream input (fba or fap)"
+    return None
+
+
+class _Runner:
+    def __init__(self, adapter: Adapter, operation: str, content: _Content, runs_dir: Path,
+                 render_size: tuple[int, int]) -> None:
+        self.adapter = adapter
+        self.operation = operation
+        self.content = content
+        self.runs_dir = runs_dir
+        self.render_size = render_size
+        self.count = 0
+        self.last_cpu_s: float | None = None  # CPU seconds of the last run (command adapters)
+        self.extra: set[str] = set()
+        self.notes: list[str] = []
+        self._planned = False
+
+    def _values(self, n: int, workdir: Path) -> dict[str, str]:
+        a, c = self.adapter, self.content
+        v: dict[str, str] = {}
+        if "fba" in a.inputs:
+            v["fba"] = v["input"] = str(c.fba(n))
+        else:
+            v["fap"] = v["input"] = str(c.fap(n))
+        if "fap" in self.extra and "fap" not in v:
+            v["fap"] = str(c.fap(n))
+        if "fba" in self.extra and "fba" not in v:
+            v["fba"] = str(c.fba(n))
+        out = workdir / "out"
+        out.mkdir(parents=True, exist_ok=True)
+        ext = "npz" if a.faps_format == "npz" else "fap"
+        wanted = set(self.extra)
+        if self.operation == "render":
+            wanted.add("images_dir")
+        elif "faps" in a.outputs:
+            wanted.add("faps_out")
+        elif "vertices" in a.outputs:
+            wanted.add("vertices_out")
+        else:
+            wanted.add("images_dir")
+        if "faps_out" in wanted:
+            v["faps_out"] = str(out / f"faps.{ext}")
+        if "vertices_out" in wanted:
+            v["vertices_out"] = str(out / "vertices.npz")
+        if "images_dir" in wanted:
+            v["images_dir"] = str(out / "images")
+        if self.operation == "render":
+            w, h = self.render_size
+            v["scenario"] = str(c.scenario(f"render-{w}x{h}", width=w, height=h, supersample=1, frames=None))
+        else:
+            v["scenario"] = str(c.scenario("decode-one-frame", width=8, height=8, supersample=1, frames=(0,)))
+        if "scene" in wanted:
+            v["scene"] = v["scene_bt"] = str(c.scene())
+        if "faps_out_dir" in wanted:
+            v["faps_out_dir"] = str(out / "faces")
+        return v
+
+    def _argv(self, job_for: Callable[[], Job]) -> tuple[list[str], Job]:
+        """Expand the decode command, adding the placeholders it requires (first call plans)."""
+        a = self.adapter
+        assert isinstance(a, CommandAdapter)
+        supplied = {"fba", "fap", "vertices_out", "images_dir", "faps_out", "scene", "faps_out_dir"}
+        while True:
+            job = job_for()
+            try:
+                return a.argv("decode", job), job
+            except KeyError as e:
+                name = e.args[0]
+                if name in self.extra or name not in supplied:
+                    raise SpeedError(f"{a.name}: the decode command needs {{{name}}}, which a speed "
+                                     f"measurement cannot supply") from None
+                if name == "scene" and "scene" not in a.inputs and "bifs" in a.inputs:
+                    raise SpeedError(f"{a.name}: the decode command needs a BIFS scene; speed "
+                                     f"measurement supplies BT scenes only") from None
+                self.extra.add(name)
+                if name in ("vertices_out", "images_dir") or (name == "faps_out" and self.operation == "render"):
+                    what = {"vertices_out": "vertices", "images_dir": "images (one 8x8 frame requested)",
+                            "faps_out": "FAPs"}[name]
+                    self.notes.append(f"the decode command always writes {what}; included in the time")
+                elif name == "scene":
+                    self.notes.append("the command requires a scene: the bundled default head is given")
+
+    def run(self, n: int) -> float:
+        """Time one invocation on ``n`` frames (seconds); raises SpeedRunError on failure."""
+        self.count += 1
+        workdir = self.runs_dir / f"run-{self.count:04d}"
+        if workdir.exists():
+            shutil.rmtree(workdir)
+        workdir.mkdir(parents=True)
+        try:
+            return self._run(n, workdir)
+        finally:
+            shutil.rmtree(workdir, ignore_errors=True)
+
+    def _run(self, n: int, workdir: Path) -> float:
+        a = self.adapter
+
+        def job_for() -> Job:
+            return Job(workdir=workdir, values=self._values(n, workdir), frames=n)
+
+        if isinstance(a, CommandAdapter):
+            from . import sandbox
+            argv, job = self._argv(job_for)
+            res = sandbox.run(argv, workdir, a.limits, env=a.env or None)
+            verdict = sandbox.classify(res, a.limits)
+            if verdict is not None:
+                raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
+            elapsed = res.elapsed_s
+            self.last_cpu_s = res.cpu_s
+        elif isinstance(a, PythonAdapter):
+            argv = None
+            job = job_for()
+            t0 = time.perf_counter()
+            try:
+                a.run(job)
+            except NotSupportedError as e:
+                raise SpeedRunError(self.operation, n, Outcome.NOT_SUPPORTED, f"not supported: {e}") from None
+            except MemoryError:
+                raise SpeedRunError(self.operation, n, Outcome.CRASH, "decoder raised MemoryError") from None
+            except Exception as e:  # the decoder's own failure
+                raise SpeedRunError(self.operation, n, Outcome.FAIL,
+                                    f"decoder raised {type(e).__name__}: {e}") from None
+            elapsed = time.perf_counter() - t0
+            if elapsed > a.limits.timeout_s:
+                raise SpeedRunError(self.operation, n, Outcome.TIMEOUT,
+                                    f"in-process decoder took {elapsed:.1f} s, over the {a.limits.timeout_s:g} s limit")
+        else:  # pragma: no cover - no other adapter kinds
+            raise SpeedError(f"unsupported adapter kind {type(a).__name__}")
+        self._check_output(job, n, argv)
+        return elapsed
+
+    def _check_output(self, job: Job, n: int, argv) -> None:
+        key = "images_dir" if self.operation == "render" else next(
+            k for k in ("faps_out", "vertices_out", "images_dir") if k in job.values)
+        p = job.path(key)
+        ok = p is not None and (any(p.iterdir()) if p.is_dir() else (p.is_file() and p.stat().st_size > 0))
+        if not ok:
+            raise SpeedRunError(self.operation, n, Outcome.FAIL,
+                                f"the decoder finished but wrote no output at {{{key}}} ({p})", argv)
+
+
+# --------------------------------------------------------------------------- fitting
+
+def fit_line(frames, seconds) -> tuple[float, float, float]:
+    """Least-squares ``seconds = startup + frames * per_frame``: (per_frame, startup, r2)."""
+    x = np.asarray(frames, dtype=np.float64)
+    y = np.asarray(seconds, dtype=np.float64)
+    if len(x) < 2 or np.ptp(x) == 0:
+        raise ValueError("a fit needs at least two different lengths")
+    slope, icpt = np.polyfit(x, y, 1)
+    return float(slope), float(icpt), _r2(x, y, slope, icpt)
+
+
+def _r2(x, y, slope, icpt) -> float:
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    ss_tot = float(np.sum((y - y.mean()) ** 2))
+    ss_res = float(np.sum((y - (icpt + slope * x)) ** 2))
+    return 1.0 - ss_res / ss_tot if ss_tot > 0 else 0.0
+
+
+def _choose_lengths(run: Callable[[int], float], *, target_s: float, max_frames: int, max_run_s: float) -> list[int]:
+    """Grow the length until the frame-dependent time reaches ``target_s`` and the start-up
+    time (module doc)."""
+    n0 = max(1, min(START_FRAMES, max_frames - 1))
+    run(n0)  # warm-up (page cache, .pyc, lazy imports): discarded
+    t0 = run(n0)
+    target_s = max(target_s, t0)  # the frame-dependent part must dominate start-up noise
+    slope = t0 / n0  # upper bound until measured (all of t0 taken as per-frame cost)
+    n = n0
+    while n < max_frames:
+        if n == n0:
+            nxt = 4 * n0
+        elif slope > 0:
+            nxt = min(max(n0 + 1.2 * target_s / slope, 2 * n), 8 * n)
+        else:
+            nxt = 8 * n
+        if slope > 0:  # keep the next run under max_run_s
+            nxt = min(nxt, max(n0 + (max_run_s - t0) / slope, n + 1))
+        n = int(min(max(nxt, n + 1), max_frames))
+        t = run(n)
+        var = t - t0
+        if var >= target_s or t >= max_run_s:
+            break
+        slope = var / (n - n0)
+    return _series(n)
+
+
+def _series(n: int) -> list[int]:
+    return sorted({max(1, int(round(n * f))) for f in SERIES})
+
+
+# --------------------------------------------------------------------------- public API
+
+def required_rate(claim: str, operation: str) -> tuple[float, str, str]:
+    """(minimum rate in frames/s, provenance, limit description) for ``claim`` and ``operation``;
+    the rate is 0 when the limit does not apply to the claimed profile."""
+    from fbaconf.profiles.model import Claim, load_profiles
+    ps = load_profiles()
+    try:
+        c = Claim.parse(claim, ps)
+    except ValueError as e:
+        raise SpeedError(f"claim: {e}", rule="speed-claim") from None
+    lim = ps.limits.get(LIMIT_FOR[operation])
+    if lim is None or lim not in ps.limits_for(c):
+        return 0.0, "none", "no minimum for this claim"
+    return float(lim.value(c.level)), lim.provenance, lim.description
+
+
+def highest_claim(adapter: Adapter) -> str:
+    """The adapter's highest claim (profile rank, then level)."""
+    from fbaconf.profiles.model import Claim
+    return str(max(Claim.parse(c) for c in adapter.claims))
+
+
+def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] | None = None,
+            repeats: int = 3, work_dir: Path | None = None, target_s: float = 0.5,
+            max_frames: int = 100_000, max_run_s: float | None = None,
+            render_size: tuple[int, int] = DEFAULT_RENDER_SIZE) -> SpeedResult | None:
+    """Measure ``operation`` (``decode`` | ``render``) of ``adapter`` against ``claim``'s minimum.
+
+    Returns None when the adapter cannot do the operation (:func:`skip_reason` says why).
+    Raises :class:`SpeedError` for setup problems and :class:`SpeedRunError` when a decoder
+    run fails. ``lengths`` (frames) fixes the series instead of the adaptive search;
+    ``work_dir`` keeps the generated content there (default: a temporary folder)."""
+    if operation not in OPERATIONS:
+        raise SpeedError(f"unknown operation {operation!r} (decode, render)")
+    if skip_reason(adapter, operation) is not None:
+        return None
+    if repeats < 1:
+        raise SpeedError("repeats must be >= 1")
+    if lengths is not None:
+        lengths = sorted({int(n) for n in lengths})
+        if len(lengths) < 2 or lengths[0] < 1:
+            raise SpeedError(f"lengths must hold at least two different frame counts >= 1, got {lengths}")
+    required, provenance, _desc = required_rate(claim, operation)
+    if max_run_s is None:
+        max_run_s = min(20.0, 0.4 * adapter.limits.timeout_s)
+    tmp = None
+    if work_dir is None:
+        tmp = tempfile.TemporaryDirectory(prefix="fbaconf-speed-")
+        root = Path(tmp.name)
+    else:
+        root = Path(work_dir)
+    try:
+        runner = _Runner(adapter, operation, _Content(root / "content"), root / f"runs-{operation}",
+                         tuple(render_size))
+        t_start = time.perf_counter()
+        if lengths is None:
+            lengths = _choose_lengths(runner.run, target_s=target_s, max_frames=max_frames, max_run_s=max_run_s)
+        else:
+            runner.run(lengths[0])  # warm-up, discarded
+        samples: list[dict] = []
+        fits: list[tuple[float, float, float]] = []
+        for r in range(repeats):
+            order = lengths if r % 2 == 0 else lengths[::-1]
+            xs, ys = [], []
+            for n in order:
+                t = runner.run(n)
+                sample = {"frames": n, "seconds": t, "repeat": r}
+                if runner.last_cpu_s is not None:
+                    sample["cpu_s"] = runner.last_cpu_s
+                samples.append(sample)
+                xs.append(n)
+                ys.append(t)
+            fits.append(fit_line(xs, ys))
+        per_frame = statistics.median(f[0] for f in fits)
+        startup = statistics.median(f[1] for f in fits)
+        r2 = _r2([s["frames"] for s in samples], [s["seconds"] for s in samples], per_frame, startup)
+        wall = time.perf_counter() - t_start
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    notes = list(runner.notes)
+    if per_frame <= 0:
+        rate = math.inf
+        notes.append(f"per-frame cost below the measurement's resolution at {lengths[-1]} frames")
+    else:
+        rate = 1.0 / per_frame
+    passed = rate >= required
+    span = per_frame * (lengths[-1] - lengths[0])
+    if 0 < per_frame and span < 0.1 * target_s and lengths[-1] < max_frames:
+        notes.append(f"frame-dependent time only {span * 1000:.0f} ms: low precision")
+    if r2 < 0.9 and per_frame > 0:
+        note = f"poor linear fit (r2 {r2:.3f}): wall-clock timings are noisy (a loaded machine?)"
+        if all("cpu_s" in s for s in samples):
+            try:
+                cpf, _cst, cr2 = fit_line([s["frames"] for s in samples], [s["cpu_s"] for s in samples])
+                note += f"; CPU time gives {cpf * 1000:.3f} ms/frame (r2 {cr2:.3f})"
+            except ValueError:
+                pass
+        notes.append(note)
+    verdict = "meets" if passed else "is below"
+    what = {"decode": "decode rate (all faces together)", "render": "render rate per face"}[operation]
+    msg = (f"{what} {_fmt_rate(rate)} fps {verdict} the {claim} minimum {required:g} fps ({provenance}); "
+           f"{per_frame * 1000:.3f} ms/frame + {startup:.3f} s start-up, lengths {lengths} x {repeats}, "
+           f"{wall:.1f} s")
+    if notes:
+        msg += "; " + "; ".join(notes)
+    return SpeedResult(operation=operation, claim=claim, per_frame_s=per_frame, startup_s=startup,
+                       rate_fps=rate, required_fps=required, passed=passed, provenance=provenance,
+                       samples=samples, fit_r2=r2, message=msg)
+
+
+def _fmt_rate(rate: float) -> str:
+    return "inf" if math.isinf(rate) else f"{rate:.1f}"
+
+
+def failed_result(err: SpeedRunError, claim: str) -> SpeedResult:
+    """A failed SpeedResult for a decoder run that did not complete."""
+    try:
+        required, provenance, _ = required_rate(claim, err.operation)
+    except SpeedError:
+        required, provenance = math.nan, "none"
+    return SpeedResult(operation=err.operation, claim=claim, per_frame_s=math.nan, startup_s=math.nan,
+                       rate_fps=0.0, required_fps=required, passed=False, provenance=provenance,
+                       message=f"decoder run failed ({err.outcome.value}) on {err.frames} frames: {err.message}")
+
+
+def measure_claim(adapter: Adapter, claim: str | None = None, **kwargs) -> list[SpeedResult]:
+    """Decode and (when the adapter outputs images) render speed for ``claim`` (default: the
+    adapter's highest claim). A failing decoder run gives a failed result rather than raising;
+    setup problems raise :class:`SpeedError`. ``kwargs`` go to :func:`measure`."""
+    claim = claim or highest_claim(adapter)
+    out: list[SpeedResult] = []
+    for op in OPERATIONS:
+        try:
+            r = measure(adapter, claim, op, **kwargs)
+        except SpeedRunError as e:
+            r = failed_result(e, claim)
+        if r is not None:
+            out.append(r)
+    return out

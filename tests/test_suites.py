@@ -1,0 +1,85 @@
+"""Suite generation: determinism, error cases' diagnostics, regression.toml, the external suite."""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from fbaconf.conformance import build
+from fbaconf.conformance.suite import load_suites
+from fbaconf.profiles.checker import analyse
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "fap"
+
+
+def test_build_is_deterministic(tmp_path):
+    names = ["simple-l1-error", "calibration-l1-core", "predictable-l2-stress"]
+    a = build.build(tmp_path / "a", names, log=lambda *_: None)
+    b = build.build(tmp_path / "b", names, log=lambda *_: None)
+    for sa, sb in zip(a, b):
+        assert (sa.path / "suite.json").read_bytes() == (sb.path / "suite.json").read_bytes()
+    # and the committed suites are what this code builds
+    committed = {s.name: s for s in load_suites()}
+    for s in a:
+        assert (s.path / "suite.json").read_bytes() == committed[s.name].manifest_path().read_bytes(), s.name
+
+
+def test_error_cases_carry_the_checker_codes():
+    n = 0
+    for s in load_suites():
+        for c in s.cases:
+            if c.kind != "error":
+                continue
+            codes = {d.code for d in analyse(c.input_path("fba").read_bytes()).diagnostics}
+            assert set(c.expect["diagnostics"]) <= codes, (c.full_id, codes)
+            n += 1
+    assert n >= 15
+
+
+def test_suite_groups_and_claims():
+    suites = load_suites()
+    groups = {(s.claim, s.group) for s in suites}
+    for claim in ("simple@1", "calibration@1", "predictable@1"):
+        assert (claim, "core") in groups
+    for claim in ("simple@1", "simple@2", "calibration@1", "calibration@2", "predictable@1", "predictable@2"):
+        assert (claim, "stress") in groups
+    assert ("simple@1", "error") in groups
+    for s in suites:
+        assert s.name == f"{s.claim.split('@')[0]}-l{s.claim.split('@')[1]}-{s.group}"
+        for c in s.cases:
+            if c.kind == "decode" and c.inputs.get("fba"):
+                assert c.inputs.get("fap"), f"{c.full_id}: every stream case also comes as .fap text"
+                assert 1 <= c.frames <= 60 or c.id in ("lookahead-stuffing",), c.full_id
+
+
+def test_regression_toml_is_merged(tmp_path):
+    data = Path(build.__file__).parent / "data"
+    d = tmp_path / "data"
+    shutil.copytree(data, d, ignore=shutil.ignore_patterns("regression*"))
+    (d / "regression.toml").write_text('[[suite]]\nname = "simple-l1-regression"\nclaim = "simple@1"\n'
+                                       'group = "regression"\n\n[[case]]\nsuite = "simple-l1-regression"\n'
+                                       'id = "fuzz-1"\ngenerator = "file"\nfile = "regression/x.fba"\nexpect = []\n')
+    s = build.spec(d)
+    assert any(x["name"] == "simple-l1-regression" for x in s["suite"])
+    assert s["case"][-1]["id"] == "fuzz-1"
+    assert len(s["case"]) == len(build.spec()["case"]) + (0 if not (data / "regression.toml").is_file() else -len(
+        __import__("tomllib").loads((data / "regression.toml").read_text()).get("case", []))) + 1
+
+
+def test_external_suite_skips_cleanly_without_files(tmp_path):
+    assert build.build_external(tmp_path / "nothing", tmp_path / "out", log=lambda *_: None) is None
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason="../shared/data/fap not present (optional external suite)")
+def test_external_suite_from_real_files(tmp_path):
+    src = tmp_path / "src"
+    (src / "vreng").mkdir(parents=True)
+    shutil.copy(REAL / "vreng" / "joy.fap", src / "vreng" / "joy.fap")
+    s = build.build_external(src, tmp_path / "out", log=lambda *_: None)
+    assert s is not None and s.group == "real" and len(s.cases) >= 4
+    man = json.loads((tmp_path / "out" / "golden" / "MANIFEST.json").read_text())
+    assert any(k.startswith(build.EXTERNAL_SUITE + "/") for k in man["files"])
+    # nothing lands in the repository
+    assert not (Path(build.__file__).parent / "suites" / build.EXTERNAL_SUITE).exists()
