@@ -23,6 +23,8 @@ VERB_MODULES = (
     "fbaconf.rendering.cli",
     "fbaconf.conformance.cli",
     "fbaconf.harness.verbs",
+    "fbaconf.harness.benchcli",
+    "fbaconf.harness.fuzzcli",
 )
 
 

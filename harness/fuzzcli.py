@@ -1,0 +1,165 @@
+"""Verb ``fbaconf fuzz``: fuzz a decoder under test, or fbaconf's own parsers; promote findings.
+
+::
+
+    fbaconf fuzz --decoder D.toml --seconds N [--seed S] [-j N] [-o DIR] [--target stream|scene]
+    fbaconf fuzz --self [--seconds N] [--seed S] [-o DIR]
+    fbaconf fuzz --decoder D.toml --replay FILE         # run one input, print its classification
+    fbaconf fuzz --promote DIR [--data-dir PATH]         # findings -> regression suite cases
+
+Exit codes: 0 no findings (replay: the input behaves), 1 findings, 2 usage or setup error.
+The engine is :mod:`fbaconf.harness.fuzz`; see docs/fuzzing.md.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+
+def register(sub) -> None:
+    p = sub.add_parser("fuzz", help="fuzz a decoder's (or fbaconf's own) bitstream and scene parsers",
+                       description="Structure-aware fuzzing: valid streams from the syntax model, field-aware and "
+                                   "byte-level mutations of the conformance streams; crashes, hangs, memory "
+                                   "blow-ups, unexpected exit codes and wrong output on valid input are "
+                                   "deduplicated, minimised and written to DIR/findings/.")
+    who = p.add_mutually_exclusive_group(required=True)
+    who.add_argument("--decoder", help="decoder manifest .toml or bundled adapter name")
+    who.add_argument("--self", dest="self_", action="store_true",
+                     help="fuzz fbaconf's own decoder, checker and scene readers in-process")
+    who.add_argument("--promote", type=Path, metavar="DIR",
+                     help="turn the findings of a fuzz run folder into regression suite cases")
+    p.add_argument("--seconds", type=float, default=60.0, help="fuzzing time budget (default 60)")
+    p.add_argument("--seed", type=int, default=0, help="random seed: the same seed replays the same inputs")
+    p.add_argument("-j", "--jobs", type=int, default=1, help="decoder processes in parallel (--decoder)")
+    p.add_argument("-o", "--output", type=Path, help="run folder (default fbaconf-fuzz/<decoder|self>)")
+    p.add_argument("--target", choices=("stream", "scene"), default="stream",
+                   help="--decoder: fuzz the stream (default) or the BT scene input (a fixed valid stream)")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="cap the per-input timeout below the adapter's timeout_s (hangs are found faster)")
+    p.add_argument("--expected-exit", default="0,1,2,69",
+                   help="exit codes that are not findings on invalid input (default 0,1,2,69)")
+    p.add_argument("--no-oracle", action="store_true", help="do not compare output on valid inputs")
+    p.add_argument("--minimise-seconds", type=float, default=30.0, help="time budget per finding's minimisation")
+    p.add_argument("--seeds", type=Path, action="append", default=[],
+                   help="extra seed files or folders (*.fba) besides the conformance suites")
+    p.add_argument("--max-execs", type=int, default=None, help="stop after this many inputs")
+    p.add_argument("--replay", type=Path, metavar="FILE", help="run one input and print its classification")
+    p.add_argument("--data-dir", type=Path, help="(--promote) conformance data folder (default: the package's)")
+    p.add_argument("--no-progress", action="store_true", help="no live status line")
+    p.add_argument("--json", action="store_true", help="print the run summary as JSON")
+    p.set_defaults(func=cmd_fuzz)
+
+
+def _extra_seeds(paths: list[Path]):
+    from .fuzz import Entry
+    out = []
+    for p in paths:
+        files = sorted(p.rglob("*.fba")) if p.is_dir() else [p]
+        for f in files:
+            out.append(Entry(f.read_bytes(), origin=f"seed:{f}"))
+    return out
+
+
+def cmd_fuzz(args) -> int:
+    from . import fuzz as F
+    if args.promote is not None:
+        added = F.promote(args.promote, args.data_dir, log=lambda s: print(s, file=sys.stderr))
+        print(f"promoted {len(added)} finding(s) to the regression suite")
+        if args.json:
+            print(json.dumps(added, indent=1))
+        return 0
+    try:
+        expected = {int(x) for x in args.expected_exit.split(",") if x.strip()}
+    except ValueError:
+        print("fbaconf fuzz: error: --expected-exit must be a comma-separated list of integers", file=sys.stderr)
+        return 2
+    if args.self_:
+        return _self(args, F)
+    return _decoder(args, F, expected)
+
+
+def _self(args, F) -> int:
+    kinds = ("stream", "stream", "stream", "scene", "bifs")
+    if args.target == "scene" and args.replay is None:
+        kinds = ("scene",)
+    seeds = F.default_seeds() + _extra_seeds(args.seeds)
+    short = F.short_prefixes(seeds)
+    target = F.SelfTarget(scene_stream=short[0].data if short else seeds[0].data, checker_every=16)
+    if args.replay is not None:
+        kind = _kind_of(args.replay, args.target)
+        v = F.replay(target, args.replay.read_bytes(), kind)
+        return _print_replay(v, args)
+    out = args.output or Path("fbaconf-fuzz") / "self"
+    fz = F.Fuzzer(target, seeds + short, seed=args.seed, seconds=args.seconds, jobs=1, out_dir=out, kinds=kinds,
+                  progress=False if args.no_progress else None, minimise_seconds=args.minimise_seconds,
+                  max_execs=args.max_execs, decoder_info={"name": "fbaconf-self"}, fresh_valid_share=0.003,
+                  prefer_short=0.9, minimise_tests=5000)
+    if args.jobs and args.jobs > 1:
+        print("fbaconf fuzz: --self runs in one process (-j ignored)", file=sys.stderr)
+    fz.run()
+    return _finish(fz, out, args, F)
+
+
+def _kind_of(path: Path, target: str) -> str:
+    suf = path.suffix.lower()
+    return {".bt": "scene", ".bifs": "bifs"}.get(suf, "scene" if target == "scene" else "stream")
+
+
+def _print_replay(v, args) -> int:
+    if args.json:
+        print(json.dumps(None if v is None else {"class": v.cls, "signature": v.signature, "message": v.message,
+                                                 "detail": v.detail}, indent=1, default=str))
+    elif v is None:
+        print("no finding: the input is handled cleanly")
+    else:
+        print(f"{v.cls} ({v.signature}): {v.message}")
+    return 0 if v is None else 1
+
+
+def _decoder(args, F, expected: set[int]) -> int:
+    from .adapters import resolve
+    adapter = resolve(args.decoder)
+    if args.output is None:
+        args.output = Path("fbaconf-fuzz") / adapter.name
+    out: Path = args.output
+    out.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix="fuzz-work-", dir=out))
+    try:
+        seeds = F.default_seeds() + _extra_seeds(args.seeds)
+        scene_stream = None
+        if args.target == "scene":
+            scene_stream = next((s.data for s in seeds if s.origin.startswith("seed:simple-l1-core")), seeds[0].data)
+        target = F.DecoderTarget(adapter, work, kind=args.target, timeout_s=args.timeout, expected_exit=expected,
+                                 oracle=not args.no_oracle, scene_stream=scene_stream)
+        if args.replay is not None:
+            v = F.replay(target, args.replay.read_bytes(), args.target)
+            return _print_replay(v, args)
+        info = {"name": adapter.name, "manifest": str(adapter.manifest_path) if adapter.manifest_path else None,
+                "manifest_sha256": adapter.digest(),
+                "limits": {"timeout_s": target.limits.timeout_s, "memory_mb": target.limits.memory_mb,
+                           "memory_kind": target.limits.memory_kind, "output_mb": target.limits.output_mb}}
+        fz = F.Fuzzer(target, seeds, seed=args.seed, seconds=args.seconds, jobs=args.jobs, out_dir=out,
+                      kinds=(args.target,), progress=False if args.no_progress else None,
+                      minimise_seconds=args.minimise_seconds, max_execs=args.max_execs, decoder_info=info)
+        fz.run()
+        return _finish(fz, out, args, F)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _finish(fz, out: Path, args, F) -> int:
+    doc = F.write_summary(out, fz)
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        c = doc["syntax_coverage"]
+        print(f"{doc['execs']} inputs in {doc['fuzz_seconds']:.1f} s ({doc['execs_per_s']:,.0f} execs/s), "
+              f"syntax coverage {c['covered']}/{c['total']}, {doc['findings']} finding(s) -> {out}")
+        for f in fz.findings.values():
+            ms = f.min_stats
+            size = f"{ms.bytes_before} -> {ms.bytes_after} bytes" if ms else f"{len(f.original.data)} bytes"
+            print(f"  {f.id}: {f.verdict.cls} ({f.verdict.signature}) x{f.hits}, {size}: {f.verdict.message[:120]}")
+    return 1 if fz.findings else 0
