@@ -1,0 +1,586 @@
+"""Coverage of the conformance suites, measured on the spec's coverage model.
+
+The model is a data file, ``data/coverage.toml``: points (id, clause, description) and
+families of points (one per value). The extractors below compute which points a case hits
+FROM ITS CONTENT, never from its labels: each stream is decoded with the reference decoder
+and its plane records (:class:`PlaneInfo`: masks, fap_quant, lists, symbols, time codes, skip,
+DCT groups...) and FapFrames are inspected; each scene is parsed and compiled (FaceDefTables
+intervals and the effective FAP values that reach them, FIT graph shapes, FDP subsets); the
+profile/level measures come from the stream checker (``fbaconf.profiles.checker.analyse``),
+compared with every level's limits; error streams are classified by the checker's diagnostics.
+
+``fbaconf suites coverage [--json]`` prints point -> cases and ends with ``coverage: K/N points``.
+"""
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+FORMAT = "fbaconf.coverage/1"
+BITRATE_BAND = 0.10  # "at the limit" for the (continuous) bitrate: within the top 10 % below it
+
+
+@dataclass(frozen=True)
+class Point:
+    id: str
+    clause: str
+    description: str
+
+
+def _values(spec) -> list:
+    if isinstance(spec, str):
+        m = re.fullmatch(r"(-?\d+)\.\.(-?\d+)", spec.strip())
+        if not m:
+            raise ValueError(f"coverage.toml: bad values range {spec!r}")
+        return list(range(int(m.group(1)), int(m.group(2)) + 1))
+    return list(spec)
+
+
+def _names() -> dict[str, dict]:
+    from fbaconf.bitstreams import tables
+    return {"fap": {str(f.number): f.name for f in tables.fap_table()},
+            "viseme": {str(n): p for n, p, _ in tables.visemes()},
+            "expression": {str(n): name for n, name in tables.expressions()}}
+
+
+def load_model(path: Path | None = None) -> list[Point]:
+    """Every coverage point of the model, in file order."""
+    text = Path(path).read_text("utf-8") if path else \
+        resources.files("fbaconf.conformance").joinpath("data/coverage.toml").read_text("utf-8")
+    d = tomllib.loads(text)
+    if d.get("format") != FORMAT:
+        raise ValueError(f"coverage model: format must be {FORMAT}")
+    names = _names()
+    from fbaconf.bitstreams import tables
+    bidir = {f.number for f in tables.fap_table() if f.direction != "U"}
+    items = [("point", p) for p in d.get("point", [])] + [("family", f) for f in d.get("family", [])]
+    # keep file order: tomllib groups arrays by key, so order by the position of each id in the text
+    items.sort(key=lambda kv: text.find(f'id = "{kv[1]["id"]}"'))
+    out: list[Point] = []
+    for kind, it in items:
+        if kind == "point":
+            out.append(Point(it["id"], it["clause"], it["description"]))
+            continue
+        prefix = it["id"].split(".", 1)[0]
+        for v in _values(it["values"]):
+            if it.get("only") == "bidirectional" and int(v) not in bidir:
+                continue
+            name = names.get(prefix, {}).get(str(v), "")
+            out.append(Point(it["id"].format(v=v), it["clause"], it["description"].format(v=v, name=name)))
+    ids = [p.id for p in out]
+    dup = {i for i in ids if ids.count(i) > 1}
+    if dup:
+        raise ValueError(f"coverage model: duplicate point ids {sorted(dup)}")
+    return out
+
+
+# ------------------------------------------------------------------ stream extractors
+
+
+def _decode_any(data: bytes):
+    """(planes, frames, error) of the reference decoder, also for invalid streams."""
+    from fbaconf.bitstreams import decoder as dec
+    from fbaconf.bitstreams.errors import BitstreamError
+    d = dec._Decoder(data, None)
+    try:
+        res = d.run()
+        return res.planes, res.frames, None, res
+    except BitstreamError as e:
+        return list(d.planes), d._frames() if d.rows_values else None, e, None
+
+
+def stream_points(data: bytes) -> set[str]:
+    """Points hit by decoding one valid face object stream."""
+    from fbaconf.bitstreams import tables
+    from fbaconf.bitstreams.frames import FREE, RETAINED, SET
+    from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER, alphabet
+    from fbaconf.bitstreams.tables import RANGE_DELTA
+    from fbaconf.profiles.checker import ARITH_BLOCKS, lookahead_stuffing
+    hits: set[str] = set()
+    planes, frames, err, res = _decode_any(data)
+    if err is not None or frames is None:
+        return hits
+    if res.end_code is not None:
+        hits.add("stream.end-code")
+    else:
+        hits.add("stream.no-end-code")
+    if res.end_offset + 8 <= len(data) * 8 and res.end_code is not None:
+        hits.add("stream.trailing-data")
+    bounds = tables.default_bounds().copy()
+    seen_p = False
+    quants, prev_coded, prev_rate = set(), None, None
+    any_rate = False
+    for k, p in enumerate(planes):
+        hits.add("plane.start-code" if p.start_code else "plane.no-start-code")
+        if p.skip:
+            hits.add("skip.frames")
+            if k == 0:
+                hits.add("skip.first-plane")
+            if p.skip >= 15:
+                hits.add("skip.chain")
+        dct = p.coding_type == CODING_DCT
+        if p.is_intra:
+            hits.add("plane.intra")
+            if seen_p:
+                hits.add("plane.intra-after-predicted")
+            q = p.fap_quant
+            if not dct:
+                quants.add(q)
+                hits.add("fap_quant.0" if q == 0 else "fap_quant.1" if q == 1 else
+                         "fap_quant.31" if q == 31 else "fap_quant.mid")
+            for t in p.group_types:
+                hits.add(f"mask.type-{t}")
+            if prev_coded is not None and not np.array_equal(prev_coded, p.coded):
+                hits.add("mask.change")
+            prev_coded = p.coded
+            if p.gender:
+                hits.add("plane.gender-1")
+            if p.frame_rate is not None:
+                any_rate = True
+                fr = p.frame_rate
+                hits.add("rate.offset" if fr.frequency_offset else "rate.integer" if fr.seconds == 0
+                         else "rate.sixteenths")
+                if fr.seconds and fr.frequency_offset:
+                    hits.add("rate.sixteenths")
+                if prev_rate is not None and fr.rate != prev_rate:
+                    hits.add("rate.change")
+                prev_rate = fr.rate
+            if p.time_code is not None:
+                hits.add("timecode.present")
+                h, m, _, s = p.time_code
+                if (h, m, s) != (0, 0, 0):
+                    hits.add("timecode.nonzero")
+            if not dct:
+                if not p.new_lists:
+                    hits.add("lists.none")
+                for li, name in enumerate(LIST_ORDER):
+                    vals = p.new_lists.get(name)
+                    if vals is None:
+                        continue
+                    hits.add(f"lists.{name}")
+                    for fap, v in vals.items():
+                        if v == 0:
+                            hits.add("lists.value-0")
+                        if v == 31:
+                            hits.add("lists.value-31")
+                        bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
+        else:
+            hits.add("plane.predicted")
+            seen_p = True
+        if dct:
+            hits.add("dct.segment")
+            hits.add("dct.segment-full" if p.segment_length == 16 else "dct.segment-short")
+            if not p.is_intra:
+                hits.add("dct.predicted")
+            if p.coded is not None and (p.coded[0] or p.coded[1]):
+                hits.add("dct.highlevel")
+            continue
+        names = [b[0] for b in p.blocks]
+        if {"viseme", "expression", "low-level"} <= set(names):
+            hits.add("arith.three-blocks")
+        if p.coded is not None and (p.coded[0] or p.coded[1]) and not p.is_intra:
+            hits.add("highlevel.predicted")
+        if p.coded is not None and (p.coded[0] or p.coded[1]) and p.fap_quant > 1:
+            hits.add("highlevel.quantised")
+        q = p.fap_quant
+        for f, s in p.symbols.items():
+            if p.is_intra:
+                lo, hi = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)
+                if s == lo:
+                    hits.add("symbol.intra-min")
+                if s == hi:
+                    hits.add("symbol.intra-max")
+            else:
+                lo, hi = alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q)
+                if s == lo:
+                    hits.add("symbol.predicted-min")
+                if s == hi:
+                    hits.add("symbol.predicted-max")
+                if s == 0:
+                    hits.add("symbol.predicted-zero")
+        for name, start, length in p.blocks:
+            if name in ARITH_BLOCKS:
+                if _has_stuffing(data, start, length):
+                    hits.add("arith.stuffing")
+                if lookahead_stuffing(data, start, length) is not None:
+                    hits.add("arith.lookahead-stuffing")
+    if len(quants) > 1:
+        hits.add("fap_quant.change")
+    if planes and not any_rate:
+        hits.add("rate.none")
+    if len({p.coding_type for p in planes}) > 1:
+        hits.add("coding.switch")
+    hits |= frames_points(frames)
+    return hits
+
+
+def _has_stuffing(data: bytes, start: int, length: int) -> bool:
+    from fbaconf.bitstreams.arith import ZERO_RUN_LIMIT
+    bits = np.unpackbits(np.frombuffer(data, dtype=np.uint8))
+    seg = bits[start:start + length]
+    zeros = 0
+    k = 0
+    while k < len(seg):
+        if seg[k]:
+            zeros = 0
+        else:
+            zeros += 1
+            if zeros == ZERO_RUN_LIMIT:
+                return True
+        k += 1
+    return False
+
+
+def frames_points(frames) -> set[str]:
+    """Points of decoded FapFrames: FAPs set, negatives, statuses, visemes/expressions."""
+    from fbaconf.bitstreams.frames import FREE, RETAINED, SET
+    hits: set[str] = set()
+    st = frames.status
+    if st.size == 0:
+        return hits
+    for j in np.nonzero((st == SET).any(axis=0))[0]:
+        hits.add(f"fap.{j + 1}")
+    neg = ((frames.values < 0) & (st != FREE)).any(axis=0)
+    for j in np.nonzero(neg)[0]:
+        if j >= 2:
+            hits.add(f"fap.{j + 1}.negative")
+    if (st == RETAINED).any():
+        hits.add("status.retained")
+    ever = np.logical_or.accumulate(st == SET, axis=0)
+    if ((st == FREE) & np.vstack([np.zeros((1, st.shape[1]), bool), ever[:-1]])).any():
+        hits.add("status.free-after-set")
+    if (~ever[-1]).any():
+        hits.add("status.free-never-set")
+    h = frames.high
+    vis = st[:, 0] != FREE
+    exp = st[:, 1] != FREE
+    for v in np.unique(np.concatenate([h[vis, 0], h[vis, 1]])):
+        hits.add(f"viseme.{int(v)}")
+    for v in np.unique(np.concatenate([h[exp, 4], h[exp, 6]])):
+        hits.add(f"expression.{int(v)}")
+    if vis.any():
+        if (h[vis, 2] == 0).any():
+            hits.add("highlevel.blend-0")
+        if (h[vis, 2] == 63).any():
+            hits.add("highlevel.blend-max")
+        if (h[vis, 3] != 0).any():
+            hits.add("highlevel.viseme_def")
+    if exp.any():
+        ints = np.concatenate([h[exp, 5], h[exp, 7]])
+        if (ints == 0).any():
+            hits.add("highlevel.intensity-0")
+        if (ints == 63).any():
+            hits.add("highlevel.intensity-max")
+        if (h[exp, 8] != 0).any():
+            hits.add("highlevel.init_face")
+        if (h[exp, 9] != 0).any():
+            hits.add("highlevel.expression_def")
+    return hits
+
+
+# ------------------------------------------------------------------ scene extractors
+
+
+def scene_points(scene_path: Path | None, frames) -> set[str]:
+    """Points of a case's scene, with the case's decoded frames (for value-dependent points)."""
+    from fbaconf.animation import bt
+    from fbaconf.animation.engine import compile_scene, effective_faps
+    from fbaconf.animation.faceparams import NUM_FEATURE_POINTS, fdp_point_rows
+    from fbaconf.animation.interp import lr_fill
+    from fbaconf.bitstreams.frames import DERIVED, FREE
+    hits: set[str] = set()
+    if frames is not None and len(frames):
+        v, s = lr_fill(frames.values.astype(np.float64), frames.status)
+        if (s == DERIVED).any():
+            hits.add("lrfill.derived")
+    if scene_path is None:
+        hits.add("model.default")
+        return hits
+    scene = bt.read(scene_path)
+    faces = scene.find("Face")
+    face = faces[0][0]
+    fdp = scene.resolve(face.get("fdp"))
+    graph = fdp.get("faceSceneGraph") if fdp is not None else []
+    if graph:
+        hits.add("model.downloaded")
+        depth = _transform_depth(scene, graph)
+        if depth >= 2:
+            hits.add("model.nested-transforms")
+    else:
+        hits.add("model.default")
+    if fdp is not None:
+        fpc = scene.resolve(fdp.get("featurePointsCoord"))
+        if fpc is not None and not graph:
+            rows, sent = fdp_point_rows(fpc.get("point"))
+            n = int(sent.sum())
+            if n == NUM_FEATURE_POINTS:
+                hits.add("calibration.all")
+            elif n > 0:
+                hits.add("calibration.subset")
+            if 0 < n < 4:
+                hits.add("calibration.few")
+        if scene.resolve(fdp.get("textureCoord")) is not None:
+            hits.add("calibration.texture")
+        if fdp.get("useOrthoTexture"):
+            hits.add("calibration.ortho")
+    fit = scene.resolve(face.get("fit"))
+    if fit is not None:
+        hits |= _fit_points(fit)
+    model = compile_scene(scene)
+    if graph and model.fp_vertices is None:
+        hits.add("model.nonhuman")
+    for t in model.mesh_tables:
+        hits.add("facedef.mesh")
+        if t.fap == 1:
+            hits.add("facedef.highlevel-viseme")
+        if t.fap == 2:
+            hits.add("facedef.highlevel-expression")
+        b = t.borders
+        n = b.size - 1
+        if n == 1:
+            hits.add("facedef.interval.single")
+        else:
+            k = int(np.nonzero(b == 0)[0][0])
+            hits.add("facedef.interval.zero-bottom" if k == 0 else "facedef.interval.zero-top" if k == n
+                     else "facedef.interval.zero-inner")
+    for t in model.transform_tables:
+        hits.add(f"facedef.transform.{t.field}")
+        if t.fap == 1:
+            hits.add("facedef.highlevel-viseme")
+        if t.fap == 2:
+            hits.add("facedef.highlevel-expression")
+    if frames is not None and len(frames):
+        values, status = effective_faps(frames, model)
+        if model.fit is not None and (status == DERIVED).any():
+            # DERIVED also comes from left/right fill and visemes: FIT derived iff a child FAP is DERIVED
+            # where it was FREE and its node has a parent available
+            kids = {f for nd in (model.fit.nodes[c] for c in model.fit.order) for f in nd}
+            if any(((status[:, f - 1] == DERIVED) & (frames.status[:, f - 1] == FREE)).any() for f in kids):
+                hits.add("fit.derived")
+        for t in model.mesh_tables:
+            if t.fap <= 2 or t.borders.size <= 2:
+                continue
+            x = values[:, t.fap - 1]
+            x = x[status[:, t.fap - 1] != FREE]
+            b = t.borders
+            if (x > b[-1]).any():
+                hits.add("facedef.value.beyond-top")
+            if (x < b[0]).any():
+                hits.add("facedef.value.below-bottom")
+            if b.size > 3 and ((x > b[1]) & (x < b[-2]) & ~np.isin(x, b)).any():
+                hits.add("facedef.value.inner")
+            if (x < 0).any():
+                hits.add("facedef.value.negative")
+    return hits
+
+
+def _transform_depth(scene, graph) -> int:
+    best = 0
+
+    def visit(v, d):
+        nonlocal best
+        n = scene.resolve(v)
+        if n is None:
+            return
+        if n.type == "Transform":
+            d += 1
+            best = max(best, d)
+        if n.type in ("Transform", "Group"):
+            for c in n.get("children"):
+                visit(c, d)
+    for v in graph:
+        visit(v, 0)
+    return best
+
+
+def _fit_points(fit) -> set[str]:
+    from fbaconf.animation.interp import FitGraph
+    g = FitGraph.from_fields(fit.get("FAPs"), fit.get("Graph"), fit.get("numeratorExp"), fit.get("denominatorExp"),
+                             fit.get("numeratorImpulse"), fit.get("numeratorTerms"), fit.get("denominatorTerms"),
+                             fit.get("numeratorCoefs"), fit.get("denominatorCoefs"))
+    hits = {"fit.link"} if g.links else set()
+    children: dict[int, set] = {}
+    parents: dict[int, set] = {}
+    for ln in g.links:
+        children.setdefault(ln.parent, set()).add(ln.child)
+        parents.setdefault(ln.child, set()).add(ln.parent)
+        for fn in ln.functions:
+            if fn.num_exps.size and fn.num_exps.max() > 1 or fn.den_exps.size and fn.den_exps.max() > 1:
+                hits.add("fit.polynomial")
+            if fn.den_coefs.size and (fn.den_exps.any()):
+                hits.add("fit.denominator")
+            if fn.num_impulse.size and fn.num_impulse.any():
+                hits.add("fit.impulse")
+        if any(f in (1, 2) for f in g.nodes[ln.parent]):
+            hits.add("fit.highlevel-parent")
+    if any(len(c) >= 2 for c in children.values()):
+        hits.add("fit.fan-out")
+    if any(len(p) >= 2 for p in parents.values()):
+        hits.add("fit.fan-in")
+    if any(c in parents for c in children) and any(p in parents for p in children):
+        if any(p in parents for c, ps in parents.items() for p in ps):
+            hits.add("fit.chain")
+    if any(len(nd) > 1 for i, nd in enumerate(g.nodes) if i in parents or i in children):
+        hits.add("fit.multi-fap-node")
+    return hits
+
+
+# ------------------------------------------------------------------ claims, limits, diagnostics
+
+
+def claim_points(data: bytes | None, scene_path: Path | None, faces: int = 1, face_streams=None) -> tuple[set, dict]:
+    """Smallest-claim and level-limit points from the checker; returns (hits, measures)."""
+    from fbaconf.profiles.checker import analyse
+    from fbaconf.profiles.model import Claim, load_profiles
+    ps = load_profiles()
+    hits: set[str] = set()
+    streams = face_streams or [data]
+    top = ps.claims()[-1]
+    measures: dict[str, float] = {}
+    smallest = []
+    for i, s in enumerate(streams):
+        rep = analyse(s, scene=str(scene_path) if (scene_path and i == 0) else None, claim=top, smallest_claim=True)
+        for row in rep.summary.get("limits", []):
+            if row["measured"] is not None:
+                measures[row["limit"]] = max(measures.get(row["limit"], 0.0), float(row["measured"]))
+        if rep.smallest_claim is not None:
+            smallest.append(rep.smallest_claim)
+    measures["faces"] = float(max(faces, measures.get("faces", 1.0)))
+    # the smallest claim admitting the case: every stream, and the number of faces
+    if smallest:
+        need = max(smallest)
+        for c in ps.claims():
+            if c >= need and all(measures[lim.id] <= lim.value(c.level) + 1e-9 for lim in ps.limits_for(c)
+                                 if lim.id == "faces"):
+                hits.add(f"claim.{c}")
+                break
+    for lim in ps.limits_for(top):
+        if lim.bounds == "decoder" or lim.kind != "max" or lim.id not in measures:
+            continue
+        for level in ps.levels:
+            limit = float(lim.value(level))
+            m = measures[lim.id]
+            if lim.id == "bitrate":
+                if (1 - BITRATE_BAND) * limit <= m <= limit + 1e-9:
+                    hits.add(f"limit.{lim.id}@{level}")
+            elif abs(m - limit) < 1e-9:
+                hits.add(f"limit.{lim.id}@{level}")
+    return hits, measures
+
+
+def diagnostic_points(data: bytes, scene_path: Path | None, error_case: bool) -> tuple[set, set]:
+    """(points, codes): checker codes of a stream -> diag.* (valid streams) or error.* points."""
+    from fbaconf.profiles.checker import analyse
+    rep = analyse(data, scene=None)
+    codes = {d.code for d in rep.diagnostics}
+    prefix = "error." if error_case else "diag."
+    return {prefix + c for c in codes}, codes
+
+
+# ------------------------------------------------------------------ cases
+
+
+@dataclass
+class CaseCoverage:
+    case: str  # full id suite/case
+    claim: str
+    points: set[str] = field(default_factory=set)
+    codes: set[str] = field(default_factory=set)
+    measures: dict[str, float] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+
+
+def case_points(case) -> CaseCoverage:
+    """Coverage points hit by one conformance case (computed from its files)."""
+    cc = CaseCoverage(case.full_id, case.claim)
+    hits = cc.points
+    try:
+        if case.kind == "error":
+            data = case.input_path("fba").read_bytes()
+            pts, cc.codes = diagnostic_points(data, None, True)
+            hits |= pts
+            return cc
+        if case.kind == "multi":
+            streams = [p.read_bytes() for p in case.face_paths()]
+            hits.add("faces.multi")
+            for s in streams:
+                hits |= stream_points(s)
+            h, cc.measures = claim_points(None, None, faces=len(streams), face_streams=streams)
+            hits |= h
+            return cc
+        fba = case.input_path("fba")
+        scene = case.input_path("scene")
+        if case.input_path("fap") is not None:
+            hits.add("text.fap")
+        frames = None
+        if fba is not None:
+            data = fba.read_bytes()
+            hits |= stream_points(data)
+            pts, cc.codes = diagnostic_points(data, None, False)
+            hits |= pts
+            h, cc.measures = claim_points(data, scene)
+            hits |= h
+            _, frames, _, _ = _decode_any(data)
+        elif case.input_path("fap") is not None:
+            from fbaconf.bitstreams.faptext import read_fap_file
+            frames = read_fap_file(case.input_path("fap"))[0]
+            hits |= frames_points(frames)
+        if "vertices" in case.stages or "images" in case.stages or scene is not None:
+            hits |= scene_points(scene, frames)
+    except Exception as e:  # a coverage tool must report, not crash
+        cc.problems.append(f"{type(e).__name__}: {e}")
+    return cc
+
+
+def compute(suites=None, model: list[Point] | None = None) -> dict:
+    """{"points": [...], "cases": [...], "covered": K, "total": N, "unknown": {...}}."""
+    from .suite import load_suites
+    suites = suites if suites is not None else load_suites()
+    model = model or load_model()
+    ids = {p.id for p in model}
+    by_point: dict[str, list[str]] = {p.id: [] for p in model}
+    cases = []
+    unknown: dict[str, list[str]] = {}
+    for s in suites:
+        for c in s.cases:
+            cc = case_points(c)
+            cases.append(cc)
+            for pid in sorted(cc.points):
+                if pid in ids:
+                    by_point[pid].append(cc.case)
+                else:
+                    unknown.setdefault(pid, []).append(cc.case)
+    covered = sum(1 for v in by_point.values() if v)
+    return {"format": "fbaconf.coverage-report/1", "total": len(model), "covered": covered,
+            "points": [{"id": p.id, "clause": p.clause, "description": p.description, "cases": by_point[p.id]}
+                       for p in model],
+            "cases": [{"case": c.case, "claim": c.claim, "points": sorted(c.points & ids), "codes": sorted(c.codes),
+                       "measures": c.measures, "problems": c.problems} for c in cases],
+            "unknown": unknown}
+
+
+def format_table(rep: dict, width: int = 100) -> str:
+    lines = [f"{'coverage point':40s} {'clause':34s} cases"]
+    for p in rep["points"]:
+        cs = p["cases"]
+        shown = ", ".join(cs[:3]) + (f" (+{len(cs) - 3})" if len(cs) > 3 else "") if cs else "-- NOT HIT --"
+        lines.append(f"{p['id']:40s} {p['clause'][:34]:34s} {shown}")
+    missing = [p for p in rep["points"] if not p["cases"]]
+    if missing:
+        lines.append("")
+        lines.append(f"not hit ({len(missing)}):")
+        for p in missing:
+            lines.append(f"  {p['id']}: {p['description']} [{p['clause']}]")
+    probs = [(c["case"], pr) for c in rep["cases"] for pr in c["problems"]]
+    for case, pr in probs:
+        lines.append(f"problem: {case}: {pr}")
+    lines.append(f"coverage: {rep['covered']}/{rep['total']} points")
+    return "\n".join(lines)
+
+
+__all__ = ["Point", "load_model", "case_points", "compute", "format_table", "stream_points", "scene_points"]
