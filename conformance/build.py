@@ -65,6 +65,10 @@ def make_content(c: dict):
     for fap, v in c.get("set_values", {}).items():
         frames.values[:, int(fap) - 1] = np.resize(np.asarray(v, dtype=np.int32), len(frames))
         frames.status[:, int(fap) - 1] = 1
+    start = int(c.get("start_frame", 0))
+    if start:  # the content begins later in the stream's timeline (skip chain + time codes past a minute)
+        frames.frame_number = frames.frame_number + start
+        frames.time_ms = frames.frame_number * 1000.0 / frames.frame_rate
     k = int(c.get("sparse", 0))
     if k > 1:
         # FAP f is coded only in frames where (frame + f) % k == 0, always in frame 0

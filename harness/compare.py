@@ -414,7 +414,8 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
     too. ``text_output=True`` (.fap text carries no SET/RETAINED distinction): a non-FREE
     expected FAP that is FREE in ``got`` is a difference ("expected a value, got none").
     A different frame count fails (reported as the first difference unless an earlier
-    frame already differs).
+    frame already differs). With ``.npz`` output plane times must match within
+    ``[faps] time_tol_ms`` of the tolerance file.
 
     ``first_difference``: frame (index), frame_number, fap, name, what ("value", "status",
     "missing", a high-level field name, "frame number", "frame count"), expected, got.
@@ -442,7 +443,14 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
         sdiff = e.status != g.status
     fndiff = e.frame_number != g.frame_number
     per_fap = vdiff | sdiff | missing
-    bad_frame = per_fap.any(axis=1) | fndiff
+    # plane times (frame rate, skips, time codes, 1000/1001) are normative too (decision D6);
+    # .fap text carries only frame numbers and one rate, so times are compared for .npz output
+    time_tol = float(load_tolerances().get("faps", {}).get("time_tol_ms", 0.5))
+    with np.errstate(invalid="ignore"):
+        tdiff = ~(np.abs(np.asarray(e.time_ms, np.float64) - np.asarray(g.time_ms, np.float64)) <= time_tol)
+    if text_output:
+        tdiff[:] = False
+    bad_frame = per_fap.any(axis=1) | fndiff | tdiff
 
     absd = np.where(norm, np.abs(e.values.astype(np.int64) - g.values.astype(np.int64)), 0)
     habs = np.where(hnorm, np.abs(e.high.astype(np.int64) - g.high.astype(np.int64)), 0)
@@ -463,6 +471,10 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
             first = {"frame": k, "frame_number": fn, "what": "frame number", "expected": fn,
                      "got": int(g.frame_number[k])}
             detail = f"{where}: frame number: expected {fn}, got {int(g.frame_number[k])}"
+        elif not per_fap[k].any():
+            et, gt = float(e.time_ms[k]), float(g.time_ms[k])
+            first = {"frame": k, "frame_number": fn, "what": "time_ms", "expected": et, "got": gt}
+            detail = f"{where}: time: expected {et:.3f} ms, got {gt:.3f} ms (tolerance {time_tol:g} ms)"
         else:
             j = int(np.nonzero(per_fap[k])[0][0])
             num, name = j + 1, _fap_name(j + 1)

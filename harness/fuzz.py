@@ -1738,7 +1738,7 @@ REGRESSION_HEADER = f"""# fbaconf regression suite: fuzz findings promoted by `f
 [[suite]]
 name = "{REGRESSION_SUITE}"
 claim = "simple@1"
-group = "error"
+group = "regression"
 description = "Simple profile, level 1: inputs that crashed, hung or blew up decoders (fuzz findings)"
 """
 

@@ -521,3 +521,19 @@ def test_stage_results_fit_the_run_report_schema(rendered, tmp_path):
                compare_images(rendered, [rendered[0], tmp_path / "absent.png"], TOL, tmp_path / "art")]
     for r in results:
         jsonschema.validate(nan_as_text(r.to_json()), stage_schema)
+
+
+def test_plane_times_are_compared_for_npz_output_only():
+    from fbaconf.bitstreams.synth import synthetic_sequence
+    from fbaconf.harness.compare import compare_faps
+    exp = synthetic_sequence(12, 25.0, visemes=False, expressions=False)
+    got = exp.copy()
+    got.time_ms = got.time_ms.copy()
+    got.time_ms[5:] += 40.0  # a skipped frame not accounted for in the times
+    r = compare_faps(exp, got, text_output=False)
+    assert r.outcome.value == "Fail"
+    assert r.first_difference["frame"] == 5 and r.first_difference["what"] == "time_ms"
+    got.time_ms[5:] -= 40.0 - 0.2  # within the 0.5 ms tolerance
+    assert compare_faps(exp, got, text_output=False).outcome.value == "Pass"
+    got.time_ms[5:] += 100.0
+    assert compare_faps(exp, got, text_output=True).outcome.value == "Pass"
