@@ -4,16 +4,18 @@
 
 Target: under 5 s for 18,000 frames. Prints the checker time and, for comparison, the
 time of the reference decoder alone (the checker's parse), so it is clear which part
-dominates.
+dominates. The arithmetic coder's inner loop runs in the optional C extension when it is
+built; ``--pure`` (or FBACONF_PURE_PYTHON=1) measures the pure-Python reference coder.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
 
-from fbaconf.bitstreams import tables
+from fbaconf.bitstreams import arith, tables
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.bitstreams.frames import SET, FapFrames
@@ -44,7 +46,11 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=18_000)
     ap.add_argument("--coding", default="arithmetic", choices=("arithmetic", "dct"))
     ap.add_argument("--repeat", type=int, default=2, help="best of N timings (the machine is shared)")
+    ap.add_argument("--pure", action="store_true", help="force the pure-Python coder (FBACONF_PURE_PYTHON=1)")
     a = ap.parse_args()
+    if a.pure:
+        os.environ[arith.PURE_PYTHON_ENV] = "1"
+    print(f"coder: {'native C extension' if arith.native_decoder() is not None else 'pure Python'}")
     t0 = time.perf_counter()
     data = encode(random_walk_frames(a.frames), EncoderOptions(coding=a.coding, intra_period=300)).data
     t1 = time.perf_counter()

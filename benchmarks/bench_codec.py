@@ -6,11 +6,14 @@ Prints (1) kbit/s for every real .fap file x fap_quant x frame rate 25/15/10 Hz 
 above the file's own rate are skipped: the encoder subsamples, it does not invent frames),
 compared with the seed's 0.5-5 kbit/s (IST 5.1), and (2) encode and decode speed in
 frames/s for a 68-FAP stream (66 low-level FAPs + viseme + expression in every frame),
-single process, one core, median of repeats.
+single process, one core, median of repeats. The arithmetic coder's inner loop runs in the
+optional C extension when it is built (``--pure`` or FBACONF_PURE_PYTHON=1: the pure-Python
+reference coder; ``--compare``: both).
 """
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -18,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fbaconf.bitstreams import arith
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.bitstreams.errors import FbaconfInputError
@@ -74,7 +78,8 @@ def speed(n_frames: int, repeats: int = 3) -> None:
     assert len(out.frames) == n_frames
     enc, dec = statistics.median(enc_t), statistics.median(dec_t)
     kbps = len(data) * 8 / (n_frames / 30.0) / 1000
-    print(f"68-FAP stream, {n_frames} frames at 30 Hz, fap_quant 1, {kbps:.1f} kbit/s")
+    coder = "native C extension" if arith.native_decoder() is not None else "pure Python"
+    print(f"68-FAP stream, {n_frames} frames at 30 Hz, fap_quant 1, {kbps:.1f} kbit/s; coder: {coder}")
     print(f"  encode: {n_frames / enc:8.0f} frames/s")
     print(f"  decode: {n_frames / dec:8.0f} frames/s  ({n_frames / dec / 30:.0f}x real time at 30 Hz; "
           f"target 6000 frames/s -> ratio {n_frames / dec / 6000:.2f})")
@@ -85,11 +90,18 @@ def main(argv=None) -> int:
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data" / "fap")
     ap.add_argument("--frames", type=int, default=3000)
     ap.add_argument("--skip-table", action="store_true")
+    ap.add_argument("--pure", action="store_true", help="force the pure-Python coder (FBACONF_PURE_PYTHON=1)")
+    ap.add_argument("--compare", action="store_true", help="measure the native and the pure-Python coder")
     args = ap.parse_args(argv)
     np.seterr(all="raise")
+    if args.pure:
+        os.environ[arith.PURE_PYTHON_ENV] = "1"
     if not args.skip_table:
         bitrate_table(args.data)
     speed(args.frames)
+    if args.compare and not args.pure:
+        os.environ[arith.PURE_PYTHON_ENV] = "1"
+        speed(args.frames)
     return 0
 
 

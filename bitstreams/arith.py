@@ -14,10 +14,13 @@ look-ahead bits is not an error: those bits belong to the next field.
 """
 from __future__ import annotations
 
+import os
 from bisect import bisect_left
 
 import numpy as np
 
+from . import syntax as _syntax
+from . import tables as _tables
 from .bitio import BitReader, BitWriter
 
 TOP = 65535
@@ -27,6 +30,11 @@ Q3 = 49152
 MAX_FREQUENCY = 16383
 ZERO_RUN_LIMIT = 22
 LOOKAHEAD = 14  # 16 primed bits - 2 flush bits
+
+# Error messages of a block (shared by the pure decoder and the native fast path)
+MSG_ARITH_STATE = "arithmetic decoder state out of range (corrupt block)"
+MSG_STUFFING = "stuffing bit after 22 consecutive zeros is not '1'"
+MSG_TRUNCATED = "stream ends inside an arithmetic-coded block"
 
 
 class Model:
@@ -273,7 +281,7 @@ class ArithDecoder:
         target = ((value - low + 1) * total - 1) // length
         if not 0 <= target < total:
             self.r.pos = self.pos
-            raise self.r.error("arithmetic decoder state out of range (corrupt block)", "arith-state")
+            raise self.r.error(MSG_ARITH_STATE, "arith-state")
         s = model.find(target)
         hi_c, lo_c, _ = model.bounds(s)
         high = low - 1 + (length * hi_c) // total
@@ -328,13 +336,13 @@ class ArithDecoder:
             if count <= used:
                 if at >= r.nbits:  # the "zeros" were read past the end of the data
                     r.pos = r.nbits
-                    raise r.error("stream ends inside an arithmetic-coded block", "truncated")
+                    raise r.error(MSG_TRUNCATED, "truncated")
                 r.pos = at
-                raise r.error("stuffing bit after 22 consecutive zeros is not '1'", "stuffing")
+                raise r.error(MSG_STUFFING, "stuffing")
         end = self.start + used + sum(1 for c in self.stuffing if c <= used)
         if end > r.nbits:
             r.pos = r.nbits
-            raise r.error("stream ends inside an arithmetic-coded block", "truncated")
+            raise r.error(MSG_TRUNCATED, "truncated")
         r.pos = end
         return end - self.start
 
@@ -349,3 +357,138 @@ def symbols_to_bits(symbols: list[int], alphabets: list[int], adaptive: bool = T
         enc.encode(m, s)
     enc.flush()
     return w.getvalue()
+
+
+# ---------------------------------------------------------------------------- native fast path
+#
+# bitstreams/_fastarith.c (an optional C extension built by setup.py) runs whole blocks:
+# the same coder, models held as int32 c tables in a "pool", blocks described by int32
+# "spec" rows (n, pool offset or -1 for a uniform non-adaptive model, lo, step, index).
+# The classes above stay the reference; the fast path is used only when the extension is
+# importable, FBACONF_PURE_PYTHON is unset (or '0'), and the classes above are the
+# originals (tests monkeypatch them to simulate faults).
+
+PURE_PYTHON_ENV = "FBACONF_PURE_PYTHON"
+
+try:
+    from . import _fastarith as _native_module
+except ImportError:  # not built (no compiler): the pure path is used
+    _native_module = None
+
+_PURE_DECODER = {k: ArithDecoder.__dict__[k] for k in ("__init__", "_bit", "_stuffing", "decode", "finish")}
+_PURE_ENCODER = {k: ArithEncoder.__dict__[k] for k in ("__init__", "_emit", "_bit_plus_follow", "encode", "flush")}
+
+
+def native_available() -> bool:
+    """True when the C extension was built and imports."""
+    return _native_module is not None
+
+
+def native():
+    """The C extension module, or None when missing or FBACONF_PURE_PYTHON is set."""
+    if _native_module is None or os.environ.get(PURE_PYTHON_ENV, "").strip() not in ("", "0"):
+        return None
+    return _native_module
+
+
+def native_decoder():
+    """The extension for the decoder, or None (also when ArithDecoder was replaced or patched)."""
+    mod = native()
+    if mod is None or any(ArithDecoder.__dict__.get(k) is not v for k, v in _PURE_DECODER.items()):
+        return None
+    return mod
+
+
+def native_encoder():
+    """The extension for the encoder, or None (also when ArithEncoder was replaced or patched)."""
+    mod = native()
+    if mod is None or any(ArithEncoder.__dict__.get(k) is not v for k, v in _PURE_ENCODER.items()):
+        return None
+    return mod
+
+
+def tdiv_array(a: np.ndarray, d: int) -> np.ndarray:
+    """C-style truncating division of an int array by d > 0 (syntax.alphabet, vectorised)."""
+    a = np.asarray(a, dtype=np.int64)
+    return np.where(a < 0, -((-a) // d), a // d)
+
+
+def block_spec(n, lo, step=0, idx=0, adaptive: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """Spec rows (int32[k, 5]) of a block and, for adaptive models, a fresh pool holding
+    one uniform c table (c[k] = n - k) per row."""
+    n = np.atleast_1d(np.asarray(n, dtype=np.int64))
+    k = len(n)
+    if k and (n.min() < 1 or n.max() > MAX_FREQUENCY):
+        raise ValueError(f"alphabet size outside 1..{MAX_FREQUENCY}")
+    spec = np.zeros((k, 5), dtype=np.int32)
+    spec[:, 0] = n
+    spec[:, 2] = lo
+    spec[:, 3] = step
+    spec[:, 4] = idx
+    if not adaptive:
+        spec[:, 1] = -1
+        return spec, None
+    sizes = n + 1
+    offs = np.cumsum(sizes) - sizes
+    spec[:, 1] = offs
+    total = int(sizes.sum())
+    pool = (np.repeat(n, sizes) - (np.arange(total) - np.repeat(offs, sizes))).astype(np.int32)
+    return spec, pool
+
+
+def append_bits(w: BitWriter, data: bytes, nbits: int) -> None:
+    """Append the first nbits of ``data`` (MSB first) to a BitWriter."""
+    if nbits <= 0:
+        return
+    nacc = w._nacc
+    if nacc == 0:
+        full = nbits >> 3
+        w._buf += data[:full]
+        rem = nbits & 7
+        w._acc = data[full] >> (8 - rem) if rem else 0
+        w._nacc = rem
+        return
+    value = int.from_bytes(data, "big") >> (len(data) * 8 - nbits)
+    acc = (w._acc << nbits) | value
+    n = nacc + nbits
+    rem = n & 7
+    w._buf += (acc >> rem).to_bytes(n >> 3, "big")
+    w._acc = acc & ((1 << rem) - 1)
+    w._nacc = rem
+
+
+class NativeSegment:
+    """Block specs and adaptive model pools of one segment (intra plane + the P planes after it)
+    for the native fast path (decoder and encoder): the same alphabets and models as the pure path (D4, D5)."""
+
+    __slots__ = ("idx", "bounds", "q", "istep", "steps", "vis_i", "exp_i", "low_i", "vis_p", "vis_pool",
+                 "exp_p", "exp_pool", "low_p", "low_pool")
+
+    def __init__(self, coded_low: list[int], bounds: np.ndarray, q: int) -> None:
+        self.idx = idx = np.asarray(coded_low, dtype=np.int64) - 1
+        self.bounds = bounds[idx].copy()  # bounds of the coded FAPs, fixed until the next intra plane
+        self.q = q
+        d = q if q > 0 else 1
+        self.istep = _syntax.intensity_step(q)
+        ib = _syntax.intensity_bound(q)
+        self.steps = _tables.quant_steps()[idx].astype(np.int64) * q if q > 0 else np.ones(len(idx), np.int64)
+        V, E = _syntax.VISEME_SELECT_MAX, _syntax.EXPRESSION_SELECT_MAX
+        self.vis_i, _ = block_spec([V + 1, V + 1, ib + 1], 0)
+        self.exp_i, _ = block_spec([E + 1, ib + 1, E + 1, ib + 1], 0)
+        lo = tdiv_array(self.bounds[:, 1], d)
+        hi = tdiv_array(self.bounds[:, 0], d)
+        self.low_i, _ = block_spec(hi - lo + 1, lo, self.steps, idx)
+        self.low_p = self.low_pool = self.vis_p = self.vis_pool = self.exp_p = self.exp_pool = None
+
+    def build_p(self) -> None:
+        """The P models, created at the first predicted plane (uniform, adaptive)."""
+        q = self.q
+        d = q if q > 0 else 1
+        ib = _syntax.intensity_bound(q)
+        V, E = _syntax.VISEME_SELECT_MAX, _syntax.EXPRESSION_SELECT_MAX
+        self.vis_p, self.vis_pool = block_spec([2 * V + 1, 2 * V + 1, 2 * ib + 1], [-V, -V, -ib], adaptive=True)
+        self.exp_p, self.exp_pool = block_spec([2 * E + 1, 2 * ib + 1, 2 * E + 1, 2 * ib + 1], [-E, -ib, -E, -ib],
+                                               adaptive=True)
+        lo = tdiv_array(self.bounds[:, 3], d)
+        hi = tdiv_array(self.bounds[:, 2], d)
+        self.low_p, self.low_pool = block_spec(hi - lo + 1, lo, self.steps, self.idx, adaptive=True)

@@ -5,6 +5,11 @@ bit offset, plane/frame, FAP and the rule broken. Work is bounded by the input l
 (every plane costs at least 6 bits, every skip-chain chunk 4 bits; a DCT plane group
 at least 8 bits for at most 16 frames) and so is memory
 (alphabets are bounded by the 5-bit range lists; no allocation depends on a coded count).
+
+The arithmetic blocks run through the optional C extension (arith.native_decoder(),
+bitstreams/_fastarith.c) when it is built; the pure-Python ArithDecoder is the reference
+and the fallback (FBACONF_PURE_PYTHON=1 forces it). Both give identical frames, plane
+records and errors (tests/test_native.py).
 """
 from __future__ import annotations
 
@@ -12,8 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import dct, tables
-from .arith import ArithDecoder, UniformModel, make_model
+from . import arith, dct, tables
+from .arith import (MSG_ARITH_STATE, MSG_STUFFING, MSG_TRUNCATED, ArithDecoder, NativeSegment, UniformModel,
+                    make_model)
 from .bitio import (FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, START_CODE_NAMES,
                     VISUAL_OBJECT_SEQUENCE_END_CODE, BitReader)
 from .errors import BitstreamError
@@ -66,6 +72,9 @@ class _Decoder:
         self.rows_meta: list[tuple] = []
         self.seen_intra = False
         self.dct_dc: dict[int, int] = {}  # DCT mode: DC level of the previous segment per FAP
+        # native fast path (arith.py, _fastarith.c): the module, or None for the pure-Python coder
+        self.native = arith.native_decoder()
+        self.nat_seg: NativeSegment | None = None
 
     # ------------------------------------------------------------------ helpers
     def err(self, msg: str, rule: str, *, at: int | None = None, fap: int | None = None) -> BitstreamError:
@@ -242,9 +251,13 @@ class _Decoder:
         # segment state: status template, coded list, P alphabets (models created lazily)
         self._mask_state(types, coded)
         q = self.fap_quant
+        self.p_models = {}
+        if self.native is not None:
+            self.p_alphabets = {}
+            self.nat_seg = NativeSegment(self.coded_low, self.bounds, q)
+            return
         self.p_alphabets = {f: alphabet(int(self.bounds[f - 1, 3]), int(self.bounds[f - 1, 2]), q)
                             for f in self.coded_low}
-        self.p_models = {}
 
     def _mask_state(self, types, coded) -> None:
         """Status template (D3) and coded low-level FAPs of the planes that follow an intra header."""
@@ -263,6 +276,8 @@ class _Decoder:
         return m
 
     def payload(self, info: PlaneInfo) -> None:
+        if self.native is not None:
+            return self._payload_native(info)
         r = self.r
         intra = info.is_intra
         q = self.fap_quant
@@ -344,6 +359,75 @@ class _Decoder:
                     raise self.err(f"FAP {f} value {v} overflows 32 bits", "value-overflow", at=start, fap=f)
                 cur[f - 1] = v
         info.blocks.append(("low-level", start, dec.finish()))
+
+    # ------------------------------------------------------------------ payload, native fast path
+    def _block_native(self, info: PlaneInfo, name: str, spec, pool, mode: int, cur) -> list[int]:
+        """One arithmetic block through the C extension; raises exactly what the pure path raises."""
+        r = self.r
+        start = r.pos
+        st, a, b = self.native.decode_block(r.data, r.nbits, start, spec, pool, mode, cur)
+        if st == 0:
+            r.pos = a
+            info.blocks.append((name, start, a - start))
+            return b
+        if st == 1:
+            r.pos = a
+            raise r.error(MSG_ARITH_STATE, "arith-state")
+        if st == 2:
+            r.pos = a
+            raise r.error(MSG_STUFFING, "stuffing")
+        if st == 3:
+            r.pos = r.nbits
+            raise r.error(MSG_TRUNCATED, "truncated")
+        f = self.coded_low[a]
+        raise self.err(f"FAP {f} value {b} overflows 32 bits", "value-overflow", at=start, fap=f)
+
+    def _payload_native(self, info: PlaneInfo) -> None:
+        r = self.r
+        intra = info.is_intra
+        seg = self.nat_seg
+        if not intra and seg.low_p is None:
+            seg.build_p()
+        hl = self.high
+        istep = seg.istep
+        block = self._block_native
+        if self.coded[0]:
+            start = r.pos
+            if intra:
+                s1, s2, b = block(info, "viseme", seg.vis_i, None, 0, None)
+                hl[0], hl[1], hl[2] = s1, s2, b * istep
+            else:
+                d1, d2, db = block(info, "viseme", seg.vis_p, seg.vis_pool, 0, None)
+                hl[0] += d1
+                hl[1] += d2
+                hl[2] += db * istep
+            for k, mx in ((0, VISEME_SELECT_MAX), (1, VISEME_SELECT_MAX)):
+                if not 0 <= hl[k] <= mx:
+                    raise self.err(f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{mx}", "viseme-select-range",
+                                   at=start, fap=1)
+            hl[3] = r.bit("viseme_def")
+        if self.coded[1]:
+            start = r.pos
+            if intra:
+                e1, i1, e2, i2 = block(info, "expression", seg.exp_i, None, 0, None)
+                hl[4], hl[5], hl[6], hl[7] = e1, i1 * istep, e2, i2 * istep
+            else:
+                d1, di1, d2, di2 = block(info, "expression", seg.exp_p, seg.exp_pool, 0, None)
+                hl[4] += d1
+                hl[5] += di1 * istep
+                hl[6] += d2
+                hl[7] += di2 * istep
+            for k in (4, 6):
+                if not 0 <= hl[k] <= EXPRESSION_SELECT_MAX:
+                    raise self.err(f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{EXPRESSION_SELECT_MAX}",
+                                   "expression-select-range", at=start, fap=2)
+            hl[8] = r.bit("init_face")
+            hl[9] = r.bit("expression_def")
+        if intra:
+            vals = block(info, "low-level", seg.low_i, None, 1, self.cur)
+        else:
+            vals = block(info, "low-level", seg.low_p, seg.low_pool, 2, self.cur)
+        info.symbols = dict(zip(self.coded_low, vals))
 
 
 def decode(data: bytes, *, file: str | None = None) -> DecodeResult:

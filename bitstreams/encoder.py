@@ -20,7 +20,7 @@ from fractions import Fraction
 import numpy as np
 
 from . import tables
-from .arith import ArithEncoder, UniformModel, make_model
+from .arith import ArithEncoder, NativeSegment, UniformModel, append_bits, make_model, native_encoder
 from .bitio import FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE, BitWriter
 from .errors import EncodeError
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
@@ -440,6 +440,7 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
     p_models: dict = {}
     fn = src.frame_number
     rate = code.rate
+    nat = native_encoder()  # the C extension's block coder, or None (pure-Python reference coder)
     for k in range(n):
         intra = bool(plan.intra[k])
         q = int(quants[k])
@@ -469,7 +470,10 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
             tmpl = np.where(c, SET, np.where((ta == MASK_INTERPOLATE) | ~ever, FREE, RETAINED)).astype(np.uint8)
             p_models = {}
         status_rows[k] = tmpl
-        _write_payload(w, plan, k, intra, q, c, bounds, p_models)
+        if nat is not None:
+            _write_payload_native(nat, w, plan, k, intra, q, c, bounds, p_models)
+        else:
+            _write_payload(w, plan, k, intra, q, c, bounds, p_models)
     if own and opts.end_code:
         w.next_start_code()
         w.start_code(VISUAL_OBJECT_SEQUENCE_END_CODE)
@@ -641,3 +645,43 @@ def _write_payload(w: BitWriter, plan: _Plan, k: int, intra: bool, q: int, c, bo
                 m = p_models[f] = make_model(hi - lo + 1)
             enc.encode(m, int(sym[f - 1]) - lo)
     enc.flush()
+
+
+def _block_native(nat, w: BitWriter, spec: np.ndarray, pool, values: np.ndarray) -> None:
+    """Code one block with the C extension and append it (same bits as ArithEncoder)."""
+    if len(values) and np.abs(values).max() >= 2**30:  # cannot happen: symbols were range-checked
+        raise ValueError(f"symbol value {int(values[np.abs(values).argmax()])} outside any alphabet")
+    st, a, b = nat.encode_block(spec, pool, values.astype(np.int32))
+    if st:
+        raise ValueError(f"symbol index {b} outside alphabet of {int(spec[a, 0])}")
+    append_bits(w, a, b)
+
+
+def _write_payload_native(nat, w: BitWriter, plan: _Plan, k: int, intra: bool, q: int, c, bounds,
+                          p_models: dict) -> None:
+    """_write_payload through the native block coder; p_models holds the segment's NativeSegment."""
+    seg = p_models.get(None)
+    if seg is None:  # first plane of the segment (p_models is reset at every intra plane)
+        seg = p_models[None] = NativeSegment([int(f) for f in np.nonzero(c[2:])[0] + 3], bounds, q)
+    if not intra and seg.low_p is None:
+        seg.build_p()
+    hs = plan.hsym[k]
+    src_high = plan.rhigh[k]
+    if c[0]:
+        if intra:
+            _block_native(nat, w, seg.vis_i, None, hs[0:3])
+        else:
+            _block_native(nat, w, seg.vis_p, seg.vis_pool, hs[0:3])
+        w.bit(int(src_high[3]))
+    if c[1]:
+        if intra:
+            _block_native(nat, w, seg.exp_i, None, hs[4:8])
+        else:
+            _block_native(nat, w, seg.exp_p, seg.exp_pool, hs[4:8])
+        w.bit(int(src_high[8]))
+        w.bit(int(src_high[9]))
+    values = plan.sym[k][seg.idx]
+    if intra:
+        _block_native(nat, w, seg.low_i, None, values)
+    else:
+        _block_native(nat, w, seg.low_p, seg.low_pool, values)
