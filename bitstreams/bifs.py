@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf.animation import bt
+from fbaconf.animation.errors import SceneError
 
 from .bitio import BitWriter
 from .errors import BitstreamError, FbaconfInputError
@@ -82,23 +83,11 @@ class BifsError(BitstreamError):
         return d
 
 
-class BifsEncodeError(FbaconfInputError):
+class BifsEncodeError(SceneError):
     """A scene model cannot be coded as BIFS (a node outside its field's node data type, a
-    value outside its field type, a USE before its DEF)."""
+    value outside its field type, a USE before its DEF); located by node path."""
 
     rule = "bifs-encode"
-
-    def __init__(self, message: str, *, rule: str, node_path: str | None = None, file: str | None = None) -> None:
-        super().__init__(message, rule=rule, file=file)
-        self.node_path = node_path
-
-    def location(self) -> str:
-        return self.node_path or ""
-
-    def to_dict(self) -> dict:
-        d = super().to_dict()
-        d["node_path"] = self.node_path
-        return d
 
 
 # ---------------------------------------------------------------------------------- tables

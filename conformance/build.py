@@ -133,7 +133,7 @@ def encoder_options(o: dict, n_frames: int):
 def make_scene(name: str):
     """A scene model for a case's ``scene`` key; returns (scene, extra files {name: bytes},
     text substitutions applied to the BT text)."""
-    from fbaconf.animation import bt, models
+    from fbaconf.animation import models
     if name == "default_head":
         return models.default_head_scene(), {}
     if name.startswith("head:"):
@@ -416,40 +416,12 @@ def _intra_then_p(a: bytes, b: bytes) -> bytes:
     return end_stream(joined, pa[0].end_offset + pb[1].end_offset - pb[1].bit_offset)
 
 
-def _wide_plane(faps=range(3, 20)) -> bytes:
-    """One intra plane, FAPs at the top of the widest ranges: long zero runs (stuffing bits)."""
-    from fbaconf.bitstreams import tables
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.frames import SET, FapFrames
-    b = np.zeros((68, 4), dtype=np.int64)
-    b[:] = (1860, -1860, 1860, -1860)
-    f = FapFrames.empty(1, 30.0)
-    for fap in faps:
-        f.status[0, fap - 1] = SET
-        f.values[0, fap - 1] = 1860 * int(tables.quant_steps()[fap - 1])
-    return encode(f, EncoderOptions(bounds=b, plane_start_codes="none")).data
-
-
-def _stuffing_offsets(data: bytes, start: int, length: int) -> list[int]:
-    from fbaconf.bitstreams.arith import ZERO_RUN_LIMIT
-    from fbaconf.profiles.bitedit import get_bits
-    out, zeros, pos = [], 0, start
-    while pos < start + length:
-        b = get_bits(data, pos, 1)
-        pos += 1
-        zeros = zeros + 1 if b == 0 else 0
-        if zeros == ZERO_RUN_LIMIT:
-            out.append(pos)
-            pos += 1
-            zeros = 0
-    return out
-
-
 def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     """An invalid stream from a valid one (``data``), or built from scratch, for an error case."""
     from fbaconf.bitstreams.decoder import decode
     from fbaconf.bitstreams.errors import BitstreamError
     from fbaconf.profiles import bitedit
+    from fbaconf.profiles.teststreams import stuffing_positions, zero_heavy_plane
     planes = decode(data).planes
     hdr = planes[0].header_offset
     if mutation == "truncate:plane1-middle":
@@ -478,9 +450,9 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
         assert planes[0].time_code is not None
         return bitedit.set_bits(data, hdr + 18, 5, 24)
     if mutation == "stuffing":
-        w = _wide_plane()
+        w = zero_heavy_plane()
         _, start, length = decode(w).planes[0].blocks[-1]
-        return bitedit.flip_bit(w, _stuffing_offsets(w, start, length)[0])
+        return bitedit.flip_bit(w, stuffing_positions(w, start, length)[0])
     if mutation == "dct-vlc":
         p = planes[0]
         for name, start, length in p.blocks:

@@ -97,7 +97,6 @@ def _decode_any(data: bytes):
 def stream_points(data: bytes) -> set[str]:
     """Points hit by decoding one valid face object stream."""
     from fbaconf.bitstreams import tables
-    from fbaconf.bitstreams.frames import FREE, RETAINED, SET
     from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER, alphabet
     from fbaconf.bitstreams.tables import RANGE_DELTA
     from fbaconf.profiles.checker import ARITH_BLOCKS, lookahead_stuffing
@@ -436,7 +435,7 @@ def _fit_points(fit) -> set[str]:
 def claim_points(data: bytes | None, scene_path: Path | None, faces: int = 1, face_streams=None) -> tuple[set, dict]:
     """Smallest-claim and level-limit points from the checker; returns (hits, measures)."""
     from fbaconf.profiles.checker import analyse
-    from fbaconf.profiles.model import Claim, load_profiles
+    from fbaconf.profiles.model import load_profiles
     ps = load_profiles()
     hits: set[str] = set()
     streams = face_streams or [data]

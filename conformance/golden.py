@@ -24,7 +24,7 @@ import numpy as np
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 
-from .suite import Suite, SuiteError, golden_root, load_suites, sha256_file
+from .suite import Suite, SuiteError, digest_problems, golden_root, load_suites, sha256_file
 
 MANIFEST = "MANIFEST.json"
 FORMAT = "fbaconf.golden/1"
@@ -120,16 +120,11 @@ def verify(root: Path | None = None, *, regenerate_check: bool = True, log=print
         return [f"golden manifest {mp} is not valid JSON: {e}"]
     problems: list[str] = []
     files = manifest.get("files", {})
-    for rel, digest in files.items():
-        p = root / rel
-        if not p.is_file():
-            problems.append(f"missing golden file {rel}")
-        elif sha256_file(p) != digest:
-            problems.append(f"golden file {rel} does not match its sha256")
-    on_disk = {p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file() and p.name != MANIFEST
-               and not p.name.startswith(".")}
-    for extra in sorted(on_disk - set(files)):
-        problems.append(f"golden file {extra} is not in the manifest")
+    missing, modified, extra = digest_problems(
+        root, files, ignore=lambda rel: rel == MANIFEST or Path(rel).name.startswith("."))
+    problems += [f"missing golden file {rel}" for rel in missing]
+    problems += [f"golden file {rel} does not match its sha256" for rel in modified]
+    problems += [f"golden file {rel} is not in the manifest" for rel in extra]
     try:
         suites = load_suites()
     except SuiteError as e:

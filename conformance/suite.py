@@ -69,6 +69,21 @@ def sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
+def digest_problems(root: Path, listed: dict[str, str], *, ignore=lambda rel: False) -> tuple[list, list, list]:
+    """Check files under ``root`` against ``listed`` (relative posix path -> sha256):
+    returns (missing, modified, extra) relative paths; ``ignore(rel)`` skips files on disk."""
+    missing, modified = [], []
+    for rel, digest in listed.items():
+        p = root / rel
+        if not p.is_file():
+            missing.append(rel)
+        elif sha256_file(p) != digest:
+            modified.append(rel)
+    on_disk = {p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()}
+    extra = sorted(rel for rel in on_disk - set(listed) if not ignore(rel))
+    return missing, modified, extra
+
+
 @dataclass
 class Case:
     id: str

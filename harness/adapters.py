@@ -43,7 +43,6 @@ import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from fbaconf.bitstreams.errors import FbaconfInputError
 
@@ -297,6 +296,12 @@ def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
     adapter.manifest_path = path
     adapter.manifest_text = text
     return adapter
+
+
+def highest_claim(adapter: Adapter) -> str:
+    """The adapter's highest claim (profile rank, then level)."""
+    from fbaconf.profiles.model import Claim
+    return str(max(Claim.parse(c) for c in adapter.claims))
 
 
 def bundled() -> dict[str, Path]:

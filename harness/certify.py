@@ -16,7 +16,6 @@ byte of any file makes verification fail.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import shutil
 import sys
@@ -24,18 +23,11 @@ import time
 from pathlib import Path
 
 from fbaconf._atomic import atomic_write_text
+from fbaconf.conformance.suite import digest_problems, sha256_file
 
 CERTIFICATE = "certificate.json"
 SUMS = "SHA256SUMS"
 FORMAT = "fbaconf.certificate/1"
-
-
-def _sha(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for b in iter(lambda: f.read(1 << 20), b""):
-            h.update(b)
-    return h.hexdigest()
 
 
 def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: bool = True) -> int:
@@ -78,7 +70,7 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
         rel = p.relative_to(out).as_posix()
         if rel in (CERTIFICATE, SUMS):
             continue
-        sums.append(f"{_sha(p)}  {rel}")
+        sums.append(f"{sha256_file(p)}  {rel}")
     atomic_write_text(out / SUMS, "\n".join(sums) + "\n")
     cert = {"format": FORMAT, "decoder": adapter.name, "decoder_manifest_sha256": adapter.digest(),
             "claim": claim, "verdict": verdict, "exit_code": record.exit_code,
@@ -86,7 +78,7 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
             "speed": [{"operation": s.operation, "rate_fps": s.rate_fps, "required_fps": s.required_fps,
                        "passed": s.passed} for s in record.speed] if speed else "not measured",
             "suites": record.suites, "provisional": record.provisional, "issued": record.finished,
-            "sha256sums_sha256": _sha(out / SUMS)}
+            "sha256sums_sha256": sha256_file(out / SUMS)}
     atomic_write_text(out / CERTIFICATE, json.dumps(cert, indent=1) + "\n")
     print(summary)
     print(f"certificate: {out / CERTIFICATE}  report: {out / 'index.html'}  ({time.perf_counter() - t0:.1f} s)")
@@ -104,7 +96,7 @@ def _statement(record, verdict: str, speed: bool) -> str:
              f"**Verdict: {verdict}**", "",
              f"- decoder manifest sha256: `{record.decoder.get('manifest_sha256')}`",
              f"- cases run: {len(record.results)} (" + ", ".join(f"{k} {v}" for k, v in c.items() if v) + ")",
-             f"- suites: " + ", ".join(f"{s['name']} {s['version']}" for s in record.suites),
+             "- suites: " + ", ".join(f"{s['name']} {s['version']}" for s in record.suites),
              f"- issued: {record.finished}", ""]
     if speed:
         lines.append("## Speed")
@@ -134,7 +126,7 @@ def verify_package(pkg: Path) -> list[str]:
     sums_path = pkg / SUMS
     if not sums_path.is_file():
         return problems + [f"no {SUMS}"]
-    if _sha(sums_path) != cert.get("sha256sums_sha256"):
+    if sha256_file(sums_path) != cert.get("sha256sums_sha256"):
         problems.append(f"{SUMS} does not match the digest in {CERTIFICATE}")
     listed: dict[str, str] = {}
     for n, line in enumerate(sums_path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
@@ -143,15 +135,10 @@ def verify_package(pkg: Path) -> list[str]:
             problems.append(f"{SUMS} line {n} malformed")
             continue
         listed[rel] = digest
-    for rel, digest in listed.items():
-        p = pkg / rel
-        if not p.is_file():
-            problems.append(f"missing file {rel}")
-        elif _sha(p) != digest:
-            problems.append(f"{rel} was modified (sha256 mismatch)")
-    present = {p.relative_to(pkg).as_posix() for p in pkg.rglob("*") if p.is_file()} - {CERTIFICATE, SUMS}
-    for extra in sorted(present - set(listed)):
-        problems.append(f"file {extra} was added after signing")
+    missing, modified, extra = digest_problems(pkg, listed, ignore=lambda rel: rel in (CERTIFICATE, SUMS))
+    problems += [f"missing file {rel}" for rel in missing]
+    problems += [f"{rel} was modified (sha256 mismatch)" for rel in modified]
+    problems += [f"file {rel} was added after signing" for rel in extra]
     try:
         report = json.loads((pkg / "report.json").read_text(encoding="utf-8"))
         if report.get("claim") != cert.get("claim") or report.get("exit_code") != cert.get("exit_code"):

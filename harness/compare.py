@@ -46,6 +46,7 @@ import numpy as np
 from fbaconf.bitstreams.errors import FbaconfInputError
 from fbaconf.bitstreams.frames import (FREE, HIGH_LEVEL_FIELDS, STATUS_NAMES, VISEME_FIELDS, FapFrames)
 from fbaconf.bitstreams.tables import NUM_FAPS, fap_table
+from fbaconf.rendering.images import _colour, _oiio
 
 from .results import OUTCOME_ORDER, Outcome, StageResult
 
@@ -629,16 +630,6 @@ class _ImageUnreadable(Exception):
     pass
 
 
-def _oiio():
-    import OpenImageIO as oiio
-    return oiio
-
-
-def _colour():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        import colour
-    return colour
 
 
 def _read_encoded(path: Path, max_bytes: int, max_pixels: int) -> np.ndarray:

@@ -25,7 +25,7 @@ import traceback
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable
 
 from fbaconf.conformance.suite import Case, golden_root
 from fbaconf.profiles.model import Claim, load_profiles
@@ -188,7 +188,8 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
         outcome, msg = verdict
         return CaseResult(**base, outcome=outcome, message=msg, **proc)
     stages = compare_outputs(ctx, case, job)
-    outcome = _worst([s.outcome for s in stages]) if stages else Outcome.PASS
+    from .compare import worst
+    outcome = worst(s.outcome for s in stages)
     failing = [s for s in stages if s.outcome != Outcome.PASS]
     msg = "; ".join(f"{s.stage}: {s.message}" for s in failing) if failing else \
         f"{', '.join(s.stage for s in stages)} match"
@@ -224,15 +225,6 @@ def _judge_error_case(case: Case, verdict, proc, base) -> CaseResult:
         return CaseResult(**base, outcome=Outcome.PASS,
                           message=f"invalid stream rejected cleanly ({msg})", **proc)
     return CaseResult(**base, outcome=outcome, message=f"invalid stream: {msg}", **proc)
-
-
-def _worst(outcomes: Iterable[Outcome]) -> Outcome:
-    from .results import OUTCOME_ORDER
-    outs = list(outcomes)
-    for o in OUTCOME_ORDER:
-        if o in outs:
-            return o
-    return Outcome.PASS
 
 
 # ------------------------------------------------------------------------ comparison
@@ -314,7 +306,7 @@ def _vertices_stage(cmp, case: Case, gdir: Path, job: Job) -> StageResult:
     return r
 
 
-def _load_effective(path: Path) -> "np.ndarray":
+def _load_effective(path: Path):
     import numpy as np
     with np.load(path, allow_pickle=False) as z:
         if "extra_fap_values" not in z.files:
@@ -355,19 +347,13 @@ def _effective_faps_stage(cmp, golden: Path, got_path: Path, tol: dict) -> Stage
 
 
 def _part_lookup(golden_vertices: Path) -> Callable[[int], str] | None:
+    """Mesh part names of the golden FaceState, for naming a diverging vertex."""
+    from fbaconf.animation.stateio import load_npz
+    from .compare import part_namer
     try:
-        from fbaconf.animation.stateio import load_npz
-        st = load_npz(golden_vertices)
-    except Exception:
+        return part_namer(load_npz(golden_vertices).parts)
+    except (OSError, ValueError, KeyError):
         return None
-    spans = [(p.first_vertex, p.first_vertex + p.vertex_count, p.name) for p in st.parts]
-
-    def part_of(v: int) -> str:
-        for a, b, n in spans:
-            if a <= v < b:
-                return f"{n} (local vertex {v - a})"
-        return "?"
-    return part_of
 
 
 def _images_stage(cmp, ctx: RunContext, case: Case, gdir: Path, job: Job) -> StageResult:

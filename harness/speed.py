@@ -49,7 +49,7 @@ import numpy as np
 
 from fbaconf.bitstreams.errors import FbaconfInputError
 
-from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
+from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim
 from .results import Outcome, SpeedResult
 
 OPERATIONS = ("decode", "render")
@@ -389,12 +389,6 @@ def required_rate(claim: str, operation: str) -> tuple[float, str, str]:
     if lim is None or lim not in ps.limits_for(c):
         return 0.0, "none", "no minimum for this claim"
     return float(lim.value(c.level)), lim.provenance, lim.description
-
-
-def highest_claim(adapter: Adapter) -> str:
-    """The adapter's highest claim (profile rank, then level)."""
-    from fbaconf.profiles.model import Claim
-    return str(max(Claim.parse(c) for c in adapter.claims))
 
 
 def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] | None = None,

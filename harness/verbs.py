@@ -15,6 +15,8 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
+from .adapters import highest_claim
+
 
 def register(sub) -> None:
     r = sub.add_parser("run", help="run conformance suites against a decoder",
@@ -58,11 +60,6 @@ def _common(p) -> None:
 
 
 # ------------------------------------------------------------------ shared
-
-
-def highest_claim(adapter) -> str:
-    from fbaconf.profiles.model import Claim
-    return str(max(Claim.parse(c) for c in adapter.claims))
 
 
 def provisional_statements(claim: str | None) -> list[str]:

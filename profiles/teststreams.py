@@ -32,6 +32,35 @@ def smooth_frames(n: int, rate: float = 30.0, faps=range(3, 69), *, seed: int = 
     return f
 
 
+def zero_heavy_plane(faps=range(3, 20)) -> bytes:
+    """One intra plane whose FAPs sit at the top of wide explicit ranges (+-1860 steps): long
+    zero runs, so its arithmetic block contains stuffing bits."""
+    b = np.zeros((68, 4), dtype=np.int64)
+    b[:] = (1860, -1860, 1860, -1860)
+    f = FapFrames.empty(1, 30.0)
+    for fap in faps:
+        f.status[0, fap - 1] = SET
+        f.values[0, fap - 1] = 1860 * int(tables.quant_steps()[fap - 1])
+    return encode(f, EncoderOptions(bounds=b, plane_start_codes="none")).data
+
+
+def stuffing_positions(data: bytes, start: int, length: int) -> list[int]:
+    """Stream offsets of the stuffing bits inside an arithmetic block (after each zero run of
+    ZERO_RUN_LIMIT), found independently of the decoder by scanning the bits."""
+    from fbaconf.bitstreams.arith import ZERO_RUN_LIMIT
+    from .bitedit import get_bits
+    out, zeros, pos = [], 0, start
+    while pos < start + length:
+        b = get_bits(data, pos, 1)
+        pos += 1
+        zeros = zeros + 1 if b == 0 else 0
+        if zeros == ZERO_RUN_LIMIT:
+            out.append(pos)
+            pos += 1
+            zeros = 0
+    return out
+
+
 def make_stream(n: int = 30, rate: float = 30.0, faps=range(3, 69), *, seed: int = 0, amplitude: int = 6,
                 max_step: int = 2, **options) -> bytes:
     """Encoded bytes of :func:`smooth_frames` with EncoderOptions(**options)."""
@@ -39,4 +68,4 @@ def make_stream(n: int = 30, rate: float = 30.0, faps=range(3, 69), *, seed: int
     return encode(smooth_frames(n, rate, faps, seed=seed, amplitude=amplitude, max_step=max_step), opts).data
 
 
-__all__ = ["make_stream", "smooth_frames"]
+__all__ = ["make_stream", "smooth_frames", "stuffing_positions", "zero_heavy_plane"]

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from fbaconf.bitstreams import arith, tables
+from fbaconf.bitstreams import arith
 from fbaconf.bitstreams import decoder as decmod
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
@@ -23,7 +23,7 @@ from fbaconf.profiles.bitedit import (end_stream, flip_bit, get_bits, remove_bit
                                       truncate_bits)
 from fbaconf.profiles.checker import SceneSummary, analyse, check_stream, lookahead_stuffing
 from fbaconf.profiles.model import load_profiles, parse_profiles
-from fbaconf.profiles.teststreams import make_stream, smooth_frames
+from fbaconf.profiles.teststreams import make_stream, smooth_frames, stuffing_positions, zero_heavy_plane
 
 FEW = range(3, 40)  # no FAP 63 (its default range is not a multiple of 60: FAP-DECISION-003)
 
@@ -80,34 +80,8 @@ def case_first_predicted(**_):
     return flip_bit(data, _header(data)), {}
 
 
-def _zero_heavy_plane():
-    """One intra plane whose FAPs sit at the top of wide explicit ranges: long zero runs, so the
-    arithmetic block contains stuffing bits."""
-    b = np.zeros((68, 4), dtype=np.int64)
-    b[:, 0], b[:, 1], b[:, 2], b[:, 3] = 1860, -1860, 1860, -1860
-    f = FapFrames.empty(1, 30.0)
-    for fap in range(3, 20):
-        f.status[0, fap - 1] = SET
-        f.values[0, fap - 1] = 1860 * int(tables.quant_steps()[fap - 1])
-    return encode(f, EncoderOptions(bounds=b, plane_start_codes="none")).data
-
-
-def stuffing_positions(data: bytes, start: int, length: int) -> list[int]:
-    """Stream offsets of the stuffing bits inside an arithmetic block (zero run of 22)."""
-    out, zeros, pos = [], 0, start
-    while pos < start + length:
-        b = get_bits(data, pos, 1)
-        pos += 1
-        zeros = zeros + 1 if b == 0 else 0
-        if zeros == arith.ZERO_RUN_LIMIT:
-            out.append(pos)
-            pos += 1
-            zeros = 0
-    return out
-
-
 def case_stuffing(**_):
-    data = _zero_heavy_plane()
+    data = zero_heavy_plane()
     _, start, length = decode(data).planes[0].blocks[-1]
     pos = stuffing_positions(data, start, length)
     assert pos, "test stream must contain a stuffing bit"
