@@ -35,7 +35,7 @@ import numpy as np
 from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.bitstreams.tables import NUM_FAPS
 
-from . import bt
+from fbaconf.scenes import bt
 from .errors import SceneError
 from .facedef import MeshTable, TransformTable, axis_angle_matrices, transform_fields
 from .faceparams import FEATURE_POINTS, NUM_FEATURE_POINTS, UNSENT, Fapu, fapu_from_feature_points, fdp_point_rows

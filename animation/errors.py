@@ -1,13 +1,13 @@
 """Typed errors of the animation stage.
 
-Text-location problems in BT files raise :class:`fbaconf.bitstreams.errors.TextFormatError`
+Text-location problems in BT files raise :class:`fbaconf.errors.TextFormatError`
 (line:column + node path). Problems found in a well-formed scene model (a FaceDefTable that
 indexes a missing vertex, unsorted interval borders, a FIT graph with a cycle, degenerate
 geometry ...) raise :class:`SceneError`, which names the node path and the rule broken.
 """
 from __future__ import annotations
 
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 
 
 class SceneError(FbaconfInputError):

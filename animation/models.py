@@ -25,7 +25,7 @@ import numpy as np
 
 from fbaconf.bitstreams.tables import fap_table
 
-from . import bt
+from fbaconf.scenes import bt
 from .faceparams import FEATURE_POINTS, fapu_from_feature_points
 
 PREDICTABLE_L1_MAX_VERTICES = 5000  # profiles-and-levels.md, Predictable L1 (provisional)

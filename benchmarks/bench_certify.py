@@ -20,14 +20,14 @@ def main() -> None:
     ap.add_argument("--speed", action="store_true", help="include the speed measurement")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        argv = [sys.executable, "-m", "fbaconf.harness.cli", "certify", "--decoder", "reference-inprocess",
+        argv = [sys.executable, "-m", "fbaconf.cli", "certify", "--decoder", "reference-inprocess",
                 "--claim", "predictable@2", "-o", os.path.join(tmp, "cert")] + ([] if a.speed else ["--no-speed"])
         t0 = time.perf_counter()
         p = subprocess.run(argv, capture_output=True, text=True)
         dt = time.perf_counter() - t0
         print(p.stdout.strip().splitlines()[-1] if p.stdout.strip() else p.stderr[-500:])
         print(f"certify predictable@2 ({'with' if a.speed else 'without'} speed): {dt:.1f} s wall, exit {p.returncode}")
-    from fbaconf.conformance.mutants import run_mutant
+    from fbaconf.harness.mutants import run_mutant
     t0 = time.perf_counter()
     r = run_mutant(None, "predictable@2", stop_at_first=False)
     print(f"same {r['total']} cases, only the compared outputs produced: {time.perf_counter() - t0:.1f} s wall "

@@ -24,7 +24,7 @@ import numpy as np
 from fbaconf.bitstreams import arith
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.synth import synthetic_sequence
 

@@ -1,4 +1,4 @@
-"""Mutation score of the committed suites: every mutant decoder of conformance/mutants.py against
+"""Mutation score of the committed suites: every mutant decoder of harness/mutants.py against
 the required cases of predictable@2 (each mutant in its own process). Prints the table, the
 wall time, and last `mutation score: K/N` (same as `fbaconf suites mutants`).
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from fbaconf.conformance import mutants
+from fbaconf.harness import mutants
 
 
 def main() -> None:

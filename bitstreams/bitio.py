@@ -6,7 +6,7 @@ already aligned.
 """
 from __future__ import annotations
 
-from .errors import BitstreamError
+from fbaconf.errors import BitstreamError
 
 START_CODE_PREFIX = 0x000001
 FACE_OBJECT_START_CODE = 0x000001BA

@@ -10,7 +10,7 @@ import numpy as np
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 
-from .errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 from .frames import FapFrames
 
 
@@ -51,7 +51,7 @@ def _summary(frames: FapFrames, nbytes: int) -> dict:
 
 def cmd_encode(args) -> int:
     if Path(args.input).suffix.lower() == ".bt":  # a BT scene -> binary BIFS (issue 9)
-        from .bifs import cmd_encode_scene
+        from fbaconf.scenes.bifs import cmd_encode_scene
         return cmd_encode_scene(args)
     from .encoder import EncoderOptions, encode
     frames, warnings = load_faps(args.input)
@@ -81,7 +81,7 @@ def cmd_decode(args) -> int:
     from .decoder import decode
     p = Path(args.input)
     if p.suffix.lower() in (".bifs", ".bif"):  # a binary BIFS scene -> BT text and/or a bit trace (issue 9)
-        from .bifs import cmd_decode_scene
+        from fbaconf.scenes.bifs import cmd_decode_scene
         return cmd_decode_scene(args)
     if getattr(args, "trace", False):
         raise FbaconfInputError("--trace is for .bifs scenes", rule="usage", file=str(p))

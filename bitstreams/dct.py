@@ -33,7 +33,7 @@ from importlib import resources
 import numpy as np
 
 from . import tables
-from .errors import EncodeError
+from fbaconf.errors import EncodeError
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET
 from .syntax import (CODING_DCT, DEFAULT_FRAME_RATE, EXPRESSION_SELECT_MAX, INTENSITY_MAX, MASK_INTERPOLATE,
                      VISEME_SELECT_MAX)

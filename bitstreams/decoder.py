@@ -22,7 +22,7 @@ from .arith import (MSG_ARITH_STATE, MSG_STUFFING, MSG_TRUNCATED, ArithDecoder, 
                     make_model)
 from .bitio import (FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, START_CODE_NAMES,
                     VISUAL_OBJECT_SEQUENCE_END_CODE, BitReader)
-from .errors import BitstreamError
+from fbaconf.errors import BitstreamError
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .syntax import (CODING_DCT, DEFAULT_FRAME_RATE, EXPRESSION_SELECT_MAX, FAPS_MASK, LIST_ORDER,
                      MASK_ALL, MASK_INTERPOLATE, VISEME_SELECT_MAX, FrameRateCode, PlaneInfo, alphabet,

@@ -22,7 +22,7 @@ import numpy as np
 from . import tables
 from .arith import ArithEncoder, NativeSegment, UniformModel, append_bits, make_model, native_encoder
 from .bitio import FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE, BitWriter
-from .errors import EncodeError
+from fbaconf.errors import EncodeError
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .syntax import (EXPRESSION_SELECT_MAX, FAPS_MASK, INTENSITY_MAX, LIST_ORDER, MASK_ALL, MASK_INTERPOLATE,
                      MASK_NONE, MASK_RETAIN, VISEME_SELECT_MAX, FrameRateCode, _tdiv, frame_rate_code,

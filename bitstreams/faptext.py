@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import EncodeError, TextFormatError
+from fbaconf.errors import EncodeError, TextFormatError
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .tables import NUM_FAPS
 

@@ -161,7 +161,8 @@ CALIBRATION_SUBSETS = {
 
 
 def _calibration_scene(subset: str):
-    from fbaconf.animation import bt, models
+    from fbaconf.scenes import bt
+    from fbaconf.animation import models
     from fbaconf.animation.faceparams import FEATURE_POINTS, UNSENT
     texture = subset.endswith("+texture")
     subset = subset.removesuffix("+texture")
@@ -189,7 +190,7 @@ def _calibration_scene(subset: str):
 
 
 def _fit_scene(which: str):
-    from fbaconf.animation import bt
+    from fbaconf.scenes import bt
     if which == "chain":
         # FAP 4 (lower_t_midlip) drives FAP 51 (lower_t_midlip_o) as 2*x, and FAP 19 drives
         # FAP 21 through (x + x^2/200) / 1 — a link with a quadratic numerator.
@@ -272,7 +273,8 @@ def _grid_scene(kind: str):
     for the coverage model. ``intervals``: every interval layout and every FaceDefTransform field,
     viseme/expression tables; ``limit:<level>``: the Predictable level limits exactly (mesh vertices,
     FaceDefTables entries, intervals per FaceDefMesh, texture size) with DEF/USE to stay small."""
-    from fbaconf.animation import bt, models
+    from fbaconf.scenes import bt
+    from fbaconf.animation import models
     from fbaconf.animation.faceparams import fapu_from_feature_points
     from fbaconf.bitstreams.synth import _amplitude
     nx, ny = 20, 10
@@ -419,7 +421,7 @@ def _intra_then_p(a: bytes, b: bytes) -> bytes:
 def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     """An invalid stream from a valid one (``data``), or built from scratch, for an error case."""
     from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.errors import BitstreamError
+    from fbaconf.errors import BitstreamError
     from fbaconf.profiles import bitedit
     from fbaconf.profiles.teststreams import stuffing_positions, zero_heavy_plane
     planes = decode(data).planes
@@ -622,7 +624,7 @@ def _write(dirpath: Path, name: str, data: bytes | str, case: Case, key: str | N
 def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
     from fbaconf.bitstreams.encoder import encode
     from fbaconf.bitstreams.faptext import write_fap
-    from fbaconf.animation import bt
+    from fbaconf.scenes import bt
     gen = c.get("generator", "stream")
     case = Case(id=c["id"], suite=suite["name"], claim=c.get("claim", suite["claim"]), group=suite["group"],
                 kind={"stream": "decode", "multi": "multi", "error": "error", "file": "decode", "special": "decode"}[gen],
@@ -688,7 +690,7 @@ def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
                 case.sha256[name] = sha256_file(d / name)
         _write(d, f"{case.id}.bt", bt.write(scene), case, "scene")
         try:
-            from fbaconf.bitstreams import bifs
+            from fbaconf.scenes import bifs
         except ImportError:
             bifs = None
         if bifs is not None:
@@ -748,7 +750,7 @@ def build_external(src: Path, out: Path | None = None, log=print) -> Suite | Non
     .fap file. Run it with ``FBACONF_SUITES=<out>/suites FBACONF_GOLDEN=<out>/golden fbaconf run``."""
     import tempfile
     from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.errors import FbaconfInputError
+    from fbaconf.errors import FbaconfInputError
     from fbaconf.bitstreams.faptext import read_fap_file, write_fap
     src = Path(src)
     files = sorted(p for p in src.rglob("*.fap") if p.is_file()) if src.is_dir() else []

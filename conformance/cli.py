@@ -32,7 +32,7 @@ def register(sub) -> None:
     cv.set_defaults(func=cmd_coverage)
     mu = ss.add_parser("mutants", help="run every mutant decoder against the suites (mutation score)",
                        description="Run each mutant decoder (the reference with one realistic bug, "
-                                   "conformance/mutants.py) against the required cases of the claim, each "
+                                   "harness/mutants.py) against the required cases of the claim, each "
                                    "mutant in its own process, and print the case that kills it; the last "
                                    "line is `mutation score: K/N`.")
     mu.add_argument("names", nargs="*", help="only these mutants")
@@ -125,7 +125,7 @@ def cmd_coverage(args) -> int:
 
 
 def cmd_mutants(args) -> int:
-    from . import mutants
+    from fbaconf.harness import mutants
     if args.list:
         for m in mutants.MUTANTS.values():
             print(f"{m.name:32s} {m.where:40s} {m.description}")

@@ -85,7 +85,7 @@ def load_model(path: Path | None = None) -> list[Point]:
 def _decode_any(data: bytes):
     """(planes, frames, error) of the reference decoder, also for invalid streams."""
     from fbaconf.bitstreams import decoder as dec
-    from fbaconf.bitstreams.errors import BitstreamError
+    from fbaconf.errors import BitstreamError
     d = dec._Decoder(data, None)
     try:
         res = d.run()
@@ -287,7 +287,7 @@ def frames_points(frames) -> set[str]:
 
 def scene_points(scene_path: Path | None, frames) -> set[str]:
     """Points of a case's scene, with the case's decoded frames (for value-dependent points)."""
-    from fbaconf.animation import bt
+    from fbaconf.scenes import bt
     from fbaconf.animation.engine import compile_scene, effective_faps
     from fbaconf.animation.faceparams import NUM_FEATURE_POINTS, fdp_point_rows
     from fbaconf.animation.interp import lr_fill

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 
 SUITE_FORMAT = "fbaconf.suite/1"
 KINDS = ("decode", "error", "multi")

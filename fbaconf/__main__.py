@@ -1,5 +1,5 @@
 import sys
 
-from fbaconf.harness.cli import main
+from fbaconf.cli import main
 
 sys.exit(main())

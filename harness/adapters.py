@@ -44,7 +44,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 
 from .sandbox import Limits
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from fbaconf._atomic import atomic_write_text
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 
 from .results import CaseResult, Outcome
 

@@ -19,7 +19,7 @@ Default tolerances live in one data file, ``harness/data/tolerances.toml``, with
 reasoning for each number; suite cases override them per comparison with a dict.
 
 Decoder outputs are untrusted: :func:`load_output_faps` and :func:`load_output_vertices`
-raise :class:`OutputError` (an :class:`~fbaconf.bitstreams.errors.FbaconfInputError`)
+raise :class:`OutputError` (an :class:`~fbaconf.errors.FbaconfInputError`)
 naming the file for any unreadable, oversized, mis-shaped, mistyped or non-finite input,
 and never another exception. ``.npz`` members are read without pickles, and every array's
 header is checked (dtype, shape, size against the byte cap) before any data is read, so a
@@ -43,7 +43,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 from fbaconf.bitstreams.frames import (FREE, HIGH_LEVEL_FIELDS, STATUS_NAMES, VISEME_FIELDS, FapFrames)
 from fbaconf.bitstreams.tables import NUM_FAPS, fap_table
 from fbaconf.rendering.images import _colour, _oiio

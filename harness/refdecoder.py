@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 
 from .adapters import Job, PythonAdapter
 
@@ -41,7 +41,7 @@ def load_scene(path: Path | None):
         return None
     path = Path(path)
     if path.suffix.lower() == ".bifs":
-        from fbaconf.bitstreams import bifs  # binary BIFS scene (issue 9)
+        from fbaconf.scenes import bifs  # binary BIFS scene (issue 9)
         return bifs.read(path)
     from fbaconf.animation.engine import load_scene as load_bt
     return load_bt(path)

@@ -47,7 +47,7 @@ from typing import Callable
 
 import numpy as np
 
-from fbaconf.bitstreams.errors import FbaconfInputError
+from fbaconf.errors import FbaconfInputError
 
 from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim
 from .results import Outcome, SpeedResult
@@ -139,7 +139,7 @@ class _Content:
 
     def scene(self) -> Path:
         if self._scene is None:
-            from fbaconf.animation import bt
+            from fbaconf.scenes import bt
             from fbaconf.animation.models import default_head_scene
             p = self.root / "default-head.bt"
             p.write_text(bt.write(default_head_scene()), encoding="utf-8")

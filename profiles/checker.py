@@ -24,7 +24,7 @@ import numpy as np
 
 from fbaconf.bitstreams import tables
 from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE
-from fbaconf.bitstreams.errors import BitstreamError
+from fbaconf.errors import BitstreamError
 from fbaconf.bitstreams.syntax import (CODING_DCT, INTENSITY_MAX, LIST_ORDER, MASK_INTERPOLATE, _tdiv, alphabet,
                                        intensity_bound, intensity_step, quant_div)
 from fbaconf.bitstreams.tables import NUM_FAPS, RANGE_DELTA
@@ -128,7 +128,7 @@ class SceneStructureError(ValueError):
 
 
 def summarize_scene(scene: Any, base_dir: Path | None = None) -> SceneSummary:
-    """SceneSummary of a parsed ``fbaconf.animation.bt.Scene`` (duck-typed). Texture sizes are
+    """SceneSummary of a parsed ``fbaconf.scenes.bt.Scene`` (duck-typed). Texture sizes are
     read from the image files of ImageTexture nodes under an FDP (URLs relative to
     ``base_dir``, default: the scene file's folder)."""
     s = SceneSummary()
@@ -210,14 +210,14 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
     if isinstance(scene, (str, Path)):
         try:
             import importlib
-            bt = importlib.import_module("fbaconf.animation.bt")  # optional: the animation stage's reader
+            bt = importlib.import_module("fbaconf.scenes.bt")  # optional: the animation stage's reader
         except Exception as e:  # ImportError, or a reader that fails to import
             out.append(diag(D.SCENE_UNAVAILABLE, f"scene {scene}: no scene reader in this build "
                             f"({type(e).__name__}: {e}); the scene was not checked"))
             return None
         try:
             if str(scene).lower().endswith((".bifs", ".bif")):  # binary BIFS (issue 9)
-                from fbaconf.bitstreams import bifs
+                from fbaconf.scenes import bifs
                 parsed = bifs.read(scene)
             else:
                 parsed = bt.read(scene)
@@ -260,7 +260,7 @@ def check_stream(data: bytes, *, scene=None, claim: Claim | str | None = None, f
     """All diagnostics for a face object stream, in stream order. Never raises on any stream or
     scene content; only a malformed ``claim`` string raises ValueError (a usage error).
 
-    ``scene``: None, a BT file path (read with ``fbaconf.animation.bt`` when available), a
+    ``scene``: None, a BT file path (read with ``fbaconf.scenes.bt`` when available), a
     parsed ``bt.Scene``, or a :class:`SceneSummary`."""
     return analyse(data, scene=scene, claim=claim, file=file, profiles=profiles).diagnostics
 

@@ -185,7 +185,7 @@ CLAIM_NONE = _define(
 
 # ---------------------------------------------------------------------------- scene / checker
 SCENE_UNAVAILABLE = _define(
-    "FAP-SCENE-001", "warning", "fbaconf check --scene (scene reader fbaconf.animation.bt)",
+    "FAP-SCENE-001", "warning", "fbaconf check --scene (scene reader fbaconf.scenes.bt)",
     "A scene file was given but this build has no scene reader: the scene was not checked.")
 SCENE_INVALID = _define(
     "FAP-SCENE-002", "error", "14496-1 BIFS Face node family as read in the spec notes §6 (BT text)",

@@ -1,12 +1,12 @@
 """Typed errors of the rendering stage.
 
-All derive from :class:`fbaconf.bitstreams.errors.FbaconfInputError` (so the CLI reports
+All derive from :class:`fbaconf.errors.FbaconfInputError` (so the CLI reports
 them as one line and exits 2) and from :class:`ValueError` (so plain Python callers can
 catch them as bad values).
 """
 from __future__ import annotations
 
-from fbaconf.bitstreams.errors import FbaconfInputError, join_location
+from fbaconf.errors import FbaconfInputError, join_location
 
 
 class RenderInputError(FbaconfInputError, ValueError):

@@ -47,7 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fbaconf.bitstreams.errors import TextFormatError
+from fbaconf.errors import TextFormatError
 
 from .errors import ScenarioError
 from .raster import Camera

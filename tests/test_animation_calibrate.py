@@ -4,7 +4,9 @@ import sys
 import numpy as np
 import pytest
 
-from fbaconf.animation import bt, engine, models
+from fbaconf.scenes import bt
+
+from fbaconf.animation import engine, models
 from fbaconf.animation.calibrate import calibrate
 from fbaconf.animation.errors import SceneError
 from fbaconf.animation.faceparams import fapu_from_feature_points, fp_index

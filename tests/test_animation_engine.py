@@ -1,7 +1,9 @@
 import numpy as np
 import pytest
 
-from fbaconf.animation import bt, engine, models
+from fbaconf.scenes import bt
+
+from fbaconf.animation import engine, models
 from fbaconf.animation.errors import SceneError
 from fbaconf.animation.faceparams import FEATURE_POINTS, fapu_from_feature_points, fp_index
 from fbaconf.bitstreams.frames import DERIVED, FREE, SET, FapFrames
@@ -237,7 +239,7 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
     ["0", "-1", "1e30", "99", "-0", "3.4e38", "2147483647", "0.0", "7", "-1000", "1000", "5", "[", "}", "USE M",
      "USE T", "TRUE"])), min_size=1, max_size=2))
 def test_mutated_scenes_give_typed_errors_only(edits):
-    from fbaconf.bitstreams.errors import FbaconfInputError
+    from fbaconf.errors import FbaconfInputError
     words = FUZZ_BASE.split(" ")
     for pos, tok in edits:
         words[pos % len(words)] = tok

@@ -151,7 +151,8 @@ def test_fit_errors():
 
 
 def test_fit_from_scene_in_engine():
-    from fbaconf.animation import bt, engine
+    from fbaconf.scenes import bt
+    from fbaconf.animation import engine
     from fbaconf.bitstreams.frames import FapFrames
     s = bt.parse("""Face { fit FIT { FAPs [4 -1 51] Graph [0 1] numeratorTerms [1] denominatorTerms [0]
                         numeratorCoefs [2.0] numeratorExp [1] } }""")

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from fbaconf.bitstreams.arith import (LOOKAHEAD, MAX_FREQUENCY, ZERO_RUN_LIMIT, ArithDecoder, ArithEncoder, FastModel,
                                       Model, UniformModel, make_model)
 from fbaconf.bitstreams.bitio import BitReader, BitWriter
-from fbaconf.bitstreams.errors import BitstreamError
+from fbaconf.errors import BitstreamError
 
 
 def code_block(prefix_bits: int, blocks, trailer: tuple[int, int]):

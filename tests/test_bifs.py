@@ -10,12 +10,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fbaconf.animation import bt, models
-from fbaconf.bitstreams import bifs
-from fbaconf.bitstreams.bifs import BifsEncodeError, BifsError, _Writer
-from fbaconf.bitstreams.errors import BitstreamError, FbaconfInputError
+from fbaconf.scenes import bt
+
+from fbaconf.animation import models
+from fbaconf.scenes import bifs
+from fbaconf.scenes.bifs import BifsEncodeError, BifsError, _Writer
+from fbaconf.errors import BitstreamError, FbaconfInputError
 from fbaconf.bitstreams.tables import fap_table
-from fbaconf.harness.cli import main
+from fbaconf.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 PROVENANCE = {"spec-notes", "iso-via-implementation", "provisional"}

@@ -138,7 +138,7 @@ def test_bitrate_window_is_sliding():
 
 
 def test_real_scene_file_through_the_bt_reader(tmp_path):
-    bt = pytest.importorskip("fbaconf.animation.bt")
+    bt = pytest.importorskip("fbaconf.scenes.bt")
     # 84 points in label order, 3 of them sent (the rest 3.4e38: not sent)
     pts = " ".join("0 0 0" if k < 3 else "3.4e38 3.4e38 3.4e38" for k in range(84))
     text = ("Face {\n  fdp FDP {\n    featurePointsCoord Coordinate { point [ " + pts + " ] }\n  }\n"
@@ -157,7 +157,7 @@ def test_real_scene_file_through_the_bt_reader(tmp_path):
 
 
 def test_feature_point_list_must_hold_84_points(tmp_path):
-    pytest.importorskip("fbaconf.animation.bt")
+    pytest.importorskip("fbaconf.scenes.bt")
     p = tmp_path / "few.bt"
     p.write_text("Face { fdp FDP { featurePointsCoord Coordinate { point [ 0 0 0, 1 1 1 ] } } }\n")
     ds = check_stream(stream(1, "clean"), scene=str(p), claim="calibration@1")
@@ -166,7 +166,7 @@ def test_feature_point_list_must_hold_84_points(tmp_path):
 
 
 def test_malformed_scene_file(tmp_path):
-    pytest.importorskip("fbaconf.animation.bt")
+    pytest.importorskip("fbaconf.scenes.bt")
     p = tmp_path / "bad.bt"
     p.write_text("Face { fdp FDP { featurePointsCoord Coordinate { point [ 0 0 ] } }\n")
     ds = check_stream(stream(1, "clean"), scene=str(p))
@@ -186,7 +186,7 @@ def _png(path, width: int, height: int) -> None:
 
 @pytest.mark.parametrize("width,codes", [(512, set()), (600, {D.LEVEL_TEXTURE})])
 def test_texture_size_from_the_scene_image(tmp_path, width, codes):
-    pytest.importorskip("fbaconf.animation.bt")
+    pytest.importorskip("fbaconf.scenes.bt")
     _png(tmp_path / "skin.png", width, 4)
     text = ("Face {\n  fdp FDP {\n    textureCoord TextureCoordinate { point [ 0 0, 1 1 ] }\n"
             "    faceSceneGraph [ Shape { appearance Appearance { texture ImageTexture { url \"skin.png\" } } } ]\n"

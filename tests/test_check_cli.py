@@ -9,7 +9,7 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from fbaconf.harness.cli import main
+from fbaconf.cli import main
 from fbaconf.profiles import catalogue
 from fbaconf.profiles import diagnostics as D
 from fbaconf.profiles.bitedit import flip_bit

@@ -15,7 +15,7 @@ from fbaconf.bitstreams import arith
 from fbaconf.bitstreams import decoder as decmod
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.errors import BitstreamError
+from fbaconf.errors import BitstreamError
 from fbaconf.bitstreams.frames import FREE, SET, FapFrames
 from fbaconf.profiles import checker
 from fbaconf.profiles import diagnostics as D
@@ -335,14 +335,14 @@ def case_claim_none(**_):
 
 
 def case_scene_unavailable(monkeypatch, tmp_path, **_):
-    monkeypatch.setitem(sys.modules, "fbaconf.animation.bt", None)  # import fails
+    monkeypatch.setitem(sys.modules, "fbaconf.scenes.bt", None)  # import fails
     p = tmp_path / "s.bt"
     p.write_text("Face {}\n")
     return base(), {"scene": str(p)}
 
 
 def case_scene_invalid(tmp_path, **_):
-    pytest.importorskip("fbaconf.animation.bt")
+    pytest.importorskip("fbaconf.scenes.bt")
     return base(), {"scene": str(tmp_path / "missing.bt")}
 
 
@@ -422,7 +422,7 @@ def test_case_triggers_exactly_its_code(code, monkeypatch, tmp_path):
 
 
 def test_input_unreadable_via_cli(tmp_path, capsys):
-    from fbaconf.harness.cli import main
+    from fbaconf.cli import main
     import json
     rc = main(["check", str(tmp_path / "missing.fba"), "--json"])
     doc = json.loads(capsys.readouterr().out)

@@ -6,7 +6,7 @@ import numpy as np
 from fbaconf.bitstreams.faptext import read_fap_file, write_fap
 from fbaconf.bitstreams.frames import FapFrames, first_difference
 from fbaconf.bitstreams.synth import synthetic_sequence
-from fbaconf.harness.cli import main
+from fbaconf.cli import main
 
 
 def test_encode_decode_round_trip_through_cli(tmp_path, capsys):

@@ -10,7 +10,7 @@ from fbaconf.bitstreams import tables
 from fbaconf.bitstreams.bitio import BitReader, BitWriter
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.errors import BitstreamError, EncodeError
+from fbaconf.errors import BitstreamError, EncodeError
 from fbaconf.bitstreams.frames import FREE, RETAINED, SET, FapFrames, first_difference
 from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.bitstreams.syntax import frame_rate_code, quantise

@@ -50,7 +50,7 @@ def test_committed_suites_cover_every_point():
 
 
 def test_coverage_verb(capsys):
-    from fbaconf.harness.cli import main
+    from fbaconf.cli import main
     assert main(["suites", "coverage"]) == 0
     out = capsys.readouterr().out
     assert out.rstrip().splitlines()[-1].startswith("coverage: ")

@@ -14,7 +14,7 @@ from fbaconf.bitstreams import dct, tables
 from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, BitReader, BitWriter
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.errors import BitstreamError, EncodeError
+from fbaconf.errors import BitstreamError, EncodeError
 from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames, first_difference
 
 T = dct.dct_tables()

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fbaconf.bitstreams.errors import EncodeError, TextFormatError
+from fbaconf.errors import EncodeError, TextFormatError
 from fbaconf.bitstreams.faptext import (RULES, FapFileHeader, TextWarning, read_fap, read_fap_file,
                                         read_fap_text, write_fap, write_fap_file)
 from fbaconf.bitstreams.frames import FREE, RETAINED, SET, FapFrames, first_difference

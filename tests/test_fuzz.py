@@ -21,10 +21,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fbaconf.animation import bt
+from fbaconf.scenes import bt
 from fbaconf.bitstreams.decoder import decode
-from fbaconf.bitstreams.errors import BitstreamError, FbaconfInputError
-from fbaconf.harness import fuzz as F
+from fbaconf.errors import BitstreamError, FbaconfInputError
+from fbaconf.fuzz import engine as F
 from fbaconf.harness.adapters import load_manifest, resolve
 from fbaconf.profiles import bitedit
 
@@ -151,7 +151,7 @@ def test_self_fuzz_no_findings_and_entry(tmp_path, seeds):
     assert st_.execs == 400 and not fz.findings, [f.verdict.message for f in fz.findings.values()]
     doc = F.write_summary(tmp_path, fz)
     assert doc["syntax_coverage"]["covered"] > 30
-    from fbaconf.harness.fuzz_entry import fuzz_one_input
+    from fbaconf.fuzz.atheris_entry import fuzz_one_input
     rng = random.Random(1)
     for sel in range(8):
         fuzz_one_input(bytes([sel]) + bytes(rng.randrange(256) for _ in range(40)))
@@ -257,7 +257,7 @@ def test_promoted_finding_fails_buggy_decoder_passes_reference(skipchain_run, tm
 
 
 def test_cli(tmp_path):
-    from fbaconf.harness.cli import main
+    from fbaconf.cli import main
     assert main(["fuzz", "--self", "--seconds", "30", "--max-execs", "60", "-o", str(tmp_path / "s"),
                  "--no-progress"]) == 0
     doc = json.loads((tmp_path / "s" / "fuzz.json").read_text())

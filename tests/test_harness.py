@@ -240,7 +240,7 @@ def test_baseline_turns_known_failures_into_non_failures(tmp_path):
 
 
 def fbaconf(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "fbaconf.harness.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "fbaconf.cli", *args], capture_output=True, text=True,
                           cwd=cwd, timeout=600)
 
 

@@ -9,7 +9,7 @@ import textwrap
 
 import pytest
 
-from fbaconf.conformance import mutants
+from fbaconf.harness import mutants
 
 
 def test_at_least_30_mutants_each_naming_its_place():
@@ -40,7 +40,7 @@ def test_reference_passes_and_mutants_are_killed():
     import json
     import subprocess
     import sys
-    p = subprocess.run([sys.executable, "-m", "fbaconf.conformance.mutants", "run", "reference", "--all-cases"],
+    p = subprocess.run([sys.executable, "-m", "fbaconf.harness.mutants", "run", "reference", "--all-cases"],
                        capture_output=True, text=True, timeout=600)
     out = json.loads(p.stdout.strip().splitlines()[-1])
     assert not out["killed"] and out["ran"] == out["total"] > 40, out

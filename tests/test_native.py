@@ -21,7 +21,7 @@ from fbaconf.bitstreams.arith import PURE_PYTHON_ENV, ArithDecoder, ArithEncoder
 from fbaconf.bitstreams.bitio import VISUAL_OBJECT_SEQUENCE_END_CODE, BitReader, BitWriter
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.errors import BitstreamError
+from fbaconf.errors import BitstreamError
 from fbaconf.bitstreams.frames import FREE, SET, FapFrames
 from fbaconf.bitstreams.synth import synthetic_sequence
 

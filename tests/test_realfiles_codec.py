@@ -7,7 +7,7 @@ import pytest
 from fbaconf.bitstreams import tables
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.errors import EncodeError
+from fbaconf.errors import EncodeError
 from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.frames import SET, first_difference
 

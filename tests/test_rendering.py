@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 import OpenImageIO as oiio
 
 from fbaconf.animation.facestate import FaceState, MeshPart
-from fbaconf.bitstreams.errors import FbaconfInputError, TextFormatError
+from fbaconf.errors import FbaconfInputError, TextFormatError
 from fbaconf.rendering import raster
 from fbaconf.rendering.errors import GeometryError, ScenarioError, TextureError
 from fbaconf.rendering.images import encode_srgb8, read_image, srgb_to_linear, write_exr, write_png
@@ -557,7 +557,7 @@ def _fake_engine(monkeypatch, state):
 
 def test_cli_render_verb(tmp_path, monkeypatch, capsys):
     from fbaconf.bitstreams.frames import FapFrames
-    from fbaconf.harness.cli import main
+    from fbaconf.cli import main
     v, t = uv_sphere()
     state = state_of(("ball", v, t, {"color": (0.8, 0.7, 0.6)}),
                      frames=np.stack([v, v * 1.1]))
@@ -583,7 +583,7 @@ def test_cli_render_verb(tmp_path, monkeypatch, capsys):
 
 def test_cli_reports_missing_animation_stage(tmp_path, monkeypatch, capsys):
     from fbaconf.bitstreams.frames import FapFrames
-    from fbaconf.harness.cli import main
+    from fbaconf.cli import main
     monkeypatch.setitem(sys.modules, "fbaconf.animation.engine", None)  # import -> ImportError
     faps = tmp_path / "f.npz"
     FapFrames.empty(1).save_npz(faps)
@@ -608,7 +608,7 @@ def test_cli_end_to_end_with_the_animation_stage(tmp_path):
     engine = pytest.importorskip("fbaconf.animation.engine")
     faptext = pytest.importorskip("fbaconf.bitstreams.faptext")
     from fbaconf.bitstreams.frames import FapFrames
-    from fbaconf.harness.cli import main
+    from fbaconf.cli import main
     assert hasattr(engine, "animate")
     frames = FapFrames.empty(2)
     frames.save_npz(tmp_path / "f.npz")

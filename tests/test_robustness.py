@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.errors import BitstreamError
+from fbaconf.errors import BitstreamError
 from fbaconf.bitstreams.synth import synthetic_sequence
 
 N_INPUTS = 10_500

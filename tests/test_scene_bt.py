@@ -3,8 +3,8 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from fbaconf.animation import bt
-from fbaconf.bitstreams.errors import TextFormatError
+from fbaconf.scenes import bt
+from fbaconf.errors import TextFormatError
 
 NODE_TYPES = sorted(bt.node_specs())
 finite = st.floats(allow_nan=False, allow_infinity=False)

@@ -12,7 +12,7 @@ import pytest
 
 from fbaconf.harness import speed
 from fbaconf.harness.adapters import PythonAdapter, load_manifest
-from fbaconf.harness.cli import main
+from fbaconf.cli import main
 
 # A decoder whose cost is known: sleeps STARTUP, then PER_FRAME x frames (the frame count comes
 # from the {frames} placeholder, so counting frames costs nothing), then writes its output.

@@ -9,13 +9,13 @@ for the mutant) so that a change of the reference's Python code takes effect.
 A mutant is applied to the WHOLE process and never undone, so it always runs in a process of
 its own:
 
-- ``python -m fbaconf.conformance.mutants run NAME [--claim C] [--all-cases]`` applies the
+- ``python -m fbaconf.harness.mutants run NAME [--claim C] [--all-cases]`` applies the
   mutant and runs the required cases of the claim through the harness (in-process reference
   adapter, one case at a time, cheapest first), stopping at the first case that fails
   ("killed"); prints one JSON line.
-- ``python -m fbaconf.conformance.mutants decode NAME ...`` is the reference decoder program
+- ``python -m fbaconf.harness.mutants decode NAME ...`` is the reference decoder program
   (``harness.refdecoder``) with the mutant applied: what :class:`MutantAdapter` (a manifest
-  ``python = "fbaconf.conformance.mutants:MutantAdapter"`` with ``[options] mutant = "NAME"``,
+  ``python = "fbaconf.harness.mutants:MutantAdapter"`` with ``[options] mutant = "NAME"``,
   bundled as ``harness/adapters/mutant.toml``) runs per case, so ``fbaconf run`` can run any
   mutant like any other decoder, in parallel, with no patch leaking into the harness.
 
@@ -317,7 +317,7 @@ def run_all(names: list[str] | None = None, *, claim: str = "predictable@2", job
     jobs = jobs or os.cpu_count() or 1
 
     def one(n: str) -> dict:
-        argv = [sys.executable, "-m", "fbaconf.conformance.mutants", "run", n, "--claim", claim]
+        argv = [sys.executable, "-m", "fbaconf.harness.mutants", "run", n, "--claim", claim]
         if not stop_at_first:
             argv.append("--all-cases")
         try:
@@ -353,7 +353,7 @@ def format_results(results: list[dict]) -> str:
 
 class MutantAdapter:
     """In-process adapter class for manifests: each case runs the mutant decoder program in a
-    subprocess (``python -m fbaconf.conformance.mutants decode NAME ...``), so the mutant's
+    subprocess (``python -m fbaconf.harness.mutants decode NAME ...``), so the mutant's
     patches never touch the harness process (thread-safe with ``-j``)."""
 
     def __new__(cls, mutant: str = "", **kw):
@@ -361,7 +361,7 @@ class MutantAdapter:
 
         class _MutantAdapter(PythonAdapter):
             supports_multi = True
-            description = "fbaconf reference decoder with one injected bug (conformance/mutants.py)"
+            description = "fbaconf reference decoder with one injected bug (harness/mutants.py)"
 
             def __init__(self, mutant: str) -> None:
                 super().__init__()
@@ -372,7 +372,7 @@ class MutantAdapter:
                 self.mutant = mutant
 
             def run(self, job) -> None:
-                base = [sys.executable, "-m", "fbaconf.conformance.mutants", "decode", self.mutant]
+                base = [sys.executable, "-m", "fbaconf.harness.mutants", "decode", self.mutant]
                 if job.faces:
                     argv = base + ["decode-multi", "--out-dir", str(job.path("faps_out_dir")),
                                    "--format", self.faps_format] + list(job.faces)
@@ -398,7 +398,7 @@ class MutantAdapter:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fbaconf.conformance.mutants",
+    ap = argparse.ArgumentParser(prog="python -m fbaconf.harness.mutants",
                                  description="Run one mutant decoder (see the module doc).")
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run the suites against one mutant; prints one JSON line")

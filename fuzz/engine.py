@@ -7,7 +7,7 @@ Pieces, in the order an input goes through them:
   every plane header giving each field's bit offset and width (``is_intra``, ``frame_rate``,
   ``number_of_frames_to_skip``, mask types and bits, min/max list values, markers...), the
   plane boundaries and the start codes. BT scenes: the node field tables of
-  ``animation/data/bt_nodes.toml``.
+  ``scenes/data/bt_nodes.toml``.
 * **Generators**: valid streams from random content and encoder options (:func:`gen_valid`),
   random BT scenes from the node tables (:func:`gen_scene`). The same code backs the
   hypothesis strategies :func:`valid_streams`, :func:`near_valid_streams` and :func:`bt_scenes`
@@ -63,7 +63,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from fbaconf.bitstreams.errors import BitstreamError, FbaconfInputError
+from fbaconf.errors import BitstreamError, FbaconfInputError
 
 # ============================================================================ bit helpers
 
@@ -771,7 +771,7 @@ def _bt_value(ch: Chooser, ftype: str, allowed, depth: int, defs: list[str]) -> 
 
 
 def _bt_node(ch: Chooser, ntype: str, depth: int, defs: list[str]) -> str:
-    from fbaconf.animation.bt import node_specs
+    from fbaconf.scenes.bt import node_specs
     specs = node_specs().get(ntype, {})
     names = list(specs)
     if ntype == "FAP" and names:
@@ -788,7 +788,7 @@ def _bt_node(ch: Chooser, ntype: str, depth: int, defs: list[str]) -> str:
 
 def gen_scene(ch: Chooser) -> Entry:
     """A BT scene from the node tables: a Face (FDP, FIT, FAP, FaceDefTables...) and/or geometry."""
-    from fbaconf.animation.bt import node_specs
+    from fbaconf.scenes.bt import node_specs
     top = ch.choice(("Face", "Face", "Face", "Group", "Transform", "Shape"))
     if top not in node_specs():
         top = "Face"
@@ -876,7 +876,7 @@ def scene_seeds(root: Path | None = None, max_bytes: int = 8000) -> list[Entry]:
             if p.stat().st_size <= max_bytes:
                 out.append(Entry(p.read_bytes(), kind="scene", origin=f"seed:{p.parent.name}/{p.name}"))
     try:
-        from fbaconf.animation import bt
+        from fbaconf.scenes import bt
         from fbaconf.conformance.build import make_scene
         for name in ("fit:chain", "calibration:all"):
             out.append(Entry(bt.write(make_scene(name)).encode(), kind="scene", origin=f"seed:make_scene({name})"))
@@ -977,8 +977,8 @@ class DecoderTarget:
     def __init__(self, adapter, work_root: Path, *, kind: str = "stream", timeout_s: float | None = None,
                  expected_exit: Iterable[int] = (0, 1, 2, 69), oracle: bool = True,
                  scene_stream: bytes | None = None) -> None:
-        from .adapters import CommandAdapter
-        from .sandbox import Limits
+        from fbaconf.harness.adapters import CommandAdapter
+        from fbaconf.harness.sandbox import Limits
         self.adapter = adapter
         self.kind = kind
         self.work_root = Path(work_root)
@@ -1005,7 +1005,7 @@ class DecoderTarget:
 
     # ---------------------------------------------------------------- job
     def _job(self, data: bytes, workdir: Path):
-        from .adapters import Job
+        from fbaconf.harness.adapters import Job
         ind, outd = workdir / "in", workdir / "out"
         ind.mkdir(parents=True)
         outd.mkdir()
@@ -1044,7 +1044,7 @@ class DecoderTarget:
             shutil.rmtree(workdir, ignore_errors=True)
 
     def _run_command(self, inp: Entry, job) -> Verdict | None:
-        from . import sandbox
+        from fbaconf.harness import sandbox
         argv = self.argv_for(job)
         res = sandbox.run(argv, job.workdir, self.limits, env=self.adapter.env)
         if "harness-start-failed" in res.notes or (res.returncode == 127 and
@@ -1075,7 +1075,7 @@ class DecoderTarget:
         return self._oracle(inp, job, rc, detail)
 
     def _run_python(self, inp: Entry, job) -> Verdict | None:
-        from .adapters import NotSupportedError
+        from fbaconf.harness.adapters import NotSupportedError
         t0 = time.perf_counter()
         try:
             self.adapter.run(job)
@@ -1104,7 +1104,7 @@ class DecoderTarget:
             return None
         if rc != 0:
             return Verdict("wrong-output", "rejected-valid", f"rejected a valid stream (exit code {rc})", detail)
-        from . import compare as cmp
+        from fbaconf.harness import compare as cmp
         path = job.path("faps_out")
         if path is None or not path.is_file():
             return Verdict("wrong-output", "no-output", "exit code 0 but no FAP output for a valid stream", detail)
@@ -1145,12 +1145,12 @@ class SelfTarget:
     name = "self"
 
     def __init__(self, *, checker_every: int = 4, slow_s: float = 5.0, scene_stream: bytes | None = None) -> None:
-        from fbaconf.animation import bt
+        from fbaconf.scenes import bt
         from fbaconf.bitstreams import decoder
         from fbaconf.profiles import checker
         self.bt, self.decoder, self.checker = bt, decoder, checker
         try:
-            from fbaconf.bitstreams import bifs
+            from fbaconf.scenes import bifs
         except ImportError:  # pragma: no cover - optional stage
             bifs = None
         self.bifs = bifs
@@ -1200,7 +1200,7 @@ class SelfTarget:
                 return Verdict("bad-output", "decoder:frames", "decoded FapFrames malformed (dtype, non-finite "
                                "times or inconsistent lengths)")
             if inp.recon is not None:
-                from .compare import compare_faps
+                from fbaconf.harness.compare import compare_faps
                 r = compare_faps(inp.recon, fr, text_output=False)
                 if not r.outcome.ok:
                     return Verdict("round-trip", f"decoder:{(r.first_difference or {}).get('what')}",
@@ -1617,7 +1617,7 @@ class Fuzzer:
 
 
 def _scene_feats_of(inp: Entry) -> set[str]:
-    from fbaconf.animation import bt
+    from fbaconf.scenes import bt
     text = inp.data.decode("utf-8", "replace")
     try:
         scene = bt.parse(text)
@@ -1628,8 +1628,8 @@ def _scene_feats_of(inp: Entry) -> set[str]:
 
 def _bifs_seeds(scenes: list[Entry]) -> list[Entry]:
     try:
-        from fbaconf.animation import bt
-        from fbaconf.bitstreams import bifs
+        from fbaconf.scenes import bt
+        from fbaconf.scenes import bifs
     except ImportError:  # pragma: no cover
         return []
     out = []
@@ -1660,7 +1660,7 @@ def write_finding(out_dir: Path, f: Finding, fz: Fuzzer) -> Path:
     replay += ["--replay", str((d / f"minimal.{ext}").resolve())]
     command = None
     if isinstance(target, DecoderTarget) and target.is_command:
-        from .adapters import Job
+        from fbaconf.harness.adapters import Job
         wd = "/tmp/fbaconf-repro"
         values = {"input": str((d / f"minimal.{ext}").resolve()), "fba": str((d / f"minimal.{ext}").resolve()),
                   "faps_out": f"{wd}/faps.{'fap' if target.adapter.faps_format == 'fap' else 'npz'}",

@@ -1,6 +1,6 @@
 """``fuzz_one_input``: the entry point for coverage-guided fuzzers (atheris, OSS-Fuzz).
 
-The same in-process checks as ``fbaconf fuzz --self`` (:class:`fbaconf.harness.fuzz.SelfTarget`):
+The same in-process checks as ``fbaconf fuzz --self`` (:class:`fbaconf.fuzz.engine.SelfTarget`):
 the first byte of the input selects the parser, the rest is its input —
 
 * 0-3: the reference decoder (typed errors only, sane FapFrames; every 4th call also runs
@@ -15,7 +15,7 @@ A finding raises :class:`FuzzFinding` (atheris reports it as a crash with the tr
 
 Run with atheris (``pip install atheris``)::
 
-    python -m fbaconf.harness.fuzz_entry [libFuzzer options] [CORPUS_DIR]
+    python -m fbaconf.fuzz.atheris_entry [libFuzzer options] [CORPUS_DIR]
 
 OSS-Fuzz: a ``fuzz_fbaconf.py`` that imports this module and calls :func:`main`.
 """
@@ -35,7 +35,7 @@ class FuzzFinding(AssertionError):
 def _target():
     global _TARGET
     if _TARGET is None:
-        from .fuzz import SelfTarget, gen_valid, RandomChooser
+        from .engine import SelfTarget, gen_valid, RandomChooser
         stream = gen_valid(RandomChooser(random.Random(0))).data
         _TARGET = SelfTarget(checker_every=4, scene_stream=stream)
     return _TARGET
@@ -43,7 +43,7 @@ def _target():
 
 def fuzz_one_input(data: bytes) -> None:
     """Run one input through fbaconf's own parsers; raise :class:`FuzzFinding` on a finding."""
-    from .fuzz import Entry, RandomChooser, gen_valid, mutate_stream
+    from .engine import Entry, RandomChooser, gen_valid, mutate_stream
     t = _target()
     sel = data[0] % 8 if data else 0
     body = bytes(data[1:])
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> None:  # pragma: no cover - needs ath
         sys.exit("fuzz_entry: atheris is not installed (pip install atheris); "
                  "`fbaconf fuzz --self` needs nothing extra")
     with atheris.instrument_imports():
-        import fbaconf.animation.bt  # noqa: F401
+        import fbaconf.scenes.bt  # noqa: F401
         import fbaconf.bitstreams.decoder  # noqa: F401
         import fbaconf.profiles.checker  # noqa: F401
     atheris.Setup(sys.argv if argv is None else argv, fuzz_one_input)

@@ -1,7 +1,7 @@
 """Binary BIFS (ISO/IEC 14496-1 scene description) for the Face node family and the VRML
 geometry nodes of fbaconf's scenes: encoder, decoder and bit trace.
 
-The codec maps exactly the scene model of :mod:`fbaconf.animation.bt` (``Scene``, ``Node``,
+The codec maps exactly the scene model of :mod:`fbaconf.scenes.bt` (``Scene``, ``Node``,
 ``Use``) to a BIFS version 1 command stream and back:
 
 * ``.bifs`` file = BIFSConfig (nodeIDbits, routeIDbits, isCommandStream = 1, pixelMetric,
@@ -46,11 +46,11 @@ from pathlib import Path
 
 import numpy as np
 
-from fbaconf.animation import bt
+from fbaconf.scenes import bt
 from fbaconf.animation.errors import SceneError
 
-from .bitio import BitWriter
-from .errors import BitstreamError, FbaconfInputError
+from fbaconf.bitstreams.bitio import BitWriter
+from fbaconf.errors import BitstreamError, FbaconfInputError
 
 BIFS_SUFFIXES = (".bifs", ".bif")
 MAX_DEPTH = bt.MAX_DEPTH
@@ -138,7 +138,7 @@ class Tables:
 @lru_cache(maxsize=1)
 def tables() -> Tables:
     """The BIFS tables of ``data/bifs_nodes.toml`` (checked against the BT field tables)."""
-    raw = tomllib.loads(resources.files("fbaconf.bitstreams").joinpath("data", "bifs_nodes.toml").read_text("utf-8"))
+    raw = tomllib.loads(resources.files("fbaconf.scenes").joinpath("data", "bifs_nodes.toml").read_text("utf-8"))
     ndts = {}
     for name, e in raw["ndt"].items():
         nodes = tuple(e["nodes"])

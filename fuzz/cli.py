@@ -8,7 +8,7 @@
     fbaconf fuzz --promote DIR [--data-dir PATH]         # findings -> regression suite cases
 
 Exit codes: 0 no findings (replay: the input behaves), 1 findings, 2 usage or setup error.
-The engine is :mod:`fbaconf.harness.fuzz`; see docs/fuzzing.md.
+The engine is :mod:`fbaconf.fuzz.engine`; see docs/fuzzing.md.
 """
 from __future__ import annotations
 
@@ -54,7 +54,7 @@ def register(sub) -> None:
 
 
 def _extra_seeds(paths: list[Path]):
-    from .fuzz import Entry
+    from .engine import Entry
     out = []
     for p in paths:
         files = sorted(p.rglob("*.fba")) if p.is_dir() else [p]
@@ -64,7 +64,7 @@ def _extra_seeds(paths: list[Path]):
 
 
 def cmd_fuzz(args) -> int:
-    from . import fuzz as F
+    from . import engine as F
     if args.promote is not None:
         added = F.promote(args.promote, args.data_dir, log=lambda s: print(s, file=sys.stderr))
         print(f"promoted {len(added)} finding(s) to the regression suite")
@@ -120,7 +120,7 @@ def _print_replay(v, args) -> int:
 
 
 def _decoder(args, F, expected: set[int]) -> int:
-    from .adapters import resolve
+    from fbaconf.harness.adapters import resolve
     adapter = resolve(args.decoder)
     if args.output is None:
         args.output = Path("fbaconf-fuzz") / adapter.name

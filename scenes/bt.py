@@ -34,7 +34,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from fbaconf.bitstreams.errors import TextFormatError
+from fbaconf.errors import TextFormatError
 from fbaconf.bitstreams.tables import fap_table
 
 FAP_NOT_SET = -2147483648  # FAP node field default 0x80000000
@@ -56,7 +56,7 @@ class FieldSpec:
 @lru_cache(maxsize=1)
 def node_specs() -> dict[str, dict[str, FieldSpec]]:
     """Node type -> field name -> FieldSpec (from data/bt_nodes.toml + the FAP table)."""
-    raw = tomllib.loads(resources.files("fbaconf.animation").joinpath("data", "bt_nodes.toml").read_text("utf-8"))
+    raw = tomllib.loads(resources.files("fbaconf.scenes").joinpath("data", "bt_nodes.toml").read_text("utf-8"))
     out: dict[str, dict[str, FieldSpec]] = {}
     for ntype, flds in raw.items():
         specs = {}
