@@ -31,7 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import SceneError
+from .compiled import CompiledFace, neutral_world
+from fbaconf.errors import SceneError
 from .faceparams import NUM_FEATURE_POINTS, fapu_from_feature_points
 
 
@@ -89,11 +90,10 @@ def _project(P: np.ndarray, ortho: bool, centre: np.ndarray) -> np.ndarray:
 
 def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None = None, ortho: bool = False,
               texture: str | None = None):
-    """Warp a CompiledFace (engine.CompiledFace) to received feature points.
+    """Warp a CompiledFace to received feature points.
 
     ``received``: float64[84, 3] in label order, NaN rows = not sent. Returns a new
     CompiledFace (the input is not modified)."""
-    from .engine import CompiledFace, neutral_world
     received = np.asarray(received, dtype=np.float64).reshape(NUM_FEATURE_POINTS, 3)
     sent = np.all(np.isfinite(received), axis=1)
     have = np.all(np.isfinite(model.feature_points), axis=1)

@@ -19,7 +19,7 @@ T * C * R * SR * S * SR^-1 * C^-1, parents first) -> world vertices.
 
 ``featurePointsCoord`` holds the 84 points in label order (faceparams.FEATURE_POINTS); a
 point is "not sent" when all three coordinates are >= ``UNSENT`` (3.4e38, the SFFloat
-maximum) -- fbaconf's convention for subsets, see NOTES.md.
+maximum) -- fbaconf's convention for subsets, see docs/animation.md.
 
 FaceState extras: ``fap_values`` float64[F, 68] (after interpolation), ``fap_status``
 uint8[F, 68], and ``feature_points`` float64[F, 84, 3] when every feature point of the
@@ -27,7 +27,6 @@ model lies on a vertex (the default head, calibrated or not).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,46 +35,14 @@ from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.bitstreams.tables import NUM_FAPS
 
 from fbaconf.scenes import bt
-from .errors import SceneError
-from .facedef import MeshTable, TransformTable, axis_angle_matrices, transform_fields
-from .faceparams import FEATURE_POINTS, NUM_FEATURE_POINTS, UNSENT, Fapu, fapu_from_feature_points, fdp_point_rows
+from .compiled import CompiledFace, PartInstance, local_matrices, neutral_world
+from fbaconf.errors import SceneError
+from .facedef import MeshTable, TransformTable, transform_fields
+from .faceparams import FEATURE_POINTS, NUM_FEATURE_POINTS, UNSENT, fapu_from_feature_points, fdp_point_rows
 from .facestate import FaceState, MeshPart
 from .highlevel import apply_high_level, high_level_weights
 from .interp import FitGraph, lr_fill
 
-
-
-@dataclass
-class PartInstance:
-    name: str
-    ifs: int  # key of the IndexedFaceSet (id of its node)
-    chain: list[int]  # transform keys, root first
-    triangles: np.ndarray
-    color: tuple
-    vertex_colors: np.ndarray | None = None
-    texcoords: np.ndarray | None = None
-    texture: str | None = None
-    specular: float = 0.0
-    shininess: float = 0.2
-
-
-@dataclass
-class CompiledFace:
-    """A face model ready to animate (neutral geometry in local coordinates + rules)."""
-
-    points: dict[int, np.ndarray]  # IFS key -> float64[n, 3] neutral local points
-    ifs_names: dict[int, str]
-    transforms: dict[int, dict]  # key -> {name, center, rotation, scale, scaleOrientation, translation}
-    parts: list[PartInstance]
-    mesh_tables: list[MeshTable]
-    transform_tables: list[TransformTable]
-    fapu: Fapu
-    feature_points: np.ndarray  # float64[84, 3] neutral world; NaN rows = not defined
-    fit: FitGraph | None = None
-    high_level_tables: tuple | None = None  # (visemes, expressions) low-level tables, None = default
-    fp_vertices: list | None = None  # per feature point (part index, vertex) or None
-    useOrtho: bool = False
-    extras: dict = field(default_factory=dict)
 
 
 # ---------------------------------------------------------------------------------- compile
@@ -130,7 +97,6 @@ def _triangulate(ci: np.ndarray, n: int, ccw: bool, path: str) -> np.ndarray:
 
 def compile_scene(scene: bt.Scene | None) -> CompiledFace:
     """Compile a scene (None = the bundled default head) into a CompiledFace."""
-    from . import models
     if scene is None:
         return _compiled_default()
     face, fpath = _find_face(scene)
@@ -335,41 +301,6 @@ def _compiled_default() -> CompiledFace:
 
 
 # ---------------------------------------------------------------------------------- transforms
-def _local_matrices(tr: dict, fields: dict | None, F: int) -> np.ndarray:
-    """float64[F, 4, 4] local matrix of one Transform (VRML order)."""
-    if fields is None:
-        r = tr["rotation"]
-        R = axis_angle_matrices(r[:3], [r[3]])
-        S = np.asarray(tr["scale"], dtype=np.float64).reshape(1, 3)
-        Tt = np.asarray(tr["translation"], dtype=np.float64).reshape(1, 3)
-    else:
-        R, S, Tt = fields["R"], fields["scale"], fields["translation"]
-    so = tr["scaleOrientation"]
-    SR = axis_angle_matrices(so[:3], [so[3]])[0]
-    C = np.asarray(tr["center"], dtype=np.float64)
-    n = max(R.shape[0], S.shape[0], Tt.shape[0])
-    lin = R @ (SR[None] @ (S[:, :, None] * SR.T[None]))  # R * SR * S * SR^-1
-    lin = np.broadcast_to(lin, (n, 3, 3))
-    M = np.zeros((n, 4, 4))
-    M[:, :3, :3] = lin
-    M[:, :3, 3] = np.broadcast_to(Tt, (n, 3)) + C - np.einsum("fij,j->fi", lin, C)
-    M[:, 3, 3] = 1.0
-    return M if n == F else np.broadcast_to(M, (F, 4, 4)) if n == 1 else M
-
-
-def neutral_world(model: CompiledFace) -> list[np.ndarray]:
-    """World positions of every part's vertices in the neutral face."""
-    mats = {k: _local_matrices(tr, None, 1)[0] for k, tr in model.transforms.items()}
-    out = []
-    for p in model.parts:
-        M = np.eye(4)
-        for k in p.chain:
-            M = M @ mats[k]
-        P = model.points[p.ifs]
-        out.append(P @ M[:3, :3].T + M[:3, 3])
-    return out
-
-
 # ---------------------------------------------------------------------------------- animate
 def effective_faps(frames: FapFrames, model: CompiledFace) -> tuple[np.ndarray, np.ndarray]:
     """FAP values float64[F, 68] and status after FIT, left/right fill and visemes/expressions."""
@@ -407,7 +338,7 @@ def animate_model(frames: FapFrames, model: CompiledFace) -> FaceState:
     by_target: dict[int, list] = {}
     for t in model.transform_tables:
         by_target.setdefault(t.target, []).append(t)
-    local = {k: _local_matrices(tr, transform_fields(tr, by_target[k], amp, unit) if k in by_target else None, F)
+    local = {k: local_matrices(tr, transform_fields(tr, by_target[k], amp, unit) if k in by_target else None, F)
              for k, tr in model.transforms.items()}
     verts, parts, first = [], [], 0
     chain_cache: dict[tuple, np.ndarray] = {}

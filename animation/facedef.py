@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SceneError
+from fbaconf.errors import SceneError
 
 FIELD_IDS = {1: "rotation", 2: "scale", 3: "translation"}
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from fbaconf.bitstreams.tables import NUM_FAPS, fap_table, fapu_table
 
-from .errors import SceneError
+from fbaconf.errors import SceneError
 
 FEATURE_POINT_GROUPS: dict[int, int] = {2: 14, 3: 14, 4: 6, 5: 4, 6: 4, 7: 1, 8: 10, 9: 15, 10: 10, 11: 6}
 FEATURE_POINTS: tuple[str, ...] = tuple(f"{g}.{i}" for g, n in FEATURE_POINT_GROUPS.items() for i in range(1, n + 1))

@@ -47,7 +47,7 @@ import numpy as np
 from fbaconf.bitstreams.frames import DERIVED, FREE
 from fbaconf.bitstreams.tables import NUM_FAPS, left_right_pairs
 
-from .errors import SceneError
+from fbaconf.errors import SceneError
 
 
 def lr_fill(values: np.ndarray, status: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -163,7 +163,7 @@ class FitGraph:
             c = cursors[key]
             if c + count > len(lists[key]):
                 raise err(f"{names[key]} has {len(lists[key])} entries, more are needed "
-                          f"(function layout: see animation/NOTES.md)", names[key], "fit-field-count")
+                          f"(function layout: see docs/animation.md)", names[key], "fit-field-count")
             cursors[key] = c + count
             return lists[key][c:c + count]
 

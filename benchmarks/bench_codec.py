@@ -38,7 +38,7 @@ def bitrate_table(data_dir: Path) -> None:
     if not files:
         print(f"(no real .fap files under {data_dir}: bitrate table skipped)")
         return
-    print(f"Bitrate (kbit/s) of the real files, frame-based mode; seed IST 5.1 reports 0.5-5 kbit/s")
+    print("Bitrate (kbit/s) of the real files, frame-based mode; seed IST 5.1 reports 0.5-5 kbit/s")
     head = f"{'file':28s} {'Hz':>4s} " + " ".join(f"{'q=' + str(q):>7s}" for q in QUANTS)
     print(head)
     print("-" * len(head))

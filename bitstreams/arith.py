@@ -347,18 +347,6 @@ class ArithDecoder:
         return end - self.start
 
 
-def symbols_to_bits(symbols: list[int], alphabets: list[int], adaptive: bool = True) -> bytes:
-    """Helper for tests: code one block of symbols (each with its own fresh model)."""
-    w = BitWriter()
-    enc = ArithEncoder(w)
-    models = {}
-    for s, n in zip(symbols, alphabets):
-        m = models.setdefault(n, make_model(n, adaptive))
-        enc.encode(m, s)
-    enc.flush()
-    return w.getvalue()
-
-
 # ---------------------------------------------------------------------------- native fast path
 #
 # bitstreams/_fastarith.c (an optional C extension built by setup.py) runs whole blocks:

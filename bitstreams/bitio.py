@@ -139,13 +139,6 @@ class BitReader:
         chunk = int.from_bytes(self.data[first:last], "big")
         return (chunk >> ((last << 3) - end)) & ((1 << nbits) - 1)
 
-    def bit_lenient(self) -> int:
-        pos = self.pos
-        self.pos = pos + 1
-        if pos >= self.nbits:
-            return 0
-        return (self.data[pos >> 3] >> (7 - (pos & 7))) & 1
-
     def stuffing_length(self, at: int | None = None) -> int:
         pos = self.pos if at is None else at
         r = pos & 7

@@ -1,7 +1,6 @@
 """Verbs of the bitstream stage: ``encode``, ``decode`` and ``demo``."""
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path

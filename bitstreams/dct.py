@@ -2,7 +2,7 @@
 
 Every table the public sources do not give is read from ``data/dct_provisional.toml``
 (tagged ``provisional = true``, decision D8); this module holds no table literal. See
-``DCT_NOTES.md`` for the syntax and the rationale of each table.
+``docs/dct-mode.md`` for the syntax and the rationale of each table.
 
 Syntax (fbaconf's reading; one *plane group* is one plane of the face object):
 
@@ -185,7 +185,7 @@ def inverse(levels, ac_step: int, t: DctTables) -> list[int]:
 
 
 def error_bound(fap: int, index: int, max_abs: int, t: DctTables | None = None) -> float:
-    """Largest |decoded - original| a sample can have (derivation in DCT_NOTES.md):
+    """Largest |decoded - original| a sample can have (derivation in docs/dct-mode.md):
     1/2 (output rounding) + sum_k |M[k][n]| / 2^s * step_k / 2 (coefficient quantisation)
     + sum_m |(M^T M / 2^2s - I)[n][m]| * max|x| (fixed-point matrix), maximised over n."""
     t = t or dct_tables()

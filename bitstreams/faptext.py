@@ -8,7 +8,7 @@ Format (whitespace between tokens is free: spaces, tabs, CR, LF, CRLF; values ma
     frame [vs1 vs2 vblend vdef] [es1 ei1 es2 ei2 init edef] v3 ... v68 (masked only)
     ...
 
-Readings chosen here (see ``cli_faptext_notes.md``):
+Readings chosen here (see ``docs/fap-text.md``):
 
 * header: version = first token, frame_rate / count = the last two tokens, name = the
   text between (it may contain spaces, as Greta writes it);
@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fbaconf import rules as _registry
 from fbaconf.errors import EncodeError, TextFormatError
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .tables import NUM_FAPS
@@ -40,26 +41,10 @@ from .tables import NUM_FAPS
 __all__ = ["RULES", "KNOWN_VERSIONS", "FapFileHeader", "TextWarning", "read_fap", "read_fap_text",
            "read_fap_file", "write_fap", "write_fap_file"]
 
-#: Every rule id the reader can report, with a one-line description. ``(warning)`` rules are
-#: recoverable (TextWarning, or TextFormatError under strict=True); ``(error)`` rules always
-#: raise TextFormatError.
-RULES: dict[str, str] = {
-    "fap-text-header": "(error) header line missing or malformed: needs 'version name frame_rate count', "
-                       "frame_rate a positive finite number, count a non-negative integer",
-    "fap-text-version": "(warning) version is not 2.0, 2.1 or 2.2",
-    "fap-text-name": "(warning) name field contains whitespace (Greta) or is empty",
-    "fap-text-mask-length": "(warning) mask line with 69 entries (Greta); the extra 69th entry is dropped",
-    "fap-text-mask-value": "(error) mask entry other than 0 or 1",
-    "fap-text-integer": "(error) mask entry, frame number or value is not a decimal integer",
-    "fap-text-value-range": "(error) frame number outside 0..2^31-1 or value outside the int32 range",
-    "fap-text-high-level-range": "(warning) viseme/expression field outside its defined range "
-                                 "(selects 0..14 / 0..6, blend/intensities 0..63, def/init bits 0..1)",
-    "fap-text-truncated": "(error) the file ends inside a frame (values missing at end of file)",
-    "fap-text-frame-order": "(warning) frame number smaller than the previous frame's",
-    "fap-text-frame-duplicate": "(warning) frame number already used by an earlier frame",
-    "fap-text-frame-beyond": "(warning) frame number greater than the header's declared frame count",
-    "fap-text-frame-count": "(warning) number of frames in the file differs from the header's count",
-}
+#: Every rule id the reader can report, with its registry entry (fbaconf/rules.py): warning rules
+#: are recoverable (TextWarning, or TextFormatError under strict=True); error rules always raise
+#: TextFormatError.
+RULES = {r.rule: r for r in _registry.RULES.values() if r.stage == "fap-text"}
 
 KNOWN_VERSIONS = ("2.0", "2.1", "2.2")
 

@@ -36,10 +36,6 @@ LIST_ORDER = ("i_max", "i_min", "p_max", "p_min")
 DEFAULT_FRAME_RATE = 25.0  # D6: a stream that never signals a frame rate
 
 
-def group_ranges() -> list[range]:
-    return [g.faps for g in tables.groups()]
-
-
 def quant_div(q: int) -> int:
     """The divisor of the ranges (D4): fap_quant, or 1 when fap_quant = 0."""
     return q if q > 0 else 1

@@ -55,7 +55,7 @@ def canonical_npz(path: Path, keep: list[str] | None = None) -> None:
 
 def generate_case(case, out: Path) -> list[Path]:
     """Write one case's goldens into ``out``; returns the files written."""
-    from fbaconf.harness.refdecoder import multi_outputs, reference_outputs
+    from fbaconf.pipeline import multi_outputs, reference_outputs
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     if case.kind == "error":

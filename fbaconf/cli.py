@@ -22,7 +22,6 @@ VERB_MODULES = (
     "fbaconf.rendering.cli",
     "fbaconf.conformance.cli",
     "fbaconf.harness.verbs",
-    "fbaconf.harness.benchcli",
     "fbaconf.fuzz.cli",
 )
 

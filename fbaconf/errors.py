@@ -3,6 +3,10 @@
 Every error names where (file, bit offset -> byte offset, plane/frame index, FAP, or
 line:column for text) and which rule was broken (a short stable rule id plus a message).
 Callers catch :class:`FbaconfInputError`; anything else escaping a parser is a bug.
+
+These are the root error types of every stage; stage-specific errors (``rendering/errors.py``,
+``scenes.bifs.BifsError``) derive from them. Every rule id is registered in
+:mod:`fbaconf.rules`.
 """
 from __future__ import annotations
 
@@ -113,4 +117,22 @@ class EncodeError(FbaconfInputError):
     def to_dict(self) -> dict:
         d = super().to_dict()
         d.update(frame=self.frame, fap=self.fap, value=self.value)
+        return d
+
+
+class SceneError(FbaconfInputError):
+    """A scene (face model, FDP, FIT, FaceDefTables) is semantically invalid."""
+
+    rule = "scene"
+
+    def __init__(self, message: str, *, rule: str, node_path: str | None = None, file: str | None = None) -> None:
+        super().__init__(message, rule=rule, file=file)
+        self.node_path = node_path
+
+    def location(self) -> str:
+        return self.node_path or ""
+
+    def to_dict(self) -> dict:
+        d = super().to_dict()
+        d.update(node_path=self.node_path)
         return d

@@ -1212,9 +1212,10 @@ class SelfTarget:
 
     def _check(self, data: bytes, scene) -> Verdict | None:
         from fbaconf.profiles import diagnostics as D
+        from fbaconf import rules as R
         rep = self.checker.analyse(data, scene=scene, claim="simple@1" if scene is None else "predictable@2",
                                    smallest_claim=True)
-        bad = [d for d in rep.diagnostics if d.code == D.CHECK_INTERNAL or d.code not in D.REGISTRY]
+        bad = [d for d in rep.diagnostics if d.code == R.CHECK_INTERNAL or d.code not in R.CODES]
         if bad:
             msg = bad[0].message
             return Verdict("internal-error", f"checker:{re.sub(r'[0-9]+', 'N', msg)[:80]}",

@@ -36,7 +36,8 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
     from fbaconf.profiles.model import Claim
     from . import reports
     from .adapters import resolve
-    from .verbs import execute, highest_claim, select_cases, write_reports
+    from .adapters import highest_claim
+    from .session import execute, select_cases, write_reports
     t0 = time.perf_counter()
     adapter = resolve(decoder)
     claim = str(Claim.parse(claim or highest_claim(adapter)))

@@ -7,7 +7,7 @@ As a program (what ``adapters/reference.toml`` runs in a subprocess)::
     python -m fbaconf.harness.refdecoder decode-multi --out-dir DIR IN1.fba IN2.fba ...
 
 Exit codes: 0 done, 2 the input was rejected (a typed error on stderr), 69 not supported.
-The same function, :func:`reference_outputs`, makes the goldens, so the reference passes
+The chain itself is :mod:`fbaconf.pipeline`, which also makes the goldens, so the reference passes
 by construction only if the whole pipeline is deterministic — which the golden tooling
 checks by regenerating bit for bit.
 """
@@ -19,61 +19,9 @@ from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
 
+from fbaconf.pipeline import multi_outputs, reference_outputs
+
 from .adapters import Job, PythonAdapter
-
-
-def load_stream(path: Path):
-    """FapFrames from a ``.fba`` stream (reference decoder) or ``.fap`` text."""
-    path = Path(path)
-    if path.suffix.lower() == ".fap":
-        from fbaconf.bitstreams.faptext import read_fap_file
-        return read_fap_file(path)[0]
-    from fbaconf.bitstreams.decoder import decode
-    try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise FbaconfInputError(f"cannot read stream: {e.strerror}", rule="io", file=str(path)) from None
-    return decode(data, file=str(path)).frames
-
-
-def load_scene(path: Path | None):
-    if path is None:
-        return None
-    path = Path(path)
-    if path.suffix.lower() == ".bifs":
-        from fbaconf.scenes import bifs  # binary BIFS scene (issue 9)
-        return bifs.read(path)
-    from fbaconf.animation.engine import load_scene as load_bt
-    return load_bt(path)
-
-
-def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path | None = None,
-                      faps_out: Path | None = None, vertices_out: Path | None = None,
-                      images_dir: Path | None = None) -> None:
-    """Decode (and animate, render) one stream with the reference, writing the requested outputs."""
-    from fbaconf.bitstreams.cli import save_faps
-    frames = load_stream(stream)
-    if faps_out is not None:
-        save_faps(frames, faps_out)
-    if vertices_out is None and images_dir is None:
-        return
-    from fbaconf.animation.engine import animate
-    from fbaconf.animation.stateio import save_npz
-    state = animate(frames, scene=load_scene(scene))
-    if vertices_out is not None:
-        save_npz(state, vertices_out)
-    if images_dir is not None:
-        from fbaconf.rendering.render import render_frames
-        from fbaconf.rendering.scenario import Scenario
-        sc = Scenario.load(scenario) if scenario is not None else Scenario.default()
-        render_frames(state, sc, images_dir, scene_dir=Path(scene).resolve().parent if scene else None)
-
-
-def multi_outputs(streams: list[Path], out_dir: Path, fmt: str = "npz") -> None:
-    from fbaconf.bitstreams.cli import save_faps
-    out_dir.mkdir(parents=True, exist_ok=True)
-    for s in streams:
-        save_faps(load_stream(s), out_dir / f"{Path(s).stem}.{fmt}")
 
 
 class ReferenceAdapter(PythonAdapter):

@@ -1,4 +1,4 @@
-"""Verbs ``fbaconf run`` and ``fbaconf certify`` (+ ``certify verify``).
+"""The harness verbs: ``fbaconf run``, ``fbaconf certify`` (+ ``certify verify``), ``fbaconf bench``.
 
 Exit codes (architecture): 0 every required case passes (and the speed requirements when
 measured); 1 some required case fails (a new failure, when ``--baseline`` is given);
@@ -6,16 +6,13 @@ measured); 1 some required case fails (a new failure, when ``--baseline`` is giv
 """
 from __future__ import annotations
 
-import datetime as _dt
-import fnmatch
 import json
+import math
 import sys
-import time
-import tomllib
-from importlib import resources
 from pathlib import Path
 
 from .adapters import highest_claim
+from .session import execute, select_cases, write_reports
 
 
 def register(sub) -> None:
@@ -50,6 +47,8 @@ def register(sub) -> None:
     c.add_argument("--no-speed", action="store_true", help="skip the speed measurement (certificate says so)")
     c.set_defaults(func=cmd_certify)
 
+    _register_bench(sub)
+
 
 def _common(p) -> None:
     p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
@@ -57,89 +56,6 @@ def _common(p) -> None:
     p.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
     p.add_argument("--keep-workdirs", action="store_true", help="keep each case's working folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-
-
-# ------------------------------------------------------------------ shared
-
-
-def provisional_statements(claim: str | None) -> list[str]:
-    """What a verdict rests on that the public sources leave open (data: harness/data/provisional.toml
-    and the provenance of each level limit)."""
-    from fbaconf.profiles.model import Claim, load_profiles
-    data = tomllib.loads(resources.files("fbaconf.harness").joinpath("data/provisional.toml").read_text("utf-8"))
-    out = [f"{r['id']}: {r['text']} ({r['where']})" for r in data["rule"]]
-    ps = load_profiles()
-    if claim:
-        c = Claim.parse(claim, ps)
-        for lim in ps.limits_for(c):
-            if lim.provenance == "provisional" and c.level in lim.values:
-                out.append(f"level limit {lim.id} = {lim.value(c.level):g} {lim.unit} at {claim} "
-                           f"({lim.description}) is provisional")
-    return out
-
-
-def select_cases(suites, claim: str | None, suite_names: list[str], case_globs: list[str], only_required: bool):
-    from .runner import required_for
-    cases = []
-    for s in suites:
-        if suite_names and s.name not in suite_names:
-            continue
-        for c in s.cases:
-            if case_globs and not any(fnmatch.fnmatch(c.id, g) or fnmatch.fnmatch(c.full_id, g) for g in case_globs):
-                continue
-            if only_required and not required_for(claim, c):
-                continue
-            cases.append(c)
-    return cases
-
-
-def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-
-
-def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, resume=False, keep=False,
-            progress=None, baseline=None, speed=False):
-    """Run cases (+ speed); returns the RunRecord with its exit code set."""
-    from . import baseline as bl
-    from .results import RunRecord
-    from .runner import run_cases
-    from .sysinfo import system_info
-    t0 = time.perf_counter()
-    started = _now()
-    results = run_cases(adapter, cases, claim=claim, out_dir=out_dir, jobs=jobs, resume=resume,
-                        keep_workdirs=keep, progress=progress)
-    new_failures = [r for r in results if r.required and r.outcome.failing]
-    if baseline is not None:
-        new_failures = bl.apply(results, bl.load(baseline))
-    speed_results = []
-    if speed:
-        from .speed import measure_claim
-        speed_results = [s for s in measure_claim(adapter, claim) if s is not None]
-    ran = {c.suite for c in cases}
-    record = RunRecord(
-        decoder=adapter.describe(), claim=claim,
-        suites=[{"name": s.name, "version": s.version, "sha256": s.digest(), "claim": s.claim, "group": s.group,
-                 "cases": len(s.cases)} for s in suites if s.name in ran],
-        system=system_info(), results=results, speed=speed_results, started=started, finished=_now(),
-        duration_s=time.perf_counter() - t0, provisional=provisional_statements(claim))
-    if new_failures:
-        record.exit_code = 1
-    elif any(not s.passed for s in speed_results):
-        record.exit_code = 3
-    else:
-        record.exit_code = 0
-    return record
-
-
-def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None) -> dict[str, Path]:
-    from . import reports
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths = {"json": json_path or out_dir / "report.json", "junit": junit_path or out_dir / "junit.xml",
-             "html": (html_dir or out_dir) / "index.html"}
-    reports.write_json(record, paths["json"])
-    reports.write_junit(record, paths["junit"])
-    paths["html"] = reports.write_html(record, html_dir or out_dir, base_dir=out_dir)
-    return paths
 
 
 # ------------------------------------------------------------------ run
@@ -198,3 +114,155 @@ def cmd_certify(args) -> int:
         print("fbaconf certify: error: --decoder and -o/--output are required", file=sys.stderr)
         return 2
     return certify.certify(args.decoder, args.claim, args.output, jobs=args.jobs, speed=not args.no_speed)
+
+
+# ------------------------------------------------------------------ bench
+# Verb ``fbaconf bench``: a decoder's decode/render speed against the claimed level's minimums.
+# 
+# ``fbaconf bench --decoder D [--claim P@L] [--repeats N] [--operation decode|render] [--json]``
+# 
+# Per-frame cost is measured free of process start-up (``harness/speed.py``: the same content
+# at several lengths, ``time = startup + frames x per_frame`` fitted per repeat, medians).
+# Exit codes: 0 every measured rate meets its minimum; 1 a decoder run failed (exit code,
+# crash, timeout, missing output); 2 usage or setup error; 3 a speed requirement is missed.
+
+
+
+def _register_bench(sub) -> None:
+    p = sub.add_parser("bench", help="measure decode/render speed against the level minimums",
+                       description="Measure a decoder's per-frame decode and render cost (free of process "
+                                   "start-up: several content lengths, a linear fit, median over repeats) and "
+                                   "compare the rates with the claimed level's minimums. Exit 0 all pass, "
+                                   "1 a decoder run failed, 2 setup error, 3 too slow.")
+    p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
+    p.add_argument("--claim", help="profile@level (default: the decoder's highest claim)")
+    p.add_argument("--repeats", type=int, default=3, help="repeats of the length series (default 3; median)")
+    p.add_argument("--operation", choices=("decode", "render"), action="append",
+                   help="only this operation (repeatable; default both, render when the decoder outputs images)")
+    p.add_argument("--lengths", help="fixed content lengths in frames, comma-separated (default: adaptive)")
+    p.add_argument("--target-seconds", type=float, default=0.5,
+                   help="adaptive lengths: frame-dependent time of the longest run (default 0.5; at least "
+                        "the start-up time)")
+    p.add_argument("--render-size", default="64x64", help="image size of the render measurement (default 64x64)")
+    p.add_argument("--work-dir", type=Path, help="keep the generated content here (default: a temporary folder)")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.set_defaults(func=cmd_bench)
+
+
+def _jsonable(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return "NaN" if math.isnan(v) else ("Infinity" if v > 0 else "-Infinity")
+    if isinstance(v, dict):
+        return {k: _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    return v
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+        if w < 1 or h < 1:
+            raise ValueError
+        return w, h
+    except ValueError:
+        raise ValueError(f"--render-size must be WxH, e.g. 64x64, not {text!r}") from None
+
+
+def _usage(msg: str) -> int:
+    print(f"fbaconf bench: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def cmd_bench(args) -> int:
+    from fbaconf.profiles.model import Claim
+
+    from .adapters import resolve
+    from .speed import OPERATIONS, SpeedError, SpeedRunError, failed_result, highest_claim, measure, skip_reason
+
+    adapter = resolve(args.decoder)  # ManifestError -> exit 2 (cli.main)
+    claim = args.claim or highest_claim(adapter)
+    try:
+        claim = str(Claim.parse(claim))
+    except ValueError as e:
+        return _usage(f"--claim: {e}")
+    if args.repeats < 1:
+        return _usage("--repeats must be >= 1")
+    lengths = None
+    if args.lengths:
+        try:
+            lengths = [int(x) for x in args.lengths.split(",") if x.strip()]
+        except ValueError:
+            return _usage(f"--lengths must be comma-separated frame counts, not {args.lengths!r}")
+    try:
+        size = _parse_size(args.render_size)
+    except ValueError as e:
+        return _usage(str(e))
+    ops = args.operation or list(OPERATIONS)
+    results, skipped, failed = [], [], False
+    for op in ops:
+        reason = skip_reason(adapter, op)
+        if reason:
+            skipped.append((op, reason))
+            continue
+        if not args.json:
+            print(f"measuring {op} speed of {adapter.name} for {claim}...", file=sys.stderr, flush=True)
+        try:
+            r = measure(adapter, claim, op, lengths=lengths, repeats=args.repeats,
+                        work_dir=(args.work_dir / op) if args.work_dir else None,
+                        target_s=args.target_seconds, render_size=size)
+        except SpeedRunError as e:
+            r = failed_result(e, claim)
+            failed = True
+        except SpeedError as e:
+            return _usage(str(e))
+        results.append(r)
+    code = 1 if failed else (3 if any(not r.passed for r in results) else 0)
+    if args.json:
+        doc = {"format": "fbaconf.bench/1", "decoder": adapter.describe(), "claim": claim, "exit_code": code,
+               "speed": [r.to_json() for r in results],
+               "skipped": [{"operation": op, "reason": why} for op, why in skipped]}
+        print(json.dumps(_jsonable(doc), indent=2))
+        return code
+    print(render_table(results))
+    for op, why in skipped:
+        print(f"{op}: skipped: {why}")
+    for r in results:
+        if r.message:
+            print(f"{r.operation}: {r.message}")
+    verdict = {0: "PASS: every measured rate meets the level minimum",
+               1: "ERROR: a decoder run failed during the measurement",
+               3: "FAIL: below the level's minimum rate (speed requirement only)"}[code]
+    print(f"result: {verdict}")
+    return code
+
+
+def render_table(results) -> str:
+    """Plain-text table: operation, per-frame ms, start-up, measured/required fps, ratio, verdict,
+    provenance (provisional limits marked with ``*``)."""
+    header = ["operation", "claim", "per-frame ms", "startup s", "measured fps", "required fps", "ratio",
+              "verdict", "provenance"]
+    rows = []
+    for r in results:
+        ratio = (r.rate_fps / r.required_fps) if r.required_fps and r.required_fps > 0 else math.inf
+        prov = r.provenance + (" *" if r.provenance == "provisional" else "")
+        rows.append([r.operation, r.claim, _num(r.per_frame_s * 1000, 3), _num(r.startup_s, 3),
+                     _num(r.rate_fps, 1), _num(r.required_fps, 1), _num(ratio, 2),
+                     "PASS" if r.passed else "FAIL", prov])
+    widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(header)]
+    right = {2, 3, 4, 5, 6}
+
+    def line(cells):
+        return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+    out = [line(header), line(["-" * w for w in widths])] + [line(r) for r in rows]
+    if any(r.provenance == "provisional" for r in results):
+        out.append("* provisional level limit (profiles/data/profiles.toml): not from the ISO text")
+    return "\n".join(s.rstrip() for s in out)
+
+
+def _num(v: float, digits: int) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    if math.isinf(v):
+        return "inf"
+    return f"{v:.{digits}f}"

@@ -4,7 +4,7 @@ Parsing is the reference decoder's (``fbaconf.bitstreams.decoder``); the checker
 per-plane records it keeps (:class:`PlaneInfo`: offsets, header fields, new lists, block
 spans) and adds its own light-weight checks on top. What the decoder refuses becomes one
 diagnostic at the bit offset where parsing stopped (``BitstreamError.rule`` -> code, see
-``RULE_CODES``); everything parsed before that point is still checked.
+``fbaconf.rules.code_for_rule``); everything parsed before that point is still checked.
 
 ``check_stream`` never raises: an unexpected exception becomes ``FAP-CHECK-002``.
 
@@ -29,52 +29,32 @@ from fbaconf.bitstreams.syntax import (CODING_DCT, INTENSITY_MAX, LIST_ORDER, MA
                                        intensity_bound, intensity_step, quant_div)
 from fbaconf.bitstreams.tables import NUM_FAPS, RANGE_DELTA
 
-from . import diagnostics as D
+
+from fbaconf import rules as R
 from .diagnostics import Diagnostic, diag
 from .model import Claim, ProfileSet, load_profiles
 
-# Decoder rule id -> diagnostic code.
-RULE_CODES = {
-    "truncated": D.SYNTAX_TRUNCATED,
-    "marker": D.SYNTAX_MARKER,
-    "object-mask": D.SYNTAX_OBJECT_MASK,
-    "first-plane-intra": D.SYNTAX_FIRST_PREDICTED,
-    "stuffing": D.SYNTAX_STUFFING,
-    "arith-state": D.SYNTAX_ARITH_STATE,
-    "start-code": D.SYNTAX_NOT_FACE,
-    "frame-rate-zero": D.SEM_FRAME_RATE_ZERO,
-    "viseme-select-range": D.SEM_VISEME_SELECT,
-    "expression-select-range": D.SEM_EXPRESSION_SELECT,
-    "value-overflow": D.SEM_VALUE_OVERFLOW,
-    "dct-unsupported": D.CHECK_DCT,
-    "invalid-vlc": D.SYNTAX_DCT,
-    "run-overflow": D.SYNTAX_DCT,
-    "segment-length": D.SYNTAX_DCT,
-    "coefficient-overflow": D.SYNTAX_DCT,
-    "dct-prediction": D.SYNTAX_DCT,
-}
-
 # Level limit id -> diagnostic code (limits with bounds = stream | scene).
 LIMIT_CODES = {
-    "bitrate": D.LEVEL_BITRATE,
-    "coded_frame_rate": D.LEVEL_FRAME_RATE,
-    "faces": D.LEVEL_FACES,
-    "fdp_feature_points": D.LEVEL_FDP_POINTS,
-    "fit_nodes": D.LEVEL_FIT_NODES,
-    "fit_links": D.LEVEL_FIT_LINKS,
-    "fit_terms": D.LEVEL_FIT_TERMS,
-    "texture_width": D.LEVEL_TEXTURE,
-    "texture_height": D.LEVEL_TEXTURE,
-    "mesh_vertices": D.LEVEL_MESH_VERTICES,
-    "facedeftables_entries": D.LEVEL_FDT_ENTRIES,
-    "intervals_per_facedefmesh": D.LEVEL_INTERVALS,
+    "bitrate": R.LEVEL_BITRATE,
+    "coded_frame_rate": R.LEVEL_FRAME_RATE,
+    "faces": R.LEVEL_FACES,
+    "fdp_feature_points": R.LEVEL_FDP_POINTS,
+    "fit_nodes": R.LEVEL_FIT_NODES,
+    "fit_links": R.LEVEL_FIT_LINKS,
+    "fit_terms": R.LEVEL_FIT_TERMS,
+    "texture_width": R.LEVEL_TEXTURE,
+    "texture_height": R.LEVEL_TEXTURE,
+    "mesh_vertices": R.LEVEL_MESH_VERTICES,
+    "facedeftables_entries": R.LEVEL_FDT_ENTRIES,
+    "intervals_per_facedefmesh": R.LEVEL_INTERVALS,
 }
 
 # Unit of a limit in the data file -> factor to the checker's measure.
 UNIT_FACTORS = {"kbit/s": 1000.0}
 
 ARITH_BLOCKS = frozenset({"viseme", "expression", "low-level"})  # PlaneInfo.blocks of the arithmetic mode
-UNREADABLE_CODES = frozenset({D.INPUT_UNREADABLE, D.SYNTAX_TOO_SHORT, D.SYNTAX_NOT_FACE})
+UNREADABLE_CODES = frozenset({R.INPUT_UNREADABLE, R.SYNTAX_TOO_SHORT, R.SYNTAX_NOT_FACE})
 UNIDIRECTIONAL = tuple(f.number for f in tables.fap_table() if f.direction == "U")
 WINDOW_MS = 1000.0
 _EPS_MS = 1e-6
@@ -212,7 +192,7 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
             import importlib
             bt = importlib.import_module("fbaconf.scenes.bt")  # optional: the animation stage's reader
         except Exception as e:  # ImportError, or a reader that fails to import
-            out.append(diag(D.SCENE_UNAVAILABLE, f"scene {scene}: no scene reader in this build "
+            out.append(diag(R.SCENE_UNAVAILABLE, f"scene {scene}: no scene reader in this build "
                             f"({type(e).__name__}: {e}); the scene was not checked"))
             return None
         try:
@@ -222,7 +202,7 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
             else:
                 parsed = bt.read(scene)
         except OSError as e:
-            out.append(diag(D.SCENE_INVALID, f"scene {scene} cannot be read: {e.strerror or e}"))
+            out.append(diag(R.SCENE_INVALID, f"scene {scene} cannot be read: {e.strerror or e}"))
             return None
         except Exception as e:  # TextFormatError / SceneError / anything the reader raises
             path = getattr(e, "node_path", None)
@@ -230,17 +210,17 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
             where = f" (line {line}, column {getattr(e, 'column', '?')})" if line is not None else ""
             if getattr(e, "bit_offset", None) is not None:  # a binary BIFS scene
                 where = f" (BIFS bit offset {e.bit_offset}, rule {getattr(e, 'rule', '?')})"
-            out.append(diag(D.SCENE_INVALID, f"scene {scene}{where}: {getattr(e, 'message', e)}",
+            out.append(diag(R.SCENE_INVALID, f"scene {scene}{where}: {getattr(e, 'message', e)}",
                             node_path=path))
             return None
         scene = parsed
     try:
         return summarize_scene(scene)
     except SceneStructureError as e:
-        out.append(diag(D.SCENE_INVALID, f"scene: {e}", node_path=e.node_path))
+        out.append(diag(R.SCENE_INVALID, f"scene: {e}", node_path=e.node_path))
         return None
     except Exception as e:
-        out.append(diag(D.SCENE_INVALID, f"scene structure not understood: {type(e).__name__}: {e}"))
+        out.append(diag(R.SCENE_INVALID, f"scene structure not understood: {type(e).__name__}: {e}"))
         return None
 
 
@@ -276,7 +256,7 @@ def analyse(data: bytes, *, scene=None, claim: Claim | str | None = None, file: 
     try:
         _analyse(bytes(data), scene, claim, file, profiles, smallest_claim, rep)
     except Exception as e:  # a checker bug must not crash the caller
-        out.append(diag(D.CHECK_INTERNAL, f"internal checker failure: {type(e).__name__}: {e}"))
+        out.append(diag(R.CHECK_INTERNAL, f"internal checker failure: {type(e).__name__}: {e}"))
     out.sort(key=lambda d: d.location.sort_key())
     rep.unreadable = any(d.code in UNREADABLE_CODES for d in out)
     return rep
@@ -320,12 +300,12 @@ def _analyse(data: bytes, scene, claim, file, profiles, want_smallest: bool, rep
     rep.claim = claim
     summary = rep.summary
     if len(data) < 4:
-        out.append(diag(D.SYNTAX_TOO_SHORT, f"input has {len(data)} byte(s): not a face object stream",
+        out.append(diag(R.SYNTAX_TOO_SHORT, f"input has {len(data)} byte(s): not a face object stream",
                         bit_offset=0))
         return
     first = int.from_bytes(data[:4], "big")
     if first != FACE_OBJECT_START_CODE:
-        out.append(diag(D.SYNTAX_NOT_FACE, f"input starts with 0x{first:08X}, not face_object_start_code "
+        out.append(diag(R.SYNTAX_NOT_FACE, f"input starts with 0x{first:08X}, not face_object_start_code "
                         "0x000001BA", bit_offset=0))
         return
     st = _Stream(data, file)
@@ -364,7 +344,7 @@ def _analyse(data: bytes, scene, claim, file, profiles, want_smallest: bool, rep
     if want_smallest and smallest is None:
         top = ps.claims()[-1]
         why = sorted({d.code for d in _claim_violations(ps, top, tools, measures)})
-        out.append(diag(D.CLAIM_NONE, f"no profile@level defined in profiles.toml admits this stream (even {top} "
+        out.append(diag(R.CLAIM_NONE, f"no profile@level defined in profiles.toml admits this stream (even {top} "
                         f"is violated: {', '.join(why)})"))
 
 
@@ -379,11 +359,11 @@ def _first_rate(planes) -> float | None:
 def _syntax(st: _Stream, out: list[Diagnostic]) -> None:
     e = st.error
     if e is not None:
-        code = RULE_CODES.get(e.rule, D.SYNTAX_OTHER)
-        if code == D.CHECK_DCT:
+        code = R.code_for_rule(e.rule, R.SYNTAX_OTHER)
+        if code == R.CHECK_DCT:
             msg = (f"plane {e.plane} uses coding_type 1 (DCT segment mode), which this checker cannot parse; "
                    "the rest of the stream was not checked")
-        elif code == D.SYNTAX_OTHER:
+        elif code == R.SYNTAX_OTHER:
             msg = f"parsing stopped: {e.message} [rule {e.rule}]"
         else:
             msg = f"parsing stopped: {e.message}"
@@ -392,16 +372,16 @@ def _syntax(st: _Stream, out: list[Diagnostic]) -> None:
     res = st.result
     nbits = len(st.data) * 8
     if res.end_code is None:
-        out.append(diag(D.SYNTAX_NO_END_CODE, "the stream ends without the end code 0x000001B1",
+        out.append(diag(R.SYNTAX_NO_END_CODE, "the stream ends without the end code 0x000001B1",
                         bit_offset=res.end_offset))
     elif res.end_code != VISUAL_OBJECT_SEQUENCE_END_CODE:
-        out.append(diag(D.SYNTAX_UNEXPECTED_START_CODE,
+        out.append(diag(R.SYNTAX_UNEXPECTED_START_CODE,
                         f"start code 0x{res.end_code:08X} ends the face object (expected a plane start code or "
                         "the end code 0x000001B1); the data after it was not checked",
                         bit_offset=res.end_offset - 32))
     elif res.end_offset < nbits:
         extra = (nbits - res.end_offset) // 8
-        out.append(diag(D.SYNTAX_TRAILING, f"{extra} byte(s) after the end code", bit_offset=res.end_offset))
+        out.append(diag(R.SYNTAX_TRAILING, f"{extra} byte(s) after the end code", bit_offset=res.end_offset))
 
 
 # ---------------------------------------------------------------------------- semantics
@@ -418,13 +398,13 @@ def _semantics(st: _Stream, out: list[Diagnostic]) -> None:
             bad = [f"{name} {v} > {lim}" for name, v, lim in (("hours", h, 23), ("minutes", m, 59),
                                                                 ("seconds", s, 59)) if v > lim]
             if bad:
-                out.append(diag(D.SEM_TIME_CODE_RANGE, "time code out of range: " + ", ".join(bad),
+                out.append(diag(R.SEM_TIME_CODE_RANGE, "time code out of range: " + ", ".join(bad),
                                 bit_offset=_time_code_offset(p), plane=p.index, frame=p.frame_number))
         # a time code has whole-second resolution: it goes backwards only when it is earlier
         # than the whole second the previous plane lies in
         if (prev_t is not None and p.time_code is not None
                 and p.time_ms < np.floor((prev_t + _EPS_MS) / 1000.0) * 1000.0 - _EPS_MS):
-            out.append(diag(D.SEM_TIME_BACKWARDS, f"time code {p.time_ms / 1000.0:g} s is earlier than the second "
+            out.append(diag(R.SEM_TIME_BACKWARDS, f"time code {p.time_ms / 1000.0:g} s is earlier than the second "
                             f"of the previous plane ({prev_t:.3f} ms)", bit_offset=p.bit_offset, plane=p.index,
                             frame=p.frame_number, time_ms=p.time_ms))
         prev_t = p.time_ms
@@ -443,7 +423,7 @@ def _semantics(st: _Stream, out: list[Diagnostic]) -> None:
         bad = np.nonzero(coded[:, fap] & ((high[:, col] < 0) | (high[:, col] > top)))[0]
         for j in bad:
             p = rp[j]
-            out.append(diag(D.SEM_INTENSITY, f"{name} = {int(high[j, col])} outside 0..{int(top[j])}",
+            out.append(diag(R.SEM_INTENSITY, f"{name} = {int(high[j, col])} outside 0..{int(top[j])}",
                             bit_offset=p.bit_offset, plane=p.index, frame=int(fr.frame_number[ks[j]]), fap=fap + 1))
     # negative values of unidirectional FAPs (D4 warning)
     vals = fr.values[ks]
@@ -451,7 +431,7 @@ def _semantics(st: _Stream, out: list[Diagnostic]) -> None:
         bad = np.nonzero(coded[:, f - 1] & (vals[:, f - 1] < 0))[0]
         for j in bad:
             p = rp[j]
-            out.append(diag(D.DECISION_UNIDIRECTIONAL_NEGATIVE,
+            out.append(diag(R.DECISION_UNIDIRECTIONAL_NEGATIVE,
                             f"unidirectional FAP {f} decodes to {int(vals[j, f - 1])} < 0",
                             bit_offset=p.bit_offset, plane=p.index, frame=int(fr.frame_number[ks[j]]), fap=f))
 
@@ -504,7 +484,7 @@ def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
     planes = st.planes
     data = st.data
     if planes and all(p.frame_rate is None for p in planes):
-        out.append(diag(D.DECISION_NO_FRAME_RATE, "no plane signals a frame rate: timed at 25 Hz (D6)",
+        out.append(diag(R.DECISION_NO_FRAME_RATE, "no plane signals a frame rate: timed at 25 Hz (D6)",
                         bit_offset=planes[0].bit_offset, plane=0))
     bounds = tables.default_bounds().copy()
     replaced = np.zeros((NUM_FAPS, 4), dtype=bool)
@@ -519,7 +499,7 @@ def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
                 continue
             at = lookahead_stuffing(data, start, length)
             if at is not None:
-                out.append(diag(D.DECISION_LOOKAHEAD_STUFFING,
+                out.append(diag(R.DECISION_LOOKAHEAD_STUFFING,
                                 f"{name} block ending at bit {start + length}: a stuffing position (bit {at}) lies "
                                 "in the 14-bit look-ahead; D7 and a plain 14-bit rewind read the next field "
                                 "differently", bit_offset=at, plane=p.index, frame=p.frame_number))
@@ -533,7 +513,7 @@ def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
         if p.coding_type != CODING_DCT:
             if prev_q is not None and q != prev_q and low and len(p.new_lists) < 4:
                 missing = [n for n in LIST_ORDER if n not in p.new_lists]
-                out.append(diag(D.DECISION_QUANT_NO_LISTS, f"fap_quant changes {prev_q} -> {q} without new "
+                out.append(diag(R.DECISION_QUANT_NO_LISTS, f"fap_quant changes {prev_q} -> {q} without new "
                                 f"{', '.join(missing)} lists (D4 recomputes the alphabets; S1 would not)", **loc))
             for li, name in enumerate(LIST_ORDER):
                 for fap, v in p.new_lists.get(name, {}).items():
@@ -546,12 +526,12 @@ def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
                         continue
                     lo, hi = alphabet(int(bounds[f - 1, il]), int(bounds[f - 1, ih]), q)
                     if lo == hi:
-                        out.append(diag(D.SEM_SINGLE_SYMBOL, f"FAP {f}: {kind} alphabet is the single symbol {lo} "
+                        out.append(diag(R.SEM_SINGLE_SYMBOL, f"FAP {f}: {kind} alphabet is the single symbol {lo} "
                                         f"(bounds {int(bounds[f - 1, il])}..{int(bounds[f - 1, ih])}, fap_quant {q})",
                                         fap=f, **loc))
                     for li in (ih, il):
                         if not replaced[f - 1, li] and _tdiv(int(raw[f - 1, li]), d) != _tdiv(int(bounds[f - 1, li]), d):
-                            out.append(diag(D.DECISION_DEFAULT_ROUNDING,
+                            out.append(diag(R.DECISION_DEFAULT_ROUNDING,
                                             f"FAP {f} uses the default {LIST_ORDER[li]} bound {int(raw[f - 1, li])}, "
                                             f"rounded to {int(bounds[f - 1, li])} by D4 (alphabet differs)",
                                             fap=f, **loc))
@@ -561,11 +541,11 @@ def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
             if gi < len(types) and types[gi] == MASK_INTERPOLATE:
                 freed = [f for f in g.faps if not coded[f - 1] and ever[f - 1]]
                 if freed:
-                    out.append(diag(D.DECISION_MASK_INTERPOLATE, f"group {g.group} mask type 10 leaves FAP(s) "
+                    out.append(diag(R.DECISION_MASK_INTERPOLATE, f"group {g.group} mask type 10 leaves FAP(s) "
                                     f"{', '.join(map(str, freed))} uncoded after they were set: FREE under D3, "
                                     "retained under S1's reading", fap=freed[0], **loc))
         if (coded[0] or coded[1]) and q > 1 and p.coding_type != CODING_DCT:
-            out.append(diag(D.DECISION_HIGH_LEVEL_QUANT, f"visemes/expressions coded with fap_quant {q}: blend/"
+            out.append(diag(R.DECISION_HIGH_LEVEL_QUANT, f"visemes/expressions coded with fap_quant {q}: blend/"
                             f"intensity alphabet 0..{intensity_bound(q)} per D5", fap=1 if coded[0] else 2, **loc))
         ever |= coded
 
@@ -645,7 +625,7 @@ def _claim_violations(ps: ProfileSet, claim: Claim, tools: dict, measures: dict)
     for t, loc in tools.items():
         if t not in prof.tools:
             desc = ps.tools[t].description if t in ps.tools else t
-            out.append(diag(D.PROFILE_TOOL, f"tool {t!r} ({desc}) is not in profile {prof.name}", **loc))
+            out.append(diag(R.PROFILE_TOOL, f"tool {t!r} ({desc}) is not in profile {prof.name}", **loc))
     for lim in ps.limits_for(claim):
         if lim.bounds == "decoder" or lim.kind != "max" or lim.id not in measures:
             continue
@@ -662,4 +642,4 @@ def _claim_violations(ps: ProfileSet, claim: Claim, tools: dict, measures: dict)
 
 
 __all__ = ["Report", "SceneSummary", "analyse", "check_stream", "lookahead_stuffing", "summarize_scene",
-           "RULE_CODES", "LIMIT_CODES"]
+           "LIMIT_CODES"]

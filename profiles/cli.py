@@ -13,6 +13,8 @@ import sys
 from pathlib import Path
 
 from . import diagnostics as D
+
+from fbaconf import rules as R
 from .checker import Report, analyse
 from .model import Claim, load_profiles
 
@@ -120,7 +122,7 @@ def run(args) -> int:
     try:
         data = path.read_bytes()
     except OSError as e:
-        rep = Report([D.diag(D.INPUT_UNREADABLE, f"cannot read {args.input}: {e.strerror or e}")],
+        rep = Report([D.diag(R.INPUT_UNREADABLE, f"cannot read {args.input}: {e.strerror or e}")],
                      {"bytes": 0}, unreadable=True, claim=claim)
     else:
         rep = analyse(data, scene=args.scene, claim=claim, file=str(path), profiles=ps,

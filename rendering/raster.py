@@ -426,14 +426,6 @@ def sample_bilinear_repeat(tex: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- resolve
-def box_downsample(img: np.ndarray, n: int) -> np.ndarray:
-    """Average n x n blocks of float64[H*n, W*n, C] (same order as :func:`box_downsample_planes`)."""
-    if n == 1:
-        return img
-    planes = np.ascontiguousarray(np.moveaxis(img, 2, 0))
-    return np.ascontiguousarray(np.moveaxis(box_downsample_planes(planes, n), 0, 2))
-
-
 def box_downsample_planes(planes: np.ndarray, n: int) -> np.ndarray:
     """Average n x n blocks of float64[C, H*n, W*n]: for each output pixel, the n samples
     of each sample row are added left to right, then the n row sums top to bottom, then

@@ -250,10 +250,6 @@ class Renderer:
             raise RuntimeError(f"internal error: non-finite pixel in frame {k}")
         return out
 
-    def render_samples(self, k: int) -> np.ndarray:
-        """Linear float64[H*N, W*N, 3] at the supersampled resolution (a new array)."""
-        return np.ascontiguousarray(self.render_planes(k).transpose(1, 2, 0))
-
     def frame_path(self, out_dir, k: int) -> Path:
         return Path(out_dir) / f"frame_{k:05d}.{self.scenario.format}"
 

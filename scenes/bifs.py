@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf.scenes import bt
-from fbaconf.animation.errors import SceneError
+from fbaconf.errors import SceneError
 
 from fbaconf.bitstreams.bitio import BitWriter
 from fbaconf.errors import BitstreamError, FbaconfInputError

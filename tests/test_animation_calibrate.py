@@ -5,10 +5,9 @@ import numpy as np
 import pytest
 
 from fbaconf.scenes import bt
-
-from fbaconf.animation import engine, models
+from fbaconf.animation import engine
 from fbaconf.animation.calibrate import calibrate
-from fbaconf.animation.errors import SceneError
+from fbaconf.errors import SceneError
 from fbaconf.animation.faceparams import fapu_from_feature_points, fp_index
 from fbaconf.animation.stateio import load_npz
 from fbaconf.bitstreams.frames import SET, FapFrames
@@ -32,7 +31,6 @@ def test_feature_points_coincide(base, subset):
     tgt = target_points(base)
     recv = np.full((84, 3), np.nan)
     if subset is None:
-        labels = slice(None)
         recv[:] = tgt
     elif subset == "half":
         recv[::2] = tgt[::2]

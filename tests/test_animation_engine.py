@@ -2,10 +2,9 @@ import numpy as np
 import pytest
 
 from fbaconf.scenes import bt
-
 from fbaconf.animation import engine, models
-from fbaconf.animation.errors import SceneError
-from fbaconf.animation.faceparams import FEATURE_POINTS, fapu_from_feature_points, fp_index
+from fbaconf.errors import SceneError
+from fbaconf.animation.faceparams import fapu_from_feature_points, fp_index
 from fbaconf.bitstreams.frames import DERIVED, FREE, SET, FapFrames
 from fbaconf.bitstreams.tables import fap_by_name
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from fbaconf.animation.errors import SceneError
+from fbaconf.errors import SceneError
 from fbaconf.animation.facedef import MeshTable, TransformTable, interval_weights, transform_fields
 from fbaconf.animation.faceparams import FEATURE_POINTS, fapu_from_feature_points, fp_index
 

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from fbaconf.animation.errors import SceneError
+from fbaconf.errors import SceneError
 from fbaconf.animation.highlevel import apply_high_level, default_tables, high_level_weights
 from fbaconf.animation.interp import FitGraph, lr_fill
 from fbaconf.bitstreams.frames import DERIVED, FREE, RETAINED, SET

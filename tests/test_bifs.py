@@ -11,7 +11,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fbaconf.scenes import bt
-
 from fbaconf.animation import models
 from fbaconf.scenes import bifs
 from fbaconf.scenes.bifs import BifsEncodeError, BifsError, _Writer

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fbaconf.profiles import diagnostics as D
+
+from fbaconf import rules as R
 from fbaconf.profiles.checker import SceneSummary, analyse, check_stream, summarize_scene
 from fbaconf.profiles.model import Claim, load_profiles
 from fbaconf.profiles.teststreams import make_stream
@@ -57,7 +58,7 @@ def test_reference_streams_check_clean_against_their_claim(claim):
 
 
 @pytest.mark.parametrize("claim", CLAIMS)
-@pytest.mark.parametrize("kind,code", [("bitrate", D.LEVEL_BITRATE), ("frame_rate", D.LEVEL_FRAME_RATE)])
+@pytest.mark.parametrize("kind,code", [("bitrate", R.LEVEL_BITRATE), ("frame_rate", R.LEVEL_FRAME_RATE)])
 def test_one_stream_limit_exceeded_gives_exactly_its_code(claim, kind, code):
     c = Claim.parse(claim)
     ds = check_stream(stream(c.level, kind), claim=c, scene=scene_for(c))
@@ -82,7 +83,7 @@ def test_one_scene_limit_exceeded_gives_exactly_its_code(claim):
     s = base or SceneSummary()
     s.faces = int(ps.limits["faces"].value(c.level)) + 1
     ds = check_stream(stream(c.level, "clean"), claim=c, scene=s)
-    assert [d.code for d in ds] == [D.LEVEL_FACES]
+    assert [d.code for d in ds] == [R.LEVEL_FACES]
 
 
 @pytest.mark.parametrize("claim,tool", [("simple@1", "fit"), ("simple@2", "fdp_feature_points"),
@@ -92,7 +93,7 @@ def test_tool_outside_the_profile_gives_exactly_profile_code(claim, tool):
     s = scene_for(c) or SceneSummary(faces=1)
     s.tools[tool] = "Face.fdp.FDP"
     ds = check_stream(stream(c.level, "clean"), claim=c, scene=s)
-    assert [d.code for d in ds] == [D.PROFILE_TOOL]
+    assert [d.code for d in ds] == [R.PROFILE_TOOL]
     assert tool in ds[0].message and ds[0].location.node_path == "Face.fdp.FDP"
 
 
@@ -102,7 +103,7 @@ def test_tool_outside_the_profile_gives_exactly_profile_code(claim, tool):
 def test_smallest_claim(level, kind, expected):
     rep = analyse(stream(level, kind), smallest_claim=True)
     assert rep.summary["smallest_claim"] == expected
-    assert {d.code for d in rep.diagnostics} == (set() if expected else {D.CLAIM_NONE})
+    assert {d.code for d in rep.diagnostics} == (set() if expected else {R.CLAIM_NONE})
 
 
 def test_smallest_claim_with_scene_tools():
@@ -138,7 +139,7 @@ def test_bitrate_window_is_sliding():
 
 
 def test_real_scene_file_through_the_bt_reader(tmp_path):
-    bt = pytest.importorskip("fbaconf.scenes.bt")
+    from fbaconf.scenes import bt
     # 84 points in label order, 3 of them sent (the rest 3.4e38: not sent)
     pts = " ".join("0 0 0" if k < 3 else "3.4e38 3.4e38 3.4e38" for k in range(84))
     text = ("Face {\n  fdp FDP {\n    featurePointsCoord Coordinate { point [ " + pts + " ] }\n  }\n"
@@ -151,26 +152,24 @@ def test_real_scene_file_through_the_bt_reader(tmp_path):
     assert s.measures["fdp_feature_points"][0] == 3 and s.measures["fit_nodes"][0] == 2
     assert s.measures["fit_links"][0] == 1 and s.faces == 1
     ds = check_stream(stream(1, "clean"), scene=str(p), claim="simple@1")
-    assert {d.code for d in ds} == {D.PROFILE_TOOL} and len(ds) == 2
+    assert {d.code for d in ds} == {R.PROFILE_TOOL} and len(ds) == 2
     assert all(d.location.node_path for d in ds)
     assert check_stream(stream(1, "clean"), scene=str(p), claim="calibration@1") == []
 
 
 def test_feature_point_list_must_hold_84_points(tmp_path):
-    pytest.importorskip("fbaconf.scenes.bt")
     p = tmp_path / "few.bt"
     p.write_text("Face { fdp FDP { featurePointsCoord Coordinate { point [ 0 0 0, 1 1 1 ] } } }\n")
     ds = check_stream(stream(1, "clean"), scene=str(p), claim="calibration@1")
-    assert [d.code for d in ds] == [D.SCENE_INVALID]
+    assert [d.code for d in ds] == [R.SCENE_INVALID]
     assert ds[0].location.node_path.endswith("featurePointsCoord") and "got 2" in ds[0].message
 
 
 def test_malformed_scene_file(tmp_path):
-    pytest.importorskip("fbaconf.scenes.bt")
     p = tmp_path / "bad.bt"
     p.write_text("Face { fdp FDP { featurePointsCoord Coordinate { point [ 0 0 ] } }\n")
     ds = check_stream(stream(1, "clean"), scene=str(p))
-    assert [d.code for d in ds] == [D.SCENE_INVALID]
+    assert [d.code for d in ds] == [R.SCENE_INVALID]
 
 
 def _png(path, width: int, height: int) -> None:
@@ -184,9 +183,8 @@ def _png(path, width: int, height: int) -> None:
                      + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
 
 
-@pytest.mark.parametrize("width,codes", [(512, set()), (600, {D.LEVEL_TEXTURE})])
+@pytest.mark.parametrize("width,codes", [(512, set()), (600, {R.LEVEL_TEXTURE})])
 def test_texture_size_from_the_scene_image(tmp_path, width, codes):
-    pytest.importorskip("fbaconf.scenes.bt")
     _png(tmp_path / "skin.png", width, 4)
     text = ("Face {\n  fdp FDP {\n    textureCoord TextureCoordinate { point [ 0 0, 1 1 ] }\n"
             "    faceSceneGraph [ Shape { appearance Appearance { texture ImageTexture { url \"skin.png\" } } } ]\n"

@@ -11,7 +11,7 @@ import pytest
 
 from fbaconf.cli import main
 from fbaconf.profiles import catalogue
-from fbaconf.profiles import diagnostics as D
+from fbaconf import rules as R
 from fbaconf.profiles.bitedit import flip_bit
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
@@ -67,7 +67,7 @@ def test_json_issue_content(files, schema, capsys):
     rc, out = run(capsys, files["warn"], "--json", "--locations", "2")
     doc = json.loads(out)
     (issue,) = doc["issues"]
-    assert issue["code"] == D.DECISION_UNIDIRECTIONAL_NEGATIVE and issue["severity"] == "warning"
+    assert issue["code"] == R.DECISION_UNIDIRECTIONAL_NEGATIVE and issue["severity"] == "warning"
     assert issue["count"] == 60 and len(issue["locations"]) == 2 and issue["omitted_locations"] == 58
     loc = issue["locations"][0]
     assert loc["fap"] == 3 and loc["plane"] == 0 and loc["byte_offset"] * 8 + loc["bit"] == loc["bit_offset"]
@@ -79,7 +79,7 @@ def test_claim_and_smallest_claim(files, schema, capsys):
     doc = json.loads(out)
     jsonschema.validate(doc, schema)
     assert rc == 1 and doc["claim"] == "simple@1" and doc["smallest_claim"] == "simple@2"
-    assert [i["code"] for i in doc["issues"]] == [D.LEVEL_BITRATE]
+    assert [i["code"] for i in doc["issues"]] == [R.LEVEL_BITRATE]
     limits = {row["limit"]: row for row in doc["summary"]["limits"]}
     assert limits["bitrate"]["ok"] is False and limits["bitrate"]["provenance"] == "provisional"
     assert limits["coded_frame_rate"]["measured"] == 30 and limits["coded_frame_rate"]["ok"] is True
@@ -98,9 +98,9 @@ def test_only_ignore_max_issues(files, schema, capsys):
     rc, out = run(capsys, files["warn"], "--json", "--ignore", "FAP-DECISION-*")
     doc = json.loads(out)
     assert rc == 0 and doc["issues"] == [] and doc["config"]["ignore"] == ["FAP-DECISION-*"]
-    rc, out = run(capsys, files["broken"], "--json", "--ignore", D.SYNTAX_MARKER)
+    rc, out = run(capsys, files["broken"], "--json", "--ignore", R.SYNTAX_MARKER)
     assert rc == 0 and json.loads(out)["status"] == "clean"
-    rc, out = run(capsys, files["warn"], "--json", "--only", D.SYNTAX_MARKER)
+    rc, out = run(capsys, files["warn"], "--json", "--only", R.SYNTAX_MARKER)
     assert json.loads(out)["issues"] == []
     rc, out = run(capsys, files["warn"], "--json", "--max-issues", "7")
     doc = json.loads(out)
@@ -120,6 +120,6 @@ def test_catalogue_document_is_current():
 
 def test_catalogue_lists_every_code_with_clause():
     text = catalogue.generate()
-    for code, info in D.REGISTRY.items():
+    for code, info in R.CODES.items():
         line = next(ln for ln in text.splitlines() if ln.startswith(f"| `{code}` |"))
         assert info.severity in line and info.clause.replace("|", "\\|") in line

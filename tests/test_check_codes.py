@@ -19,6 +19,7 @@ from fbaconf.errors import BitstreamError
 from fbaconf.bitstreams.frames import FREE, SET, FapFrames
 from fbaconf.profiles import checker
 from fbaconf.profiles import diagnostics as D
+from fbaconf import rules as R
 from fbaconf.profiles.bitedit import (end_stream, flip_bit, get_bits, remove_bits, set_bits, splice,
                                       truncate_bits)
 from fbaconf.profiles.checker import SceneSummary, analyse, check_stream, lookahead_stuffing
@@ -127,7 +128,7 @@ def case_dct_syntax(**_):
             try:
                 decode(bad)
             except BitstreamError as e:
-                if checker.RULE_CODES.get(e.rule) == D.SYNTAX_DCT:
+                if R.code_for_rule(e.rule, R.SYNTAX_OTHER) == R.SYNTAX_DCT:
                     return bad, {}
     pytest.skip("no single-bit corruption of the DCT data found")
 
@@ -312,14 +313,14 @@ def case_faces(**_):
 
 
 LEVEL_SCENE = {
-    D.LEVEL_FDP_POINTS: ("fdp_feature_points", 85),
-    D.LEVEL_FIT_NODES: ("fit_nodes", 17),
-    D.LEVEL_FIT_LINKS: ("fit_links", 33),
-    D.LEVEL_FIT_TERMS: ("fit_terms", 9),
-    D.LEVEL_TEXTURE: ("texture_width", 1024),
-    D.LEVEL_MESH_VERTICES: ("mesh_vertices", 5001),
-    D.LEVEL_FDT_ENTRIES: ("facedeftables_entries", 201),
-    D.LEVEL_INTERVALS: ("intervals_per_facedefmesh", 9),
+    R.LEVEL_FDP_POINTS: ("fdp_feature_points", 85),
+    R.LEVEL_FIT_NODES: ("fit_nodes", 17),
+    R.LEVEL_FIT_LINKS: ("fit_links", 33),
+    R.LEVEL_FIT_TERMS: ("fit_terms", 9),
+    R.LEVEL_TEXTURE: ("texture_width", 1024),
+    R.LEVEL_MESH_VERTICES: ("mesh_vertices", 5001),
+    R.LEVEL_FDT_ENTRIES: ("facedeftables_entries", 201),
+    R.LEVEL_INTERVALS: ("intervals_per_facedefmesh", 9),
 }
 
 
@@ -342,7 +343,6 @@ def case_scene_unavailable(monkeypatch, tmp_path, **_):
 
 
 def case_scene_invalid(tmp_path, **_):
-    pytest.importorskip("fbaconf.scenes.bt")
     return base(), {"scene": str(tmp_path / "missing.bt")}
 
 
@@ -364,50 +364,50 @@ def case_internal(monkeypatch, **_):
 
 
 CASES = {
-    D.SYNTAX_TOO_SHORT: case_too_short,
-    D.SYNTAX_NOT_FACE: case_not_face,
-    D.SYNTAX_TRUNCATED: case_truncated,
-    D.SYNTAX_MARKER: case_marker,
-    D.SYNTAX_OBJECT_MASK: case_object_mask,
-    D.SYNTAX_FIRST_PREDICTED: case_first_predicted,
-    D.SYNTAX_STUFFING: case_stuffing,
-    D.SYNTAX_ARITH_STATE: case_arith_state,
-    D.SYNTAX_NO_END_CODE: case_no_end_code,
-    D.SYNTAX_TRAILING: case_trailing,
-    D.SYNTAX_UNEXPECTED_START_CODE: case_unexpected_start_code,
-    D.SYNTAX_OTHER: case_other,
-    D.SYNTAX_DCT: case_dct_syntax,
-    D.SEM_FRAME_RATE_ZERO: case_frame_rate_zero,
-    D.SEM_TIME_CODE_RANGE: case_time_code_range,
-    D.SEM_TIME_BACKWARDS: case_time_backwards,
-    D.SEM_VISEME_SELECT: case_viseme_select,
-    D.SEM_EXPRESSION_SELECT: case_expression_select,
-    D.SEM_INTENSITY: case_intensity,
-    D.SEM_VALUE_OVERFLOW: case_value_overflow,
-    D.SEM_SINGLE_SYMBOL: case_single_symbol,
-    D.DECISION_QUANT_NO_LISTS: case_quant_no_lists,
-    D.DECISION_UNIDIRECTIONAL_NEGATIVE: case_unidirectional_negative,
-    D.DECISION_DEFAULT_ROUNDING: case_default_rounding,
-    D.DECISION_NO_FRAME_RATE: case_no_frame_rate,
-    D.DECISION_LOOKAHEAD_STUFFING: case_lookahead,
-    D.DECISION_MASK_INTERPOLATE: case_mask_interpolate,
-    D.DECISION_HIGH_LEVEL_QUANT: case_high_level_quant,
-    D.PROFILE_TOOL: case_profile_tool,
-    D.LEVEL_BITRATE: case_bitrate,
-    D.LEVEL_FRAME_RATE: case_frame_rate,
-    D.LEVEL_FACES: case_faces,
+    R.SYNTAX_TOO_SHORT: case_too_short,
+    R.SYNTAX_NOT_FACE: case_not_face,
+    R.SYNTAX_TRUNCATED: case_truncated,
+    R.SYNTAX_MARKER: case_marker,
+    R.SYNTAX_OBJECT_MASK: case_object_mask,
+    R.SYNTAX_FIRST_PREDICTED: case_first_predicted,
+    R.SYNTAX_STUFFING: case_stuffing,
+    R.SYNTAX_ARITH_STATE: case_arith_state,
+    R.SYNTAX_NO_END_CODE: case_no_end_code,
+    R.SYNTAX_TRAILING: case_trailing,
+    R.SYNTAX_UNEXPECTED_START_CODE: case_unexpected_start_code,
+    R.SYNTAX_OTHER: case_other,
+    R.SYNTAX_DCT: case_dct_syntax,
+    R.SEM_FRAME_RATE_ZERO: case_frame_rate_zero,
+    R.SEM_TIME_CODE_RANGE: case_time_code_range,
+    R.SEM_TIME_BACKWARDS: case_time_backwards,
+    R.SEM_VISEME_SELECT: case_viseme_select,
+    R.SEM_EXPRESSION_SELECT: case_expression_select,
+    R.SEM_INTENSITY: case_intensity,
+    R.SEM_VALUE_OVERFLOW: case_value_overflow,
+    R.SEM_SINGLE_SYMBOL: case_single_symbol,
+    R.DECISION_QUANT_NO_LISTS: case_quant_no_lists,
+    R.DECISION_UNIDIRECTIONAL_NEGATIVE: case_unidirectional_negative,
+    R.DECISION_DEFAULT_ROUNDING: case_default_rounding,
+    R.DECISION_NO_FRAME_RATE: case_no_frame_rate,
+    R.DECISION_LOOKAHEAD_STUFFING: case_lookahead,
+    R.DECISION_MASK_INTERPOLATE: case_mask_interpolate,
+    R.DECISION_HIGH_LEVEL_QUANT: case_high_level_quant,
+    R.PROFILE_TOOL: case_profile_tool,
+    R.LEVEL_BITRATE: case_bitrate,
+    R.LEVEL_FRAME_RATE: case_frame_rate,
+    R.LEVEL_FACES: case_faces,
     **{code: _level_scene_case(code) for code in LEVEL_SCENE},
-    D.CLAIM_NONE: case_claim_none,
-    D.SCENE_UNAVAILABLE: case_scene_unavailable,
-    D.SCENE_INVALID: case_scene_invalid,
-    D.CHECK_DCT: case_check_dct,
-    D.CHECK_INTERNAL: case_internal,
+    R.CLAIM_NONE: case_claim_none,
+    R.SCENE_UNAVAILABLE: case_scene_unavailable,
+    R.SCENE_INVALID: case_scene_invalid,
+    R.CHECK_DCT: case_check_dct,
+    R.CHECK_INTERNAL: case_internal,
 }
-CLI_ONLY = {D.INPUT_UNREADABLE}
+CLI_ONLY = {R.INPUT_UNREADABLE}
 
 
 def test_every_code_has_a_case():
-    assert set(D.REGISTRY) == set(CASES) | CLI_ONLY
+    assert set(R.CODES) == set(CASES) | CLI_ONLY
 
 
 @pytest.mark.parametrize("code", sorted(CASES))
@@ -418,7 +418,7 @@ def test_case_triggers_exactly_its_code(code, monkeypatch, tmp_path):
     got = {d.code for d in rep.diagnostics}
     assert got == {code}, [str(d) for d in rep.diagnostics]
     for d in rep.diagnostics:
-        assert d.severity == D.REGISTRY[code].severity and d.clause == D.REGISTRY[code].clause
+        assert d.severity == R.CODES[code].severity and d.clause == R.CODES[code].clause
 
 
 def test_input_unreadable_via_cli(tmp_path, capsys):
@@ -427,7 +427,7 @@ def test_input_unreadable_via_cli(tmp_path, capsys):
     rc = main(["check", str(tmp_path / "missing.fba"), "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert rc == 2 and doc["status"] == "unreadable"
-    assert [i["code"] for i in doc["issues"]] == [D.INPUT_UNREADABLE]
+    assert [i["code"] for i in doc["issues"]] == [R.INPUT_UNREADABLE]
 
 
 # ---------------------------------------------------------------------------- details of some checks
@@ -435,7 +435,7 @@ def test_parse_errors_carry_the_offset_where_parsing_stopped():
     data = base()
     at = decode(data).planes[0].marker_offsets[3][0]
     (d,) = check_stream(flip_bit(data, at))
-    assert d.code == D.SYNTAX_MARKER and d.location.bit_offset == at and d.location.plane == 0
+    assert d.code == R.SYNTAX_MARKER and d.location.bit_offset == at and d.location.plane == 0
     assert d.location.byte_offset == at // 8
 
 
@@ -463,7 +463,7 @@ def test_lookahead_warning_matches_a_real_disagreement(monkeypatch):
 def test_lookahead_detector_is_silent_on_ordinary_streams():
     for seed in range(3):
         data = make_stream(n=30, faps=range(3, 69), seed=seed)
-        assert D.DECISION_LOOKAHEAD_STUFFING not in codes(data)
+        assert R.DECISION_LOOKAHEAD_STUFFING not in codes(data)
 
 
 def test_default_rounding_only_for_fap_63():
@@ -483,7 +483,7 @@ def test_profile_tool_from_a_narrower_profile_data_file():
     f.high[:, 0] = 3
     data = encode(f, EncoderOptions()).data
     ds = check_stream(data, claim="simple@1", profiles=narrow)
-    assert {d.code for d in ds} == {D.PROFILE_TOOL}
+    assert {d.code for d in ds} == {R.PROFILE_TOOL}
     assert ds[0].location.fap == 1 and ds[0].location.plane == 0
     assert codes(data, claim="simple@1") == set()  # real data: Simple includes visemes/expressions
 
@@ -501,13 +501,13 @@ def test_time_code_minutes_and_seconds():
     h = _header(data)
     for off, n, v in ((h + 23, 6, 60), (h + 30, 6, 61)):
         ds = check_stream(set_bits(data, off, n, v))
-        assert [d.code for d in ds] == [D.SEM_TIME_CODE_RANGE]
+        assert [d.code for d in ds] == [R.SEM_TIME_CODE_RANGE]
         assert ds[0].location.bit_offset == h + 18
 
 
 def test_trailing_after_end_code_counts_bytes():
     (d,) = check_stream(base() + bytes(5))
-    assert d.code == D.SYNTAX_TRAILING and "5 byte" in d.message
+    assert d.code == R.SYNTAX_TRAILING and "5 byte" in d.message
 
 
 def test_folding_of_repeated_diagnostics():
@@ -521,13 +521,13 @@ def test_folding_of_repeated_diagnostics():
 
 
 def test_select_only_ignore_prefix():
-    ds = [D.diag(D.SYNTAX_TRUNCATED, "a"), D.diag(D.DECISION_NO_FRAME_RATE, "b"), D.diag(D.SEM_SINGLE_SYMBOL, "c")]
-    assert [d.code for d in D.select(ds, only=["FAP-DECISION-*"])] == [D.DECISION_NO_FRAME_RATE]
-    assert [d.code for d in D.select(ds, ignore=["FAP-SYNTAX-003", "FAP-SEM-*"])] == [D.DECISION_NO_FRAME_RATE]
+    ds = [D.diag(R.SYNTAX_TRUNCATED, "a"), D.diag(R.DECISION_NO_FRAME_RATE, "b"), D.diag(R.SEM_SINGLE_SYMBOL, "c")]
+    assert [d.code for d in D.select(ds, only=["FAP-DECISION-*"])] == [R.DECISION_NO_FRAME_RATE]
+    assert [d.code for d in D.select(ds, ignore=["FAP-SYNTAX-003", "FAP-SEM-*"])] == [R.DECISION_NO_FRAME_RATE]
 
 
 def test_registry_codes_are_well_formed():
     import re
-    for c, info in D.REGISTRY.items():
+    for c, info in R.CODES.items():
         assert re.fullmatch(r"FAP-[A-Z]+-\d{3}", c) and info.description and info.clause
     load_profiles()  # data file valid

@@ -11,7 +11,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fbaconf.profiles import diagnostics as D
+
+from fbaconf import rules as R
 from fbaconf.profiles.bitedit import flip_bit, splice, truncate_bits
 from fbaconf.profiles.checker import SceneSummary, analyse
 from fbaconf.profiles.cli import build_report
@@ -29,8 +30,8 @@ SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[Heal
 
 def _ok(data: bytes, **kw) -> None:
     rep = analyse(data, smallest_claim=True, **kw)
-    assert all(d.code in D.REGISTRY for d in rep.diagnostics)
-    assert D.CHECK_INTERNAL not in {d.code for d in rep.diagnostics}, [str(d) for d in rep.diagnostics]
+    assert all(d.code in R.CODES for d in rep.diagnostics)
+    assert R.CHECK_INTERNAL not in {d.code for d in rep.diagnostics}, [str(d) for d in rep.diagnostics]
     doc, status = build_report(rep, file=None, smallest_claim=True)
     assert status in (0, 1, 2)
     VALIDATOR.validate(json.loads(json.dumps(doc)))

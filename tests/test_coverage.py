@@ -1,9 +1,6 @@
 """The coverage model (conformance/data/coverage.toml) and its extractors."""
 from __future__ import annotations
 
-import numpy as np
-import pytest
-
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.conformance import coverage
 from fbaconf.conformance.build import make_content

@@ -9,7 +9,6 @@ thing (SIGSEGV, an endless loop, 1 GiB of output...).
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import textwrap

@@ -605,8 +605,8 @@ def test_chunked_rasterisation_gives_the_same_coverage(monkeypatch):
 
 def test_cli_end_to_end_with_the_animation_stage(tmp_path):
     """The real default head (when the animation stage is present): npz and .fap inputs."""
-    engine = pytest.importorskip("fbaconf.animation.engine")
-    faptext = pytest.importorskip("fbaconf.bitstreams.faptext")
+    from fbaconf.animation import engine
+    from fbaconf.bitstreams import faptext
     from fbaconf.bitstreams.frames import FapFrames
     from fbaconf.cli import main
     assert hasattr(engine, "animate")

@@ -206,7 +206,7 @@ def test_json_schema_strict_and_round_trip(tmp_path, schema):
 
 
 def test_json_handles_numpy_values(tmp_path, schema):
-    np = pytest.importorskip("numpy")
+    import numpy as np
     rec = make_record()
     rec.results[2].stages[0].first_difference = {"frame": np.int64(3), "vertex": np.int32(7),
                                                  "expected": np.array([1.0, 2.0]), "got": np.float32(0.5)}
@@ -273,7 +273,7 @@ class _Collector(HTMLParser):
 
 def test_html_report(tmp_path):
     out = tmp_path / "report"
-    inside = tiny_png(out / "run" / "frame0.png")
+    tiny_png(out / "run" / "frame0.png")
     rec = make_record(tmp_path / "elsewhere", inside="run/frame0.png")
     rec.results[3].stages[0].artefacts["missing"] = str(tmp_path / "nope.png")
     for kind in ("diff", "got", "expected"):  # the comparison ladder's naming, out of order
