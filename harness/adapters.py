@@ -46,6 +46,7 @@ from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
 
+from .exits import DEFAULT_REJECT_EXIT_CODES
 from .sandbox import Limits
 
 INPUT_KINDS = ("fba", "fap", "scene", "bifs")
@@ -92,6 +93,14 @@ class Adapter:
     supports_multi: bool = False
     manifest_path: Path | None = None
     manifest_text: str = ""
+    reject_exit_codes: frozenset[int] = DEFAULT_REJECT_EXIT_CODES
+
+    @property
+    def is_player(self) -> bool:
+        """A decoder that reads only the .fap text form: a FAP *player*. It can be tested (``run``)
+        but cannot hold an MPEG-4 profile certificate, which requires decoding the binary
+        face-object stream."""
+        return "fba" not in self.inputs
 
     def digest(self) -> str:
         return hashlib.sha256(self.manifest_text.encode("utf-8")).hexdigest()
@@ -100,6 +109,7 @@ class Adapter:
         return {"name": self.name, "kind": self.kind, "description": self.description, "claims": list(self.claims),
                 "tools": self.tools, "inputs": list(self.inputs), "outputs": list(self.outputs),
                 "faps_format": self.faps_format, "manifest": str(self.manifest_path) if self.manifest_path else None,
+                "reject_exit_codes": sorted(self.reject_exit_codes),
                 "manifest_sha256": self.digest(),
                 "limits": {"timeout_s": self.limits.timeout_s, "memory_mb": self.limits.memory_mb,
                            "memory_kind": self.limits.memory_kind, "output_mb": self.limits.output_mb}}
@@ -148,10 +158,28 @@ class CommandAdapter(Adapter):
         self.commands = data["commands"]
         self.env = {str(k): str(v) for k, v in data.get("env", {}).items()}
         self.limits = _limits(data.get("limits", {}), path)
+        self.reject_exit_codes = frozenset(data.get("reject_exit_codes", DEFAULT_REJECT_EXIT_CODES))
         self.supports_multi = "decode_multi" in self.commands
 
     def argv(self, command: str, job: Job) -> list[str]:
         return expand(self.commands[command], job, self.manifest_path)
+
+    def program(self) -> str | None:
+        """The decode command's program as an absolute path ({manifest_dir} expanded, PATH
+        searched for a bare name), or None when it does not exist."""
+        import shutil
+        first = self.commands["decode"][0]
+        if isinstance(first, list):
+            return None
+        if "{manifest_dir}" in first and self.manifest_path is not None:
+            first = first.replace("{manifest_dir}", str(Path(self.manifest_path).resolve().parent))
+        if "{python}" in first:
+            import sys
+            first = first.replace("{python}", sys.executable)
+        if "/" not in first:
+            return shutil.which(first)
+        p = Path(first)
+        return str(p.resolve()) if p.is_file() else None
 
 
 def _limits(d: dict, path) -> Limits:
@@ -199,6 +227,17 @@ def _check_manifest(data: dict, path: Path | None) -> None:
     for key in ("name", "claims", "inputs", "outputs"):
         if key not in data:
             raise bad(f"missing required key {key!r}", "manifest-key")
+    for key in data:
+        if key not in MANIFEST_KEYS:
+            raise bad(f"unknown key {key!r}{_did_you_mean(key, MANIFEST_KEYS)}", "manifest-key")
+    for key in data.get("limits", {}) if isinstance(data.get("limits"), dict) else ():
+        if key not in LIMIT_KEYS:
+            raise bad(f"[limits]: unknown key {key!r}{_did_you_mean(key, LIMIT_KEYS)}", "manifest-limits")
+    rc = data.get("reject_exit_codes", [1])
+    if (not isinstance(rc, list) or not rc or
+            any(not isinstance(c, int) or isinstance(c, bool) or not 1 <= c <= 255 or c in (69, 126, 127) for c in rc)):
+        raise bad("reject_exit_codes must be a non-empty list of exit codes 1..255 other than 69 (not supported) "
+                  "and 126/127 (cannot execute)", "manifest-reject-codes")
     if not isinstance(data["name"], str) or not data["name"]:
         raise bad("name must be a non-empty string", "manifest-key")
     from fbaconf.profiles.model import Claim
@@ -250,6 +289,17 @@ def _check_manifest(data: dict, path: Path | None) -> None:
             raise bad(f"outputs lists {out!r} but [commands] decode never names {ph}", "manifest-outputs")
 
 
+MANIFEST_KEYS = ("name", "description", "claims", "tools", "inputs", "outputs", "faps_format", "commands", "limits",
+                 "env", "python", "options", "reject_exit_codes")
+LIMIT_KEYS = ("timeout_s", "memory_mb", "memory_kind", "output_mb")
+
+
+def _did_you_mean(word: str, choices) -> str:
+    import difflib
+    close = difflib.get_close_matches(word, choices, n=1)
+    return f" (did you mean {close[0]!r}?)" if close else f" (known: {', '.join(choices)})"
+
+
 def _flatten(argv):
     for x in argv:
         if isinstance(x, list):
@@ -293,6 +343,7 @@ def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
     adapter.outputs = list(data["outputs"])
     adapter.faps_format = data.get("faps_format", getattr(adapter, "faps_format", "npz"))
     adapter.limits = _limits(data.get("limits", {}), path)
+    adapter.reject_exit_codes = frozenset(data.get("reject_exit_codes", DEFAULT_REJECT_EXIT_CODES))
     adapter.manifest_path = path
     adapter.manifest_text = text
     return adapter
@@ -313,7 +364,7 @@ def resolve(spec: str | Path) -> Adapter:
     ``reference-inprocess``, ``dummy``...)."""
     p = Path(spec)
     if p.suffix == ".toml" or p.exists():
-        return load_manifest(p)
+        return load_manifest(p.resolve())
     names = bundled()
     if str(spec) in names:
         return load_manifest(names[str(spec)])

@@ -33,17 +33,22 @@ FORMAT = "fbaconf.certificate/1"
 def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: bool = True) -> int:
     from fbaconf.conformance.golden import MANIFEST
     from fbaconf.conformance.suite import golden_root, load_suites
-    from fbaconf.profiles.model import Claim
     from . import reports
     from .adapters import resolve
-    from .adapters import highest_claim
-    from .session import execute, select_cases, write_reports
+    from .session import execute, preflight, resolve_claim, select_cases, write_reports
     t0 = time.perf_counter()
     adapter = resolve(decoder)
-    claim = str(Claim.parse(claim or highest_claim(adapter)))
+    claim = resolve_claim(claim, adapter)
     if not any(_covers(c, claim) for c in adapter.claims):
         print(f"fbaconf certify: error: the decoder does not claim {claim} (claims: {', '.join(adapter.claims)})",
               file=sys.stderr)
+        return 2
+    preflight(adapter)
+    if adapter.is_player:
+        print(f"fbaconf certify: error: {adapter.name} reads only the .fap text form (inputs: "
+              f"{', '.join(adapter.inputs)}): it is a FAP player, not a decoder. An MPEG-4 profile certificate "
+              f"requires decoding the binary face-object stream (inputs must include \"fba\"). Test a player "
+              f"with `fbaconf run` (docs/harness.md, \"Players\").", file=sys.stderr)
         return 2
     suites = load_suites()
     cases = select_cases(suites, claim, [], [], only_required=True)
@@ -54,6 +59,7 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
     record = execute(adapter, claim, cases, suites, out, jobs=jobs, progress=None, speed=speed)
     write_reports(record, out)
     verdict = {0: "PASS", 1: "FAIL", 3: "FAIL (speed)"}.get(record.exit_code, "ERROR")
+    basis = claim_basis(record, cases, claim)
     (out / "suites").mkdir()
     for s in suites:
         if s.name in {c.suite for c in cases}:
@@ -65,7 +71,7 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
         shutil.copyfile(adapter.manifest_path, out / "decoder.toml")
     summary = reports.terminal_summary(record, color=False)
     atomic_write_text(out / "summary.txt", summary + "\n")
-    atomic_write_text(out / "statement.md", _statement(record, verdict, speed))
+    atomic_write_text(out / "statement.md", _statement(record, verdict, speed, basis))
     sums = []
     for p in sorted(q for q in out.rglob("*") if q.is_file()):
         rel = p.relative_to(out).as_posix()
@@ -79,6 +85,7 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
             "speed": [{"operation": s.operation, "rate_fps": s.rate_fps, "required_fps": s.required_fps,
                        "passed": s.passed} for s in record.speed] if speed else "not measured",
             "suites": record.suites, "provisional": record.provisional, "issued": record.finished,
+            "rests_on": basis,
             "sha256sums_sha256": sha256_file(out / SUMS)}
     atomic_write_text(out / CERTIFICATE, json.dumps(cert, indent=1) + "\n")
     print(summary)
@@ -91,7 +98,28 @@ def _covers(claimed: str, claim: str) -> bool:
     return claim_covers(claimed, claim)
 
 
-def _statement(record, verdict: str, speed: bool) -> str:
+def claim_basis(record, cases, claim: str) -> dict:
+    """What a verdict rests on: the tools the claim needs, the coverage points exercised by the
+    cases that passed (of those the claim's cases exercise), and the required cases the decoder
+    could not take."""
+    from fbaconf.conformance.coverage import case_points
+    from fbaconf.profiles.model import Claim, load_profiles
+    ps = load_profiles()
+    c = Claim.parse(claim, ps)
+    ok = {r.case_id for r in record.results if r.outcome.ok}
+    exercised, possible = set(), set()
+    for case in cases:
+        pts = case_points(case).points
+        possible |= pts
+        if case.full_id in ok:
+            exercised |= pts
+    return {"tools": sorted(ps.profiles[c.profile].tools),
+            "coverage_points_exercised": len(exercised), "coverage_points_of_claim": len(possible),
+            "not_exercised": sorted(possible - exercised),
+            "cases_not_taken": list(record.missing)}
+
+
+def _statement(record, verdict: str, speed: bool, basis: dict) -> str:
     c = record.counts()
     lines = [f"# fbaconf certification: {record.decoder['name']} — {record.claim}", "",
              f"**Verdict: {verdict}**", "",
@@ -106,6 +134,18 @@ def _statement(record, verdict: str, speed: bool) -> str:
                          f"({s.provenance}) — {'pass' if s.passed else 'FAIL'}")
     else:
         lines.append("Speed was not measured (--no-speed): this certificate does not cover the level's minimum rates.")
+    lines += ["", "## What this verdict rests on", "",
+              f"- tools the claim requires: {', '.join(basis['tools'])}",
+              f"- coverage points exercised by passing cases: {basis['coverage_points_exercised']} of the "
+              f"{basis['coverage_points_of_claim']} the claim's cases exercise"]
+    if basis["not_exercised"]:
+        lines.append(f"- not exercised (their cases did not pass): {', '.join(basis['not_exercised'][:40])}"
+                     + (" …" if len(basis["not_exercised"]) > 40 else ""))
+    if basis["cases_not_taken"]:
+        lines += ["- required cases the decoder could not take (each fails the claim):"]
+        lines += [f"  - {m}" for m in basis["cases_not_taken"]]
+    else:
+        lines.append("- the decoder took every required case")
     lines += ["", "## Provisional rules and limits", "",
               "The ISO/IEC 14496 text was not available to fbaconf. This verdict rests on these provisional "
               "decisions and limits:", ""]

@@ -5,8 +5,9 @@ run loses nothing and ``--resume`` skips cases already recorded. A :class:`RunRe
 is what every report (terminal, JSON, JUnit XML, HTML) and the certificate are built from.
 
 Outcome classes (architecture "Results"): Pass, Fail, QualityWarning, NotSupported,
-Timeout, Crash, Error, Skipped. ``Pass``/``QualityWarning`` and, for cases outside the
-claim, ``NotSupported`` do not count against a claim; everything else does.
+Timeout, Crash, Error, Skipped. Only ``Pass``/``QualityWarning`` satisfy a case the claim
+requires: a required case that is NotSupported fails the claim too (a claim means all of
+it). NotSupported outside the claim is informative.
 """
 from __future__ import annotations
 
@@ -91,7 +92,8 @@ class CaseResult:
     exit_code: int | None = None
     signal: str | None = None
     stderr_tail: str = ""
-    baseline: str | None = None  # "known-failure", "flake", "fixed" (known failure that now passes)
+    crash_kind: str | None = None  # the crash report found (sanitizer, panic, uncaught exception), if any
+    baseline: str | None = None  # "known-failure", "flake", "fixed" (listed failing, passes now), "new"
 
     @property
     def first_difference(self) -> dict | None:
@@ -150,6 +152,8 @@ class RunRecord:
     finished: str = ""
     duration_s: float = 0.0
     provisional: list[str] = field(default_factory=list)  # statements of provisional rules/limits
+    missing: list[str] = field(default_factory=list)  # required cases the decoder could not take, by reason
+    baseline_summary: str = ""  # "N new, N known, N fixed, N flaky" when a baseline/flakes/retries applied
     exit_code: int = 0
 
     def counts(self, results: Iterable[CaseResult] | None = None) -> dict[str, int]:
@@ -164,6 +168,7 @@ class RunRecord:
             "decoder": self.decoder, "claim": self.claim, "suites": self.suites, "system": self.system,
             "started": self.started, "finished": self.finished, "duration_s": self.duration_s,
             "counts": self.counts(), "exit_code": self.exit_code, "provisional": self.provisional,
+            "missing": self.missing, "baseline_summary": self.baseline_summary,
             "results": [r.to_json() for r in self.results],
             "speed": [s.to_json() for s in self.speed],
         }
@@ -175,7 +180,7 @@ class RunRecord:
                    speed=[SpeedResult.from_json(s) for s in d.get("speed", [])],
                    started=d.get("started", ""), finished=d.get("finished", ""),
                    duration_s=d.get("duration_s", 0.0), provisional=d.get("provisional", []),
-                   exit_code=d.get("exit_code", 0))
+                   missing=d.get("missing", []), baseline_summary=d.get("baseline_summary", ""), exit_code=d.get("exit_code", 0))
 
 
 class ResultLog:

@@ -28,9 +28,10 @@ from pathlib import Path
 from typing import Callable
 
 from fbaconf.conformance.suite import Case, golden_root
+from fbaconf.errors import FbaconfInputError
 from fbaconf.profiles.model import Claim, load_profiles
 
-from . import sandbox
+from . import exits, sandbox
 from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
 from .results import CaseResult, Outcome, ResultLog, StageResult
 
@@ -113,7 +114,12 @@ def _prepare(ctx: RunContext, case: Case, workdir: Path) -> Job:
             values[ph] = v
     a = ctx.adapter
     if "fba" in a.inputs and "fba" in values:
+        # A decoder of the binary stream never gets the .fap form of the case: that text is
+        # what the reference decoded, i.e. the expected output.
         values["input"] = values["fba"]
+        fap = values.pop("fap", None)
+        if fap is not None:
+            Path(fap).unlink()
     elif "fap" in a.inputs and "fap" in values:
         values["input"] = values["fap"]
     if "scene" in a.inputs and "scene_bt" in values:
@@ -178,12 +184,14 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
             return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED,
                               message=f"[commands] {cmd} needs {{{e.args[0]}}}, which this case does not have")
         res = sandbox.run(argv, job.workdir, a.limits, env=a.env)
-        verdict = sandbox.classify(res, a.limits)
+        ending = exits.classify(res, a.limits, a.reject_exit_codes)
         proc = dict(command=argv, exit_code=res.returncode, signal=res.signal, stderr_tail=res.stderr_tail[-2000:])
     else:
-        verdict, proc = _run_python(a, job)
-    if case.kind == "error":
-        return _judge_error_case(case, verdict, proc, base)
+        ending, proc = _run_python(a, job)
+    verdict = exits.outcome_for(ending, invalid_stream=case.kind == "error",
+                                conceal_allowed=bool(case.expect.get("conceal")))
+    if ending.report is not None:
+        proc["crash_kind"] = ending.report.kind
     if verdict is not None:
         outcome, msg = verdict
         return CaseResult(**base, outcome=outcome, message=msg, **proc)
@@ -197,34 +205,34 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
 
 
 def _run_python(a: PythonAdapter, job: Job):
+    """Call an in-process adapter; its ending in the terms of :mod:`.exits` (a typed input
+    error is its reject, an uncaught exception its crash)."""
     t0 = time.perf_counter()
     proc = dict(command=None, exit_code=None, signal=None, stderr_tail="")
     try:
         a.run(job)
     except NotSupportedError as e:
-        return (Outcome.NOT_SUPPORTED, f"decoder: not supported: {e}"), proc
+        return exits.Ending("not-supported", f"decoder: not supported: {e}"), proc
     except MemoryError:
-        return (Outcome.CRASH, "decoder raised MemoryError"), proc
+        return exits.Ending("memory", "in-process decoder raised MemoryError"), proc
+    except FbaconfInputError as e:
+        proc["exit_code"] = 2
+        proc["stderr_tail"] = str(e)[-2000:]
+        if e.rule == "io":
+            return exits.Ending("setup", f"in-process decoder could not read its input: {e}"), proc
+        return exits.Ending("reject", f"in-process decoder rejected the stream: {e}"), proc
     except Exception as e:
-        proc["stderr_tail"] = traceback.format_exc(limit=5)[-2000:]
+        tb = traceback.format_exc(limit=5)
+        proc["stderr_tail"] = tb[-2000:]
         proc["exit_code"] = 1
-        return (Outcome.FAIL, f"decoder raised {type(e).__name__}: {e}"), proc
+        return exits.Ending("crash", f"in-process decoder raised {type(e).__name__}: {e}",
+                            exits.crash_report(traceback.format_exc())), proc
     dt = time.perf_counter() - t0
     if dt > a.limits.timeout_s:
-        return (Outcome.TIMEOUT, f"in-process decoder took {dt:.1f} s, over the {a.limits.timeout_s:g} s limit"), proc
+        return exits.Ending("timeout", f"in-process decoder took {dt:.1f} s, over the {a.limits.timeout_s:g} s "
+                                       f"limit"), proc
     proc["exit_code"] = 0
-    return None, proc
-
-
-def _judge_error_case(case: Case, verdict, proc, base) -> CaseResult:
-    if verdict is None:
-        return CaseResult(**base, outcome=Outcome.PASS, message="invalid stream: decoder exited 0 within limits",
-                          **proc)
-    outcome, msg = verdict
-    if outcome == Outcome.FAIL and proc.get("exit_code") not in (None, 0) and "output limit" not in msg:
-        return CaseResult(**base, outcome=Outcome.PASS,
-                          message=f"invalid stream rejected cleanly ({msg})", **proc)
-    return CaseResult(**base, outcome=outcome, message=f"invalid stream: {msg}", **proc)
+    return exits.Ending("decoded", "in-process decoder returned"), proc
 
 
 # ------------------------------------------------------------------------ comparison
@@ -375,13 +383,17 @@ def _images_stage(cmp, ctx: RunContext, case: Case, gdir: Path, job: Job) -> Sta
 
 
 class Progress:
-    """A one-line progress bar on stderr (only when it is a terminal)."""
+    """Progress on stderr: a one-line bar on a terminal; plain lines (at most one every
+    ``LINE_EVERY_S`` seconds, and the last) in CI logs; nothing when disabled."""
+
+    LINE_EVERY_S = 5.0
 
     def __init__(self, total: int, enabled: bool | None = None) -> None:
         self.total, self.done = total, 0
         self.counts: dict[str, int] = {}
-        self.enabled = sys.stderr.isatty() if enabled is None else enabled
-        self.t0 = time.perf_counter()
+        self.enabled = enabled is not False
+        self.tty = sys.stderr.isatty()
+        self.t0 = self.last = time.perf_counter()
         self.lock = threading.Lock()
 
     def update(self, r: CaseResult) -> None:
@@ -390,10 +402,17 @@ class Progress:
             self.counts[r.outcome.value] = self.counts.get(r.outcome.value, 0) + 1
             if not self.enabled:
                 return
+            now = time.perf_counter()
+            rate = self.done / max(1e-9, now - self.t0)
+            counts = " ".join(f"{k} {v}" for k, v in sorted(self.counts.items()))
+            if not self.tty:
+                if self.done == self.total or now - self.last >= self.LINE_EVERY_S:
+                    self.last = now
+                    sys.stderr.write(f"fbaconf: {self.done}/{self.total} cases ({rate:.1f}/s) {counts}\n")
+                    sys.stderr.flush()
+                return
             w = 30
             fill = int(w * self.done / max(1, self.total))
-            rate = self.done / max(1e-9, time.perf_counter() - self.t0)
-            counts = " ".join(f"{k} {v}" for k, v in sorted(self.counts.items()))
             sys.stderr.write(f"\r[{'#' * fill}{'.' * (w - fill)}] {self.done}/{self.total} "
                              f"({rate:.1f}/s) {counts}\x1b[K")
             if self.done == self.total:
@@ -404,8 +423,9 @@ class Progress:
 def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir: Path, jobs: int | None = None,
               resume: bool = False, keep_workdirs: bool = False, progress: bool | None = None,
               golden: Path | None = None, on_result: Callable[[CaseResult], None] | None = None) -> list[CaseResult]:
-    """Run ``cases``; returns results in case order. ``out_dir/results.jsonl`` is the live log."""
-    out_dir = Path(out_dir)
+    """Run ``cases``; returns results in case order. ``out_dir/results.jsonl`` is the live log.
+    Every path is made absolute first: decoders run in their own folders."""
+    out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     log = ResultLog(out_dir / "results.jsonl")
     done = log.read() if resume else {}

@@ -28,10 +28,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .results import Outcome
 
 LIMIT_LAUNCHER = Path(__file__).with_name("_limit.py")
-EXIT_NOT_SUPPORTED = 69  # sysexits EX_UNAVAILABLE: "not supported" by convention of the manifest
 MEMORY_KINDS = ("address-space", "rss", "none")
 TAIL_BYTES = 4000
 
@@ -186,37 +184,3 @@ def _kill_group(pid: int) -> None:
         os.killpg(pid, signal.SIGKILL)
     except (ProcessLookupError, PermissionError):
         pass
-
-
-def classify(res: ProcResult, limits: Limits) -> tuple[Outcome, str] | None:
-    """The outcome of a finished invocation, or None when it exited 0 within its limits
-    (then the outputs decide). Messages say what happened in words a vendor can act on."""
-    cmd = Path(res.argv[0]).name
-    if "harness-start-failed" in res.notes:
-        return Outcome.ERROR, f"harness could not start the launcher: {res.stderr_tail.strip()}"
-    if res.timed_out:
-        why = "CPU-time limit" if "cpu-limit" in res.notes else f"timeout of {limits.timeout_s:g} s"
-        return Outcome.TIMEOUT, f"{cmd} did not finish within the {why} (killed after {res.elapsed_s:.2f} s)"
-    if res.memory_limit_hit and res.returncode != 0:
-        how = f"killed by {res.signal}" if res.signal else f"exit code {res.returncode}"
-        kind = "resident-set" if limits.memory_kind == "rss" else "address-space"
-        return Outcome.CRASH, (f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; "
-                               f"peak RSS {res.maxrss_mb:.0f} MB)")
-    if res.output_limit_hit:
-        return Outcome.FAIL, (f"{cmd} wrote more than the {limits.output_mb} MB output limit "
-                              f"({res.output_bytes / 2**20:.0f} MB seen" +
-                              (f", killed by {res.signal})" if res.signal else ")"))
-    if res.signal:
-        return Outcome.CRASH, f"{cmd} crashed: killed by {res.signal}" + _err_hint(res)
-    if res.returncode == EXIT_NOT_SUPPORTED:
-        return Outcome.NOT_SUPPORTED, f"{cmd} exited with code 69 (not supported)" + _err_hint(res)
-    if res.returncode == 127 and res.stderr_tail.startswith("fbaconf-limit:"):
-        return Outcome.ERROR, res.stderr_tail.strip()
-    if res.returncode != 0:
-        return Outcome.FAIL, f"{cmd} exited with code {res.returncode}" + _err_hint(res)
-    return None
-
-
-def _err_hint(res: ProcResult) -> str:
-    lines = [ln for ln in res.stderr_tail.strip().splitlines() if ln.strip()]
-    return f"; stderr: {lines[-1][:300]}" if lines else ""

@@ -6,10 +6,15 @@ from __future__ import annotations
 
 import datetime as _dt
 import fnmatch
+import os
 import time
 import tomllib
 from importlib import resources
 from pathlib import Path
+
+from fbaconf.errors import FbaconfInputError
+
+from .adapters import highest_claim
 
 
 def provisional_statements(claim: str | None) -> list[str]:
@@ -48,19 +53,26 @@ def _now() -> str:
 
 
 def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, resume=False, keep=False,
-            progress=None, baseline=None, speed=False):
-    """Run cases (+ speed); returns the RunRecord with its exit code set."""
+            progress=None, baseline=None, flakes=None, retries: int = 0, allow_fixed: bool = False, speed=False):
+    """Run cases (+ speed); returns the RunRecord with its exit code set.
+
+    Exit code: 1 when a required case fails or could not be taken (a claim means all of it),
+    counting only new failures (and fixed cases, unless ``allow_fixed``) when a baseline or
+    flakes file is given; 3 only when every required case passed and only speed was missed;
+    else 0."""
     from . import baseline as bl
     from .results import RunRecord
     from .runner import run_cases
     from .sysinfo import system_info
     t0 = time.perf_counter()
     started = _now()
+    out_dir = Path(out_dir).resolve()
     results = run_cases(adapter, cases, claim=claim, out_dir=out_dir, jobs=jobs, resume=resume,
                         keep_workdirs=keep, progress=progress)
-    new_failures = [r for r in results if r.required and r.outcome.failing]
-    if baseline is not None:
-        new_failures = bl.apply(results, bl.load(baseline))
+    if retries:
+        _retry(adapter, cases, results, claim, out_dir, jobs, retries)
+    summary = bl.classify(results, bl.load(baseline) if baseline is not None else None,
+                          bl.load_flakes(flakes) if flakes is not None else None)
     speed_results = []
     if speed:
         from .speed import measure_claim
@@ -72,13 +84,34 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, res
                  "cases": len(s.cases)} for s in suites if s.name in ran],
         system=system_info(), results=results, speed=speed_results, started=started, finished=_now(),
         duration_s=time.perf_counter() - t0, provisional=provisional_statements(claim))
-    if new_failures:
+    record.missing = missing_summary(results)
+    record.baseline_summary = summary.line() if (baseline is not None or flakes is not None or retries) else ""
+    if summary.failing(allow_fixed):
         record.exit_code = 1
     elif any(not s.passed for s in speed_results):
         record.exit_code = 3
     else:
         record.exit_code = 0
     return record
+
+
+def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) -> None:
+    """Re-run each failing required case up to ``retries`` times; one that passes on a re-run
+    is a flake (its first result is kept, annotated ``flake``)."""
+    from .runner import run_cases
+    by_id = {c.full_id: c for c in cases}
+    todo = [r for r in results if r.required and r.outcome.failing]
+    for attempt in range(1, retries + 1):
+        if not todo:
+            return
+        again = run_cases(adapter, [by_id[r.case_id] for r in todo], claim=claim,
+                          out_dir=out_dir / "retries" / str(attempt), jobs=jobs, progress=False)
+        passed = {r.case_id for r in again if r.outcome.ok}
+        for r in todo:
+            if r.case_id in passed:
+                r.baseline = "flake"
+                r.message = f"flaky: passed on re-run {attempt}; first run: {r.message}"
+        todo = [r for r in todo if r.case_id not in passed]
 
 
 def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None) -> dict[str, Path]:
@@ -90,3 +123,53 @@ def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, htm
     reports.write_junit(record, paths["junit"])
     paths["html"] = reports.write_html(record, html_dir or out_dir, base_dir=out_dir)
     return paths
+
+
+def missing_summary(results) -> list[str]:
+    """What the decoder could not take among the required cases, grouped by reason
+    (tools, inputs, outputs, claims): one line per reason with its count."""
+    from collections import Counter
+    reasons = Counter(r.message for r in results if r.required and r.outcome.value == "NotSupported")
+    return [f"{n} required case(s): {why}" for why, n in reasons.most_common()]
+
+
+class UsageError(FbaconfInputError):
+    """A command-line value is wrong (exit 2, one line)."""
+    rule = "usage"
+
+
+def use_color(stream) -> bool:
+    """Colour only on a terminal and never when NO_COLOR is set (https://no-color.org)."""
+    return stream.isatty() and not os.environ.get("NO_COLOR")
+
+
+def resolve_claim(text: str | None, adapter) -> str:
+    from fbaconf.profiles.model import Claim
+    try:
+        return str(Claim.parse(text or highest_claim(adapter)))
+    except ValueError as e:
+        raise UsageError(f"--claim: {e}") from None
+
+
+def check_suites(suites, names: list[str]) -> None:
+    """Unknown ``--suite`` names are a usage error, with the nearest name."""
+    import difflib
+    known = [s.name for s in suites]
+    for n in names:
+        if n not in known:
+            close = difflib.get_close_matches(n, known, n=1)
+            raise UsageError(f"--suite {n!r}: no such suite" + (f" (did you mean {close[0]!r}?)" if close else
+                             f" (known: {', '.join(known)})"))
+
+
+def preflight(adapter) -> None:
+    """Before any case: a command decoder's program must exist and be executable."""
+    from .adapters import CommandAdapter
+    if not isinstance(adapter, CommandAdapter):
+        return
+    prog = adapter.program()
+    if prog is None:
+        raise UsageError(f"decoder {adapter.name}: program {adapter.commands['decode'][0]!r} not found "
+                         f"(not a file, and not on PATH)")
+    if not os.access(prog, os.X_OK):
+        raise UsageError(f"decoder {adapter.name}: program {prog} is not executable")

@@ -283,10 +283,10 @@ class _Runner:
             return Job(workdir=workdir, values=self._values(n, workdir), frames=n)
 
         if isinstance(a, CommandAdapter):
-            from . import sandbox
+            from . import exits, sandbox
             argv, job = self._argv(job_for)
             res = sandbox.run(argv, workdir, a.limits, env=a.env or None)
-            verdict = sandbox.classify(res, a.limits)
+            verdict = exits.outcome_for(exits.classify(res, a.limits, a.reject_exit_codes))
             if verdict is not None:
                 raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
             elapsed = res.elapsed_s

@@ -11,8 +11,9 @@ import math
 import sys
 from pathlib import Path
 
-from .adapters import highest_claim
-from .session import execute, select_cases, write_reports
+
+
+from .session import UsageError, check_suites, execute, preflight, resolve_claim, select_cases, use_color, write_reports
 
 
 def register(sub) -> None:
@@ -26,7 +27,14 @@ def register(sub) -> None:
                    help="skip cases outside the claim instead of reporting them NotSupported")
     r.add_argument("-o", "--output", type=Path, default=None, help="run folder (default fbaconf-run/<decoder>)")
     r.add_argument("--resume", action="store_true", help="continue an interrupted run in the same folder")
-    r.add_argument("--baseline", type=Path, help="known failures/flakes: only new failures fail the run")
+    r.add_argument("--baseline", type=Path, help="known failures/flakes (case,Outcome[,signature] lines): only "
+                   "new failures, and fixed cases, fail the run")
+    r.add_argument("--flakes", type=Path, help="file of regular expressions (one per line) of case ids whose "
+                   "failures are accepted as flaky")
+    r.add_argument("--retries", type=int, default=0, help="re-run failing cases up to N times; a case that then "
+                   "passes is flaky (default 0)")
+    r.add_argument("--allow-fixed", action="store_true",
+                   help="do not fail the run when a case the baseline lists as failing now passes")
     r.add_argument("--write-baseline", type=Path, help="write the failing cases of this run as a baseline file")
     r.add_argument("--junit", type=Path, help="write JUnit XML here")
     r.add_argument("--json", type=Path, help="write the JSON report here")
@@ -63,31 +71,37 @@ def _common(p) -> None:
 
 def cmd_run(args) -> int:
     from fbaconf.conformance.suite import load_suites
-    from fbaconf.profiles.model import Claim
     from . import baseline as bl
     from . import reports
     from .adapters import resolve
     adapter = resolve(args.decoder)
-    claim = args.claim or highest_claim(adapter)
-    try:
-        claim = str(Claim.parse(claim))
-    except ValueError as e:
-        print(f"fbaconf run: error: --claim: {e}", file=sys.stderr)
-        return 2
+    claim = resolve_claim(args.claim, adapter)
     suites = load_suites()
+    check_suites(suites, args.suite)
+    if args.retries < 0:
+        raise UsageError("--retries must be >= 0")
     cases = select_cases(suites, claim, args.suite, args.case, args.only_required)
     if not cases:
-        print("fbaconf run: error: no case selected", file=sys.stderr)
-        return 2
-    out_dir = args.output or Path("fbaconf-run") / adapter.name
+        raise UsageError("no case selected (check --case and --only-required)")
+    preflight(adapter)
+    out_dir = (args.output or Path("fbaconf-run") / adapter.name).resolve()
     record = execute(adapter, claim, cases, suites, out_dir, jobs=args.jobs, resume=args.resume,
                      keep=args.keep_workdirs, progress=False if args.no_progress else None,
-                     baseline=args.baseline, speed=args.speed)
+                     baseline=args.baseline, flakes=args.flakes, retries=args.retries,
+                     allow_fixed=args.allow_fixed, speed=args.speed)
     paths = write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
     if args.write_baseline:
         n = bl.write(record.results, args.write_baseline)
         print(f"wrote baseline with {n} known failure(s) to {args.write_baseline}")
-    print(reports.terminal_summary(record, color=sys.stdout.isatty()))
+    print(reports.terminal_summary(record, color=use_color(sys.stdout)))
+    if record.baseline_summary:
+        print(f"baseline: {record.baseline_summary}")
+    if record.missing:
+        print(f"claim {claim} not met: the decoder could not take every case it requires:")
+        for m in record.missing:
+            print(f"  {m}")
+        if adapter.is_player:
+            print("  (a .fap player cannot hold an MPEG-4 profile claim; see docs/harness.md, \"Players\")")
     print(f"reports: {paths['html']}  {paths['json']}  {paths['junit']}")
     return record.exit_code
 
@@ -111,9 +125,8 @@ def cmd_certify(args) -> int:
         print(f"certify verify: OK — {info['decoder']} {info['claim']}: {info['verdict']}")
         return 0
     if not args.decoder or not args.output:
-        print("fbaconf certify: error: --decoder and -o/--output are required", file=sys.stderr)
-        return 2
-    return certify.certify(args.decoder, args.claim, args.output, jobs=args.jobs, speed=not args.no_speed)
+        raise UsageError("--decoder and -o/--output are required")
+    return certify.certify(args.decoder, args.claim, args.output.resolve(), jobs=args.jobs, speed=not args.no_speed)
 
 
 # ------------------------------------------------------------------ bench
@@ -175,17 +188,14 @@ def _usage(msg: str) -> int:
 
 
 def cmd_bench(args) -> int:
-    from fbaconf.profiles.model import Claim
-
     from .adapters import resolve
-    from .speed import OPERATIONS, SpeedError, SpeedRunError, failed_result, highest_claim, measure, skip_reason
+    from .speed import OPERATIONS, SpeedError, SpeedRunError, failed_result, measure, skip_reason
 
     adapter = resolve(args.decoder)  # ManifestError -> exit 2 (cli.main)
-    claim = args.claim or highest_claim(adapter)
-    try:
-        claim = str(Claim.parse(claim))
-    except ValueError as e:
-        return _usage(f"--claim: {e}")
+    claim = resolve_claim(args.claim, adapter)
+    preflight(adapter)
+    if args.work_dir:
+        args.work_dir = args.work_dir.resolve()
     if args.repeats < 1:
         return _usage("--repeats must be >= 1")
     lengths = None

@@ -120,7 +120,10 @@ class Claim:
         try:
             prof = ps.profile(pname)
         except KeyError:
-            raise ValueError(f"unknown profile {pname!r} (known: {', '.join(ps.profiles)})") from None
+            import difflib
+            close = difflib.get_close_matches(pname.strip().lower(), list(ps.profiles), n=1)
+            hint = f"did you mean {close[0]}@{lv.strip() or 1}? " if close else ""
+            raise ValueError(f"unknown profile {pname!r} ({hint}known: {', '.join(ps.profiles)})") from None
         lv = lv.strip()
         if lv[:1] in ("L", "l"):
             lv = lv[1:]

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from fbaconf.conformance.suite import load_suites
-from fbaconf.harness import adapters, baseline, sandbox
+from fbaconf.harness import exits, adapters, baseline, sandbox
 from fbaconf.harness.certify import verify_package
 from fbaconf.harness.results import Outcome, ResultLog
 from fbaconf.harness.runner import capability, claim_covers, run_cases
@@ -178,8 +178,9 @@ def test_sandbox_runs_argv_without_a_shell(tmp_path):
     assert res.returncode == 0
     assert res.stdout_tail.strip() == "$HOME; `id`"
     missing = sandbox.run(["/nonexistent/decoder"], tmp_path, sandbox.Limits(timeout_s=5))
-    outcome, msg = sandbox.classify(missing, sandbox.Limits(timeout_s=5))
-    assert outcome == Outcome.ERROR and "cannot execute" in msg
+    ending = exits.classify(missing, sandbox.Limits(timeout_s=5))
+    assert ending.kind == "setup" and "cannot execute" in ending.message
+    assert exits.outcome_for(ending, invalid_stream=True)[0] == Outcome.ERROR
 
 
 # ----------------------------------------------------------------------------- manifests

@@ -154,7 +154,7 @@ def _raised_rule_ids() -> dict[str, str]:
             f = node.func
             fname = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
             cands = [kw.value for kw in node.keywords if kw.arg == "rule"]
-            if fname in ("err", "error", "warn", "_err", "fail"):
+            if fname in ("err", "error", "warn", "_err", "fail", "bad"):
                 cands += node.args[1:3]
             for c in cands:
                 if isinstance(c, ast.Constant) and isinstance(c.value, str) and _RULE_ID.fullmatch(c.value):

@@ -1,0 +1,137 @@
+"""A verdict only a real decoder can earn (issue 14).
+
+Lazy and broken decoders, written here as tiny programs, must not certify; every process
+ending on the error suite gets the outcome the harness guide's table gives it."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fbaconf.conformance.suite import load_suites
+from fbaconf.harness import adapters, certify
+from fbaconf.harness.results import Outcome
+from fbaconf.harness.runner import run_cases
+
+ERROR_CASE = "simple-l1-error/truncated"
+VALID_CASE = "simple-l1-core/arith-q8-visemes-expressions"
+
+
+def case(full_id: str):
+    suite, cid = full_id.split("/")
+    (s,) = load_suites(names=[suite])
+    return next(c for c in s.cases if c.id == cid)
+
+
+def manifest(tmp_path: Path, name: str, decode: list, *, inputs=("fba",), tools=None, extra: str = "") -> Path:
+    argv = ", ".join(f'"{a}"' for a in decode)
+    tools_line = f"tools = {list(tools)!r}\n".replace("'", '"') if tools is not None else ""
+    p = tmp_path / f"{name}.toml"
+    p.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = {list(inputs)!r}\n'.replace("'", '"') +
+                 tools_line + 'outputs = ["faps"]\nfaps_format = "fap"\n' + extra +
+                 f"[commands]\ndecode = [{argv}]\n[limits]\ntimeout_s = 20\n")
+    return p
+
+
+def script(tmp_path: Path, name: str, body: str) -> Path:
+    """A decoder program: a Python script run as {python} SCRIPT {input} {faps_out}."""
+    p = tmp_path / f"{name}.py"
+    p.write_text("import os, signal, sys\n" + body)
+    return p
+
+
+def pydec(tmp_path, name, body, **kw) -> Path:
+    s = script(tmp_path, name, body)
+    return manifest(tmp_path, name, ["{python}", str(s), "{input}", "{faps_out}"], **kw)
+
+
+def run_one(m: Path, full_id: str, tmp_path: Path):
+    a = adapters.resolve(m)
+    (r,) = run_cases(a, [case(full_id)], claim="simple@1", out_dir=tmp_path / "run", jobs=1, progress=False)
+    return r
+
+
+# ------------------------------------------------------------------ the error-case matrix
+MATRIX = [
+    # name, program body, outcome on the invalid stream, words in the message
+    ("clean-reject", "sys.stderr.write('dec: error: byte 9: truncated\\n'); sys.exit(1)", Outcome.PASS,
+     "rejected cleanly"),
+    ("rust-panic", "sys.stderr.write(\"thread 'main' panicked at src/parse.rs:41:9:\\nindex out of bounds\\n\");"
+                   " sys.exit(101)", Outcome.CRASH, "Rust panic"),
+    ("asan", "sys.stderr.write('==12==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x1\\n"
+             "    #0 0x4 in parse_plane dec.c:10\\n'); sys.exit(1)", Outcome.CRASH, "AddressSanitizer"),
+    ("ubsan-exit0", "sys.stderr.write('dec.c:88:14: runtime error: signed integer overflow: 2147483647 + 1\\n');"
+                    " sys.exit(0)", Outcome.CRASH, "UndefinedBehaviorSanitizer"),
+    ("go-panic", "sys.stderr.write('panic: runtime error: index out of range [3] with length 3\\n\\n"
+                 "goroutine 1 [running]:\\nmain.parse(0x1)\\n'); sys.exit(2)", Outcome.CRASH, "Go panic"),
+    ("java-exception", "sys.stderr.write('Exception in thread \"main\" java.lang.ArrayIndexOutOfBoundsException: 3\\n"
+                       "\\tat Dec.parse(Dec.java:10)\\n'); sys.exit(1)", Outcome.CRASH,
+     "java.lang.ArrayIndexOutOfBoundsException"),
+    ("segfault", "os.kill(os.getpid(), signal.SIGSEGV)", Outcome.CRASH, "SIGSEGV"),
+    ("exit0-output", "open(sys.argv[2], 'w').write('2.1 x 25 1\\n' + '0 ' * 68 + '\\n0\\n'); sys.exit(0)",
+     Outcome.FAIL, "without complaint"),
+    ("missing-input", "open(sys.argv[1] + '.nope'); sys.exit(0)", Outcome.ERROR, "could not open"),
+    ("odd-exit", "sys.exit(7)", Outcome.FAIL, "not a documented reject code"),
+]
+
+
+@pytest.mark.parametrize("name,body,outcome,words", MATRIX, ids=[m[0] for m in MATRIX])
+def test_error_stream_endings(tmp_path, name, body, outcome, words):
+    r = run_one(pydec(tmp_path, name, body), ERROR_CASE, tmp_path)
+    assert r.outcome == outcome, r.message
+    assert words in r.message
+
+
+def test_a_crash_report_is_named_in_the_result(tmp_path):
+    r = run_one(pydec(tmp_path, "rust", MATRIX[1][1]), ERROR_CASE, tmp_path)
+    assert r.crash_kind == "Rust panic"
+
+
+def test_missing_input_on_a_valid_stream_is_error_not_fail(tmp_path):
+    r = run_one(pydec(tmp_path, "lost", "open('/nonexistent/in.fba'); sys.exit(0)"), VALID_CASE, tmp_path)
+    assert r.outcome == Outcome.ERROR
+
+
+def test_documented_reject_codes_are_the_manifests(tmp_path):
+    m = pydec(tmp_path, "rej3", "sys.exit(3)", extra="reject_exit_codes = [3]\n")
+    assert run_one(m, ERROR_CASE, tmp_path).outcome == Outcome.PASS
+    assert run_one(m, VALID_CASE, tmp_path).outcome == Outcome.FAIL
+
+
+# ------------------------------------------------------------------ claims
+def certify_exit(tmp_path, m, claim="simple@1") -> int:
+    return certify.certify(str(m), claim, tmp_path / "cert", jobs=2, speed=False)
+
+
+def test_copying_player_cannot_certify(tmp_path, capsys):
+    m = manifest(tmp_path, "copier", ["/bin/cp", "{input}", "{faps_out}"], inputs=("fap",))
+    assert certify_exit(tmp_path, m) == 2
+    assert "player" in capsys.readouterr().err
+
+
+def test_copying_decoder_never_sees_the_fap_form(tmp_path):
+    """A binary decoder that tries to copy the .fap text (the expected output) gets none."""
+    m = manifest(tmp_path, "sneaky", ["/bin/cp", "{fap}", "{faps_out}"], inputs=("fba", "fap"))
+    assert certify_exit(tmp_path, m) == 1
+
+
+def test_decoder_that_supports_nothing_fails_the_claim(tmp_path):
+    m = pydec(tmp_path, "nothing", "sys.exit(69)")
+    assert certify_exit(tmp_path, m) == 1
+    statement = (tmp_path / "cert" / "statement.md").read_text()
+    assert "could not take" in statement
+
+
+def test_arithmetic_only_decoder_fails_the_claim(tmp_path):
+    """The reference decoder declared without the DCT tool: the DCT cases are NotSupported."""
+    m = manifest(tmp_path, "arith-only", ["{python}", "-m", "fbaconf.harness.refdecoder", "decode", "{input}",
+                                          "--faps-out", "{faps_out}"], tools=("arithmetic", "high_level_faps"))
+    assert certify_exit(tmp_path, m) == 1
+    statement = (tmp_path / "cert" / "statement.md").read_text()
+    assert "dct" in statement
+
+
+def test_worked_text_example_is_a_player():
+    m = Path(__file__).resolve().parents[1] / "examples" / "fapplay" / "fapplay.toml"
+    a = adapters.resolve(m)
+    assert a.is_player
