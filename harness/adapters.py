@@ -159,10 +159,26 @@ class CommandAdapter(Adapter):
         self.env = {str(k): str(v) for k, v in data.get("env", {}).items()}
         self.limits = _limits(data.get("limits", {}), path)
         self.reject_exit_codes = frozenset(data.get("reject_exit_codes", DEFAULT_REJECT_EXIT_CODES))
+        self.sandbox = dict(data.get("sandbox", {}))
         self.supports_multi = "decode_multi" in self.commands
 
     def argv(self, command: str, job: Job) -> list[str]:
         return expand(self.commands[command], job, self.manifest_path)
+
+    def sandbox_view(self, argv: list[str], workdir: Path, hidden=()):
+        """What this decoder sees in the sandbox: its program's and manifest's folders and the
+        manifest's ``[sandbox] read_only`` paths read-only, its case folder (inputs read-only),
+        and — when started through ``{python}`` — the Python installation and the fbaconf
+        package read-only with ``hidden`` (goldens, suites, the run folder) emptied."""
+        from .sandbox import default_view, python_view
+        v = default_view(argv, workdir)
+        if self.manifest_path is not None:
+            v.read_only.append(Path(self.manifest_path).resolve().parent)
+        v.read_only += [Path(p) for p in self.sandbox.get("read_only", [])]
+        if argv[0] == sys.executable or Path(argv[0]).resolve() == Path(sys.executable).resolve():
+            v.read_only += python_view()
+        v.hidden += [Path(h) for h in hidden]
+        return v
 
     def program(self) -> str | None:
         """The decode command's program as an absolute path ({manifest_dir} expanded, PATH
@@ -183,10 +199,13 @@ class CommandAdapter(Adapter):
 
 
 def _limits(d: dict, path) -> Limits:
+    if not isinstance(d, dict):
+        raise ManifestError("[limits] must be a table", rule="manifest-limits", file=str(path))
     try:
-        return Limits(timeout_s=float(d.get("timeout_s", 60)), memory_mb=int(d.get("memory_mb", 2048)),
-                      memory_kind=str(d.get("memory_kind", "address-space")), output_mb=int(d.get("output_mb", 256)))
-    except (TypeError, ValueError) as e:
+        return Limits(timeout_s=d.get("timeout_s", 60), memory_mb=d.get("memory_mb", 2048),
+                      memory_kind=str(d.get("memory_kind", "address-space")), output_mb=d.get("output_mb", 256),
+                      processes=d.get("processes", 64))
+    except (TypeError, ValueError, OverflowError) as e:
         raise ManifestError(f"[limits]: {e}", rule="manifest-limits", file=str(path)) from None
 
 
@@ -233,13 +252,19 @@ def _check_manifest(data: dict, path: Path | None) -> None:
     for key in data.get("limits", {}) if isinstance(data.get("limits"), dict) else ():
         if key not in LIMIT_KEYS:
             raise bad(f"[limits]: unknown key {key!r}{_did_you_mean(key, LIMIT_KEYS)}", "manifest-limits")
+    sb = data.get("sandbox", {})
+    if not isinstance(sb, dict) or any(k not in SANDBOX_KEYS for k in sb) or \
+            not all(isinstance(x, str) and x.startswith("/") for x in sb.get("read_only", [])):
+        raise bad("[sandbox] may only give read_only = [absolute paths] (extra folders the decoder needs, "
+                  "e.g. its runtime)", "manifest-sandbox")
     rc = data.get("reject_exit_codes", [1])
     if (not isinstance(rc, list) or not rc or
             any(not isinstance(c, int) or isinstance(c, bool) or not 1 <= c <= 255 or c in (69, 126, 127) for c in rc)):
         raise bad("reject_exit_codes must be a non-empty list of exit codes 1..255 other than 69 (not supported) "
                   "and 126/127 (cannot execute)", "manifest-reject-codes")
-    if not isinstance(data["name"], str) or not data["name"]:
-        raise bad("name must be a non-empty string", "manifest-key")
+    if not isinstance(data["name"], str) or not re.fullmatch(r"[A-Za-z0-9_@+-][A-Za-z0-9._@+-]{0,63}", data["name"]):
+        raise bad("name must be 1-64 letters, digits, '.', '_', '-', '+' or '@', not starting with '.' "
+                  "(it names the run folder)", "manifest-name")
     from fbaconf.profiles.model import Claim
     if not isinstance(data["claims"], list) or not data["claims"]:
         raise bad("claims must be a non-empty list like [\"simple@1\"]", "manifest-claims")
@@ -290,8 +315,9 @@ def _check_manifest(data: dict, path: Path | None) -> None:
 
 
 MANIFEST_KEYS = ("name", "description", "claims", "tools", "inputs", "outputs", "faps_format", "commands", "limits",
-                 "env", "python", "options", "reject_exit_codes")
-LIMIT_KEYS = ("timeout_s", "memory_mb", "memory_kind", "output_mb")
+                 "env", "python", "options", "reject_exit_codes", "sandbox")
+LIMIT_KEYS = ("timeout_s", "memory_mb", "memory_kind", "output_mb", "processes")
+SANDBOX_KEYS = ("read_only",)
 
 
 def _did_you_mean(word: str, choices) -> str:

@@ -16,21 +16,28 @@ byte of any file makes verification fail.
 """
 from __future__ import annotations
 
+import hashlib
 import json
+import os
+import re
 import shutil
 import sys
 import time
 from pathlib import Path
 
 from fbaconf._atomic import atomic_write_text
-from fbaconf.conformance.suite import digest_problems, sha256_file
+from fbaconf.conformance.suite import sha256_file
+from fbaconf.errors import FbaconfInputError
+
+from .safefs import confined, read_regular, remove_tree
 
 CERTIFICATE = "certificate.json"
 SUMS = "SHA256SUMS"
 FORMAT = "fbaconf.certificate/1"
 
 
-def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: bool = True) -> int:
+def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: bool = True, key: Path | None = None,
+            force: bool = False, allow_unisolated: bool = False) -> int:
     from fbaconf.conformance.golden import MANIFEST
     from fbaconf.conformance.suite import golden_root, load_suites
     from . import reports
@@ -50,12 +57,20 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
               f"requires decoding the binary face-object stream (inputs must include \"fba\"). Test a player "
               f"with `fbaconf run` (docs/harness.md, \"Players\").", file=sys.stderr)
         return 2
+    from . import sandbox
+    from .adapters import CommandAdapter
+    isolated = sandbox.isolation() != "none" or not isinstance(adapter, CommandAdapter)
+    if not isolated and not allow_unisolated:
+        print("fbaconf certify: error: bubblewrap (bwrap) is not available, so the decoder would run unisolated "
+              "(it could read the goldens); install it (Debian: apt-get install bubblewrap) or give "
+              "--allow-unisolated (the statement then says so)", file=sys.stderr)
+        return 2
+    if key is not None:
+        _load_key(Path(key), private=True)  # a bad key is a set-up error before anything runs
     suites = load_suites()
     cases = select_cases(suites, claim, [], [], only_required=True)
-    out = Path(out)
-    if out.exists():
-        shutil.rmtree(out)
-    out.mkdir(parents=True)
+    out = Path(out).resolve()
+    prepare_output(out, force)
     record = execute(adapter, claim, cases, suites, out, jobs=jobs, progress=None, speed=speed)
     write_reports(record, out)
     verdict = {0: "PASS", 1: "FAIL", 3: "FAIL (speed)"}.get(record.exit_code, "ERROR")
@@ -71,6 +86,9 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
         shutil.copyfile(adapter.manifest_path, out / "decoder.toml")
     summary = reports.terminal_summary(record, color=False)
     atomic_write_text(out / "summary.txt", summary + "\n")
+    basis["isolation"] = ("bubblewrap sandbox" if sandbox.isolation() == "bwrap" and isinstance(adapter, CommandAdapter)
+                          else "in-process (trusted Python adapter)" if not isinstance(adapter, CommandAdapter)
+                          else "NONE: the decoder ran unisolated (--allow-unisolated)")
     atomic_write_text(out / "statement.md", _statement(record, verdict, speed, basis))
     sums = []
     for p in sorted(q for q in out.rglob("*") if q.is_file()):
@@ -88,6 +106,8 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
             "rests_on": basis,
             "sha256sums_sha256": sha256_file(out / SUMS)}
     atomic_write_text(out / CERTIFICATE, json.dumps(cert, indent=1) + "\n")
+    if key is not None:
+        sign_package(out, key)
     print(summary)
     print(f"certificate: {out / CERTIFICATE}  report: {out / 'index.html'}  ({time.perf_counter() - t0:.1f} s)")
     return record.exit_code
@@ -135,6 +155,7 @@ def _statement(record, verdict: str, speed: bool, basis: dict) -> str:
     else:
         lines.append("Speed was not measured (--no-speed): this certificate does not cover the level's minimum rates.")
     lines += ["", "## What this verdict rests on", "",
+              f"- isolation of the decoder: {basis.get('isolation', 'unknown')}",
               f"- tools the claim requires: {', '.join(basis['tools'])}",
               f"- coverage points exercised by passing cases: {basis['coverage_points_exercised']} of the "
               f"{basis['coverage_points_of_claim']} the claim's cases exercise"]
@@ -153,37 +174,178 @@ def _statement(record, verdict: str, speed: bool, basis: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def verify_package(pkg: Path) -> list[str]:
+# ------------------------------------------------------------------ signatures
+SIGNATURE = "SIGNATURE"
+KEY_FILE, PUB_FILE = "fbaconf-signing.key", "fbaconf-signing.pub"
+MAX_PACKAGE_FILE = 256 * 2**20
+
+
+class SignatureError(FbaconfInputError):
+    rule = "certificate-key"
+
+
+def keygen(out_dir: Path) -> tuple[Path, Path]:
+    """A new Ed25519 key pair: ``fbaconf-signing.key`` (PEM, PKCS#8, mode 0600) and
+    ``fbaconf-signing.pub`` (PEM) in ``out_dir``; never overwrites an existing key."""
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    key_path, pub_path = out_dir / KEY_FILE, out_dir / PUB_FILE
+    if key_path.exists() or pub_path.exists():
+        raise SignatureError(f"{key_path} or {pub_path} exists already: not overwriting a key", file=str(out_dir))
+    key = Ed25519PrivateKey.generate()
+    pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                            serialization.NoEncryption())
+    fd = os.open(key_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "wb") as f:
+        f.write(pem)
+    pub_path.write_bytes(key.public_key().public_bytes(serialization.Encoding.PEM,
+                                                       serialization.PublicFormat.SubjectPublicKeyInfo))
+    return key_path, pub_path
+
+
+def _load_key(path: Path, private: bool):
+    from cryptography.hazmat.primitives import serialization
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
+    try:
+        data = read_regular(path, 64 * 1024)
+        key = (serialization.load_pem_private_key(data, password=None) if private
+               else serialization.load_pem_public_key(data))
+    except (FbaconfInputError, ValueError, TypeError) as e:
+        raise SignatureError(f"not a PEM {'private' if private else 'public'} key: {e}", file=str(path)) from None
+    want = Ed25519PrivateKey if private else Ed25519PublicKey
+    if not isinstance(key, want):
+        raise SignatureError("not an Ed25519 key (make one with `fbaconf certify keygen`)", file=str(path))
+    return key
+
+
+def sign_package(pkg: Path, key_path: Path) -> None:
+    """Sign the certificate (which pins SHA256SUMS, which pins every file): ``SIGNATURE``
+    holds the base64 Ed25519 signature of ``certificate.json``'s bytes."""
+    import base64
+    key = _load_key(Path(key_path), private=True)
+    sig = key.sign((Path(pkg) / CERTIFICATE).read_bytes())
+    atomic_write_text(Path(pkg) / SIGNATURE, base64.b64encode(sig).decode("ascii") + "\n")
+
+
+def _check_signature(pkg: Path, pubkey: Path | None) -> tuple[str, list[str]]:
+    """("signed", []) / ("unsigned", []) / ("signature not checked", []) or problems."""
+    import base64
+    from cryptography.exceptions import InvalidSignature
+    sig_path = pkg / SIGNATURE
+    if not sig_path.exists() and not sig_path.is_symlink():
+        return "unsigned", ([f"no {SIGNATURE}: the package is unsigned"] if pubkey is not None else [])
+    if pubkey is None:
+        return "signature not checked (give --pubkey)", []
+    key = _load_key(Path(pubkey), private=False)
+    try:
+        sig = base64.b64decode(read_regular(sig_path, 4096).strip(), validate=True)
+        key.verify(sig, read_regular(pkg / CERTIFICATE, MAX_PACKAGE_FILE))
+    except (InvalidSignature, ValueError, FbaconfInputError):
+        return "signature INVALID", [f"{SIGNATURE} does not verify with {pubkey}: the certificate was changed or "
+                                     f"signed with another key"]
+    return "signed", []
+
+
+def prepare_output(out: Path, force: bool) -> None:
+    """``certify -o``: an absent or empty folder, or — with ``force`` — an fbaconf package to
+    replace. Anything else of the user's is left alone (exit 2)."""
+    from .session import UsageError
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise UsageError(f"-o {out}: exists and is not a folder")
+    if not out.exists() or not any(out.iterdir()):
+        out.mkdir(parents=True, exist_ok=True)
+        return
+    try:
+        is_pkg = json.loads(read_regular(out / CERTIFICATE, 1 << 20)).get("format") == FORMAT
+    except (FbaconfInputError, ValueError, AttributeError):
+        is_pkg = False
+    if not is_pkg:
+        raise UsageError(f"-o {out}: the folder is not empty and is not an fbaconf certification package; "
+                         f"give an empty or new folder")
+    if not force:
+        raise UsageError(f"-o {out}: holds a certification package already; give --force to replace it")
+    remove_tree(out)
+    out.mkdir(parents=True)
+
+
+_SUMS_LINE = re.compile(r"([0-9a-f]{64})  (\S(?:.*\S)?)")
+
+
+def verify_package(pkg: Path, pubkey: Path | None = None) -> list[str]:
+    """Every problem of a package (digests, files, and the signature when ``pubkey`` is given)."""
+    return verify(pkg, pubkey)[0]
+
+
+def verify(pkg: Path, pubkey: Path | None = None) -> tuple[list[str], str]:
+    """(problems, signature state). Reads only regular files inside the package, each capped
+    in size; a SHA256SUMS entry that leaves the package, or names a link, is a problem."""
     pkg = Path(pkg)
     problems: list[str] = []
+    if not pkg.is_dir() or pkg.is_symlink():
+        return [f"{pkg} is not a package folder"], "unsigned"
     try:
-        cert = json.loads((pkg / CERTIFICATE).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        return [f"no {CERTIFICATE} in {pkg}"]
-    except (OSError, ValueError) as e:
-        return [f"{CERTIFICATE} unreadable: {e}"]
+        cert = json.loads(read_regular(pkg / CERTIFICATE, 1 << 20).decode("utf-8"))
+        if not isinstance(cert, dict):
+            raise ValueError("not a JSON object")
+    except FbaconfInputError as e:
+        return [f"{CERTIFICATE}: {e.message}"], "unsigned"
+    except (UnicodeDecodeError, ValueError) as e:
+        return [f"{CERTIFICATE} unreadable: {e}"], "unsigned"
     if cert.get("format") != FORMAT:
-        problems.append(f"{CERTIFICATE}: unknown format {cert.get('format')!r}")
-    sums_path = pkg / SUMS
-    if not sums_path.is_file():
-        return problems + [f"no {SUMS}"]
-    if sha256_file(sums_path) != cert.get("sha256sums_sha256"):
+        problems.append(f"{CERTIFICATE}: unknown format {str(cert.get('format'))[:80]!r}")
+    try:
+        sums_bytes = read_regular(pkg / SUMS, 16 * 2**20)
+    except FbaconfInputError as e:
+        return problems + [f"{SUMS}: {e.message}"], "unsigned"
+    if hashlib.sha256(sums_bytes).hexdigest() != cert.get("sha256sums_sha256"):
         problems.append(f"{SUMS} does not match the digest in {CERTIFICATE}")
     listed: dict[str, str] = {}
-    for n, line in enumerate(sums_path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
-        digest, sep, rel = line.partition("  ")
-        if not sep or len(digest) != 64:
+    for n, line in enumerate(sums_bytes.decode("utf-8", "replace").splitlines(), 1):
+        m = _SUMS_LINE.fullmatch(line)
+        if not m:
             problems.append(f"{SUMS} line {n} malformed")
             continue
-        listed[rel] = digest
-    missing, modified, extra = digest_problems(pkg, listed, ignore=lambda rel: rel in (CERTIFICATE, SUMS))
-    problems += [f"missing file {rel}" for rel in missing]
-    problems += [f"{rel} was modified (sha256 mismatch)" for rel in modified]
-    problems += [f"file {rel} was added after signing" for rel in extra]
+        rel = m.group(2)
+        try:
+            confined(pkg, rel, what=f"{SUMS} line {n} entry")
+        except FbaconfInputError as e:
+            problems.append(e.message)
+            continue
+        listed[rel] = m.group(1)
+    for rel, digest in sorted(listed.items()):
+        try:
+            data = read_regular(pkg / rel, MAX_PACKAGE_FILE)
+        except FbaconfInputError as e:
+            problems.append(f"{rel}: {e.message}" if (pkg / rel).exists() or (pkg / rel).is_symlink()
+                            else f"missing file {rel}")
+            continue
+        if hashlib.sha256(data).hexdigest() != digest:
+            problems.append(f"{rel} was modified (sha256 mismatch)")
+    for p in _walk_files(pkg):
+        rel = p.relative_to(pkg).as_posix()
+        if rel not in listed and rel not in (CERTIFICATE, SUMS, SIGNATURE):
+            problems.append(f"file {rel} was added after signing")
     try:
-        report = json.loads((pkg / "report.json").read_text(encoding="utf-8"))
-        if report.get("claim") != cert.get("claim") or report.get("exit_code") != cert.get("exit_code"):
+        report = json.loads(read_regular(pkg / "report.json", MAX_PACKAGE_FILE).decode("utf-8"))
+        if not isinstance(report, dict) or report.get("claim") != cert.get("claim") or \
+                report.get("exit_code") != cert.get("exit_code"):
             problems.append("report.json disagrees with the certificate (claim or exit code)")
-    except (OSError, ValueError):
+    except (FbaconfInputError, UnicodeDecodeError, ValueError):
         problems.append("report.json unreadable")
-    return problems
+    state, sig_problems = _check_signature(pkg, pubkey)
+    return problems + sig_problems, state
+
+
+def _walk_files(root: Path):
+    """Every non-directory entry below ``root`` (links included, never followed)."""
+    stack = [root]
+    while stack:
+        d = stack.pop()
+        for e in os.scandir(d):
+            p = Path(e.path)
+            if e.is_dir(follow_symlinks=False):
+                stack.append(p)
+            else:
+                yield p

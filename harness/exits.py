@@ -45,6 +45,7 @@ _RUST_PANIC = re.compile(r"thread '[^']*' panicked at (?:'[^']*', )?([^\n:]+:\d+
 _JAVA_EXC = re.compile(r"Exception in thread \"[^\"]*\" ([\w.$]+)")
 _JAVA_FRAME = re.compile(r"^\s+at (\S+)\(", re.M)
 _DOTNET_EXC = re.compile(r"Unhandled exception\. ([\w.]+)")
+_BWRAP = re.compile(r"^bwrap: ([^\n]*)", re.M)
 _ENOENT = re.compile(r"No such file or directory|\bENOENT\b|FileNotFoundError|NoSuchFileException|"
                      r"FileNotFoundException|cannot find the (?:file|path) specified")
 
@@ -135,6 +136,13 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
     if res.signal:
         what = f" ({report.kind})" if report else ""
         return Ending("crash", f"{cmd} crashed: killed by {res.signal}{what}{_last_line(err)}", report)
+    m = _BWRAP.search(err)
+    if m and rc == 1:
+        what = m.group(1)
+        if what.startswith("execvp "):
+            prog, _, why = what[len("execvp "):].partition(": ")
+            return Ending("setup", f"sandbox: cannot execute {prog!r}: {why}")
+        return Ending("setup", f"the sandbox (bubblewrap) could not start the decoder: {what}")
     if rc in (126, 127):
         return Ending("setup", f"{cmd} could not be executed (exit code {rc}){_last_line(err)}")
     if rc != 0 and _ENOENT.search(err):

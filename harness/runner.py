@@ -32,6 +32,7 @@ from fbaconf.errors import FbaconfInputError
 from fbaconf.profiles.model import Claim, load_profiles
 
 from . import exits, sandbox
+from .safefs import remove_tree
 from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
 from .results import CaseResult, Outcome, ResultLog, StageResult
 
@@ -151,6 +152,14 @@ def _prepare(ctx: RunContext, case: Case, workdir: Path) -> Job:
     return Job(workdir=workdir, values=values, faces=faces, frames=case.frames, unwanted=unwanted)
 
 
+def _remove_quietly(path: Path) -> None:
+    """Delete a case folder whatever the decoder left in it (depth, permissions, links)."""
+    try:
+        remove_tree(path)
+    except OSError as e:
+        print(f"fbaconf: warning: could not remove {path}: {e}", file=sys.stderr)
+
+
 def run_case(ctx: RunContext, case: Case) -> CaseResult:
     t0 = time.perf_counter()
     required = required_for(ctx.claim, case)
@@ -168,7 +177,7 @@ def run_case(ctx: RunContext, case: Case) -> CaseResult:
                             stderr_tail=traceback.format_exc(limit=3)[-2000:])
     finally:
         if not ctx.keep_workdirs:
-            shutil.rmtree(workdir, ignore_errors=True)
+            _remove_quietly(workdir)
     result.duration_s = time.perf_counter() - t0
     return result
 
@@ -183,7 +192,10 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
         except KeyError as e:
             return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED,
                               message=f"[commands] {cmd} needs {{{e.args[0]}}}, which this case does not have")
-        res = sandbox.run(argv, job.workdir, a.limits, env=a.env)
+        if sandbox.stopping():
+            return CaseResult(**base, outcome=Outcome.SKIPPED, message="interrupted before it started")
+        view = a.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders(ctx))
+        res = sandbox.run(argv, job.workdir, a.limits, env=a.env, view=view)
         ending = exits.classify(res, a.limits, a.reject_exit_codes)
         proc = dict(command=argv, exit_code=res.returncode, signal=res.signal, stderr_tail=res.stderr_tail[-2000:])
     else:
@@ -202,6 +214,18 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
     msg = "; ".join(f"{s.stage}: {s.message}" for s in failing) if failing else \
         f"{', '.join(s.stage for s in stages)} match"
     return CaseResult(**base, outcome=outcome, message=msg, stages=stages, **proc)
+
+
+def hidden_from_decoders(ctx: RunContext | None = None) -> list[Path]:
+    """What a sandboxed decoder must never see even where fbaconf's own files are visible:
+    the goldens, the suites, the run folder (results, other cases, reports), the git tree."""
+    from fbaconf.conformance.suite import suites_root
+    import fbaconf
+    root = Path(fbaconf.__file__).resolve().parent.parent
+    out = [Path(golden_root()).resolve(), Path(suites_root()).resolve(), root / ".git"]
+    if ctx is not None:
+        out += [Path(ctx.golden).resolve(), Path(ctx.out_dir).resolve()]
+    return out
 
 
 def _run_python(a: PythonAdapter, job: Job):
@@ -458,5 +482,5 @@ def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir
             for f in as_completed(futs):
                 results[futs[f].full_id] = f.result()
     if not keep_workdirs:
-        shutil.rmtree(work_root, ignore_errors=True)
+        _remove_quietly(work_root)
     return [results[c.full_id] for c in cases if c.full_id in results]

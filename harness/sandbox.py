@@ -1,37 +1,63 @@
-"""Run one untrusted decoder invocation: argv list (never a shell), own directory, limits.
+"""Run one untrusted decoder invocation: argv list (never a shell), own directory, limits,
+and — where bubblewrap is installed — its own sandbox.
+
+Isolation (``bwrap``, Debian package ``bubblewrap``): the decoder sees the system's
+``/usr`` and ``/etc`` read-only, its own program's folder and manifest folder read-only,
+its case folder (inputs read-only, outputs writable), an empty ``/tmp`` — and nothing of the
+project: not the goldens, the suites, the run folder, the venv or the harness's code
+(decoders started through ``{python}`` see the Python installation and the fbaconf package
+read-only, with the goldens, suites and run folder hidden). It gets its own PID, network,
+IPC and UTS namespaces: no network, and every process it starts dies with the case.
+Without bubblewrap (:func:`isolation` says ``"none"``) decoders run unisolated; ``run``
+warns once and ``certify`` refuses unless told ``--allow-unisolated``.
 
 Limits per invocation:
 
 * wall-clock ``timeout_s`` — the whole process group is killed (SIGKILL) when it expires;
-* memory: ``memory_mb`` as an address-space rlimit (``memory_kind = "address-space"``,
-  the default; allocations beyond it fail inside the decoder), or, for runtimes that
-  reserve large virtual ranges up front (JVM, some Go/JS runtimes), ``"rss"``: the harness
-  samples the child's resident set and kills it when it exceeds the limit; ``"none"``;
+* memory: ``memory_mb`` as an address-space rlimit per process (``memory_kind =
+  "address-space"``, the default), or for runtimes that reserve large virtual ranges up
+  front (JVM, some Go/JS runtimes) ``"rss"``: the resident set; ``"none"``. Where the
+  machine's cgroups are writable, the limit also holds for the whole process tree together
+  (a cgroup memory limit), and ``processes`` caps the number of processes (pids.max);
 * output: ``output_mb`` per file (RLIMIT_FSIZE: a write beyond it raises SIGXFSZ in the
   decoder) and in total over the working directory (checked after the run);
 * CPU seconds (RLIMIT_CPU, a backstop at twice the timeout); no core dumps.
 
-The limits are applied by a tiny launcher (``_limit.py``) that sets the rlimits and execs
-the program, so nothing runs between fork and exec in this (threaded) process. stdout and
-stderr go to files in the working directory; only their tails are kept.
+The limits are applied by a tiny launcher (``_limit.py``) that joins the cgroups, sets the
+rlimits and execs bubblewrap (or the program), so nothing runs between fork and exec in
+this (threaded) process. stdout and stderr go to files outside the decoder's view; only
+their tails are kept, read without following links or blocking.
 
 The result names what happened — exit code, signal name, timeout, output limit, memory
-limit — and :func:`classify` turns it into a harness outcome with a useful message.
+limit — and :mod:`.exits` turns it into an outcome with a useful message.
 """
 from __future__ import annotations
 
+import math
 import os
+import shutil
 import signal
+import stat
 import subprocess
 import sys
+import threading
 import time
+import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
 
 LIMIT_LAUNCHER = Path(__file__).with_name("_limit.py")
+_SIGNALS = {int(s) for s in signal.Signals}
 MEMORY_KINDS = ("address-space", "rss", "none")
 TAIL_BYTES = 4000
+
+
+# Sane bounds of every limit: a limit outside them is a manifest error, never a disabled check.
+MAX_TIMEOUT_S = 24 * 3600.0
+MAX_MEMORY_MB = 1 << 20
+MAX_OUTPUT_MB = 1 << 20
+MAX_PROCESSES = 4096
 
 
 @dataclass(frozen=True)
@@ -40,12 +66,82 @@ class Limits:
     memory_mb: int = 2048
     memory_kind: str = "address-space"
     output_mb: int = 256
+    processes: int = 64
 
     def __post_init__(self) -> None:
         if self.memory_kind not in MEMORY_KINDS:
             raise ValueError(f"memory_kind must be one of {', '.join(MEMORY_KINDS)}, not {self.memory_kind!r}")
-        if not (self.timeout_s > 0 and self.memory_mb >= 0 and self.output_mb > 0):
-            raise ValueError("limits must be positive")
+        t = self.timeout_s
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or \
+                not 0 < t <= MAX_TIMEOUT_S:
+            raise ValueError(f"timeout_s must be a number of seconds in (0, {MAX_TIMEOUT_S:g}], not {t!r}")
+        for name, v, lo, hi in (("memory_mb", self.memory_mb, 0, MAX_MEMORY_MB),
+                                ("output_mb", self.output_mb, 1, MAX_OUTPUT_MB),
+                                ("processes", self.processes, 1, MAX_PROCESSES)):
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+                raise ValueError(f"{name} must be a whole number in [{lo}, {hi}], not {v!r}")
+
+
+@dataclass
+class View:
+    """What a sandboxed decoder sees: read-only paths, writable paths, and paths hidden (an
+    empty tmpfs) inside the read-only ones. Paths that do not exist are skipped."""
+    read_only: list[Path] = field(default_factory=list)
+    writable: list[Path] = field(default_factory=list)
+    hidden: list[Path] = field(default_factory=list)
+    read_only_inside: list[Path] = field(default_factory=list)  # re-bound read-only inside writable ones
+
+
+_ISOLATION: str | None = None
+_ISO_LOCK = threading.Lock()
+
+
+def isolation() -> str:
+    """``"bwrap"`` when bubblewrap can make a sandbox on this machine, else ``"none"``
+    (``FBACONF_SANDBOX=none`` forces it off, for debugging a decoder)."""
+    global _ISOLATION
+    with _ISO_LOCK:
+        if _ISOLATION is None:
+            _ISOLATION = "none"
+            exe = shutil.which("bwrap")
+            if exe and os.environ.get("FBACONF_SANDBOX", "") != "none":
+                try:
+                    r = subprocess.run([exe, "--unshare-all", "--die-with-parent", "--ro-bind", "/", "/", "--",
+                                        "/bin/true"], capture_output=True, timeout=10)
+                    if r.returncode == 0:
+                        _ISOLATION = "bwrap"
+                except (OSError, subprocess.SubprocessError):
+                    pass
+        return _ISOLATION
+
+
+def _bwrap_argv(view: View, workdir: Path) -> list[str]:
+    out = [shutil.which("bwrap") or "bwrap", "--die-with-parent", "--new-session", "--unshare-all",
+           "--cap-drop", "ALL"]
+    for top in ("/usr", "/etc", "/bin", "/sbin", "/lib", "/lib32", "/lib64", "/libx32"):
+        p = Path(top)
+        if p.is_symlink():
+            out += ["--symlink", os.readlink(p), top]
+        elif p.is_dir():
+            out += ["--ro-bind", top, top]
+    out += ["--proc", "/proc", "--dev", "/dev", "--tmpfs", "/tmp"]
+    seen = set()
+    for p in view.read_only:
+        p = Path(p)
+        if p.exists() and str(p) not in seen:
+            seen.add(str(p))
+            out += ["--ro-bind", str(p), str(p)]
+    for p in view.hidden:
+        if Path(p).is_dir():
+            out += ["--tmpfs", str(p)]
+    for p in view.writable:
+        if Path(p).exists():
+            out += ["--bind", str(p), str(p)]
+    for p in view.read_only_inside:
+        if Path(p).exists():
+            out += ["--ro-bind", str(p), str(p)]
+    out += ["--chdir", str(workdir), "--"]
+    return out
 
 
 @dataclass
@@ -66,16 +162,155 @@ class ProcResult:
 
 
 def _tail(path: Path) -> str:
+    """The last ``TAIL_BYTES`` of a regular file, read without following a link and without
+    blocking (a FIFO or device put in its place reads as empty)."""
     try:
-        with open(path, "rb") as f:
-            f.seek(0, os.SEEK_END)
-            size = f.tell()
-            f.seek(max(0, size - TAIL_BYTES))
-            data = f.read()
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
     except OSError:
         return ""
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            return ""
+        size = st.st_size
+        os.lseek(fd, max(0, size - TAIL_BYTES), os.SEEK_SET)
+        data = os.read(fd, TAIL_BYTES)
+    except OSError:
+        return ""
+    finally:
+        os.close(fd)
     text = data.decode("utf-8", "replace")
     return ("…" if size > TAIL_BYTES else "") + text
+
+
+# ------------------------------------------------------------------ cgroups (the whole process tree)
+_CG_LOCK = threading.Lock()
+_CG_BASES: list[tuple[str, Path]] | None = None
+
+
+def _cgroup_bases() -> list[tuple[str, Path]]:
+    """Writable cgroup parents for "pids" and "memory": v1 hierarchies or a v2 unified one."""
+    global _CG_BASES
+    with _CG_LOCK:
+        if _CG_BASES is not None:
+            return _CG_BASES
+        bases: list[tuple[str, Path]] = []
+        root = Path("/sys/fs/cgroup")
+        for ctrl in ("pids", "memory"):
+            v1 = root / ctrl
+            if (v1 / "cgroup.procs").exists() and not (v1 / "cgroup.controllers").exists():
+                bases.append((ctrl, v1 / "fbaconf"))
+        if not bases:
+            for v2 in (root, root / "unified"):
+                try:
+                    ctrls = (v2 / "cgroup.controllers").read_text().split()
+                except OSError:
+                    continue
+                if "pids" in ctrls or "memory" in ctrls:
+                    bases.append(("v2", v2 / "fbaconf"))
+                    break
+        ok = []
+        for kind, base in bases:
+            try:
+                base.mkdir(exist_ok=True)
+                if kind == "v2":
+                    have = (base.parent / "cgroup.controllers").read_text().split()
+                    (base / "cgroup.subtree_control").write_text(
+                        " ".join(f"+{c}" for c in ("pids", "memory") if c in have))
+                probe = base / f"probe-{uuid.uuid4().hex[:8]}"
+                probe.mkdir()
+                probe.rmdir()
+                ok.append((kind, base))
+            except OSError:
+                pass
+        _CG_BASES = ok
+        return ok
+
+
+class _Cgroups:
+    """One case's cgroups: a process-count and a memory limit over the whole tree, and a way
+    to kill every process in it, whatever session or group it moved to."""
+
+    def __init__(self, limits: Limits) -> None:
+        self.dirs: list[tuple[str, Path]] = []
+        name = f"case-{uuid.uuid4().hex[:12]}"
+        for kind, base in _cgroup_bases():
+            d = base / name
+            try:
+                d.mkdir()
+                if kind in ("pids", "v2") and (d / "pids.max").exists():
+                    (d / "pids.max").write_text(str(limits.processes))
+                if limits.memory_kind != "none" and limits.memory_mb:
+                    n = str(limits.memory_mb * 2**20)
+                    if kind == "memory":
+                        (d / "memory.limit_in_bytes").write_text(n)
+                    elif kind == "v2" and (d / "memory.max").exists():
+                        (d / "memory.max").write_text(n)
+                self.dirs.append((kind, d))
+            except OSError:
+                _rmdir(d)
+
+    def launcher_args(self) -> list[str]:
+        return [x for _k, d in self.dirs for x in ("--cgroup", str(d))]
+
+    def kill_all(self) -> None:
+        for _kind, d in self.dirs:
+            for _ in range(200):
+                try:
+                    pids = [int(x) for x in (d / "cgroup.procs").read_text().split()]
+                except (OSError, ValueError):
+                    break
+                if not pids:
+                    break
+                for pid in pids:
+                    try:
+                        os.kill(pid, signal.SIGKILL)
+                    except OSError:
+                        pass
+                time.sleep(0.005)
+
+    def oom_killed(self) -> bool:
+        for kind, d in self.dirs:
+            try:
+                if kind == "memory":
+                    txt = (d / "memory.oom_control").read_text()
+                    if any(ln.split()[:1] == ["oom_kill"] and int(ln.split()[1]) > 0 for ln in txt.splitlines()):
+                        return True
+                    if int((d / "memory.failcnt").read_text() or 0) > 0:
+                        return True
+                elif kind == "v2" and (d / "memory.events").exists():
+                    for ln in (d / "memory.events").read_text().splitlines():
+                        k, v = ln.split()
+                        if k in ("oom_kill", "max") and int(v) > 0:
+                            return True
+            except (OSError, ValueError, IndexError):
+                pass
+        return False
+
+    def pids_exhausted(self) -> bool:
+        for kind, d in self.dirs:
+            try:
+                if kind == "pids" and int((d / "pids.events").read_text().split()[1]) > 0:
+                    return True
+            except (OSError, ValueError, IndexError):
+                pass
+        return False
+
+    def close(self) -> None:
+        self.kill_all()
+        for _kind, d in self.dirs:
+            _rmdir(d)
+
+
+def _rmdir(d: Path) -> None:
+    for _ in range(50):
+        try:
+            d.rmdir()
+            return
+        except FileNotFoundError:
+            return
+        except OSError:
+            time.sleep(0.01)
 
 
 def _rss_mb(pid: int) -> float:
@@ -100,19 +335,44 @@ def _dir_bytes(root: Path, stop_at: int) -> int:
     return total
 
 
+def default_view(argv: list[str], workdir: Path) -> View:
+    """The program's folder read-only, the working folder writable (its ``in/`` read-only)."""
+    ro = []
+    prog = argv[0] if "/" in argv[0] else shutil.which(argv[0])
+    if prog:
+        ro += [Path(prog).parent, Path(prog).resolve().parent]
+    return View(read_only=ro, writable=[Path(workdir)], read_only_inside=[Path(workdir) / "in"])
+
+
+def python_view() -> list[Path]:
+    """What a decoder started through ``{python}`` needs read-only: the Python installation,
+    the venv and the fbaconf package (the caller hides the goldens, suites and run folder)."""
+    import fbaconf
+    pkg_root = Path(fbaconf.__file__).resolve().parent.parent
+    return [Path(sys.base_prefix).resolve(), Path(sys.prefix).resolve(), Path(sys.prefix), pkg_root]
+
+
 def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,
-        measure_dirs: list[Path] | None = None) -> ProcResult:
-    """Run ``argv`` in ``workdir`` under ``limits``; never raises for the decoder's behaviour."""
+        measure_dirs: list[Path] | None = None, view: View | None = None) -> ProcResult:
+    """Run ``argv`` in ``workdir`` under ``limits`` (sandboxed when :func:`isolation` allows);
+    never raises for the decoder's behaviour."""
     if not argv or not all(isinstance(a, str) for a in argv):
         raise ValueError("argv must be a non-empty list of strings")
-    workdir = Path(workdir)
+    workdir = Path(workdir).resolve()
     tmp = workdir / "tmp"
     tmp.mkdir(parents=True, exist_ok=True)
-    out_path, err_path = workdir / ".stdout", workdir / ".stderr"
+    io_dir = Path(tempfile_dir())
+    out_path, err_path = io_dir / "stdout", io_dir / "stderr"
     as_bytes = limits.memory_mb * 2**20 if limits.memory_kind == "address-space" else 0
     fsize = limits.output_mb * 2**20
     cpu = int(max(1, limits.timeout_s * 2 + 1))
-    full = [sys.executable, "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize), str(cpu), "--", *argv]
+    cg = _Cgroups(limits)
+    inner = list(argv)
+    sandboxed = isolation() == "bwrap"
+    if sandboxed:
+        inner = _bwrap_argv(view or default_view(argv, workdir), workdir) + inner
+    full = [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize), str(cpu),
+            *cg.launcher_args(), "--", *inner]
     base_env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8",
                 "HOME": str(workdir), "TMPDIR": str(tmp), "TMP": str(tmp), "TEMP": str(tmp)}
     for keep in ("SYSTEMROOT", "LD_LIBRARY_PATH", "JAVA_HOME", "PYTHONPATH", "VIRTUAL_ENV"):
@@ -120,41 +380,37 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
             base_env[keep] = os.environ[keep]
     base_env.update(env or {})
     t0 = time.perf_counter()
-    with open(out_path, "wb") as fo, open(err_path, "wb") as fe:
-        try:
-            proc = subprocess.Popen(full, cwd=workdir, stdin=subprocess.DEVNULL, stdout=fo, stderr=fe,
-                                    env=base_env, start_new_session=True, close_fds=True)
-        except OSError as e:  # the launcher itself could not start: a harness problem
-            return ProcResult(argv, None, elapsed_s=0.0, stderr_tail=f"cannot start: {e}",
-                              notes=["harness-start-failed"])
-        deadline = t0 + limits.timeout_s
-        status, rusage, timed_out, mem_hit = None, None, False, False
-        delay = 0.0005
-        while True:
-            pid, st, ru = os.wait4(proc.pid, os.WNOHANG)
-            if pid:
-                status, rusage = st, ru
-                break
-            now = time.perf_counter()
-            if now >= deadline:
-                timed_out = True
-            elif limits.memory_kind == "rss" and limits.memory_mb and _rss_mb(proc.pid) > limits.memory_mb:
-                mem_hit = True
-            if timed_out or mem_hit:
-                _kill_group(proc.pid)
-                _pid, status, rusage = os.wait4(proc.pid, 0)
-                break
-            time.sleep(delay)
-            delay = min(delay * 2, 0.01)
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        _kill_group(proc.pid)  # leftover children of the decoder
-    elapsed = time.perf_counter() - t0
-    rc = proc.returncode
-    res = ProcResult(argv, None if (timed_out or mem_hit) else (rc if rc >= 0 else None), elapsed_s=elapsed,
-                     timed_out=timed_out, memory_limit_hit=mem_hit,
-                     cpu_s=(rusage.ru_utime + rusage.ru_stime) if rusage else 0.0,
-                     maxrss_mb=(rusage.ru_maxrss / 1024.0) if rusage else 0.0,
-                     stdout_tail=_tail(out_path), stderr_tail=_tail(err_path))
+    try:
+        with open(out_path, "wb") as fo, open(err_path, "wb") as fe:
+            try:
+                proc = subprocess.Popen(full, cwd=workdir, stdin=subprocess.DEVNULL, stdout=fo, stderr=fe,
+                                        env=base_env, start_new_session=True, close_fds=True)
+            except OSError as e:  # the launcher itself could not start: a harness problem
+                return ProcResult(argv, None, elapsed_s=0.0, stderr_tail=f"cannot start: {e}",
+                                  notes=["harness-start-failed"])
+            _RUNNING.add(proc.pid)
+            try:
+                status, rusage, timed_out, mem_hit = _wait(proc, t0, limits)
+            finally:
+                _RUNNING.discard(proc.pid)
+                _kill_group(proc.pid)  # leftover children of the decoder
+                oom = cg.oom_killed()
+                pids_hit = cg.pids_exhausted()
+                cg.close()
+        elapsed = time.perf_counter() - t0
+        rc = os.waitstatus_to_exitcode(status)
+        proc.returncode = rc
+        if sandboxed and 128 < rc < 128 + 65 and rc - 128 in _SIGNALS:
+            rc = -(rc - 128)  # bubblewrap reports a decoder killed by signal N as exit code 128 + N
+        res = ProcResult(argv, None if (timed_out or mem_hit) else (rc if rc >= 0 else None), elapsed_s=elapsed,
+                         timed_out=timed_out, memory_limit_hit=mem_hit or (oom and rc != 0),
+                         cpu_s=(rusage.ru_utime + rusage.ru_stime) if rusage else 0.0,
+                         maxrss_mb=(rusage.ru_maxrss / 1024.0) if rusage else 0.0,
+                         stdout_tail=_tail(out_path), stderr_tail=_tail(err_path))
+    finally:
+        shutil.rmtree(io_dir, ignore_errors=True)
+    if pids_hit:
+        res.notes.append("process-limit")
     if rc < 0 and not (timed_out or mem_hit):
         try:
             res.signal = signal.Signals(-rc).name
@@ -177,6 +433,53 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
     if total > limits.output_mb * 2**20:
         res.output_limit_hit = True
     return res
+
+
+def tempfile_dir() -> str:
+    import tempfile
+    return tempfile.mkdtemp(prefix="fbaconf-io-")
+
+
+def _wait(proc, t0: float, limits: Limits):
+    deadline = t0 + limits.timeout_s
+    status, rusage, timed_out, mem_hit = None, None, False, False
+    delay = 0.0005
+    while True:
+        pid, st, ru = os.wait4(proc.pid, os.WNOHANG)
+        if pid:
+            return st, ru, timed_out, mem_hit
+        now = time.perf_counter()
+        if now >= deadline:
+            timed_out = True
+        elif limits.memory_kind == "rss" and limits.memory_mb and _rss_mb(proc.pid) > limits.memory_mb:
+            mem_hit = True
+        if timed_out or mem_hit or _STOP.is_set():
+            _kill_group(proc.pid)
+            _pid, status, rusage = os.wait4(proc.pid, 0)
+            return status, rusage, timed_out, mem_hit
+        time.sleep(delay)
+        delay = min(delay * 2, 0.01)
+
+
+# ------------------------------------------------------------------ interruption
+_RUNNING: set[int] = set()
+_STOP = threading.Event()
+
+
+def stop_all() -> None:
+    """Kill every decoder process group this harness is running (Ctrl-C, SIGTERM): each
+    running :func:`run` returns at once; no new decoder starts until :func:`reset_stop`."""
+    _STOP.set()
+    for pid in list(_RUNNING):
+        _kill_group(pid)
+
+
+def reset_stop() -> None:
+    _STOP.clear()
+
+
+def stopping() -> bool:
+    return _STOP.is_set()
 
 
 def _kill_group(pid: int) -> None:

@@ -38,7 +38,6 @@ A run that fails (non-zero exit, crash, timeout, missing output) raises
 from __future__ import annotations
 
 import math
-import shutil
 import statistics
 import tempfile
 import time
@@ -51,6 +50,7 @@ from fbaconf.errors import FbaconfInputError
 
 from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim
 from .results import Outcome, SpeedResult
+from .safefs import remove_tree
 
 OPERATIONS = ("decode", "render")
 LIMIT_FOR = {"decode": "decode_rate", "render": "render_rate"}
@@ -269,12 +269,15 @@ class _Runner:
         self.count += 1
         workdir = self.runs_dir / f"run-{self.count:04d}"
         if workdir.exists():
-            shutil.rmtree(workdir)
+            remove_tree(workdir)
         workdir.mkdir(parents=True)
         try:
             return self._run(n, workdir)
         finally:
-            shutil.rmtree(workdir, ignore_errors=True)
+            try:
+                remove_tree(workdir)
+            except OSError:
+                pass
 
     def _run(self, n: int, workdir: Path) -> float:
         a = self.adapter
@@ -285,7 +288,9 @@ class _Runner:
         if isinstance(a, CommandAdapter):
             from . import exits, sandbox
             argv, job = self._argv(job_for)
-            res = sandbox.run(argv, workdir, a.limits, env=a.env or None)
+            from .runner import hidden_from_decoders
+            res = sandbox.run(argv, workdir, a.limits, env=a.env or None,
+                              view=a.sandbox_view(argv, workdir, hidden=hidden_from_decoders()))
             verdict = exits.outcome_for(exits.classify(res, a.limits, a.reject_exit_codes))
             if verdict is not None:
                 raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)

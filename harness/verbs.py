@@ -42,12 +42,19 @@ def register(sub) -> None:
     r.add_argument("--speed", action="store_true", help="also measure decode/render speed against the level")
     r.set_defaults(func=cmd_run)
 
-    c = sub.add_parser("certify", help="certify a decoder for a claim (or verify a certificate)",
-                       description="`fbaconf certify --decoder D --claim P@L -o DIR` runs exactly the cases the "
-                                   "claim requires plus the speed measurement and writes a certification package "
-                                   "signed by sha256 digests. `fbaconf certify verify DIR` re-checks a package.")
-    c.add_argument("action", nargs="?", choices=("verify",), help="verify an existing package")
+    c = sub.add_parser("certify", help="certify a decoder for a claim (or verify a certificate, make a key)",
+                       description="`fbaconf certify --decoder D --claim P@L -o DIR [--key K]` runs exactly the "
+                                   "cases the claim requires plus the speed measurement and writes a certification "
+                                   "package (sha256 digests of every file, signed with an Ed25519 key when --key is "
+                                   "given). `fbaconf certify verify DIR [--pubkey P]` re-checks a package. "
+                                   "`fbaconf certify keygen -o DIR` makes a key pair.")
+    c.add_argument("action", nargs="?", choices=("verify", "keygen"), help="verify a package / make a key pair")
     c.add_argument("package", nargs="?", type=Path, help="(verify) the package folder")
+    c.add_argument("--key", type=Path, help="sign the package with this Ed25519 private key (PEM)")
+    c.add_argument("--pubkey", type=Path, help="(verify) check the package's signature with this public key")
+    c.add_argument("--force", action="store_true", help="replace an existing certification package in -o")
+    c.add_argument("--allow-unisolated", action="store_true",
+                   help="certify even without the bubblewrap sandbox (the statement says so)")
     c.add_argument("--decoder", help="decoder manifest .toml or bundled adapter name")
     c.add_argument("--claim", help="profile@level to certify (default: the decoder's highest claim)")
     c.add_argument("-o", "--output", type=Path, help="package folder to write")
@@ -111,22 +118,28 @@ def cmd_run(args) -> int:
 
 def cmd_certify(args) -> int:
     from . import certify
+    if args.action == "keygen":
+        if not args.output:
+            raise UsageError("certify keygen needs -o DIR")
+        key, pub = certify.keygen(args.output)
+        print(f"wrote {key} (private: keep it secret) and {pub} (public: give it to whoever verifies)")
+        return 0
     if args.action == "verify":
         if args.package is None:
-            print("fbaconf certify verify: error: give the package folder", file=sys.stderr)
-            return 2
-        problems = certify.verify_package(args.package)
+            raise UsageError("certify verify: give the package folder")
+        problems, state = certify.verify(args.package, args.pubkey)
         for p in problems:
             print(f"certify verify: {p}", file=sys.stderr)
         if problems:
-            print(f"certify verify: FAILED ({len(problems)} problem(s))")
+            print(f"certify verify: FAILED ({len(problems)} problem(s); {state})")
             return 1
-        info = json.loads((args.package / certify.CERTIFICATE).read_text(encoding="utf-8"))
-        print(f"certify verify: OK — {info['decoder']} {info['claim']}: {info['verdict']}")
+        info = json.loads(certify.read_regular(args.package / certify.CERTIFICATE, 1 << 20))
+        print(f"certify verify: OK ({state}) — {info.get('decoder')} {info.get('claim')}: {info.get('verdict')}")
         return 0
     if not args.decoder or not args.output:
         raise UsageError("--decoder and -o/--output are required")
-    return certify.certify(args.decoder, args.claim, args.output.resolve(), jobs=args.jobs, speed=not args.no_speed)
+    return certify.certify(args.decoder, args.claim, args.output.resolve(), jobs=args.jobs, speed=not args.no_speed,
+                           key=args.key, force=args.force, allow_unisolated=args.allow_unisolated)
 
 
 # ------------------------------------------------------------------ bench
