@@ -123,9 +123,10 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
     if res.timed_out:
         why = "CPU-time limit" if "cpu-limit" in res.notes else f"timeout of {limits.timeout_s:g} s"
         return Ending("timeout", f"{cmd} did not finish within the {why} (killed after {res.elapsed_s:.2f} s)")
-    if res.memory_limit_hit and rc != 0:
+    if res.memory_limit_hit and (rc != 0 or "tree-memory-limit" in res.notes):
         how = f"killed by {res.signal}" if res.signal else f"exit code {rc}"
-        kind = "resident-set" if limits.memory_kind == "rss" else "address-space"
+        kind = ("whole-process-tree" if "tree-memory-limit" in res.notes else
+                "resident-set" if limits.memory_kind == "rss" else "address-space")
         return Ending("memory", f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; "
                                 f"peak RSS {res.maxrss_mb:.0f} MB)")
     if res.output_limit_hit:

@@ -88,6 +88,37 @@ def _remove_dir_at(parent_fd: int, name: str) -> None:
             os.rmdir(dname, dir_fd=pfd)
 
 
+def tree_size(path: Path | str, stop_at: int) -> int:
+    """Bytes in the regular files below ``path`` (links not followed, any depth, no
+    recursion); stops counting once past ``stop_at``."""
+    try:
+        root = os.open(path, _DIR_FLAGS)
+    except OSError:
+        return 0
+    total, stack = 0, [root]
+    try:
+        while stack:
+            fd = stack.pop()
+            try:
+                with os.scandir(fd) as it:
+                    for e in it:
+                        try:
+                            if e.is_dir(follow_symlinks=False):
+                                stack.append(os.open(e.name, _DIR_FLAGS, dir_fd=fd))
+                            elif e.is_file(follow_symlinks=False):
+                                total += e.stat(follow_symlinks=False).st_size
+                        except OSError:
+                            pass
+                        if total > stop_at:
+                            return total
+            finally:
+                os.close(fd)
+    finally:
+        for fd in stack:
+            os.close(fd)
+    return total
+
+
 def _chmod_dir(fd: int) -> None:
     try:
         os.fchmod(fd, 0o700)

@@ -46,6 +46,7 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .safefs import tree_size
 
 LIMIT_LAUNCHER = Path(__file__).with_name("_limit.py")
 _SIGNALS = {int(s) for s in signal.Signals}
@@ -322,19 +323,6 @@ def _rss_mb(pid: int) -> float:
         return 0.0
 
 
-def _dir_bytes(root: Path, stop_at: int) -> int:
-    total = 0
-    for dirpath, _dirs, files in os.walk(root):
-        for name in files:
-            try:
-                total += os.lstat(os.path.join(dirpath, name)).st_size
-            except OSError:
-                pass
-            if total > stop_at:
-                return total
-    return total
-
-
 def default_view(argv: list[str], workdir: Path) -> View:
     """The program's folder read-only, the working folder writable (its ``in/`` read-only)."""
     ro = []
@@ -403,7 +391,7 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
         if sandboxed and 128 < rc < 128 + 65 and rc - 128 in _SIGNALS:
             rc = -(rc - 128)  # bubblewrap reports a decoder killed by signal N as exit code 128 + N
         res = ProcResult(argv, None if (timed_out or mem_hit) else (rc if rc >= 0 else None), elapsed_s=elapsed,
-                         timed_out=timed_out, memory_limit_hit=mem_hit or (oom and rc != 0),
+                         timed_out=timed_out, memory_limit_hit=mem_hit or oom,
                          cpu_s=(rusage.ru_utime + rusage.ru_stime) if rusage else 0.0,
                          maxrss_mb=(rusage.ru_maxrss / 1024.0) if rusage else 0.0,
                          stdout_tail=_tail(out_path), stderr_tail=_tail(err_path))
@@ -411,6 +399,8 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
         shutil.rmtree(io_dir, ignore_errors=True)
     if pids_hit:
         res.notes.append("process-limit")
+    if oom:
+        res.notes.append("tree-memory-limit")  # a process of the tree was killed at the cgroup memory limit
     if rc < 0 and not (timed_out or mem_hit):
         try:
             res.signal = signal.Signals(-rc).name
@@ -428,7 +418,7 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
             res.memory_limit_hit = True
     total = 0
     for d in measure_dirs or [workdir]:
-        total += _dir_bytes(Path(d), stop_at=limits.output_mb * 2**20 * 4)
+        total += tree_size(d, stop_at=limits.output_mb * 2**20 * 4)
     res.output_bytes = total
     if total > limits.output_mb * 2**20:
         res.output_limit_hit = True

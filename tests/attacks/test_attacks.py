@@ -1,0 +1,366 @@
+"""Hostile decoders (issue 16): one decoder per attack, each row asserting the attack is
+contained — and that an honest decoder still passes under the same sandbox.
+
+The sandbox rows need bubblewrap (``.ci/run`` installs it). Without it they fail in CI
+(``CI`` set) and skip elsewhere, naming the reason: a developer machine without bwrap
+runs decoders unisolated, which is exactly what these rows would catch.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+import fbaconf
+from fbaconf.conformance.suite import golden_root, load_suites
+from fbaconf.harness import adapters, certify, sandbox
+from fbaconf.harness.results import Outcome, ResultLog
+from fbaconf.harness.runner import run_cases
+
+ROOT = Path(fbaconf.__file__).resolve().parents[1]
+VALID = ["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/dct-q4"]
+
+
+def needs_sandbox():
+    if sandbox.isolation() == "none":
+        if os.environ.get("CI"):
+            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
+        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
+
+
+def needs_cgroups():
+    if not sandbox._cgroup_bases():
+        if os.environ.get("CI") and os.geteuid() == 0:
+            pytest.fail("no writable cgroups in CI (running as root)")
+        pytest.skip("no writable cgroup hierarchy here (not root?): no whole-tree limits")
+
+
+def cases(ids):
+    out = []
+    for full in ids:
+        suite, cid = full.split("/")
+        (s,) = load_suites(names=[suite])
+        out.append(next(c for c in s.cases if c.id == cid))
+    return out
+
+
+def decoder(tmp_path: Path, name: str, body: str, *, limits: str = "timeout_s = 20\n", faps_format="npz") -> Path:
+    """A decoder written in Python, run as {python} SCRIPT {input} {faps_out}; ``body`` sees
+    IN, OUT (paths) and may call honest() to decode with the reference."""
+    script = tmp_path / f"{name}.py"
+    script.write_text(textwrap.dedent('''\
+        import os, sys, signal, subprocess, time
+        IN, OUT = sys.argv[1], sys.argv[2]
+        def honest():
+            from fbaconf.pipeline import reference_outputs
+            reference_outputs(IN, faps_out=OUT)
+        ''') + textwrap.dedent(body))
+    m = tmp_path / f"{name}.toml"
+    m.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+                 f'faps_format = "{faps_format}"\n[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", '
+                 f'"{{faps_out}}"]\n[limits]\n{limits}')
+    return m
+
+
+def run(tmp_path: Path, m: Path, ids=VALID, **kw):
+    return run_cases(adapters.resolve(m), cases(ids), claim="simple@1", out_dir=tmp_path / "run", jobs=1,
+                     progress=False, **kw)
+
+
+def digest(p: Path) -> str:
+    return hashlib.sha256(p.read_bytes()).hexdigest()
+
+
+def test_honest_decoder_passes_in_the_sandbox(tmp_path):
+    needs_sandbox()
+    rs = run(tmp_path, decoder(tmp_path, "honest", "honest()\n"))
+    assert [r.outcome for r in rs] == [Outcome.PASS, Outcome.PASS], [r.message for r in rs]
+
+
+def test_copy_the_golden_fails_every_valid_case(tmp_path):
+    needs_sandbox()
+    gold = golden_root()
+    body = f'''
+        import shutil
+        from pathlib import Path
+        case = Path(IN).stem
+        for g in Path({str(gold)!r}).glob("*/" + case + "/*.npz"):
+            shutil.copyfile(g, OUT)
+            break
+        '''
+    assert any(gold.glob("*/*/*.npz")), "the goldens exist outside the sandbox"
+    rs = run(tmp_path, decoder(tmp_path, "copier", body))
+    assert all(r.outcome == Outcome.FAIL for r in rs), [(r.outcome, r.message) for r in rs]
+
+
+def test_cannot_change_the_harness_the_venv_or_its_manifest(tmp_path):
+    needs_sandbox()
+    targets = [ROOT / "harness" / "runner.py", ROOT / "conformance" / "data" / "suites.toml"]
+    site = Path(next(p for p in sys.path if p.endswith("site-packages")))
+    m_path = tmp_path / "patcher.toml"
+    body = f'''
+        for t in {[str(t) for t in targets]!r}:
+            try:
+                open(t, "a").write("# patched")
+            except OSError:
+                pass
+        for t in [{str(site / "evil.pth")!r}, {str(m_path)!r}]:
+            try:
+                open(t, "w").write("import os")
+            except OSError:
+                pass
+        honest()
+        '''
+    before = {t: digest(t) for t in targets}
+    m = decoder(tmp_path, "patcher", body)
+    mtext = m.read_text()
+    rs = run(tmp_path, m, ids=VALID[:1])
+    assert {t: digest(t) for t in targets} == before
+    assert not (site / "evil.pth").exists()
+    assert m.read_text() == mtext
+    assert rs[0].outcome == Outcome.PASS
+
+
+def test_cannot_forge_the_results_of_the_run(tmp_path):
+    needs_sandbox()
+    body = '''
+        from pathlib import Path
+        run = Path(OUT).parents[4]
+        for p in [run / "results.jsonl", Path(OUT).parents[3] / "results.jsonl"]:
+            try:
+                p.write_text('{"case_id": "x", "outcome": "Pass"}\\n')
+            except OSError:
+                pass
+        sys.exit(3)
+        '''
+    rs = run(tmp_path, decoder(tmp_path, "forger", body), ids=VALID[:1])
+    assert rs[0].outcome == Outcome.FAIL
+    logged = ResultLog(tmp_path / "run" / "results.jsonl").read()
+    assert [r.outcome for r in logged.values()] == [Outcome.FAIL]
+
+
+def _procs_with(marker: str) -> list[int]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if marker in (d / "cmdline").read_bytes().decode(errors="replace"):
+                    out.append(int(d.name))
+            except OSError:
+                pass
+    return out
+
+
+def test_an_escaped_grandchild_is_gone_when_the_case_ends(tmp_path):
+    needs_sandbox()
+    body = '''
+        subprocess.Popen(["setsid", "sleep", "313.5"], start_new_session=True)
+        if os.fork() == 0:
+            os.setsid()
+            if os.fork() == 0:
+                os.execvp("sleep", ["sleep", "313.5"])
+            os._exit(0)
+        honest()
+        '''
+    rs = run(tmp_path, decoder(tmp_path, "escaper", body), ids=VALID[:1])
+    time.sleep(0.2)
+    assert _procs_with("313.5") == []
+    assert rs[0].outcome == Outcome.PASS
+
+
+def test_a_fork_bomb_is_capped_and_cleaned_up(tmp_path):
+    needs_sandbox()
+    needs_cgroups()
+    body = '''
+        n = 0
+        for i in range(300):
+            try:
+                if os.fork() == 0:
+                    time.sleep(60)
+                    os._exit(0)
+                n += 1
+            except OSError:
+                break
+        print("forked", n, file=sys.stderr)
+        sys.exit(0 if n < 300 else 9)
+        '''
+    t0 = time.perf_counter()
+    rs = run(tmp_path, decoder(tmp_path, "bomb", body, limits="timeout_s = 20\nprocesses = 32\n"), ids=VALID[:1])
+    assert time.perf_counter() - t0 < 15
+    assert "forked" in rs[0].stderr_tail and int(rs[0].stderr_tail.split("forked")[1].split()[0]) < 32
+    time.sleep(0.2)
+    assert _procs_with("bomb.py") == []
+
+
+def test_memory_limit_holds_for_the_whole_tree(tmp_path):
+    needs_sandbox()
+    needs_cgroups()
+    body = '''
+        kids = []
+        for i in range(3):
+            pid = os.fork()
+            if pid == 0:
+                blob = b"x" * (150 * 2**20)
+                time.sleep(3)
+                os._exit(0)
+            kids.append(pid)
+        ok = all(os.waitpid(p, 0)[1] == 0 for p in kids)
+        honest()
+        sys.exit(0 if ok else 1)
+        '''
+    rs = run(tmp_path, decoder(tmp_path, "hog", body, limits="timeout_s = 30\nmemory_mb = 300\n"), ids=VALID[:1])
+    assert rs[0].outcome == Outcome.CRASH and "memory limit" in rs[0].message, rs[0].message
+
+
+def test_no_network(tmp_path):
+    needs_sandbox()
+    srv = socket.socket()
+    srv.bind(("127.0.0.1", 0))
+    srv.listen(1)
+    srv.settimeout(0.5)
+    port = srv.getsockname()[1]
+    body = f'''
+        import socket
+        try:
+            socket.create_connection(("127.0.0.1", {port}), timeout=2).sendall(b"leak")
+        except OSError as e:
+            print("no network:", e, file=sys.stderr)
+        honest()
+        '''
+    rs = run(tmp_path, decoder(tmp_path, "caller", body), ids=VALID[:1])
+    with pytest.raises(OSError):
+        srv.accept()
+    srv.close()
+    assert "no network" in rs[0].stderr_tail
+
+
+def test_writes_outside_its_folder_do_not_land(tmp_path):
+    needs_sandbox()
+    victim = tmp_path / "victim.txt"
+    body = f'''
+        for t in [{str(victim)!r}, "/tmp/fbaconf-escape-marker", "/etc/fbaconf-escape-marker"]:
+            try:
+                open(t, "w").write("escaped")
+            except OSError:
+                pass
+        honest()
+        '''
+    rs = run(tmp_path, decoder(tmp_path, "writer", body), ids=VALID[:1])
+    assert not victim.exists()
+    assert not Path("/tmp/fbaconf-escape-marker").exists() and not Path("/etc/fbaconf-escape-marker").exists()
+    assert rs[0].outcome == Outcome.PASS
+
+
+def test_a_deep_tree_in_the_work_folder_does_not_stop_the_run(tmp_path):
+    body = '''
+        fd = os.open(".", os.O_RDONLY)
+        for i in range(3000):
+            os.mkdir("d", dir_fd=fd)
+            nfd = os.open("d", os.O_RDONLY, dir_fd=fd)
+            os.close(fd)
+            fd = nfd
+        sys.exit(3)
+        '''
+    rs = run(tmp_path, decoder(tmp_path, "deep", body), ids=VALID)
+    assert [r.outcome for r in rs] == [Outcome.FAIL, Outcome.FAIL]
+    assert not (tmp_path / "run" / "work").exists()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "zero", "passwd"])
+def test_outputs_that_are_not_regular_files_are_not_read(tmp_path, kind):
+    make = {"fifo": "os.mkfifo(OUT)", "zero": "os.symlink('/dev/zero', OUT)",
+            "passwd": "os.symlink('/etc/passwd', OUT)"}[kind]
+    t0 = time.perf_counter()
+    rs = run(tmp_path, decoder(tmp_path, kind, make + "\n", faps_format="fap"), ids=VALID[:1])
+    assert time.perf_counter() - t0 < 20
+    assert rs[0].outcome == Outcome.FAIL and "regular file" in rs[0].message, rs[0].message
+
+
+@pytest.mark.parametrize("limits", ["timeout_s = 1e300", "timeout_s = inf", "timeout_s = -1", "memory_mb = 1.5",
+                                    "processes = 0", "output_mb = 99999999999"])
+def test_limits_that_would_disable_checks_are_refused(tmp_path, limits):
+    m = decoder(tmp_path, "lim", "honest()\n", limits=limits + "\n")
+    with pytest.raises(adapters.ManifestError):
+        adapters.resolve(m)
+
+
+@pytest.mark.parametrize("name", ["../../x", "/abs/path", ".hidden", "a/b", ""])
+def test_manifest_names_cannot_leave_the_run_folder(tmp_path, name):
+    m = decoder(tmp_path, "named", "honest()\n")
+    m.write_text(m.read_text().replace('name = "named"', f'name = "{name}"'))
+    with pytest.raises(adapters.ManifestError):
+        adapters.resolve(m)
+
+
+def fbaconf_cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "fbaconf", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=600)
+
+
+def test_certify_leaves_a_users_folder_intact(tmp_path):
+    mine = tmp_path / "mine"
+    (mine / ".git").mkdir(parents=True)
+    (mine / "notes.txt").write_text("keep me")
+    r = fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(mine),
+                    "--no-speed")
+    assert r.returncode == 2 and "not empty" in r.stderr
+    assert (mine / "notes.txt").read_text() == "keep me" and (mine / ".git").is_dir()
+
+
+def test_a_re_signed_package_fails_verification(tmp_path):
+    keys = tmp_path / "keys"
+    certify.keygen(keys)
+    out = tmp_path / "cert"
+    r = fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(out),
+                    "--no-speed", "--key", str(keys / certify.KEY_FILE))
+    assert r.returncode == 0, r.stdout + r.stderr
+    pub = keys / certify.PUB_FILE
+    assert certify.verify(out, pub) == ([], "signed")
+    # The attacker edits the report, recomputes every digest and the certificate's — but has no key.
+    report = out / "report.json"
+    data = json.loads(report.read_text())
+    data["exit_code"] = 0
+    report.write_text(json.dumps(data))
+    lines = []
+    for ln in (out / certify.SUMS).read_text().splitlines():
+        rel = ln.split("  ", 1)[1]
+        lines.append(f"{digest(out / rel)}  {rel}")
+    (out / certify.SUMS).write_text("\n".join(lines) + "\n")
+    cert = json.loads((out / certify.CERTIFICATE).read_text())
+    cert["sha256sums_sha256"] = digest(out / certify.SUMS)
+    (out / certify.CERTIFICATE).write_text(json.dumps(cert, indent=1) + "\n")
+    assert certify.verify(out)[0] == []  # digests alone cannot tell
+    problems, state = certify.verify(out, pub)
+    assert state == "signature INVALID" and problems
+    v = fbaconf_cli("certify", "verify", str(out), "--pubkey", str(pub))
+    assert v.returncode == 1
+
+
+def test_unsigned_packages_say_so(tmp_path):
+    out = tmp_path / "cert"
+    assert fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(out),
+                       "--no-speed").returncode == 0
+    v = fbaconf_cli("certify", "verify", str(out))
+    assert v.returncode == 0 and "unsigned" in v.stdout
+
+
+def test_sums_entries_outside_the_package_are_refused(tmp_path):
+    out = tmp_path / "cert"
+    assert fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(out),
+                       "--no-speed").returncode == 0
+    sums = out / certify.SUMS
+    sums.write_text(sums.read_text() + f"{digest(Path('/etc/hostname'))}  ../../../../../../etc/hostname\n")
+    assert any("would leave" in p for p in certify.verify_package(out))
+    (out / "fifo").unlink(missing_ok=True)
+    os.mkfifo(out / "fifo")
+    t0 = time.perf_counter()
+    certify.verify_package(out)
+    assert time.perf_counter() - t0 < 10
