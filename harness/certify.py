@@ -73,6 +73,9 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
     prepare_output(out, force)
     record = execute(adapter, claim, cases, suites, out, jobs=jobs, progress=None, speed=speed)
     write_reports(record, out)
+    if record.exit_code >= 128:
+        print(f"fbaconf certify: interrupted: no certificate written; partial report in {out}", file=sys.stderr)
+        return record.exit_code
     verdict = {0: "PASS", 1: "FAIL", 3: "FAIL (speed)"}.get(record.exit_code, "ERROR")
     basis = claim_basis(record, cases, claim)
     (out / "suites").mkdir()

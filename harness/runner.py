@@ -192,8 +192,6 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
         except KeyError as e:
             return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED,
                               message=f"[commands] {cmd} needs {{{e.args[0]}}}, which this case does not have")
-        if sandbox.stopping():
-            return CaseResult(**base, outcome=Outcome.SKIPPED, message="interrupted before it started")
         view = a.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders(ctx))
         res = sandbox.run(argv, job.workdir, a.limits, env=a.env, view=view)
         ending = exits.classify(res, a.limits, a.reject_exit_codes)
@@ -465,8 +463,12 @@ def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir
     results: dict[str, CaseResult] = dict(done)
     jobs = jobs or os.cpu_count() or 1
 
-    def one(case: Case) -> CaseResult:
+    def one(case: Case) -> CaseResult | None:
+        if sandbox.stopping():
+            return None  # interrupted: not run, not logged (--resume runs it)
         r = run_case(ctx, case)
+        if sandbox.stopping():
+            return None  # killed by the interruption: its result is not the decoder's
         log.append(r)
         bar.update(r)
         if on_result:
@@ -475,12 +477,16 @@ def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir
 
     if jobs <= 1:
         for c in todo:
-            results[c.full_id] = one(c)
+            r = one(c)
+            if r is not None:
+                results[c.full_id] = r
     else:
         with ThreadPoolExecutor(max_workers=jobs) as ex:
             futs = {ex.submit(one, c): c for c in todo}
             for f in as_completed(futs):
-                results[futs[f].full_id] = f.result()
+                r = f.result()
+                if r is not None:
+                    results[futs[f].full_id] = r
     if not keep_workdirs:
         _remove_quietly(work_root)
     return [results[c.full_id] for c in cases if c.full_id in results]

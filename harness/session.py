@@ -67,8 +67,11 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, res
     t0 = time.perf_counter()
     started = _now()
     out_dir = Path(out_dir).resolve()
-    results = run_cases(adapter, cases, claim=claim, out_dir=out_dir, jobs=jobs, resume=resume,
-                        keep_workdirs=keep, progress=progress)
+    with interruptible() as stop:
+        results = run_cases(adapter, cases, claim=claim, out_dir=out_dir, jobs=jobs, resume=resume,
+                            keep_workdirs=keep, progress=progress)
+    if stop.signum is not None:
+        return _interrupted_record(adapter, claim, suites, cases, results, started, t0, stop.signum)
     if retries:
         _retry(adapter, cases, results, claim, out_dir, jobs, retries)
     summary = bl.classify(results, bl.load(baseline) if baseline is not None else None,
@@ -173,3 +176,51 @@ def preflight(adapter) -> None:
                          f"(not a file, and not on PATH)")
     if not os.access(prog, os.X_OK):
         raise UsageError(f"decoder {adapter.name}: program {prog} is not executable")
+
+
+class _Stop:
+    signum: int | None = None
+
+
+class interruptible:
+    """Ctrl-C / SIGTERM during a run: kill every running decoder tree at once (the sandbox's
+    process groups), start no new case, and let the caller write the partial report. Cases
+    cut short are not recorded, so ``--resume`` runs exactly them and those never started."""
+
+    def __enter__(self) -> _Stop:
+        import signal
+        import threading
+        from . import sandbox
+        self.stop = _Stop()
+        self.old = {}
+        sandbox.reset_stop()
+        if threading.current_thread() is threading.main_thread():
+            def handler(signum, _frame):
+                self.stop.signum = signum
+                sandbox.stop_all()
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self.old[sig] = signal.signal(sig, handler)
+        return self.stop
+
+    def __exit__(self, *exc) -> None:
+        import signal
+        from . import sandbox
+        for sig, h in self.old.items():
+            signal.signal(sig, h)
+        sandbox.reset_stop()
+
+
+def _interrupted_record(adapter, claim, suites, cases, results, started, t0, signum):
+    from .results import RunRecord
+    from .sysinfo import system_info
+    ran = {c.suite for c in cases}
+    record = RunRecord(
+        decoder=adapter.describe(), claim=claim,
+        suites=[{"name": s.name, "version": s.version, "sha256": s.digest(), "claim": s.claim, "group": s.group,
+                 "cases": len(s.cases)} for s in suites if s.name in ran],
+        system=system_info(), results=results, started=started, finished=_now(),
+        duration_s=time.perf_counter() - t0, provisional=provisional_statements(claim))
+    record.missing = [f"interrupted by signal {signum}: {len(cases) - len(results)} case(s) not run "
+                      f"(--resume continues)"]
+    record.exit_code = 128 + signum
+    return record

@@ -364,3 +364,41 @@ def test_sums_entries_outside_the_package_are_refused(tmp_path):
     t0 = time.perf_counter()
     certify.verify_package(out)
     assert time.perf_counter() - t0 < 10
+
+
+def test_interruption_kills_running_decoders_and_resume_is_exact(tmp_path):
+    """SIGINT at -j 2 while decoders sleep: the run stops within seconds with a partial
+    report; --resume then runs exactly the cases that had not finished."""
+    flag = tmp_path / "fast-now"
+    body = f'''
+        from pathlib import Path
+        if "dct" in Path(IN).name and not Path({str(flag)!r}).exists():
+            time.sleep(60)
+        honest()
+        '''
+    m = decoder(tmp_path, "sleepy", body, limits="timeout_s = 120\n")
+    out = tmp_path / "run"
+    args = [sys.executable, "-m", "fbaconf", "run", "--decoder", str(m), "--claim", "simple@1", "-j", "2",
+            "--suite", "simple-l1-core", "--case", "arith-q8-visemes-expressions", "--case", "dct-q4",
+            "--case", "dct-short-high-level", "-o", str(out)]
+    p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    log = out / "results.jsonl"
+    deadline = time.time() + 60
+    while time.time() < deadline and not (log.exists() and log.read_text().count("\n") >= 1):
+        time.sleep(0.1)
+    time.sleep(0.5)
+    t0 = time.time()
+    p.send_signal(__import__("signal").SIGINT)
+    p.communicate(timeout=30)
+    assert time.time() - t0 < 5 and p.returncode == 130
+    report = json.loads((out / "report.json").read_text())
+    assert report["exit_code"] == 130
+    done = [json.loads(x)["case_id"] for x in log.read_text().splitlines()]
+    assert done == ["simple-l1-core/arith-q8-visemes-expressions"]
+    assert _procs_with("sleepy.py") == []
+    flag.write_text("")
+    r = subprocess.run(args + ["--resume"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    lines = [json.loads(x)["case_id"] for x in log.read_text().splitlines()]
+    assert sorted(lines) == sorted(["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/dct-q4",
+                                    "simple-l1-core/dct-short-high-level"])
