@@ -621,6 +621,15 @@ def _write(dirpath: Path, name: str, data: bytes | str, case: Case, key: str | N
     return name
 
 
+def _error_expect(c: dict) -> dict:
+    """An error case's expectation: the checker's diagnostics, and whether a decoder may
+    decode (conceal) instead of rejecting (``conceal = true`` in suites.toml)."""
+    out = {"diagnostics": list(c.get("expect", []))}
+    if c.get("conceal"):
+        out["conceal"] = True
+    return out
+
+
 def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
     from fbaconf.bitstreams.encoder import encode
     from fbaconf.bitstreams.faptext import write_fap
@@ -640,7 +649,7 @@ def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
         _write(d, f"{case.id}.{ext}", src.read_bytes(), case, ext)
         if c.get("expect") is not None or c.get("valid") is False:
             case.kind = "error"
-            case.expect = {"diagnostics": list(c.get("expect", []))}
+            case.expect = _error_expect(c)
         else:
             case.stages = ["faps"]
             case.goldens = {"faps": "faps.npz"}
@@ -667,7 +676,7 @@ def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
     if gen == "error":
         data = mutate(res.data, c["mutation"], int(c.get("content", {}).get("seed", 0)))
         _write(d, f"{case.id}.fba", data, case, "fba")
-        case.expect = {"diagnostics": list(c.get("expect", []))}
+        case.expect = _error_expect(c)
         case.frames = len(content)
         return case
     data = special_stream(c["special"]) if c.get("special") else res.data

@@ -179,7 +179,7 @@ def test_sandbox_runs_argv_without_a_shell(tmp_path):
     assert res.stdout_tail.strip() == "$HOME; `id`"
     missing = sandbox.run(["/nonexistent/decoder"], tmp_path, sandbox.Limits(timeout_s=5))
     ending = exits.classify(missing, sandbox.Limits(timeout_s=5))
-    assert ending.kind == "setup" and "cannot execute" in ending.message
+    assert ending.kind == "setup" and "cannot execute" in ending.message, ending.message
     assert exits.outcome_for(ending, invalid_stream=True)[0] == Outcome.ERROR
 
 
