@@ -31,6 +31,7 @@ from __future__ import annotations
 import bisect
 import math
 import os
+import stat
 import tomllib
 import warnings
 import zipfile
@@ -55,6 +56,7 @@ __all__ = ["OutputError", "ToleranceError", "DEFAULT_MAX_BYTES", "DEFAULT_MAX_PI
            "compare_faps", "compare_vertices", "compare_images", "part_namer", "worst"]
 
 DEFAULT_MAX_BYTES = 256 * 1024 * 1024  # cap of one output file, and of the decompressed arrays read from it
+MAX_NPZ_MEMBERS = 64
 DEFAULT_MAX_PIXELS = 64 * 1024 * 1024  # cap of width x height x channels of one image
 PSNR_CAP = 100.0  # PSNR of identical images is infinite; recorded as this (JSON has no infinity)
 
@@ -187,12 +189,16 @@ class ImageTolerances(_Tolerances):
 # Untrusted output files
 # ====================================================================================
 def _check_size(path: Path, max_bytes: int) -> None:
+    """A decoder's output must be a regular file (not a symlink the decoder points at any file,
+    not a FIFO that would block the harness, not a device that streams forever) within the cap."""
     try:
-        st = path.stat()
+        st = os.lstat(path)
     except OSError as e:
         raise OutputError(f"cannot read output: {e.strerror or e}", rule="output-missing", file=str(path)) from None
-    if not path.is_file():
-        raise OutputError("output is not a regular file", rule="output-missing", file=str(path))
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a symbolic link" if stat.S_ISLNK(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) else
+                "a directory" if stat.S_ISDIR(st.st_mode) else "a device or socket")
+        raise OutputError(f"output is {kind}; outputs must be regular files", rule="output-unsafe", file=str(path))
     if st.st_size > max_bytes:
         raise OutputError(f"output is {st.st_size} bytes, more than the limit of {max_bytes}",
                           rule="output-too-large", file=str(path))
@@ -214,7 +220,17 @@ class _SafeNpz:
         self.max_bytes = max_bytes
         self.read_bytes = 0
         self.zf = zipfile.ZipFile(path)
-        self.members = {i.filename[:-4]: i for i in self.zf.infolist() if i.filename.endswith(".npy")}
+        infos = self.zf.infolist()
+        if len(infos) > MAX_NPZ_MEMBERS:
+            raise self.err(f"{len(infos)} zip members, more than {MAX_NPZ_MEMBERS}", rule="output-too-large")
+        for i in infos:
+            if i.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
+                raise self.err(f"member {i.filename[:80]!r} uses zip compression type {i.compress_type}; .npz "
+                               f"members must be stored or deflated", rule="output-npz")
+        if sum(i.file_size for i in infos) > max_bytes:
+            raise self.err(f"the members expand to {sum(i.file_size for i in infos)} bytes, more than the limit of "
+                           f"{max_bytes}", rule="output-too-large")
+        self.members = {i.filename[:-4]: i for i in infos if i.filename.endswith(".npy")}
 
     def __enter__(self) -> "_SafeNpz":
         return self
@@ -636,8 +652,10 @@ def _read_encoded(path: Path, max_bytes: int, max_pixels: int) -> np.ndarray:
     """An image as float64[H, W, C] sRGB-encoded values: integer formats as stored
     (normalised to [0, 1]), float formats (linear) clipped to [0, 1] and sRGB-encoded.
     Raises _ImageUnreadable with a reason."""
-    if not path.is_file():
-        raise _ImageUnreadable("image missing")
+    try:
+        _check_size(path, max_bytes)
+    except OutputError as e:
+        raise _ImageUnreadable(e.message) from None
     size = path.stat().st_size
     if size > max_bytes:
         raise _ImageUnreadable(f"image is {size} bytes, more than the limit of {max_bytes}")
