@@ -432,7 +432,9 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
     expected FAP that is FREE in ``got`` is a difference ("expected a value, got none").
     A different frame count fails (reported as the first difference unless an earlier
     frame already differs). With ``.npz`` output plane times must match within
-    ``[faps] time_tol_ms`` of the tolerance file.
+    ``[faps] time_tol_ms`` of the tolerance file. With ``.fap`` output the header's frame
+    rate must equal the coded rate within ``[faps] header_rate_tol_hz``, and frame numbers
+    may count from 0 or from 1 (one offset for the whole file, reported in the metrics).
 
     ``first_difference``: frame (index), frame_number, fap, name, what ("value", "status",
     "missing", a high-level field name, "frame number", "frame count"), expected, got.
@@ -458,7 +460,14 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
     else:
         missing = np.zeros_like(norm)
         sdiff = e.status != g.status
-    fndiff = e.frame_number != g.frame_number
+    offset = 0
+    if text_output and n and np.array_equal(g.frame_number, e.frame_number + 1):
+        offset = 1  # a player numbering frames from 1, as the .fap notes allow
+    fndiff = e.frame_number + offset != g.frame_number
+    rate_bad = False
+    if text_output:
+        rate_tol = float(load_tolerances().get("faps", {}).get("header_rate_tol_hz", 0.005))
+        rate_bad = not abs(float(expected.frame_rate) - float(got.frame_rate)) <= rate_tol
     per_fap = vdiff | sdiff | missing
     # plane times (frame rate, skips, time codes, 1000/1001) are normative too (decision D6);
     # .fap text carries only frame numbers and one rate, so times are compared for .npz output
@@ -476,7 +485,7 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
               "max_abs_diff": [float(x) for x in max_abs]}
     metrics = {"frames_compared": float(n), "frames_differing": float(bad_frame.sum()),
                "faps_differing": float(per_fap.sum()), "max_abs_diff": float(max_abs.max(initial=0)),
-               "expected_frames": float(ne), "got_frames": float(ng)}
+               "expected_frames": float(ne), "got_frames": float(ng), "frame_number_offset": float(offset)}
 
     first: dict[str, Any] | None = None
     detail = ""
@@ -516,13 +525,19 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
                              got=STATUS_NAMES.get(gs, str(gs)))
                 detail = (f"{where}: FAP {num} {name} status: expected {first['expected']}, "
                           f"got {first['got']}")
+    if rate_bad:
+        er, gr = float(expected.frame_rate), float(got.frame_rate)
+        first = {"what": "frame rate", "expected": er, "got": gr}
+        return StageResult("faps", Outcome.FAIL, f"header frame rate: expected {er:.6g} Hz (the coded rate), got "
+                           f"{gr:.6g} Hz", first, metrics, series)
     count_msg = ""
     if ne != ng:
         count_msg = f"frame count: expected {ne}, got {ng}"
         if first is None:
             first = {"frame": n, "what": "frame count", "expected": ne, "got": ng}
     if first is None:
-        return StageResult("faps", Outcome.PASS, f"{n} frame(s) match", None, metrics, series)
+        note = " (frames numbered from 1)" if offset else ""
+        return StageResult("faps", Outcome.PASS, f"{n} frame(s) match{note}", None, metrics, series)
     parts = [p for p in (count_msg,) if p]
     if detail:
         parts.append(f"{int(bad_frame.sum())} of {n} frame(s) differ; first at {detail}")

@@ -135,3 +135,43 @@ def test_worked_text_example_is_a_player():
     m = Path(__file__).resolve().parents[1] / "examples" / "fapplay" / "fapplay.toml"
     a = adapters.resolve(m)
     assert a.is_player
+
+
+# ------------------------------------------------------------------ timing in .fap output
+NTSC_CASE = "simple-l1-core/arith-ntsc-rate"
+
+
+def rewriting_decoder(tmp_path, name, edit: str) -> Path:
+    """The reference decoder writing .fap text, then ``edit`` applied to the text lines."""
+    body = f'''from fbaconf.pipeline import reference_outputs
+reference_outputs(sys.argv[1], faps_out=sys.argv[2])
+lines = open(sys.argv[2]).read().splitlines()
+{edit}
+open(sys.argv[2], "w").write("\\n".join(lines) + "\\n")
+'''
+    return pydec(tmp_path, name, body)
+
+
+def test_truncated_header_rate_fails_naming_the_rate(tmp_path):
+    m = rewriting_decoder(tmp_path, "rate30", '''h = lines[0].split(); h[2] = "30"; lines[0] = " ".join(h)''')
+    r = run_one(m, NTSC_CASE, tmp_path)
+    assert r.outcome == Outcome.FAIL and "frame rate" in r.message and "29.97" in r.message, r.message
+
+
+def test_header_rate_with_two_decimals_passes(tmp_path):
+    m = rewriting_decoder(tmp_path, "rate2", '''h = lines[0].split(); h[2] = "29.97"; lines[0] = " ".join(h)''')
+    assert run_one(m, NTSC_CASE, tmp_path).outcome == Outcome.PASS
+
+
+def test_frames_numbered_from_one_pass(tmp_path):
+    edit = '''for i in range(2, len(lines), 2):
+    t = lines[i].split(); t[0] = str(int(t[0]) + 1); lines[i] = " ".join(t)'''
+    r = run_one(rewriting_decoder(tmp_path, "from1", edit), NTSC_CASE, tmp_path)
+    assert r.outcome == Outcome.PASS, r.message
+    assert r.stages[0].metrics["frame_number_offset"] == 1.0
+
+
+def test_frames_numbered_from_two_fail(tmp_path):
+    edit = '''for i in range(2, len(lines), 2):
+    t = lines[i].split(); t[0] = str(int(t[0]) + 2); lines[i] = " ".join(t)'''
+    assert run_one(rewriting_decoder(tmp_path, "from2", edit), NTSC_CASE, tmp_path).outcome == Outcome.FAIL
