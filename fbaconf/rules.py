@@ -336,6 +336,7 @@ _rule("manifest-outputs", "harness", "a decoder manifest's outputs are not a lis
 _rule("manifest-placeholder", "harness", "a decoder manifest's command uses an unknown placeholder")
 _rule("manifest-reject-codes", "harness", "a decoder manifest's reject_exit_codes are not exit codes 1..255 (other than 69, 126, 127)")
 _rule("manifest-sandbox", "harness", "a decoder manifest's [sandbox] table is not read_only = [absolute paths]")
+_rule("cluster", "harness", "--cluster is not local[:N] or tcp://HOST:PORT, Dask is missing, or the scheduler cannot be reached")
 _rule("certificate-key", "harness", "a signing key is missing, not PEM, or not Ed25519; or a key would be overwritten")
 _rule("manifest-name", "harness", "a decoder manifest's name is not a plain name (it names the run folder)")
 _rule("output-unsafe", "harness", "a decoder's output is not a regular file (FIFO, device, symlink) or is larger than allowed")

@@ -37,7 +37,7 @@ FORMAT = "fbaconf.certificate/1"
 
 
 def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: bool = True, key: Path | None = None,
-            force: bool = False, allow_unisolated: bool = False) -> int:
+            force: bool = False, allow_unisolated: bool = False, cluster: str | None = None) -> int:
     from fbaconf.conformance.golden import MANIFEST
     from fbaconf.conformance.suite import golden_root, load_suites
     from . import reports
@@ -71,7 +71,7 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
     cases = select_cases(suites, claim, [], [], only_required=True)
     out = Path(out).resolve()
     prepare_output(out, force)
-    record = execute(adapter, claim, cases, suites, out, jobs=jobs, progress=None, speed=speed)
+    record = execute(adapter, claim, cases, suites, out, jobs=jobs, progress=None, speed=speed, cluster=cluster)
     write_reports(record, out)
     if record.exit_code >= 128:
         print(f"fbaconf certify: interrupted: no certificate written; partial report in {out}", file=sys.stderr)

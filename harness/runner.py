@@ -450,7 +450,8 @@ class Progress:
 
 def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir: Path, jobs: int | None = None,
               resume: bool = False, keep_workdirs: bool = False, progress: bool | None = None,
-              golden: Path | None = None, on_result: Callable[[CaseResult], None] | None = None) -> list[CaseResult]:
+              golden: Path | None = None, on_result: Callable[[CaseResult], None] | None = None,
+              cluster: str | None = None) -> list[CaseResult]:
     """Run ``cases``; returns results in case order. ``out_dir/results.jsonl`` is the live log.
     Every path is made absolute first: decoders run in their own folders."""
     out_dir = Path(out_dir).resolve()
@@ -481,7 +482,21 @@ def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir
             on_result(r)
         return r
 
-    if jobs <= 1:
+    if cluster:
+        from . import cluster as cl
+
+        def record(r: CaseResult) -> None:
+            if sandbox.stopping():
+                return
+            log.append(r)
+            bar.update(r)
+            if on_result:
+                on_result(r)
+            results[r.case_id] = r
+
+        with cl.client(cluster) as cli:
+            cl.run_on_cluster(cli, ctx, todo, record, sandbox.stopping)
+    elif jobs <= 1:
         for c in todo:
             r = one(c)
             if r is not None:

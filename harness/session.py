@@ -53,7 +53,8 @@ def _now() -> str:
 
 
 def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, resume=False, keep=False,
-            progress=None, baseline=None, flakes=None, retries: int = 0, allow_fixed: bool = False, speed=False):
+            progress=None, baseline=None, flakes=None, retries: int = 0, allow_fixed: bool = False, speed=False,
+            cluster: str | None = None):
     """Run cases (+ speed); returns the RunRecord with its exit code set.
 
     Exit code: 1 when a required case fails or could not be taken (a claim means all of it),
@@ -69,7 +70,7 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, res
     out_dir = Path(out_dir).resolve()
     with interruptible() as stop:
         results = run_cases(adapter, cases, claim=claim, out_dir=out_dir, jobs=jobs, resume=resume,
-                            keep_workdirs=keep, progress=progress)
+                            keep_workdirs=keep, progress=progress, cluster=cluster)
     if stop.signum is not None:
         return _interrupted_record(adapter, claim, suites, cases, results, started, t0, stop.signum)
     if retries:

@@ -59,6 +59,8 @@ def register(sub) -> None:
     c.add_argument("--claim", help="profile@level to certify (default: the decoder's highest claim)")
     c.add_argument("-o", "--output", type=Path, help="package folder to write")
     c.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
+    c.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
+                   help="run the cases as tasks on a Dask cluster instead of the local pool")
     c.add_argument("--no-speed", action="store_true", help="skip the speed measurement (certificate says so)")
     c.set_defaults(func=cmd_certify)
 
@@ -69,6 +71,8 @@ def _common(p) -> None:
     p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
     p.add_argument("--claim", help="profile@level under test (default: the decoder's highest claim)")
     p.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
+    p.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
+                   help="run the cases as tasks on a Dask cluster instead of the local pool")
     p.add_argument("--keep-workdirs", action="store_true", help="keep each case's working folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -95,7 +99,7 @@ def cmd_run(args) -> int:
     record = execute(adapter, claim, cases, suites, out_dir, jobs=args.jobs, resume=args.resume,
                      keep=args.keep_workdirs, progress=False if args.no_progress else None,
                      baseline=args.baseline, flakes=args.flakes, retries=args.retries,
-                     allow_fixed=args.allow_fixed, speed=args.speed)
+                     allow_fixed=args.allow_fixed, speed=args.speed, cluster=args.cluster)
     paths = write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
     if args.write_baseline:
         n = bl.write(record.results, args.write_baseline)
@@ -139,7 +143,8 @@ def cmd_certify(args) -> int:
     if not args.decoder or not args.output:
         raise UsageError("--decoder and -o/--output are required")
     return certify.certify(args.decoder, args.claim, args.output.resolve(), jobs=args.jobs, speed=not args.no_speed,
-                           key=args.key, force=args.force, allow_unisolated=args.allow_unisolated)
+                           key=args.key, force=args.force, allow_unisolated=args.allow_unisolated,
+                           cluster=args.cluster)
 
 
 # ------------------------------------------------------------------ bench
