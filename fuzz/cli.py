@@ -39,8 +39,9 @@ def register(sub) -> None:
                    help="--decoder: fuzz the stream (default) or the BT scene input (a fixed valid stream)")
     p.add_argument("--timeout", type=float, default=None,
                    help="cap the per-input timeout below the adapter's timeout_s (hangs are found faster)")
-    p.add_argument("--expected-exit", default="0,1,2,69",
-                   help="exit codes that are not findings on invalid input (default 0,1,2,69)")
+    p.add_argument("--expected-exit", default=None,
+                   help="exit codes that mean a clean reject (default: the manifest's reject_exit_codes; 0 and 69 "
+                        "are always expected)")
     p.add_argument("--no-oracle", action="store_true", help="do not compare output on valid inputs")
     p.add_argument("--minimise-seconds", type=float, default=30.0, help="time budget per finding's minimisation")
     p.add_argument("--seeds", type=Path, action="append", default=[],
@@ -72,7 +73,8 @@ def cmd_fuzz(args) -> int:
             print(json.dumps(added, indent=1))
         return 0
     try:
-        expected = {int(x) for x in args.expected_exit.split(",") if x.strip()}
+        expected = ({int(x) for x in args.expected_exit.split(",") if x.strip()}
+                    if args.expected_exit is not None else None)
     except ValueError:
         print("fbaconf fuzz: error: --expected-exit must be a comma-separated list of integers", file=sys.stderr)
         return 2

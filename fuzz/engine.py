@@ -53,7 +53,6 @@ import os
 import random
 import re
 import shlex
-import shutil
 import sys
 import tempfile
 import time
@@ -64,6 +63,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from fbaconf.errors import BitstreamError, FbaconfInputError
+from fbaconf.harness.safefs import remove_tree
 
 # ============================================================================ bit helpers
 
@@ -912,7 +912,7 @@ def default_seeds() -> list[Entry]:
 
 # ============================================================================ verdicts and targets
 
-CLASSES = ("crash", "hang", "memory", "output-blowup", "unexpected-exit", "wrong-output", "exception",
+CLASSES = ("crash", "hang", "memory", "output-blowup", "unexpected-exit", "accepted-invalid", "wrong-output", "exception",
            "internal-error", "bad-output", "round-trip", "slow")
 
 
@@ -933,35 +933,12 @@ class FuzzSetupError(FbaconfInputError):
     rule = "fuzz-setup"
 
 
-_ASAN_FRAME = re.compile(r"^\s*#\d+ 0x[0-9a-f]+ in (\S+)", re.M)
-_PY_FRAME = re.compile(r'^\s*File "([^"]+)", line (\d+), in (\S+)', re.M)
-_GO_FRAME = re.compile(r"^(\S+\.\S+)\(.*\)$", re.M)
-_RUST_PANIC = re.compile(r"panicked at (?:'[^']*', )?([^\n:]+:\d+)")
-_JAVA_FRAME = re.compile(r"^\s+at (\S+)\(", re.M)
-
-
 def stack_hash(text: str) -> tuple[str, str] | None:
-    """(kind, short hash) of the crash stack a decoder printed (ASan/UBSan, Python, Go, Rust, Java)."""
-    def h(items) -> str:
-        return hashlib.sha256("\n".join(items).encode()).hexdigest()[:10]
-    if "Sanitizer" in text:
-        frames = _ASAN_FRAME.findall(text)[:5]
-        m = re.search(r"ERROR: (\w+Sanitizer): (\S+)", text)
-        kind = f"{m.group(1)}:{m.group(2)}" if m else "sanitizer"
-        return kind, h(frames or [kind])
-    if "Traceback (most recent call last)" in text:
-        frames = [f"{Path(f).name}:{ln}:{fn}" for f, ln, fn in _PY_FRAME.findall(text)][-5:]
-        last = [ln for ln in text.strip().splitlines() if ln.strip()][-1:] or ["?"]
-        exc = last[0].split(":")[0].strip()
-        return f"python:{exc}", h(frames + [exc])
-    if "panic:" in text and "goroutine" in text:
-        return "go-panic", h(_GO_FRAME.findall(text)[:5])
-    m = _RUST_PANIC.search(text)
-    if m:
-        return "rust-panic", h([m.group(1)])
-    if "Exception in thread" in text:
-        return "java-exception", h(_JAVA_FRAME.findall(text)[:5])
-    return None
+    """(kind, short hash) of the crash report a decoder printed — the harness's one crash
+    classifier (:func:`fbaconf.harness.exits.crash_report`)."""
+    from fbaconf.harness.exits import crash_report
+    r = crash_report(text)
+    return (r.kind, r.signature) if r else None
 
 
 @dataclass
@@ -975,7 +952,7 @@ class DecoderTarget:
     Python adapters called directly)."""
 
     def __init__(self, adapter, work_root: Path, *, kind: str = "stream", timeout_s: float | None = None,
-                 expected_exit: Iterable[int] = (0, 1, 2, 69), oracle: bool = True,
+                 expected_exit: Iterable[int] | None = None, oracle: bool = True,
                  scene_stream: bytes | None = None) -> None:
         from fbaconf.harness.adapters import CommandAdapter
         from fbaconf.harness.sandbox import Limits
@@ -985,8 +962,11 @@ class DecoderTarget:
         self.work_root.mkdir(parents=True, exist_ok=True)
         lim = adapter.limits
         self.limits = lim if timeout_s is None else Limits(min(lim.timeout_s, timeout_s), lim.memory_mb,
-                                                           lim.memory_kind, lim.output_mb)
-        self.expected_exit = set(expected_exit)
+                                                           lim.memory_kind, lim.output_mb, lim.processes)
+        # The decoder's documented reject codes (manifest reject_exit_codes), unless overridden;
+        # 0 (decoded) and 69 (not supported) are always expected endings.
+        self.reject_exit_codes = (frozenset(expected_exit) - {0, 69} if expected_exit is not None
+                                  else frozenset(getattr(adapter, "reject_exit_codes", (1, 2))))
         self.oracle = oracle and kind == "stream" and "faps" in adapter.outputs
         self.is_command = isinstance(adapter, CommandAdapter)
         self.scene_stream = scene_stream
@@ -1041,37 +1021,43 @@ class DecoderTarget:
                 return ExecResult(self._run_command(inp, job))
             return ExecResult(self._run_python(inp, job))
         finally:
-            shutil.rmtree(workdir, ignore_errors=True)
+            try:
+                remove_tree(workdir)
+            except OSError:
+                pass
 
     def _run_command(self, inp: Entry, job) -> Verdict | None:
-        from fbaconf.harness import sandbox
+        from fbaconf.harness import exits, sandbox
+        from fbaconf.harness.runner import hidden_from_decoders
         argv = self.argv_for(job)
-        res = sandbox.run(argv, job.workdir, self.limits, env=self.adapter.env)
-        if "harness-start-failed" in res.notes or (res.returncode == 127 and
-                                                   res.stderr_tail.startswith("fbaconf-limit:")):
-            raise FuzzSetupError(f"cannot run the decoder: {res.stderr_tail.strip()}")
+        res = sandbox.run(argv, job.workdir, self.limits, env=self.adapter.env,
+                          view=self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders()))
+        ending = exits.classify(res, self.limits, self.reject_exit_codes)
+        if ending.kind == "setup":
+            raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
         detail = {"exit_code": res.returncode, "signal": res.signal, "elapsed_s": round(res.elapsed_s, 3),
                   "maxrss_mb": round(res.maxrss_mb, 1), "stderr_tail": res.stderr_tail[-1500:]}
-        if res.timed_out:
-            return Verdict("hang", "timeout", f"did not finish within {self.limits.timeout_s:g} s "
-                           f"(killed after {res.elapsed_s:.2f} s)", detail)
-        if res.memory_limit_hit and res.returncode != 0:
-            return Verdict("memory", "memory-limit", f"exceeded the {self.limits.memory_mb} MB memory limit "
-                           f"(peak RSS {res.maxrss_mb:.0f} MB, " +
-                           (f"killed by {res.signal})" if res.signal else f"exit code {res.returncode})"), detail)
-        if res.output_limit_hit:
-            return Verdict("output-blowup", "output-limit", f"wrote more than the {self.limits.output_mb} MB "
-                           f"output limit", detail)
-        st = stack_hash(res.stderr_tail) if res.returncode != 0 else None
-        if res.signal:
-            sig = res.signal + (f":{st[0]}:{st[1]}" if st else "")
-            return Verdict("crash", sig, f"killed by {res.signal}" + (f" ({st[0]})" if st else ""), detail)
-        if st is not None:
-            return Verdict("crash", f"{st[0]}:{st[1]}", f"exit code {res.returncode} with a {st[0]} report", detail)
-        rc = res.returncode
-        if rc not in self.expected_exit:
-            return Verdict("unexpected-exit", f"exit-{rc}", f"exit code {rc} (expected one of "
-                           f"{', '.join(map(str, sorted(self.expected_exit)))})", detail)
+        return self.verdict_for(ending, inp, job, detail)
+
+    def verdict_for(self, ending, inp: Entry, job, detail: dict) -> Verdict | None:
+        """The finding (or None) for one process ending — the run's classifier
+        (:mod:`fbaconf.harness.exits`), so fuzz and run judge an ending the same way."""
+        k = ending.kind
+        rep = ending.report
+        if k == "timeout":
+            return Verdict("hang", "timeout", ending.message, detail)
+        if k == "memory":
+            return Verdict("memory", "memory-limit", ending.message, detail)
+        if k == "output-limit":
+            return Verdict("output-blowup", "output-limit", ending.message, detail)
+        if k == "crash":
+            sig = ":".join(x for x in (detail.get("signal") or "", rep.kind if rep else "",
+                                       rep.signature if rep else "") if x)
+            return Verdict("crash", sig or "crash", ending.message, {**detail, "crash_kind": rep.kind if rep else None})
+        if k == "unexpected":
+            rc = detail.get("exit_code")
+            return Verdict("unexpected-exit", f"exit-{rc}", ending.message, detail)
+        rc = {"decoded": 0, "not-supported": 69}.get(k, detail.get("exit_code"))
         return self._oracle(inp, job, rc, detail)
 
     def _run_python(self, inp: Entry, job) -> Verdict | None:
@@ -1097,7 +1083,14 @@ class DecoderTarget:
         return self._oracle(inp, job, rc, {"exit_code": rc})
 
     def _oracle(self, inp: Entry, job, rc: int, detail: dict) -> Verdict | None:
-        if rc == 69 or not self.oracle:
+        if rc == 69:
+            return None
+        if rc == 0 and self.kind == "stream":
+            rule = reference_rejection(inp)
+            if rule is not None:  # as in the run's error cases: decoding garbage silently is a defect
+                return Verdict("accepted-invalid", f"rule:{rule}", f"exit code 0 on a stream the reference rejects "
+                               f"(rule {rule}): decoded an invalid stream without complaint", detail)
+        if not self.oracle:
             return None
         expected = reference_if_valid(inp)
         if expected is None:
@@ -1117,6 +1110,18 @@ class DecoderTarget:
             return None
         what = (r.first_difference or {}).get("what", "value")
         return Verdict("wrong-output", f"differs:{what}", r.message, {**detail, "first_difference": r.first_difference})
+
+
+def reference_rejection(inp: Entry) -> str | None:
+    """The rule the reference decoder rejects ``inp`` with, or None when it decodes it."""
+    from fbaconf.bitstreams.decoder import decode
+    if inp.valid:
+        return None
+    try:
+        decode(inp.data)
+    except FbaconfInputError as e:
+        return e.rule
+    return None
 
 
 def reference_if_valid(inp: Entry):
@@ -1211,7 +1216,6 @@ class SelfTarget:
         return None
 
     def _check(self, data: bytes, scene) -> Verdict | None:
-        from fbaconf.profiles import diagnostics as D
         from fbaconf import rules as R
         rep = self.checker.analyse(data, scene=scene, claim="simple@1" if scene is None else "predictable@2",
                                    smallest_claim=True)

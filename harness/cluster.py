@@ -67,16 +67,12 @@ def client(spec: str) -> Iterator:
             c.close()
 
 
-def _remote_case(ctx, case):
-    from .runner import run_case
-    return run_case(ctx, case)
-
-
-def run_on_cluster(c, ctx, cases, on_result: Callable, stopping: Callable[[], bool]) -> None:
-    """Submit every case as a task and hand each result to ``on_result`` as it arrives.
-    Tasks of a lost worker are rerun by Dask; a task that raises is retried twice."""
+def run_on_cluster(c, run_case: Callable, ctx, cases, on_result: Callable, stopping: Callable[[], bool]) -> None:
+    """Submit ``run_case(ctx, case)`` for every case as a task and hand each result to
+    ``on_result`` as it arrives. Tasks of a lost worker are rerun by Dask; a task that raises
+    is retried twice."""
     from distributed import as_completed
-    futures = [c.submit(_remote_case, ctx, case, key=f"fbaconf-case-{i}-{case.full_id}", pure=False, retries=2)
+    futures = [c.submit(run_case, ctx, case, key=f"fbaconf-case-{i}-{case.full_id}", pure=False, retries=2)
                for i, case in enumerate(cases)]
     ac = as_completed(futures, with_results=True)
     for _fut, result in ac:

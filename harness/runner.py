@@ -495,7 +495,7 @@ def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir
             results[r.case_id] = r
 
         with cl.client(cluster) as cli:
-            cl.run_on_cluster(cli, ctx, todo, record, sandbox.stopping)
+            cl.run_on_cluster(cli, run_case, ctx, todo, record, sandbox.stopping)
     elif jobs <= 1:
         for c in todo:
             r = one(c)

@@ -137,8 +137,8 @@ def test_stack_hash_kinds():
     asan = ("==1==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x1\n"
             "    #0 0x4005 in plane /src/dec.c:40\n    #1 0x4006 in main /src/dec.c:80\n")
     py = 'Traceback (most recent call last):\n  File "/x/dec.py", line 3, in f\n    g()\nIndexError: list index'
-    assert F.stack_hash(asan)[0] == "AddressSanitizer:heap-buffer-overflow"
-    assert F.stack_hash(py)[0] == "python:IndexError"
+    assert F.stack_hash(asan)[0] == "AddressSanitizer heap-buffer-overflow"
+    assert F.stack_hash(py)[0] == "uncaught Python exception IndexError"
     assert F.stack_hash(asan)[1] != F.stack_hash(asan.replace("plane", "other"))[1]
     assert F.stack_hash("just an error message") is None
 

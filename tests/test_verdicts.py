@@ -175,3 +175,24 @@ def test_frames_numbered_from_two_fail(tmp_path):
     edit = '''for i in range(2, len(lines), 2):
     t = lines[i].split(); t[0] = str(int(t[0]) + 2); lines[i] = " ".join(t)'''
     assert run_one(rewriting_decoder(tmp_path, "from2", edit), NTSC_CASE, tmp_path).outcome == Outcome.FAIL
+
+
+# ------------------------------------------------------------------ run and fuzz agree
+def _fuzz_class(m: Path, tmp_path: Path) -> str:
+    """How the fuzzer classifies the same decoder on the same invalid stream."""
+    from fbaconf.fuzz import engine as F
+    target = F.DecoderTarget(adapters.resolve(m), tmp_path / "fz")
+    data = case(ERROR_CASE).input_path("fba").read_bytes()
+    try:
+        v = target.execute(F.Entry(data, origin="error-case")).verdict
+    except F.FuzzSetupError:
+        return "Error"
+    if v is None:
+        return "Pass"
+    return {"crash": "Crash", "memory": "Crash", "hang": "Timeout"}.get(v.cls, "Fail")
+
+
+@pytest.mark.parametrize("name,body,outcome,words", MATRIX, ids=[m[0] for m in MATRIX])
+def test_run_and_fuzz_agree(tmp_path, name, body, outcome, words):
+    m = pydec(tmp_path, name, body)
+    assert _fuzz_class(m, tmp_path) == run_one(m, ERROR_CASE, tmp_path).outcome.value
