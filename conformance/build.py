@@ -412,7 +412,7 @@ def _hl_stream(n: int, fap: int, fields: dict[int, list[int]]) -> bytes:
 def _intra_then_p(a: bytes, b: bytes) -> bytes:
     """A's intra plane followed by B's first predicted plane (same masks and quantiser)."""
     from fbaconf.bitstreams.decoder import decode
-    from fbaconf.profiles.bitedit import end_stream, splice
+    from fbaconf.bitstreams.bitedit import end_stream, splice
     pa, pb = decode(a).planes, decode(b).planes
     joined = splice((a, 0, pa[0].end_offset), (b, pb[1].bit_offset, pb[1].end_offset))
     return end_stream(joined, pa[0].end_offset + pb[1].end_offset - pb[1].bit_offset)
@@ -422,7 +422,7 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     """An invalid stream from a valid one (``data``), or built from scratch, for an error case."""
     from fbaconf.bitstreams.decoder import decode
     from fbaconf.errors import BitstreamError
-    from fbaconf.profiles import bitedit
+    from fbaconf.bitstreams import bitedit
     from fbaconf.profiles.teststreams import stuffing_positions, zero_heavy_plane
     planes = decode(data).planes
     hdr = planes[0].header_offset
@@ -485,7 +485,7 @@ def _value_overflow() -> bytes:
     from fbaconf.bitstreams.decoder import decode
     from fbaconf.bitstreams.encoder import EncoderOptions, encode
     from fbaconf.bitstreams.frames import SET, FapFrames
-    from fbaconf.profiles.bitedit import end_stream, splice
+    from fbaconf.bitstreams.bitedit import end_stream, splice
     fap = 47
     bnd = np.zeros((68, 4), dtype=np.int64)
     bnd[fap - 1] = (1860, 0, 1860, 0)
@@ -511,7 +511,7 @@ def edit_valid(data: bytes, edit: str) -> bytes:
     """Bit edits that keep a stream decodable (warnings only): ``no-frame-rate``, ``trailing``,
     ``time-backwards``, ``quant-no-lists``."""
     from fbaconf.bitstreams.decoder import decode
-    from fbaconf.profiles import bitedit
+    from fbaconf.bitstreams import bitedit
     planes = decode(data).planes
     if edit == "no-frame-rate":
         intra = [p for p in planes if p.is_intra and p.frame_rate is not None]
@@ -546,7 +546,7 @@ def special_stream(name: str) -> bytes:
     from fbaconf.bitstreams.decoder import decode
     from fbaconf.bitstreams.encoder import EncoderOptions, encode
     from fbaconf.bitstreams.frames import SET, FapFrames
-    from fbaconf.profiles.bitedit import end_stream, splice
+    from fbaconf.bitstreams.bitedit import end_stream, splice
     if name == "lookahead":
         b = np.zeros((68, 4), dtype=np.int64)
         b[:] = (1860, -1860, 1860, -1860)

@@ -1,6 +1,6 @@
 """``fuzz_one_input``: the entry point for coverage-guided fuzzers (atheris, OSS-Fuzz).
 
-The same in-process checks as ``fbaconf fuzz --self`` (:class:`fbaconf.fuzz.engine.SelfTarget`):
+The same in-process checks as ``fbaconf fuzz --self`` (:class:`fbaconf.fuzz.targets.SelfTarget`):
 the first byte of the input selects the parser, the rest is its input —
 
 * 0-3: the reference decoder (typed errors only, sane FapFrames; every 4th call also runs
@@ -35,7 +35,7 @@ class FuzzFinding(AssertionError):
 def _target():
     global _TARGET
     if _TARGET is None:
-        from .engine import SelfTarget, gen_valid, RandomChooser
+        from . import RandomChooser, SelfTarget, gen_valid
         stream = gen_valid(RandomChooser(random.Random(0))).data
         _TARGET = SelfTarget(checker_every=4, scene_stream=stream)
     return _TARGET
@@ -43,7 +43,7 @@ def _target():
 
 def fuzz_one_input(data: bytes) -> None:
     """Run one input through fbaconf's own parsers; raise :class:`FuzzFinding` on a finding."""
-    from .engine import Entry, RandomChooser, gen_valid, mutate_stream
+    from . import Entry, RandomChooser, gen_valid, mutate_stream
     t = _target()
     sel = data[0] % 8 if data else 0
     body = bytes(data[1:])

@@ -8,7 +8,7 @@
     fbaconf fuzz --promote DIR [--data-dir PATH]         # findings -> regression suite cases
 
 Exit codes: 0 no findings (replay: the input behaves), 1 findings, 2 usage or setup error.
-The engine is :mod:`fbaconf.fuzz.engine`; see docs/fuzzing.md.
+The stage's modules are listed in :mod:`fbaconf.fuzz`; see docs/fuzzing.md.
 """
 from __future__ import annotations
 
@@ -55,7 +55,7 @@ def register(sub) -> None:
 
 
 def _extra_seeds(paths: list[Path]):
-    from .engine import Entry
+    from .generators import Entry
     out = []
     for p in paths:
         files = sorted(p.rglob("*.fba")) if p.is_dir() else [p]
@@ -65,7 +65,7 @@ def _extra_seeds(paths: list[Path]):
 
 
 def cmd_fuzz(args) -> int:
-    from . import engine as F
+    from fbaconf import fuzz as F
     if args.promote is not None:
         added = F.promote(args.promote, args.data_dir, log=lambda s: print(s, file=sys.stderr))
         print(f"promoted {len(added)} finding(s) to the regression suite")

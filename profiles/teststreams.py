@@ -48,7 +48,7 @@ def stuffing_positions(data: bytes, start: int, length: int) -> list[int]:
     """Stream offsets of the stuffing bits inside an arithmetic block (after each zero run of
     ZERO_RUN_LIMIT), found independently of the decoder by scanning the bits."""
     from fbaconf.bitstreams.arith import ZERO_RUN_LIMIT
-    from .bitedit import get_bits
+    from fbaconf.bitstreams.bitedit import get_bits
     out, zeros, pos = [], 0, start
     while pos < start + length:
         b = get_bits(data, pos, 1)

@@ -12,7 +12,7 @@ import pytest
 from fbaconf.cli import main
 from fbaconf.profiles import catalogue
 from fbaconf import rules as R
-from fbaconf.profiles.bitedit import flip_bit
+from fbaconf.bitstreams.bitedit import flip_bit
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.profiles.teststreams import make_stream, smooth_frames

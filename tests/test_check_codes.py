@@ -1,7 +1,7 @@
 """One stream (or scene) per diagnostic code that triggers exactly that code.
 
 Streams come from the reference encoder (profiles.teststreams), bit-edited where needed
-(profiles.bitedit). ``CASES`` maps every registered code to its builder; a test fails when
+(bitstreams/bitedit.py). ``CASES`` maps every registered code to its builder; a test fails when
 a code has no case, so a new code cannot land untested.
 """
 from __future__ import annotations
@@ -20,7 +20,7 @@ from fbaconf.bitstreams.frames import FREE, SET, FapFrames
 from fbaconf.profiles import checker
 from fbaconf.profiles import diagnostics as D
 from fbaconf import rules as R
-from fbaconf.profiles.bitedit import (end_stream, flip_bit, get_bits, remove_bits, set_bits, splice,
+from fbaconf.bitstreams.bitedit import (end_stream, flip_bit, get_bits, remove_bits, set_bits, splice,
                                       truncate_bits)
 from fbaconf.profiles.checker import SceneSummary, analyse, check_stream, lookahead_stuffing
 from fbaconf.profiles.model import load_profiles, parse_profiles

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 
 from fbaconf import rules as R
-from fbaconf.profiles.bitedit import flip_bit, splice, truncate_bits
+from fbaconf.bitstreams.bitedit import flip_bit, splice, truncate_bits
 from fbaconf.profiles.checker import SceneSummary, analyse
 from fbaconf.profiles.cli import build_report
 from fbaconf.profiles.teststreams import make_stream

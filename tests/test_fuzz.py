@@ -24,9 +24,10 @@ from hypothesis import strategies as st
 from fbaconf.scenes import bt
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.errors import BitstreamError, FbaconfInputError
-from fbaconf.fuzz import engine as F
+from fbaconf import fuzz as F
+from fbaconf.fuzz import strategies
 from fbaconf.harness.adapters import load_manifest, resolve
-from fbaconf.profiles import bitedit
+from fbaconf.bitstreams import bitedit
 
 HERE = Path(__file__).resolve().parent / "fuzz_decoders"
 SET = settings(max_examples=8, deadline=None, suppress_health_check=list(HealthCheck))
@@ -42,16 +43,24 @@ def seeds() -> list[F.Entry]:
 
 @SET
 @given(st.binary(min_size=1, max_size=40), st.integers(0, 10**6), st.integers(1, 20), st.integers(0, 2**20))
-def test_bit_helpers_match_bitedit(data, at, n, value):
+def test_bit_helpers_match_a_text_oracle(data, at, n, value):
+    """The integer bit helpers against the obvious '0'/'1' string implementation."""
+    bits = "".join(f"{b:08b}" for b in data)
+
+    def pack(s: str) -> bytes:
+        s += "0" * (-len(s) % 8)
+        return bytes(int(s[i:i + 8], 2) for i in range(0, len(s), 8))
+
     nb = len(data) * 8
     at = at % nb
     value &= (1 << n) - 1
-    assert F.insert_bits(data, at, value, n) == bitedit.insert_bits(data, at, value, n)
-    assert F.remove_bits(data, at, n) == bitedit.remove_bits(data, at, n)
-    assert F.cut_bits(data, at) == bitedit.truncate_bits(data, at)
+    v = format(value, f"0{n}b")
+    assert bitedit.insert_bits(data, at, value, n) == pack(bits[:at] + v + bits[at:])
+    assert bitedit.remove_bits(data, at, n) == pack(bits[:at] + bits[at + n:])
+    assert bitedit.truncate_bits(data, at) == pack(bits[:at])
     if at + n <= nb:
-        assert F.set_bits(data, at, n, value) == bitedit.set_bits(data, at, n, value)
-        assert F.get_bits(data, at, n) == bitedit.get_bits(data, at, n)
+        assert bitedit.set_bits(data, at, n, value) == pack(bits[:at] + v + bits[at + n:])
+        assert bitedit.get_bits(data, at, n) == int(bits[at:at + n], 2)
 
 
 def test_syntax_model_locates_header_fields():
@@ -63,7 +72,7 @@ def test_syntax_model_locates_header_fields():
     m = F.stream_model(data)
     assert m.error_rule is None and len(m.planes) == 4
     (rate,) = m.fields_named("frame_rate")
-    assert rate.value == 25 and F.get_bits(data, rate.offset, 8) == 25
+    assert rate.value == 25 and bitedit.get_bits(data, rate.offset, 8) == 25
     chunks = [f for f in m.fields_named("number_of_frames_to_skip") if f.plane == 2]
     assert [c.value for c in chunks] == [15, 15, 8]
     assert len(m.fields_named("plane_start_code")) == 4
@@ -95,7 +104,7 @@ def test_every_mutator_yields_typed_errors_only(seeds):
 
 
 @SET
-@given(F.valid_entries())
+@given(strategies.valid_entries())
 def test_generated_streams_are_valid_and_round_trip(e):
     from fbaconf.harness.compare import compare_faps
     got = decode(e.data).frames
@@ -103,14 +112,14 @@ def test_generated_streams_are_valid_and_round_trip(e):
 
 
 @SET
-@given(F.near_valid_streams())
+@given(strategies.near_valid_streams())
 def test_near_valid_streams_only_typed_errors(data):
     target = F.SelfTarget(checker_every=1)
     assert target.execute(F.Entry(data)).verdict is None
 
 
 @SET
-@given(F.bt_scenes(mutated=True))
+@given(strategies.bt_scenes(mutated=True))
 def test_scene_reader_typed_errors_only(text):
     try:
         bt.parse(text)

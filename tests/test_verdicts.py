@@ -180,7 +180,7 @@ def test_frames_numbered_from_two_fail(tmp_path):
 # ------------------------------------------------------------------ run and fuzz agree
 def _fuzz_class(m: Path, tmp_path: Path) -> str:
     """How the fuzzer classifies the same decoder on the same invalid stream."""
-    from fbaconf.fuzz import engine as F
+    from fbaconf import fuzz as F
     target = F.DecoderTarget(adapters.resolve(m), tmp_path / "fz")
     data = case(ERROR_CASE).input_path("fba").read_bytes()
     try:

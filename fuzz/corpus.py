@@ -1,0 +1,64 @@
+"""The seed corpus: the conformance suites' streams, short prefixes, generated streams and scenes."""
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+from .choosers import RandomChooser
+from .generators import Entry, gen_valid
+from .scenes import gen_scene
+
+
+def conformance_seeds(root: Path | None = None) -> list[Entry]:
+    """The conformance suites' streams (``*.fba``) as seed corpus; empty when no suites are built."""
+    from fbaconf.conformance.suite import suites_root
+    root = Path(root) if root else suites_root()
+    out = []
+    if root.is_dir():
+        for p in sorted(root.glob("*/*.fba")):
+            out.append(Entry(p.read_bytes(), origin=f"seed:{p.parent.name}/{p.name}"))
+    return out
+
+
+def scene_seeds(root: Path | None = None, max_bytes: int = 8000) -> list[Entry]:
+    """Small BT scenes of the suites plus generated Face-family scenes."""
+    from fbaconf.conformance.suite import suites_root
+    root = Path(root) if root else suites_root()
+    out = []
+    if root.is_dir():
+        for p in sorted(root.glob("*/*.bt")):
+            if p.stat().st_size <= max_bytes:
+                out.append(Entry(p.read_bytes(), kind="scene", origin=f"seed:{p.parent.name}/{p.name}"))
+    try:
+        from fbaconf.scenes import bt
+        from fbaconf.conformance.build import make_scene
+        for name in ("fit:chain", "calibration:all"):
+            out.append(Entry(bt.write(make_scene(name)).encode(), kind="scene", origin=f"seed:make_scene({name})"))
+    except Exception:  # noqa: BLE001 - optional seeds
+        pass
+    rng = RandomChooser(random.Random(7))
+    out.extend(gen_scene(rng) for _ in range(4))
+    return out
+
+
+def short_prefixes(entries: list[Entry], max_planes: int = 3) -> list[Entry]:
+    """Valid short streams: the first 1..max_planes planes of each entry, then the end code."""
+    from fbaconf.bitstreams.bitedit import end_stream
+    out = []
+    for e in entries:
+        m = e.get_model()
+        if m.error_rule:
+            continue
+        for k in range(1, min(max_planes, len(m.planes)) + 1):
+            if k == len(m.planes):
+                break
+            out.append(Entry(end_stream(e.data, m.planes[k - 1].end_offset), origin=f"{e.origin}[:{k} planes]"))
+    return out
+
+
+def default_seeds() -> list[Entry]:
+    seeds = conformance_seeds()
+    if not seeds:
+        ch = RandomChooser(random.Random(1))
+        seeds = [gen_valid(ch) for _ in range(12)]
+    return seeds

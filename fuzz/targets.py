@@ -1,0 +1,370 @@
+"""Targets and verdicts: the decoder under test (through the harness's sandbox and its one classifier of process endings) and fbaconf itself (--self)."""
+from __future__ import annotations
+
+import re
+import tempfile
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable
+
+from fbaconf.errors import FbaconfInputError
+from fbaconf.harness.safefs import remove_tree
+from .generators import Entry
+from .model import stream_features
+from .scenes import scene_features
+
+
+CLASSES = ("crash", "hang", "memory", "output-blowup", "unexpected-exit", "accepted-invalid", "wrong-output", "exception",
+           "internal-error", "bad-output", "round-trip", "slow")
+
+
+@dataclass
+class Verdict:
+    cls: str
+    signature: str  # dedup key within the class (signal + stack hash, or behaviour)
+    message: str
+    detail: dict = field(default_factory=dict)
+
+    @property
+    def key(self) -> str:
+        return f"{self.cls}:{self.signature}"
+
+
+class FuzzSetupError(FbaconfInputError):
+    """The fuzz run cannot start or continue (decoder not runnable, no seeds...)."""
+    rule = "fuzz-setup"
+
+
+def stack_hash(text: str) -> tuple[str, str] | None:
+    """(kind, short hash) of the crash report a decoder printed — the harness's one crash
+    classifier (:func:`fbaconf.harness.exits.crash_report`)."""
+    from fbaconf.harness.exits import crash_report
+    r = crash_report(text)
+    return (r.kind, r.signature) if r else None
+
+
+@dataclass
+class ExecResult:
+    verdict: Verdict | None
+    features: set[str] = field(default_factory=set)
+
+
+class DecoderTarget:
+    """A decoder adapter under its limits (command manifests through the sandbox; in-process
+    Python adapters called directly)."""
+
+    def __init__(self, adapter, work_root: Path, *, kind: str = "stream", timeout_s: float | None = None,
+                 expected_exit: Iterable[int] | None = None, oracle: bool = True,
+                 scene_stream: bytes | None = None) -> None:
+        from fbaconf.harness.adapters import CommandAdapter
+        from fbaconf.harness.sandbox import Limits
+        self.adapter = adapter
+        self.kind = kind
+        self.work_root = Path(work_root)
+        self.work_root.mkdir(parents=True, exist_ok=True)
+        lim = adapter.limits
+        self.limits = lim if timeout_s is None else Limits(min(lim.timeout_s, timeout_s), lim.memory_mb,
+                                                           lim.memory_kind, lim.output_mb, lim.processes)
+        # The decoder's documented reject codes (manifest reject_exit_codes), unless overridden;
+        # 0 (decoded) and 69 (not supported) are always expected endings.
+        self.reject_exit_codes = (frozenset(expected_exit) - {0, 69} if expected_exit is not None
+                                  else frozenset(getattr(adapter, "reject_exit_codes", (1, 2))))
+        self.oracle = oracle and kind == "stream" and "faps" in adapter.outputs
+        self.is_command = isinstance(adapter, CommandAdapter)
+        self.scene_stream = scene_stream
+        if kind == "stream" and "fba" not in adapter.inputs:
+            raise FuzzSetupError(f"decoder {adapter.name} does not accept binary streams (inputs: "
+                                 f"{', '.join(adapter.inputs)})")
+        if kind == "scene" and "scene" not in adapter.inputs:
+            raise FuzzSetupError(f"decoder {adapter.name} accepts no BT scene (inputs: {', '.join(adapter.inputs)})")
+
+    @property
+    def name(self) -> str:
+        return self.adapter.name
+
+    def ext(self) -> str:
+        return "bt" if self.kind == "scene" else "fba"
+
+    # ---------------------------------------------------------------- job
+    def _job(self, data: bytes, workdir: Path):
+        from fbaconf.harness.adapters import Job
+        ind, outd = workdir / "in", workdir / "out"
+        ind.mkdir(parents=True)
+        outd.mkdir()
+        values: dict[str, str] = {}
+        if self.kind == "scene":
+            sp = ind / "input.bt"
+            sp.write_bytes(data)
+            fp = ind / "stream.fba"
+            fp.write_bytes(self.scene_stream or b"")
+            values.update(scene=str(sp), scene_bt=str(sp), fba=str(fp), input=str(fp))
+        else:
+            fp = ind / "input.fba"
+            fp.write_bytes(data)
+            values.update(fba=str(fp), input=str(fp))
+        ext = "fap" if self.adapter.faps_format == "fap" else "npz"
+        values.update(faps_out=str(outd / f"faps.{ext}"), vertices_out=str(outd / "vertices.npz"),
+                      images_dir=str(outd / "images"), faps_out_dir=str(outd / "faces"))
+        (outd / "images").mkdir()
+        (outd / "faces").mkdir()
+        return Job(workdir=workdir, values=values, frames=0)
+
+    def argv_for(self, job) -> list[str]:
+        try:
+            return self.adapter.argv("decode", job)
+        except KeyError as e:
+            raise FuzzSetupError(f"[commands] decode needs {{{e.args[0]}}}, which a fuzz input does not have") from None
+
+    def execute(self, inp: Entry) -> ExecResult:
+        workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
+        try:
+            job = self._job(inp.data, workdir)
+            if self.is_command:
+                return ExecResult(self._run_command(inp, job))
+            return ExecResult(self._run_python(inp, job))
+        finally:
+            try:
+                remove_tree(workdir)
+            except OSError:
+                pass
+
+    def _run_command(self, inp: Entry, job) -> Verdict | None:
+        from fbaconf.harness import exits, sandbox
+        from fbaconf.harness.runner import hidden_from_decoders
+        argv = self.argv_for(job)
+        res = sandbox.run(argv, job.workdir, self.limits, env=self.adapter.env,
+                          view=self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders()))
+        ending = exits.classify(res, self.limits, self.reject_exit_codes)
+        if ending.kind == "setup":
+            raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
+        detail = {"exit_code": res.returncode, "signal": res.signal, "elapsed_s": round(res.elapsed_s, 3),
+                  "maxrss_mb": round(res.maxrss_mb, 1), "stderr_tail": res.stderr_tail[-1500:]}
+        return self.verdict_for(ending, inp, job, detail)
+
+    def verdict_for(self, ending, inp: Entry, job, detail: dict) -> Verdict | None:
+        """The finding (or None) for one process ending — the run's classifier
+        (:mod:`fbaconf.harness.exits`), so fuzz and run judge an ending the same way."""
+        k = ending.kind
+        rep = ending.report
+        if k == "timeout":
+            return Verdict("hang", "timeout", ending.message, detail)
+        if k == "memory":
+            return Verdict("memory", "memory-limit", ending.message, detail)
+        if k == "output-limit":
+            return Verdict("output-blowup", "output-limit", ending.message, detail)
+        if k == "crash":
+            sig = ":".join(x for x in (detail.get("signal") or "", rep.kind if rep else "",
+                                       rep.signature if rep else "") if x)
+            return Verdict("crash", sig or "crash", ending.message, {**detail, "crash_kind": rep.kind if rep else None})
+        if k == "unexpected":
+            rc = detail.get("exit_code")
+            return Verdict("unexpected-exit", f"exit-{rc}", ending.message, detail)
+        rc = {"decoded": 0, "not-supported": 69}.get(k, detail.get("exit_code"))
+        return self._oracle(inp, job, rc, detail)
+
+    def _run_python(self, inp: Entry, job) -> Verdict | None:
+        from fbaconf.harness.adapters import NotSupportedError
+        t0 = time.perf_counter()
+        try:
+            self.adapter.run(job)
+            rc = 0
+        except NotSupportedError:
+            rc = 69
+        except FbaconfInputError:
+            rc = 2
+        except MemoryError:
+            return Verdict("memory", "MemoryError", "in-process decoder raised MemoryError")
+        except Exception as e:  # noqa: BLE001 - the finding
+            tb = traceback.format_exc()
+            st = stack_hash(tb)
+            return Verdict("crash", f"{type(e).__name__}:{st[1] if st else ''}",
+                           f"in-process decoder raised {type(e).__name__}: {e}", {"traceback": tb[-2000:]})
+        dt = time.perf_counter() - t0
+        if dt > self.limits.timeout_s:
+            return Verdict("hang", "timeout", f"in-process decoder took {dt:.1f} s")
+        return self._oracle(inp, job, rc, {"exit_code": rc})
+
+    def _oracle(self, inp: Entry, job, rc: int, detail: dict) -> Verdict | None:
+        if rc == 69:
+            return None
+        if rc == 0 and self.kind == "stream":
+            rule = reference_rejection(inp)
+            if rule is not None:  # as in the run's error cases: decoding garbage silently is a defect
+                return Verdict("accepted-invalid", f"rule:{rule}", f"exit code 0 on a stream the reference rejects "
+                               f"(rule {rule}): decoded an invalid stream without complaint", detail)
+        if not self.oracle:
+            return None
+        expected = reference_if_valid(inp)
+        if expected is None:
+            return None
+        if rc != 0:
+            return Verdict("wrong-output", "rejected-valid", f"rejected a valid stream (exit code {rc})", detail)
+        from fbaconf.harness import compare as cmp
+        path = job.path("faps_out")
+        if path is None or not path.is_file():
+            return Verdict("wrong-output", "no-output", "exit code 0 but no FAP output for a valid stream", detail)
+        try:
+            got = cmp.load_output_faps(path)
+        except cmp.OutputError as e:
+            return Verdict("wrong-output", "unreadable-output", f"unreadable FAP output: {e}", detail)
+        r = cmp.compare_faps(expected, got, text_output=path.suffix.lower() == ".fap")
+        if r.outcome.ok:
+            return None
+        what = (r.first_difference or {}).get("what", "value")
+        return Verdict("wrong-output", f"differs:{what}", r.message, {**detail, "first_difference": r.first_difference})
+
+
+def reference_rejection(inp: Entry) -> str | None:
+    """The rule the reference decoder rejects ``inp`` with, or None when it decodes it."""
+    from fbaconf.bitstreams.decoder import decode
+    if inp.valid:
+        return None
+    try:
+        decode(inp.data)
+    except FbaconfInputError as e:
+        return e.rule
+    return None
+
+
+def reference_if_valid(inp: Entry):
+    """The reference FapFrames when ``inp`` is a valid stream (generated valid, or decoded by the
+    reference with no error and no decision-dependent diagnostic), else None."""
+    from fbaconf.bitstreams.decoder import decode
+    try:
+        frames = decode(inp.data).frames
+    except FbaconfInputError:
+        return None
+    if inp.valid:
+        return frames
+    if len(frames) == 0:  # no plane: nothing to compare, and rejecting it is no defect
+        return None
+    from fbaconf.profiles.checker import check_stream
+    diags = check_stream(inp.data)
+    if any(d.severity == "error" or d.code.startswith("FAP-DECISION") for d in diags):
+        return None
+    return frames
+
+
+class SelfTarget:
+    """fbaconf's own parsers in-process: the decoder (typed errors only, sane output, round trip of
+    generated streams), the checker (never raises, no internal diagnostic), the BT scene reader
+    and the binary BIFS reader (typed errors only)."""
+    name = "self"
+
+    def __init__(self, *, checker_every: int = 4, slow_s: float = 5.0, scene_stream: bytes | None = None) -> None:
+        from fbaconf.scenes import bt
+        from fbaconf.bitstreams import decoder
+        from fbaconf.profiles import checker
+        self.bt, self.decoder, self.checker = bt, decoder, checker
+        try:
+            from fbaconf.scenes import bifs
+        except ImportError:  # pragma: no cover - optional stage
+            bifs = None
+        self.bifs = bifs
+        self.checker_every = max(1, checker_every)
+        self.slow_s = slow_s
+        self.count = 0
+        self.scene_stream = scene_stream
+        self.kind = "stream"
+
+    def ext(self) -> str:
+        return "fba"
+
+    def execute(self, inp: Entry) -> ExecResult:
+        self.count += 1
+        t0 = time.perf_counter()
+        feats: set[str] = set()
+        try:
+            v = getattr(self, f"_{inp.kind}")(inp, feats)
+        except Exception as e:  # noqa: BLE001 - anything escaping is the finding
+            tb = traceback.format_exc()
+            st = stack_hash(tb)
+            where = _innermost_fbaconf_frame(e)
+            v = Verdict("exception", f"{inp.kind}:{type(e).__name__}:{where}:{st[1] if st else ''}",
+                        f"{inp.kind} parser raised {type(e).__name__}: {e} (at {where})", {"traceback": tb[-3000:]})
+        dt = time.perf_counter() - t0
+        if v is None and dt > self.slow_s:
+            v = Verdict("slow", f"{inp.kind}", f"{inp.kind} input took {dt:.1f} s (> {self.slow_s:g} s)",
+                        {"seconds": dt})
+        return ExecResult(v, feats)
+
+    def _stream(self, inp: Entry, feats: set[str]) -> Verdict | None:
+        import numpy as np
+        data = inp.data
+        try:
+            res = self.decoder.decode(data)
+        except FbaconfInputError as e:
+            rule = getattr(e, "rule", "?")
+            feats.add(f"rule:{rule}")
+            if rule == "internal":
+                return Verdict("internal-error", f"decoder:{e.message.split(':')[0][:80]}",
+                               f"decoder internal failure: {e}")
+            res = None
+        if res is not None:
+            feats |= stream_features(res.planes, res.end_code, None)
+            fr = res.frames
+            if fr.values.dtype != np.int32 or not np.isfinite(fr.time_ms).all() or len(fr.values) != len(fr.status):
+                return Verdict("bad-output", "decoder:frames", "decoded FapFrames malformed (dtype, non-finite "
+                               "times or inconsistent lengths)")
+            if inp.recon is not None:
+                from fbaconf.harness.compare import compare_faps
+                r = compare_faps(inp.recon, fr, text_output=False)
+                if not r.outcome.ok:
+                    return Verdict("round-trip", f"decoder:{(r.first_difference or {}).get('what')}",
+                                   f"generated stream decodes differently from the encoder's reconstruction: "
+                                   f"{r.message}", {"first_difference": r.first_difference})
+        if self.count % self.checker_every == 0:
+            return self._check(data, None)
+        return None
+
+    def _check(self, data: bytes, scene) -> Verdict | None:
+        from fbaconf import rules as R
+        rep = self.checker.analyse(data, scene=scene, claim="simple@1" if scene is None else "predictable@2",
+                                   smallest_claim=True)
+        bad = [d for d in rep.diagnostics if d.code == R.CHECK_INTERNAL or d.code not in R.CODES]
+        if bad:
+            msg = bad[0].message
+            return Verdict("internal-error", f"checker:{re.sub(r'[0-9]+', 'N', msg)[:80]}",
+                           f"checker internal failure: {msg}")
+        return None
+
+    def _scene(self, inp: Entry, feats: set[str]) -> Verdict | None:
+        try:
+            text = inp.data.decode("utf-8")
+        except UnicodeDecodeError:
+            text = inp.data.decode("utf-8", "replace")
+        try:
+            scene = self.bt.parse(text)
+        except FbaconfInputError as e:
+            feats.add(f"rule:{getattr(e, 'rule', '?')}")
+            return None
+        feats |= scene_features(scene, None, text)
+        if self.scene_stream is not None and self.count % self.checker_every == 0:
+            return self._check(self.scene_stream, scene)
+        if self.bifs is not None and hasattr(self.bifs, "encode") and self.count % self.checker_every == 1:
+            try:  # a scene the reader accepts either encodes and reads back, or is refused with a typed error
+                blob = self.bifs.encode(scene)
+            except FbaconfInputError:
+                return None
+            self.bifs.decode(blob)
+        return None
+
+    def _bifs(self, inp: Entry, feats: set[str]) -> Verdict | None:
+        if self.bifs is None:
+            return None
+        try:
+            self.bifs.decode(inp.data)
+            feats.add("bifs:ok")
+        except FbaconfInputError as e:
+            feats.add(f"bifs-rule:{getattr(e, 'rule', '?')}")
+        return None
+
+
+def _innermost_fbaconf_frame(e: BaseException) -> str:
+    tb = traceback.extract_tb(e.__traceback__)
+    for fr in reversed(tb):
+        if "fbaconf" in fr.filename or "/work/" in fr.filename:
+            return f"{Path(fr.filename).name}:{fr.lineno}"
+    return f"{Path(tb[-1].filename).name}:{tb[-1].lineno}" if tb else "?"
