@@ -1,0 +1,132 @@
+"""What every report format shares: text cleaning of untrusted strings, verdicts, difference formatting, the cases that need attention."""
+from __future__ import annotations
+
+import math
+import re
+from typing import Any
+
+from fbaconf.harness.results import OUTCOME_ORDER, CaseResult, Outcome, RunRecord, SpeedResult
+
+
+# Column order of the outcome tables (as the Outcome enum: Pass first, then the bad ones).
+COLUMNS = tuple(Outcome)
+
+VERDICTS = {0: "PASS", 1: "FAIL", 2: "SETUP ERROR", 3: "SPEED FAIL"}
+
+# Non-finite floats are not JSON; they are written as these strings and read back.
+_NONFINITE = {"Infinity": math.inf, "-Infinity": -math.inf, "NaN": math.nan}
+
+
+
+_ANSI = re.compile(r"\x1b(?:\[[0-?]*[ -/]*[@-~]|\][^\x07\x1b]*(?:\x07|\x1b\\)?|[@-Z\\-_])")
+# Characters XML 1.0 cannot hold, plus the other C0/C1 controls (kept out of every report).
+_BAD_CHARS = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f\ud800-\udfff\ufffe\uffff]")
+
+
+def clean_text(value: Any) -> str:
+    """``value`` as text safe for a terminal, XML and HTML (before escaping): ANSI/OSC escape
+    sequences removed, other control characters, lone surrogates and U+FFFE/U+FFFF shown as
+    ``\\xNN``/``\\uNNNN``; newlines, tabs and carriage returns kept."""
+    s = value if isinstance(value, str) else str(value)
+    s = _ANSI.sub("", s)
+
+    def esc(m: re.Match) -> str:
+        c = ord(m.group(0))
+        return f"\\x{c:02x}" if c < 0x100 else f"\\u{c:04x}"
+    return _BAD_CHARS.sub(esc, s)
+
+
+def profile_of(claim: str | None) -> str:
+    """The profile part of a claim: ``"simple"`` from ``"simple@1"``; ``"-"`` when unknown."""
+    if not claim:
+        return "-"
+    return claim.split("@", 1)[0] or "-"
+
+
+def verdict(record: RunRecord) -> str:
+    """``PASS`` / ``FAIL`` / ``SPEED FAIL`` / ``SETUP ERROR`` from the record's exit code."""
+    return VERDICTS.get(record.exit_code, f"EXIT {record.exit_code}")
+
+
+def _fmt_value(v: Any) -> str:
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            return str(v)
+        return f"{v:.6g}"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_fmt_value(x) for x in v) + "]"
+    return str(v)
+
+
+_DIFF_WHERE = ("frame", "time_ms", "fap", "name", "vertex", "part", "pixel", "channel", "field")
+
+
+def format_difference(d: dict | None) -> str:
+    """One line for a first difference: ``frame 12, FAP 31 (raise_l_i_eyebrow): expected 120, got 121``."""
+    if not d:
+        return ""
+    where = []
+    if "frame" in d:
+        where.append(f"frame {_fmt_value(d['frame'])}")
+    if "time_ms" in d:
+        where.append(f"t={_fmt_value(d['time_ms'])} ms")
+    for key, label in (("fap", "FAP"), ("vertex", "vertex"), ("pixel", "pixel"), ("channel", "channel"),
+                       ("field", "field")):
+        if key in d:
+            item = f"{label} {_fmt_value(d[key])}"
+            extra = [str(d[k]) for k in ("name", "part") if k in d and key in ("fap", "vertex")]
+            if extra:
+                item += " (" + ", ".join(extra) + ")"
+            where.append(item)
+    if "fap" not in d and "vertex" not in d:
+        where += [f"{k} {_fmt_value(d[k])}" for k in ("name", "part") if k in d]
+    text = ", ".join(where)
+    vals = []
+    if "expected" in d:
+        vals.append(f"expected {_fmt_value(d['expected'])}")
+    if "got" in d:
+        vals.append(f"got {_fmt_value(d['got'])}")
+    rest = [f"{k} {_fmt_value(v)}" for k, v in d.items() if k not in _DIFF_WHERE + ("expected", "got")]
+    parts = [p for p in (text, ", ".join(vals), ", ".join(rest)) if p]
+    return clean_text(": ".join(parts[:2]) + ("; " + parts[2] if len(parts) > 2 else ""))
+
+
+def _suite_names(record: RunRecord) -> list[str]:
+    names = [str(s.get("name")) for s in record.suites if s.get("name") is not None]
+    for r in record.results:
+        if r.suite not in names:
+            names.append(r.suite)
+    return names
+
+
+def _by(record: RunRecord, key) -> dict[str, dict[str, int]]:
+    groups: dict[str, list[CaseResult]] = {}
+    for r in record.results:
+        groups.setdefault(key(r), []).append(r)
+    return {k: record.counts(v) for k, v in groups.items()}
+
+
+def _summary_counts(counts: dict[str, int]) -> str:
+    n = sum(counts.values())
+    parts = [f"{counts[o.value]} {o.value}" for o in COLUMNS if counts.get(o.value)]
+    return f"{n} case{'s' if n != 1 else ''}" + (": " + ", ".join(parts) if parts else "")
+
+
+def _speed_summary(speed: list[SpeedResult]) -> str:
+    if not speed:
+        return ""
+    bad = sum(1 for s in speed if not s.passed)
+    return f"; speed: {len(speed) - bad} of {len(speed)} pass" + (f", {bad} below the level minimum" if bad else "")
+
+
+def _problem_cases(record: RunRecord) -> list[CaseResult]:
+    """Cases worth a closer look, worst first: failing, quality warnings, baseline changes."""
+    rank = {o: i for i, o in enumerate(OUTCOME_ORDER)}
+    picked = [r for r in record.results
+              if r.outcome.failing or r.outcome is Outcome.QUALITY_WARNING or r.baseline in ("fixed", "flake")]
+    return sorted(picked, key=lambda r: (rank[r.outcome], not r.required, r.case_id))
+
+
+def _speed_rows(speed: list[SpeedResult]) -> list[list[str]]:
+    return [[s.operation, s.claim, f"{s.rate_fps:.2f}", f"{s.required_fps:.2f}", "PASS" if s.passed else "FAIL",
+             s.provenance] for s in speed]

@@ -1,0 +1,148 @@
+"""JUnit XML for CI systems (ElementTree, no extra dependency), agreeing with the run's exit code."""
+from __future__ import annotations
+
+import json
+import math
+import shlex
+from collections import Counter
+from pathlib import Path
+from typing import Any
+from xml.etree import ElementTree as ET
+
+from fbaconf._atomic import atomic_write_bytes
+from fbaconf.harness.results import CaseResult, Outcome, RunRecord
+from .common import _fmt_value, _suite_names, clean_text, format_difference, verdict
+from .jsonreport import _jsonable
+
+
+def _sec(x: float) -> str:
+    return f"{x:.3f}" if isinstance(x, (int, float)) and math.isfinite(x) and x >= 0 else "0.000"
+
+
+def _case_details(r: CaseResult) -> str:
+    out = []
+    if r.message:
+        out.append(r.message)
+    if r.baseline:
+        out.append(f"baseline: {r.baseline}")
+    if not r.required:
+        out.append("optional (not required by the claim)")
+    out.append(f"claim: {r.claim}")
+    diff = r.first_difference
+    if diff:
+        out.append(f"first difference: {format_difference(diff)}")
+    for st in r.stages:
+        line = f"stage {st.stage}: {st.outcome.value}"
+        if st.message:
+            line += f" - {st.message}"
+        if st.metrics:
+            line += " (" + ", ".join(f"{k}={_fmt_value(v)}" for k, v in st.metrics.items()) + ")"
+        out.append(line)
+    if r.command:
+        out.append("command: " + shlex.join(str(a) for a in r.command))
+    if r.exit_code is not None or r.signal:
+        out.append(f"exit code: {r.exit_code}" + (f", signal {r.signal}" if r.signal else ""))
+    if r.stderr_tail:
+        out.append("stderr (tail):\n" + r.stderr_tail)
+    return clean_text("\n".join(out))
+
+
+def _one_line(text: str, limit: int = 500) -> str:
+    s = " ".join(clean_text(text).split())
+    return s if len(s) <= limit else s[:limit - 1] + "\u2026"
+
+
+def _properties(parent: ET.Element, props: list[tuple[str, Any]]) -> None:
+    el = ET.SubElement(parent, "properties")
+    for name, value in props:
+        if isinstance(value, (dict, list)):
+            value = json.dumps(_jsonable(value), sort_keys=True, ensure_ascii=False)
+        ET.SubElement(el, "property", name=clean_text(name), value=clean_text("" if value is None else value))
+
+
+def junit_xml(record: RunRecord) -> bytes:
+    """The JUnit XML document written by :func:`write_junit`."""
+    dec = record.decoder or {}
+    common = [("decoder", dec.get("name")), ("decoder.manifest_sha256", dec.get("manifest_sha256")),
+              ("claim", record.claim), ("exit_code", record.exit_code), ("verdict", verdict(record))]
+    common += [(f"provisional.{i}", p) for i, p in enumerate(record.provisional)]
+    common += [(f"system.{k}", v) for k, v in (record.system or {}).items()]
+    suite_meta = {str(s.get("name")): s for s in record.suites}
+    root = ET.Element("testsuites", name=clean_text(f"fbaconf {dec.get('name', '')}".strip()))
+    totals = Counter()
+    for name in _suite_names(record):
+        cases = [r for r in record.results if r.suite == name]
+        c = Counter()
+        ts = ET.SubElement(root, "testsuite", name=clean_text(name))
+        meta = suite_meta.get(name, {})
+        _properties(ts, common + [(f"suite.{k}", v) for k, v in meta.items() if k != "name"])
+        for r in cases:
+            tc = ET.SubElement(ts, "testcase", classname=clean_text(f"fbaconf.{r.suite}"), name=clean_text(r.case_id),
+                               time=_sec(r.duration_s))
+            o = r.outcome
+            msg = _one_line(r.message or o.value)
+            if o in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH):
+                el = ET.SubElement(tc, "failure", message=msg, type=o.value)
+                el.text = _case_details(r)
+                c["failures"] += 1
+            elif o is Outcome.ERROR:
+                el = ET.SubElement(tc, "error", message=msg, type=o.value)
+                el.text = _case_details(r)
+                c["errors"] += 1
+            elif o in (Outcome.NOT_SUPPORTED, Outcome.SKIPPED):
+                el = ET.SubElement(tc, "skipped", message=_one_line(f"{o.value}: {r.message}" if r.message else o.value))
+                c["skipped"] += 1
+            elif o is Outcome.QUALITY_WARNING:
+                ET.SubElement(tc, "system-out").text = "QualityWarning (passes): " + _case_details(r)
+            elif r.baseline:
+                ET.SubElement(tc, "system-out").text = clean_text(f"baseline: {r.baseline}")
+            c["tests"] += 1
+            c["time"] += r.duration_s if math.isfinite(r.duration_s) and r.duration_s > 0 else 0.0
+        ts.set("tests", str(c["tests"]))
+        for k in ("failures", "errors", "skipped"):
+            ts.set(k, str(c[k]))
+        ts.set("time", _sec(c["time"]))
+        if record.started:
+            ts.set("timestamp", clean_text(record.started))
+        totals.update(c)
+    if record.speed:
+        ts = ET.SubElement(root, "testsuite", name="speed")
+        c = Counter()
+        _properties(ts, common)
+        for s in record.speed:
+            t = sum(float(x.get("seconds", 0.0)) for x in s.samples if isinstance(x, dict))
+            tc = ET.SubElement(ts, "testcase", classname="fbaconf.speed",
+                               name=clean_text(f"{s.operation} {s.claim}"), time=_sec(t))
+            text = (f"{s.operation}: {s.rate_fps:.2f} fps measured, {s.required_fps:.2f} fps required "
+                    f"(provenance: {s.provenance}); per frame {s.per_frame_s:.6g} s, startup {s.startup_s:.6g} s, "
+                    f"fit r2 {s.fit_r2:.4f}" + (f"\n{s.message}" if s.message else ""))
+            if not s.passed:
+                el = ET.SubElement(tc, "failure", type="SpeedBelowMinimum",
+                                   message=_one_line(f"{s.operation} {s.rate_fps:.2f} fps below the required "
+                                                     f"{s.required_fps:.2f} fps ({s.provenance})"))
+                el.text = clean_text(text)
+                c["failures"] += 1
+            else:
+                ET.SubElement(tc, "system-out").text = clean_text(text)
+            c["tests"] += 1
+            c["time"] += t
+        ts.set("tests", str(c["tests"]))
+        for k in ("failures", "errors", "skipped"):
+            ts.set(k, str(c[k]))
+        ts.set("time", _sec(c["time"]))
+        if record.started:
+            ts.set("timestamp", clean_text(record.started))
+        totals.update(c)
+    root.set("tests", str(totals["tests"]))
+    for k in ("failures", "errors", "skipped"):
+        root.set(k, str(totals[k]))
+    root.set("time", _sec(record.duration_s if record.duration_s else totals["time"]))
+    ET.indent(root)
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
+
+
+def write_junit(record: RunRecord, path) -> Path:
+    """Write the run as JUnit XML (one ``<testsuite>`` per suite plus ``speed``), atomically."""
+    path = Path(path)
+    atomic_write_bytes(path, junit_xml(record))
+    return path

@@ -1,0 +1,128 @@
+"""The terminal summary: aligned tables per suite, profile and outcome, the failing cases, speed, the verdict line."""
+from __future__ import annotations
+
+from typing import Iterable
+
+from fbaconf.harness.results import Outcome, RunRecord
+from .common import COLUMNS, _by, _problem_cases, _speed_rows, _speed_summary, _suite_names, _summary_counts, clean_text, format_difference, profile_of, verdict
+
+
+_ANSI_COLOURS = {
+    Outcome.PASS: "32", Outcome.QUALITY_WARNING: "33", Outcome.NOT_SUPPORTED: "36", Outcome.SKIPPED: "2",
+    Outcome.FAIL: "31", Outcome.TIMEOUT: "35", Outcome.CRASH: "1;31", Outcome.ERROR: "1;35",
+}
+
+
+def _table(header: list[str], rows: list[list[str]], right: set[int], colour=None) -> list[str]:
+    """Aligned text table; ``colour(row, col, padded_text)`` may wrap a padded cell in ANSI codes."""
+    widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)] if rows else [len(h) for h in header]
+    out = []
+    for ri, row in enumerate([header] + rows):
+        cells = []
+        for ci, cell in enumerate(row):
+            text = str(cell).rjust(widths[ci]) if ci in right else str(cell).ljust(widths[ci])
+            if colour and ri > 0:
+                text = colour(ri - 1, ci, text)
+            cells.append(text)
+        out.append("  " + "  ".join(cells).rstrip())
+    return out
+
+
+def _indent(text: str, prefix: str) -> list[str]:
+    return [prefix + line for line in text.splitlines()] or [prefix.rstrip()]
+
+
+def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: int = 20) -> str:
+    """A plain-text summary of ``record`` (ANSI colours when ``color``), ending with the verdict line
+    ``result: PASS|FAIL|SPEED FAIL|SETUP ERROR (N cases: a Pass, b Fail, ...)``."""
+    def paint(code: str, text: str) -> str:
+        return f"\x1b[{code}m{text}\x1b[0m" if color else text
+
+    lines: list[str] = []
+    dec = record.decoder or {}
+    lines.append(f"fbaconf run: decoder {clean_text(dec.get('name', '?'))}"
+                 + (f", claim {clean_text(record.claim)}" if record.claim else "")
+                 + (f", {record.duration_s:.1f} s" if record.duration_s else ""))
+    suites = []
+    for s in record.suites:
+        n = s.get("cases")
+        n = len(n) if isinstance(n, (list, tuple)) else n
+        suites.append(f"{clean_text(s.get('name', '?'))} {clean_text(s.get('version', ''))}".rstrip()
+                      + (f" ({n} cases)" if n is not None else ""))
+    if suites:
+        lines.append("  suites: " + ", ".join(suites))
+    for p in record.provisional:
+        lines.append(f"  provisional: {clean_text(p)}")
+
+    header_cols = [o.value for o in COLUMNS] + ["total"]
+
+    def colour_counts(_r, ci, text):
+        if ci == 0 or ci > len(COLUMNS) or not text.strip() or text.strip() == "0":
+            return text
+        return paint(_ANSI_COLOURS[COLUMNS[ci - 1]], text)
+
+    def count_table(title: str, groups: dict[str, dict[str, int]], order: Iterable[str]):
+        rows = []
+        for name in order:
+            c = groups.get(name, {o.value: 0 for o in COLUMNS})
+            rows.append([clean_text(name)] + [str(c[o.value]) for o in COLUMNS] + [str(sum(c.values()))])
+        tot = record.counts()
+        rows.append(["total"] + [str(tot[o.value]) for o in COLUMNS] + [str(sum(tot.values()))])
+        lines.append("")
+        lines.extend(_table([title] + header_cols, rows, set(range(1, len(header_cols) + 1)), colour_counts))
+
+    by_suite = _by(record, lambda r: r.suite)
+    count_table("suite", by_suite, _suite_names(record))
+    by_profile = _by(record, lambda r: profile_of(r.claim))
+    count_table("profile", by_profile, sorted(by_profile))
+
+    problems = _problem_cases(record)
+    if problems:
+        shown = problems[:max(0, max_failures)]
+        lines.append("")
+        lines.append(f"cases to look at ({len(shown)} of {len(problems)} shown):")
+        for r in shown:
+            tags = []
+            if not r.required:
+                tags.append("optional")
+            if r.baseline:
+                tags.append(f"baseline: {clean_text(r.baseline)}")
+            head = f"  {paint(_ANSI_COLOURS[r.outcome], r.outcome.value.ljust(14))} {clean_text(r.case_id)}"
+            lines.append(head + (f"  [{', '.join(tags)}]" if tags else ""))
+            if r.message:
+                lines.extend(_indent(clean_text(r.message), " " * 6))
+            for st in r.stages:
+                if st.outcome is not Outcome.PASS and st.message and st.message != r.message:
+                    lines.extend(_indent(f"{st.stage}: {clean_text(st.message)}", " " * 6))
+            diff = r.first_difference
+            if diff:
+                lines.append(f"      first difference: {format_difference(diff)}")
+            if r.signal or (r.exit_code not in (None, 0) and r.outcome in (Outcome.CRASH, Outcome.ERROR)):
+                lines.append(f"      exit code {r.exit_code}" + (f", signal {clean_text(r.signal)}" if r.signal else ""))
+            if r.stderr_tail and r.outcome in (Outcome.CRASH, Outcome.TIMEOUT, Outcome.ERROR):
+                tail = clean_text(r.stderr_tail).rstrip().splitlines()[-5:]
+                lines.append("      stderr (last lines):")
+                lines.extend("        " + t for t in tail)
+        if len(problems) > len(shown):
+            lines.append(f"  ... and {len(problems) - len(shown)} more (see the JSON/HTML report)")
+
+    if record.speed:
+        lines.append("")
+        lines.append("speed:")
+
+        def colour_speed(ri, ci, text):
+            if ci != 4:
+                return text
+            return paint("32" if record.speed[ri].passed else "31", text)
+        rows = [[clean_text(c) for c in row] for row in _speed_rows(record.speed)]
+        lines.extend(_table(["operation", "claim", "measured fps", "required fps", "verdict", "provenance"],
+                            rows, {2, 3}, colour_speed))
+        for s in record.speed:
+            if s.message:
+                lines.append(f"  {clean_text(s.operation)}: {clean_text(s.message)}")
+
+    v = verdict(record)
+    lines.append("")
+    code = "32" if record.exit_code == 0 else ("33" if record.exit_code == 3 else "31")
+    lines.append(f"result: {paint('1;' + code, v)} ({_summary_counts(record.counts())}{_speed_summary(record.speed)})")
+    return "\n".join(lines) + "\n"
