@@ -343,8 +343,8 @@ def _load_effective(path: Path):
     """``extra_fap_values`` of a vertices output, read as defensively as every output."""
     import numpy as np
     from . import compare as cmp
-    cmp._check_size(path, cmp.DEFAULT_MAX_BYTES)
-    with cmp._open_npz(path, cmp.DEFAULT_MAX_BYTES) as z:
+    cmp.check_output_file(path, cmp.DEFAULT_MAX_BYTES)
+    with cmp.open_npz(path, cmp.DEFAULT_MAX_BYTES) as z:
         if "extra_fap_values" not in z:
             raise ValueError("no array 'extra_fap_values' (effective FAP values after FIT and left/right fill)")
         a = z.get("extra_fap_values")

@@ -22,12 +22,14 @@ from fbaconf._atomic import atomic_path
 from .errors import ImageIOError, TextureError
 
 
-def _oiio():
-    import OpenImageIO as oiio
-    return oiio
+def openimageio():
+    """The OpenImageIO module (imported on first use)."""
+    import OpenImageIO
+    return OpenImageIO
 
 
-def _colour():
+def colour_science():
+    """The colour-science module (imported on first use, its import warnings silenced)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         import colour
@@ -37,18 +39,18 @@ def _colour():
 def encode_srgb8(linear: np.ndarray) -> np.ndarray:
     """Linear float RGB -> uint8 sRGB (clip, sRGB inverse EOTF, round half up)."""
     x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    e = np.asarray(_colour().cctf_encoding(x, function="sRGB"), dtype=np.float64)
+    e = np.asarray(colour_science().cctf_encoding(x, function="sRGB"), dtype=np.float64)
     return np.floor(e * 255.0 + 0.5).astype(np.uint8)
 
 
 def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
     """sRGB-encoded [0, 1] -> linear (colour-science's sRGB EOTF)."""
-    return np.asarray(_colour().cctf_decoding(np.asarray(encoded, dtype=np.float64), function="sRGB"),
+    return np.asarray(colour_science().cctf_decoding(np.asarray(encoded, dtype=np.float64), function="sRGB"),
                       dtype=np.float64)
 
 
 def _write(path: Path, pixels: np.ndarray, fmt: str) -> None:
-    oiio = _oiio()
+    oiio = openimageio()
     h, w, c = pixels.shape
     with atomic_path(path, suffix=path.suffix) as tmp:
         out = oiio.ImageOutput.create(tmp)
@@ -96,7 +98,7 @@ def write_image(path, linear: np.ndarray, fmt: str | None = None) -> Path:
 def read_image(path, *, error=ImageIOError) -> tuple[np.ndarray, str]:
     """Read an image with OpenImageIO: (float32 pixels[H, W, C] as stored, pixel format name).
     Integer formats come back normalised to [0, 1]."""
-    oiio = _oiio()
+    oiio = openimageio()
     path = Path(path)
     if not path.is_file():
         raise error(f"image not found: {path}", file=str(path))

@@ -1,4 +1,4 @@
-"""The harness comparison ladder (harness/compare.py): FAPs, vertices, images, tolerances,
+"""The harness comparison ladder (harness/compare/): FAPs, vertices, images, tolerances,
 and untrusted decoder outputs."""
 from __future__ import annotations
 

@@ -1,0 +1,103 @@
+"""Tolerances of the comparison ladder: harness/data/tolerances.toml (every number with its reason) and a case's overrides."""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import asdict, dataclass, fields
+from functools import lru_cache
+from importlib import resources
+from typing import Any, Mapping
+
+
+
+from .base import ToleranceError
+
+
+@lru_cache(maxsize=1)
+def _tolerance_file() -> dict:
+    text = resources.files("fbaconf.harness").joinpath("data", "tolerances.toml").read_text("utf-8")
+    return tomllib.loads(text)
+
+
+def load_tolerances() -> dict:
+    """The parsed default tolerance file (a fresh copy): ``{"vertices": {...}, "images": {...}}``."""
+    return {k: dict(v) for k, v in _tolerance_file().items()}
+
+
+def _check_number(cls_name: str, key: str, v: Any) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ToleranceError(f"{cls_name}.{key} must be a number, not {type(v).__name__}", rule="tolerance-type")
+    v = float(v)
+    if math.isnan(v) or v < 0:
+        raise ToleranceError(f"{cls_name}.{key} must be >= 0 (got {v})", rule="tolerance-value")
+    return v
+
+
+class _Tolerances:
+    _section = ""
+    _order: tuple[tuple[str, str], ...] = ()  # (warn key, fail key) pairs that must be ordered
+
+    @classmethod
+    def defaults(cls):
+        return cls.from_dict(None, None)
+
+    @classmethod
+    def from_dict(cls, defaults=None, overrides: Mapping[str, Any] | None = None):
+        """Tolerances from ``defaults`` (an instance, a dict, or None for the data file)
+        with the keys of ``overrides`` replacing them. Unknown keys, non-numbers, negative
+        or NaN values and a warn limit above its fail limit raise :class:`ToleranceError`."""
+        names = [f.name for f in fields(cls)]
+        if defaults is None:
+            base = dict(_tolerance_file().get(cls._section, {}))
+        elif isinstance(defaults, cls):
+            base = asdict(defaults)
+        elif isinstance(defaults, Mapping):
+            base = dict(defaults)
+        else:
+            raise ToleranceError(f"{cls.__name__} defaults must be a {cls.__name__}, a table or None",
+                                 rule="tolerance-type")
+        if overrides is not None and not isinstance(overrides, Mapping):
+            raise ToleranceError(f"{cls.__name__} overrides must be a table", rule="tolerance-type")
+        merged = {**base, **dict(overrides or {})}
+        unknown = sorted(set(merged) - set(names))
+        if unknown:
+            raise ToleranceError(f"unknown {cls.__name__} key(s) {', '.join(map(str, unknown))} "
+                                 f"(known: {', '.join(names)})", rule="tolerance-key")
+        missing = [n for n in names if n not in merged]
+        if missing:
+            raise ToleranceError(f"{cls.__name__} misses {', '.join(missing)}", rule="tolerance-key")
+        vals = {n: _check_number(cls.__name__, n, merged[n]) for n in names}
+        for w, f in cls._order:
+            if vals[w] > vals[f]:
+                raise ToleranceError(f"{cls.__name__}: {w} ({vals[w]}) is above {f} ({vals[f]})",
+                                     rule="tolerance-order")
+        return cls(**vals)
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class VertexTolerances(_Tolerances):
+    """Vertex comparison limits in scene units: per-frame maximum euclidean error of any
+    vertex and per-frame RMS over all vertices."""
+    max_tol: float
+    rms_tol: float
+    _section = "vertices"
+
+
+@dataclass(frozen=True)
+class ImageTolerances(_Tolerances):
+    """Image comparison limits. Thresholds are per channel on sRGB-encoded values in
+    [0, 1]; ``fail_percent`` is a percentage of pixels; ΔE limits are CIEDE2000."""
+    fail_threshold: float
+    warn_threshold: float
+    fail_percent: float
+    hard_fail: float
+    deltae_warn_mean: float
+    deltae_warn_p95: float
+    deltae_fail_mean: float
+    deltae_fail_p95: float
+    _section = "images"
+    _order = (("warn_threshold", "fail_threshold"), ("deltae_warn_mean", "deltae_fail_mean"),
+              ("deltae_warn_p95", "deltae_fail_p95"))
