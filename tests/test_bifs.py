@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from fbaconf.scenes import bt
 from fbaconf.animation import models
 from fbaconf.scenes import bifs
-from fbaconf.scenes.bifs import BifsEncodeError, BifsError, _Writer
+from fbaconf.scenes.bifs import BifsEncodeError, BifsError, BifsWriter
 from fbaconf.errors import BitstreamError, FbaconfInputError
 from fbaconf.bitstreams.tables import fap_table
 from fbaconf.cli import main
@@ -142,8 +142,8 @@ def scenes(draw, max_depth=4):
             return draw(st.booleans())
         if ftype in ("SFFloat",):
             return float(draw(f32))
-        if ftype in bifs._VEC:
-            return tuple(float(draw(f32)) for _ in range(bifs._VEC[ftype]))
+        if ftype in bifs.SF_VEC:
+            return tuple(float(draw(f32)) for _ in range(bifs.SF_VEC[ftype]))
         if ftype == "SFString":
             return draw(st.text(max_size=6))
         n = draw(st.sampled_from([0, 1, 2, 3, 5, 17]))
@@ -151,8 +151,8 @@ def scenes(draw, max_depth=4):
             return np.array(draw(st.lists(st.integers(-2**31, 2**31 - 1), min_size=n, max_size=n)), np.int64)
         if ftype == "MFFloat":
             return np.array(draw(st.lists(f32, min_size=n, max_size=n)), np.float64)
-        if ftype in bifs._MF_VEC:
-            k = bifs._MF_VEC[ftype]
+        if ftype in bifs.MF_VEC:
+            k = bifs.MF_VEC[ftype]
             return np.array(draw(st.lists(f32, min_size=n * k, max_size=n * k)), np.float64).reshape(n, k)
         if ftype == "MFString":
             return draw(st.lists(st.text(max_size=4), max_size=3))
@@ -227,11 +227,11 @@ def test_any_float64_round_trips_within_float32(xs):
 
 
 # ---------------------------------------------------------------------------------- hand-made streams
-def _prefix(id_bits: int = 3) -> _Writer:
+def _prefix(id_bits: int = 3) -> BifsWriter:
     """Config + ReplaceScene + top OrderedGroup with a list-coded children field: the caller
     writes the children (each preceded by endFlag 0) and calls _finish."""
     t = bifs.tables()
-    w = _Writer()
+    w = BifsWriter()
     w.write(id_bits, 5), w.write(0, 5), w.bit(1), w.bit(0), w.bit(0), w.align()
     w.write(3, 2), w.write(0, 6), w.bit(1)
     w.bit(0), w.write(t.ndts["SFTopNode"].code("OrderedGroup"), 3), w.bit(0)
