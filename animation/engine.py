@@ -283,15 +283,14 @@ _DEFAULT: CompiledFace | None = None
 def _compiled_default() -> CompiledFace:
     """A fresh copy of the compiled bundled default head (callers may modify it)."""
     global _DEFAULT
-    from . import models
+    from .bundled import default_head_feature_vertices, default_head_scene
     if _DEFAULT is None:
-        d = compile_scene(models.default_head_scene())
-        # the generator knows which vertex carries each feature point (coinciding points such as
+        d = compile_scene(default_head_scene())
+        # the data file says which vertex carries each feature point (coinciding points such as
         # 2.2/2.3 -- lips in contact -- cannot be told apart by position)
-        head = models.default_head()
+        fpv = default_head_feature_vertices()
         index = {p.name: i for i, p in enumerate(d.parts)}
-        d.fp_vertices = [(index[head.feature_points[label][0]], head.feature_points[label][1])
-                         for label in FEATURE_POINTS]
+        d.fp_vertices = [(index[fpv[label][0]], fpv[label][1]) for label in FEATURE_POINTS]
         _DEFAULT = d
     d = _DEFAULT
     return CompiledFace({k: v.copy() for k, v in d.points.items()}, dict(d.ifs_names),

@@ -71,7 +71,7 @@ def cmd_list(args) -> int:
 
 
 def cmd_build(args) -> int:
-    from .build import build, build_external
+    from fbaconf.generators.suites import build, build_external
     if args.external is not None:
         ext = build_external(args.external, args.external_out)
         if ext is None:

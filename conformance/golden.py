@@ -32,15 +32,18 @@ FORMAT = "fbaconf.golden/1"
 
 def canonical_npz(path: Path, keep: list[str] | None = None) -> None:
     """Rewrite an .npz with fixed metadata so equal arrays give equal bytes. Float64 vertex
-    arrays are stored as float32 (their comparison has a tolerance far above float32's
-    resolution; halves the repository). ``keep``: store only these arrays (what the case
+    arrays are stored rounded to 6 decimals as float32 (their comparison has a tolerance far
+    above that resolution; halves the repository; and a build's last-digit noise does not
+    change the bytes). ``keep``: store only these arrays (what the case
     compares)."""
     with np.load(path, allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files if keep is None or k in keep or k == "format"}
         if "format" in arrays and str(arrays["format"]).startswith("fbaconf.FaceState"):
             for k in ("vertices", "extra_feature_points"):
                 if k in arrays:
-                    arrays[k] = arrays[k].astype(np.float32)
+                    # 6 decimals first: float noise of a numpy/scipy/libm build (1e-15 near zero)
+                    # does not reach the stored bytes
+                    arrays[k] = (np.round(arrays[k], 6) + 0.0).astype(np.float32)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name in sorted(arrays):

@@ -31,7 +31,7 @@ def scene_seeds(root: Path | None = None, max_bytes: int = 8000) -> list[Entry]:
                 out.append(Entry(p.read_bytes(), kind="scene", origin=f"seed:{p.parent.name}/{p.name}"))
     try:
         from fbaconf.scenes import bt
-        from fbaconf.conformance.build import make_scene
+        from fbaconf.generators.suite_scenes import make_scene
         for name in ("fit:chain", "calibration:all"):
             out.append(Entry(bt.write(make_scene(name)).encode(), kind="scene", origin=f"seed:make_scene({name})"))
     except Exception:  # noqa: BLE001 - optional seeds

@@ -402,6 +402,25 @@ def read(path) -> Scene:
 
 
 # ---------------------------------------------------------------------------------- writer
+def rounded(scene: Scene, decimals: int = 6) -> Scene:
+    """A copy of ``scene`` with every float rounded to ``decimals`` decimals (-0 written as 0):
+    generated geometry written at a fixed precision does not change with a numpy/libm
+    build's last digit."""
+    def r(v):
+        if isinstance(v, Node):
+            return Node(v.type, {k: r(x) for k, x in v.fields.items()}, v.def_name)
+        if isinstance(v, list):
+            return [r(x) for x in v]
+        if isinstance(v, tuple):
+            return tuple(r(x) for x in v)
+        if isinstance(v, float):
+            return round(v, decimals) + 0.0
+        if isinstance(v, np.ndarray) and v.dtype.kind == "f":
+            return np.round(v, decimals) + 0.0
+        return v
+    return Scene([r(n) for n in scene.nodes], scene.file)
+
+
 def fmt_float(x: float) -> str:
     r = repr(float(x))
     if r.endswith(".0"):

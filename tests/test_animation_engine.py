@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from fbaconf.scenes import bt
-from fbaconf.animation import engine, models
+from fbaconf.animation import engine
+from fbaconf.generators import head, models
 from fbaconf.errors import SceneError
 from fbaconf.animation.faceparams import fapu_from_feature_points, fp_index
 from fbaconf.bitstreams.frames import DERIVED, FREE, SET, FapFrames
@@ -52,7 +53,7 @@ def test_default_fapu_from_feature_points(neutral):
     assert model.fapu == fapu_from_feature_points(model.feature_points)
     iris = next(p for p in neutral.parts if p.name == "LeftIris")
     assert np.ptp(neutral.part_vertices(iris, 0)[:, 1]) == pytest.approx(f.IRISD * 1024, rel=1e-3)  # lids tangent
-    assert f.IRISD * 1024 == pytest.approx(2 * models.IRIS_R, rel=0.01)
+    assert f.IRISD * 1024 == pytest.approx(2 * head.IRIS_R, rel=0.01)
     assert f.MNS * 1024 == pytest.approx(25.0, rel=0.02)
     assert 40 < f.ES * 1024 < 80 and 40 < f.MW * 1024 < 60 and 30 < f.ENS * 1024 < 60
     # neutral face: lips in contact, lip line horizontal, corners at the same height
@@ -122,7 +123,8 @@ def test_neutral_and_deterministic(neutral):
     fr.high[2, 4:8] = (1, 63, 0, 0)
     a, b = engine.animate(fr), engine.animate(fr)
     assert np.array_equal(a.vertices, b.vertices)
-    scene2 = bt.parse(bt.write(models.default_head_scene()))
+    from fbaconf.animation.bundled import default_head_scene
+    scene2 = bt.parse(bt.write(default_head_scene()))
     c = engine.animate(fr, scene2)
     assert np.array_equal(a.vertices, c.vertices)
 
@@ -253,3 +255,18 @@ def test_mutated_scenes_give_typed_errors_only(edits):
     except FbaconfInputError:
         return
     assert np.all(np.isfinite(st_.vertices))
+
+
+def test_committed_model_data_is_what_the_generator_makes():
+    """The default head is loaded from committed data (animation/data/models); regenerating it
+    on this machine gives the same bytes (fixed precision: no last-digit drift)."""
+    from fbaconf.generators.models import MODEL_DATA, model_data_files
+    for name, text in model_data_files().items():
+        assert (MODEL_DATA / name).read_text("utf-8") == text, name
+
+
+def test_the_runtime_head_is_the_generated_one_at_fixed_precision():
+    from fbaconf.animation.bundled import default_head_feature_vertices, default_head_scene
+    assert default_head_scene() == bt.rounded(models.default_head_scene(), 6)
+    head = models.default_head()
+    assert default_head_feature_vertices() == {k: tuple(v) for k, v in head.feature_points.items()}

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fbaconf.scenes import bt
-from fbaconf.animation import models
+from fbaconf.generators import models
 from fbaconf.scenes import bifs
 from fbaconf.scenes.bifs import BifsEncodeError, BifsError, BifsWriter
 from fbaconf.errors import BitstreamError, FbaconfInputError

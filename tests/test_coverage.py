@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.conformance import coverage
-from fbaconf.conformance.build import make_content
+from fbaconf.generators.content import make_content
 
 
 def test_model_loads_with_unique_ids_and_clauses():

@@ -647,7 +647,7 @@ def test_failed_image_write_leaves_no_file(tmp_path, monkeypatch):
 
     fake = types.SimpleNamespace(ImageOutput=types.SimpleNamespace(create=lambda p: FailingOutput()),
                                  ImageSpec=oiio.ImageSpec, geterror=lambda: "")
-    monkeypatch.setattr(images, "_oiio", lambda: fake)
+    monkeypatch.setattr(images, "openimageio", lambda: fake)
     with pytest.raises(ImageIOError, match="disk full"):
         write_png(tmp_path / "frame_00000.png", np.zeros((4, 4, 3)))
     assert list(tmp_path.iterdir()) == []

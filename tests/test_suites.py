@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from fbaconf.conformance import build
+from fbaconf.conformance import suite as suite_module
+from fbaconf.generators import suites as build
 from fbaconf.conformance.suite import load_suites
 from fbaconf.profiles.checker import analyse
 
@@ -55,7 +56,7 @@ def test_suite_groups_and_claims():
 
 
 def test_regression_toml_is_merged(tmp_path):
-    data = Path(build.__file__).parent / "data"
+    data = Path(suite_module.__file__).parent / "data"
     d = tmp_path / "data"
     shutil.copytree(data, d, ignore=shutil.ignore_patterns("regression*"))
     (d / "regression.toml").write_text('[[suite]]\nname = "simple-l1-regression"\nclaim = "simple@1"\n'
@@ -82,4 +83,25 @@ def test_external_suite_from_real_files(tmp_path):
     man = json.loads((tmp_path / "out" / "golden" / "MANIFEST.json").read_text())
     assert any(k.startswith(build.EXTERNAL_SUITE + "/") for k in man["files"])
     # nothing lands in the repository
-    assert not (Path(build.__file__).parent / "suites" / build.EXTERNAL_SUITE).exists()
+    assert not (Path(suite_module.__file__).parent / "suites" / build.EXTERNAL_SUITE).exists()
+
+
+def test_every_suite_rebuilds_byte_for_byte(tmp_path):
+    """`fbaconf suites build` (the README's first command) leaves the tree as committed: every
+    file of every suite is rebuilt identically (fixed seeds, the bundled models from committed
+    data, generated geometry at 6 decimals)."""
+    built = build.build(tmp_path, None, log=lambda *_: None)
+    committed = {s.name: s for s in load_suites()}
+    assert sorted(s.name for s in built) == sorted(committed)
+    for s in built:
+        mine = sorted(p.relative_to(s.path) for p in s.path.rglob("*") if p.is_file())
+        theirs = sorted(p.relative_to(committed[s.name].path) for p in committed[s.name].path.rglob("*")
+                        if p.is_file())
+        assert mine == theirs, s.name
+        for rel in mine:
+            assert (s.path / rel).read_bytes() == (committed[s.name].path / rel).read_bytes(), f"{s.name}/{rel}"
+
+
+def test_goldens_regenerate_byte_for_byte():
+    from fbaconf.conformance.golden import verify
+    assert verify(log=lambda *_: None) == []

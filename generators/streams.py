@@ -1,0 +1,177 @@
+"""Error and special streams of the suites: mutations of valid streams, edits, and streams no encoder option makes."""
+from __future__ import annotations
+
+import random
+
+import numpy as np
+
+
+from fbaconf.conformance.suite import SuiteError
+from .content import make_content
+
+
+def _hl_stream(n: int, fap: int, fields: dict[int, list[int]]) -> bytes:
+    from fbaconf.bitstreams.encoder import EncoderOptions, encode
+    from fbaconf.bitstreams.frames import SET, FapFrames
+    f = FapFrames.empty(n, 30.0)
+    f.status[:, fap - 1] = SET
+    for col, vals in fields.items():
+        f.high[:, col] = vals
+    return encode(f, EncoderOptions(plane_start_codes="none")).data
+
+
+def _intra_then_p(a: bytes, b: bytes) -> bytes:
+    """A's intra plane followed by B's first predicted plane (same masks and quantiser)."""
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.bitstreams.bitedit import end_stream, splice
+    pa, pb = decode(a).planes, decode(b).planes
+    joined = splice((a, 0, pa[0].end_offset), (b, pb[1].bit_offset, pb[1].end_offset))
+    return end_stream(joined, pa[0].end_offset + pb[1].end_offset - pb[1].bit_offset)
+
+
+def mutate(data: bytes, mutation: str, seed: int) -> bytes:
+    """An invalid stream from a valid one (``data``), or built from scratch, for an error case."""
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.errors import BitstreamError
+    from fbaconf.bitstreams import bitedit
+    from fbaconf.profiles.teststreams import stuffing_positions, zero_heavy_plane
+    planes = decode(data).planes
+    hdr = planes[0].header_offset
+    if mutation == "truncate:plane1-middle":
+        p1, p2 = planes[1], planes[2]
+        return bitedit.truncate_bits(data, (p1.header_offset + p2.bit_offset) // 2)
+    if mutation == "frame-rate-zero":
+        return bitedit.set_bits(data, hdr + 4, 12, 0)
+    if mutation == "garbage:plane0":
+        rng = random.Random(seed)
+        cut = (planes[0].header_offset + 40) // 8
+        return data[:cut] + bytes(rng.randrange(256) for _ in range(64))
+    if mutation == "too-short":
+        return data[:3]
+    if mutation == "not-face":
+        return b"\x00\x00\x01\xb6" + data[4:]
+    if mutation == "object-mask":
+        return bitedit.set_bits(data, hdr + 1, 2, 0b11)
+    if mutation == "first-predicted":
+        return bitedit.flip_bit(data, hdr)
+    if mutation == "marker":
+        return bitedit.flip_bit(data, planes[0].marker_offsets[0][0])
+    if mutation == "unexpected-start-code":
+        assert data[-4:] == b"\x00\x00\x01\xb1"
+        return data[:-1] + b"\xb6"
+    if mutation == "time-code-hours":
+        assert planes[0].time_code is not None
+        return bitedit.set_bits(data, hdr + 18, 5, 24)
+    if mutation == "stuffing":
+        w = zero_heavy_plane()
+        _, start, length = decode(w).planes[0].blocks[-1]
+        return bitedit.flip_bit(w, stuffing_positions(w, start, length)[0])
+    if mutation == "dct-vlc":
+        p = planes[0]
+        for name, start, length in p.blocks:
+            for b in range(start, start + length):
+                bad = bitedit.flip_bit(data, b)
+                try:
+                    decode(bad)
+                except BitstreamError as e:
+                    if e.rule in ("invalid-vlc", "run-overflow", "segment-length", "coefficient-overflow"):
+                        return bad
+        raise SuiteError("no single-bit corruption of the DCT data found", rule="suite-spec")
+    if mutation == "viseme-select":
+        return _intra_then_p(_hl_stream(1, 1, {0: [14]}), _hl_stream(2, 1, {0: [0, 5]}))
+    if mutation == "expression-select":
+        return _intra_then_p(_hl_stream(1, 2, {4: [6]}), _hl_stream(2, 2, {4: [0, 4]}))
+    if mutation == "intensity":
+        return _intra_then_p(_hl_stream(1, 1, {2: [63]}), _hl_stream(2, 1, {2: [0, 30]}))
+    if mutation == "value-overflow":
+        return _value_overflow()
+    raise SuiteError(f"unknown mutation {mutation!r}", rule="suite-spec")
+
+
+def _value_overflow() -> bytes:
+    """FAP 47 at the top of 0..1860 steps, then predicted planes each adding +1860 steps (written
+    with the codec's arithmetic coder: the encoder refuses such values) until 2^31 - 1 is passed."""
+    from fbaconf.bitstreams.arith import ArithEncoder, make_model
+    from fbaconf.bitstreams.bitio import BitWriter
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.bitstreams.encoder import EncoderOptions, encode
+    from fbaconf.bitstreams.frames import SET, FapFrames
+    from fbaconf.bitstreams.bitedit import end_stream, splice
+    fap = 47
+    bnd = np.zeros((68, 4), dtype=np.int64)
+    bnd[fap - 1] = (1860, 0, 1860, 0)
+    f = FapFrames.empty(1, 30.0)
+    f.status[:, fap - 1] = SET
+    f.values[0, fap - 1] = 1860 * 512
+    e = encode(f, EncoderOptions(bounds=bnd, plane_start_codes="none")).data
+    end = decode(e).planes[0].end_offset
+    w = BitWriter()
+    model = make_model(1861)
+    for _ in range(2260):
+        w.bit(0)
+        w.write(1, 2)
+        w.bit(0)
+        enc = ArithEncoder(w)
+        enc.encode(model, 1860)
+        enc.flush()
+    n = w.position
+    return end_stream(splice((e, 0, end), (w.getvalue(), 0, n)), end + n)
+
+
+def edit_valid(data: bytes, edit: str) -> bytes:
+    """Bit edits that keep a stream decodable (warnings only): ``no-frame-rate``, ``trailing``,
+    ``time-backwards``, ``quant-no-lists``."""
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.bitstreams import bitedit
+    planes = decode(data).planes
+    if edit == "no-frame-rate":
+        intra = [p for p in planes if p.is_intra and p.frame_rate is not None]
+        out = data
+        removed = 0
+        for p in intra:  # drop the 13 frame-rate bits of every intra plane (is_frame_rate = 0)
+            h = p.header_offset - removed
+            out = bitedit.set_bits(bitedit.remove_bits(out, h + 4, 13), h + 3, 1, 0)
+            removed += 13
+        return bitedit.end_stream(out, planes[-1].end_offset - removed)
+    if edit == "trailing":
+        return data + b"\x00\x17"
+    if edit == "time-backwards":
+        p = [p for p in planes if p.is_intra and p.time_code is not None and p.time_code[3] >= 2][0]
+        return bitedit.set_bits(data, p.header_offset + 18 + 12, 6, 0)
+    if edit == "quant-no-lists":
+        p = next(p for p in planes if p.is_intra and p.index > 0 and len(p.new_lists) == 4)
+        first_list = p.marker_offsets[10][0]
+        p_min_start = p.marker_offsets[10 + 3 * 18][0]
+        block_start = p.blocks[0][1]
+        removed = block_start - p_min_start
+        out = bitedit.remove_bits(data, p_min_start, removed)
+        out = bitedit.set_bits(out, first_list - 1, 1, 0)  # is_p_new_min = 0
+        return bitedit.end_stream(out, planes[-1].end_offset - removed)
+    raise SuiteError(f"unknown edit {edit!r}", rule="suite-spec")
+
+
+def special_stream(name: str) -> bytes:
+    """Streams that need hand-made frames: ``lookahead`` (a stuffing position in the 14-bit look-ahead
+    after the viseme block, FAP-DECISION-005), ``splice-rates`` (the frame rate changes at an intra
+    plane: 25 Hz then 12.5 Hz)."""
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.bitstreams.encoder import EncoderOptions, encode
+    from fbaconf.bitstreams.frames import SET, FapFrames
+    from fbaconf.bitstreams.bitedit import end_stream, splice
+    if name == "lookahead":
+        b = np.zeros((68, 4), dtype=np.int64)
+        b[:] = (1860, -1860, 1860, -1860)
+        f = FapFrames.empty(1, 30.0)
+        f.status[0, 0] = f.status[0, 2] = f.status[0, 3] = SET
+        f.high[0, :3] = (0, 3, 32)
+        f.values[0, 2], f.values[0, 3] = 1860 * 4, 1860 * 2
+        return encode(f, EncoderOptions(fap_quant=1, bounds=b, plane_start_codes="none")).data
+    if name == "splice-rates":
+        a = encode(make_content({"frames": 12, "rate": 25, "seed": 31, "visemes": False, "expressions": False,
+                                 "faps": list(range(3, 20))}), EncoderOptions(fap_quant=2, plane_start_codes="none"))
+        b = encode(make_content({"frames": 8, "rate": 12.5, "seed": 32, "visemes": False, "expressions": False,
+                                 "faps": list(range(3, 20))}), EncoderOptions(fap_quant=2, plane_start_codes="none"))
+        pa, pb = decode(a.data).planes, decode(b.data).planes
+        joined = splice((a.data, 0, pa[-1].end_offset), (b.data, pb[0].bit_offset, pb[-1].end_offset))
+        return end_stream(joined, pa[-1].end_offset + pb[-1].end_offset - pb[0].bit_offset)
+    raise SuiteError(f"unknown special stream {name!r}", rule="suite-spec")

@@ -1,0 +1,278 @@
+"""``fbaconf suites build``: generate every suite of ``conformance/data/suites.toml`` into
+``conformance/suites/`` (content in :mod:`.content`, scenes in :mod:`.suite_scenes`, error and
+special streams in :mod:`.streams`).
+
+Deterministic: the same fbaconf version writes byte-identical files on any machine
+(procedural content, reference encoder, fixed seeds, the bundled models from their committed
+data, generated geometry rounded to 6 decimals before it is written), so the sha256 digests in each ``suite.json`` are stable
+and the goldens made from them (``fbaconf golden regenerate``) can be verified bit for bit.
+
+Each case folder-less: a suite folder holds ``suite.json`` and the case files named
+``<case>.fba``, ``<case>.fap``, ``<case>.bt``, ``<case>.bifs`` (when the BIFS codec is
+available), ``scenario.toml`` (shared by the suite's image cases), ``<case>-face<i>.fba``.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import tomllib
+from importlib import resources
+from pathlib import Path
+
+
+from fbaconf._atomic import atomic_write_bytes, atomic_write_text
+
+from fbaconf.conformance.suite import SUITE_FORMAT, Case, Suite, SuiteError, sha256_file, suites_root
+from .content import encoder_options, make_content
+from .streams import edit_valid, mutate, special_stream
+from .suite_scenes import make_scene
+
+
+# Generated geometry is written at this many decimals: the files do not change with a
+# numpy/libm build's last digit (0.000001 mm-like units: far below every tolerance).
+GEOMETRY_DECIMALS = 6
+
+
+def spec(data_dir: Path | None = None) -> dict:
+    """suites.toml, with the [[suite]] / [[case]] lists of data/regression.toml (promoted fuzz
+    findings, written by the fuzzer) appended when that file exists."""
+    data = Path(data_dir) if data_dir is not None else resources.files("fbaconf.conformance").joinpath("data")
+    s = tomllib.loads(data.joinpath("suites.toml").read_text("utf-8"))
+    reg = data.joinpath("regression.toml")
+    if reg.is_file():
+        r = tomllib.loads(reg.read_text("utf-8"))
+        known = {x["name"] for x in s["suite"]}
+        s["suite"] = s["suite"] + [x for x in r.get("suite", []) if x["name"] not in known]
+        s["case"] = s["case"] + list(r.get("case", []))
+    return s
+
+
+
+
+def _scenario_toml(sc_spec: dict, n_frames: int) -> str:
+    from fbaconf.rendering.scenario import Scenario
+    sc = Scenario.default()
+    frames = sorted({0, n_frames // 2, n_frames - 1}) if sc_spec.get("frames") == "ends" else None
+    text = sc.to_toml()
+    d = tomllib.loads(text)
+    d["width"], d["height"], d["supersample"] = sc_spec["width"], sc_spec["height"], sc_spec["supersample"]
+    if frames is not None:
+        d["frames"] = frames
+    return _dump_toml(d)
+
+
+def _dump_toml(d: dict, prefix: str = "") -> str:
+    def val(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v)
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(val(x) for x in v) + "]"
+        if isinstance(v, float):
+            return repr(v)
+        return str(v)
+    lines, tables, arrays = [], [], []
+    for k, v in d.items():
+        if isinstance(v, dict):
+            tables.append((k, v))
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            arrays.append((k, v))
+        else:
+            lines.append(f"{k} = {val(v)}")
+    out = "\n".join(lines) + "\n"
+    for k, v in tables:
+        out += f"\n[{prefix}{k}]\n" + _dump_toml(v, f"{prefix}{k}.")
+    for k, items in arrays:
+        for it in items:
+            out += f"\n[[{prefix}{k}]]\n" + _dump_toml(it, f"{prefix}{k}.")
+    return out
+
+
+def _write(dirpath: Path, name: str, data: bytes | str, case: Case, key: str | None) -> str:
+    p = dirpath / name
+    if isinstance(data, str):
+        atomic_write_text(p, data)
+    else:
+        atomic_write_bytes(p, data)
+    case.sha256[name] = sha256_file(p)
+    if key:
+        case.inputs[key] = name
+    return name
+
+
+def _error_expect(c: dict) -> dict:
+    """An error case's expectation: the checker's diagnostics, and whether a decoder may
+    decode (conceal) instead of rejecting (``conceal = true`` in suites.toml)."""
+    out = {"diagnostics": list(c.get("expect", []))}
+    if c.get("conceal"):
+        out["conceal"] = True
+    return out
+
+
+def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
+    from fbaconf.bitstreams.encoder import encode
+    from fbaconf.bitstreams.faptext import write_fap
+    from fbaconf.scenes import bt
+    gen = c.get("generator", "stream")
+    case = Case(id=c["id"], suite=suite["name"], claim=c.get("claim", suite["claim"]), group=suite["group"],
+                kind={"stream": "decode", "multi": "multi", "error": "error", "file": "decode", "special": "decode"}[gen],
+                description=c.get("description", ""), tools=list(c.get("tools", [])), covers=list(c.get("covers", [])),
+                suite_dir=d)
+    if gen == "file":
+        # a committed input (e.g. a promoted fuzz finding, conformance/data/regression/): an error
+        # case, or a valid stream decoded by the reference for the goldens
+        src = Path(str(resources.files("fbaconf.conformance").joinpath("data", c["file"])))
+        if not src.is_file():
+            raise SuiteError(f"case {case.id}: file {c['file']} not found under conformance/data", rule="suite-spec")
+        ext = src.suffix.lower().lstrip(".")
+        _write(d, f"{case.id}.{ext}", src.read_bytes(), case, ext)
+        if c.get("expect") is not None or c.get("valid") is False:
+            case.kind = "error"
+            case.expect = _error_expect(c)
+        else:
+            case.stages = ["faps"]
+            case.goldens = {"faps": "faps.npz"}
+        return case
+    if gen == "error" and c.get("mutation") in ("too-short", "not-face", "stuffing", "viseme-select",
+                                                 "expression-select", "intensity", "value-overflow") \
+            and "content" not in c:
+        c = dict(c, content={"frames": 5, "faps": [3, 4]})
+    content = make_content(c.get("content", {}))
+    opts = encoder_options(c.get("options", {}), len(content))
+    if gen == "multi":
+        faces = []
+        for i in range(int(c["faces"])):
+            cc = dict(c.get("content", {}))
+            cc["seed"] = int(cc.get("seed", 0)) * 10 + i
+            res = encode(make_content(cc), opts)
+            faces.append(_write(d, f"{case.id}-face{i}.fba", res.data, case, None))
+        case.inputs["faces"] = faces
+        case.frames = len(content)
+        case.stages = ["faps"]
+        case.goldens = {"faces": [f"face{i}.npz" for i in range(len(faces))]}
+        return case
+    res = encode(content, opts)
+    if gen == "error":
+        data = mutate(res.data, c["mutation"], int(c.get("content", {}).get("seed", 0)))
+        _write(d, f"{case.id}.fba", data, case, "fba")
+        case.expect = _error_expect(c)
+        case.frames = len(content)
+        return case
+    data = special_stream(c["special"]) if c.get("special") else res.data
+    if c.get("edit"):
+        data = edit_valid(data, c["edit"])
+    from fbaconf.bitstreams.decoder import decode
+    decoded = decode(data).frames
+    _write(d, f"{case.id}.fba", data, case, "fba")
+    if c.get("text", True):
+        _write(d, f"{case.id}.fap", write_fap(decoded, name=case.id), case, "fap")
+    case.frames = len(decoded)
+    case.stages = list(c.get("stages", ["faps"]))
+    case.goldens = {"faps": "faps.npz"}
+    if "scene" in c:
+        scene, files = make_scene(c["scene"])
+        for name, blob in sorted(files.items()):
+            if not (d / name).is_file():
+                _write(d, name, blob, case, None)
+            else:
+                case.sha256[name] = sha256_file(d / name)
+        from fbaconf.scenes import bifs
+        scene = bt.rounded(scene, GEOMETRY_DECIMALS)
+        _write(d, f"{case.id}.bt", bt.write(scene), case, "scene")
+        _write(d, f"{case.id}.bifs", bifs.encode(scene), case, "bifs")
+    if "vertices" in case.stages:
+        case.goldens["vertices"] = "vertices.npz"
+        if c.get("vertices_key"):
+            case.tolerances.setdefault("vertices", {})["key"] = c["vertices_key"]
+    if "images" in case.stages:
+        text = _scenario_toml(sc_spec, case.frames)
+        _write(d, f"{case.id}-scenario.toml", text, case, "scenario")
+        frames = tomllib.loads(text).get("frames", list(range(case.frames)))
+        case.goldens["images"] = [f"frame_{k:05d}.png" for k in frames]
+    return case
+
+
+def build(root: Path | None = None, names: list[str] | None = None, log=print) -> list[Suite]:
+    """Regenerate the suites (all, or ``names``) under ``root``; returns them."""
+    s = spec()
+    root = root or suites_root()
+    root.mkdir(parents=True, exist_ok=True)
+    suites = []
+    known = {x["name"] for x in s["suite"]}
+    for c in s["case"]:
+        if c["suite"] not in known:
+            raise SuiteError(f"case {c['id']} names unknown suite {c['suite']!r}", rule="suite-spec")
+    for sd in s["suite"]:
+        if names and sd["name"] not in names:
+            continue
+        d = root / sd["name"]
+        if d.exists():
+            shutil.rmtree(d)
+        d.mkdir(parents=True)
+        cases = [build_case(c, sd, d, s["scenario"]) for c in s["case"] if c["suite"] == sd["name"]]
+        suite = Suite(sd["name"], sd.get("description", ""), sd["claim"], sd["group"], s["version"], cases, d)
+        atomic_write_text(d / "suite.json", json.dumps(suite.to_json(), indent=1, sort_keys=False) + "\n")
+        suites.append(suite)
+        log(f"built {suite.name}: {len(cases)} case(s)")
+    return suites
+
+
+EXTERNAL_SUITE = "simple-l2-real"
+EXTERNAL_QUANTS = (1, 8, 31)
+EXTERNAL_RATES = (None, 10.0)  # the file's own rate, and resampled to 10 Hz
+
+
+def build_external(src: Path, out: Path | None = None, log=print) -> Suite | None:
+    """The optional EXTERNAL suite: every ``.fap`` file under ``src`` (e.g. ../shared/data/fap),
+    encoded at several quantisers and frame rates, with goldens, under ``out`` (default: a new
+    temporary folder). Never written into the repository. Returns None when ``src`` holds no
+    .fap file. Run it with ``FBACONF_SUITES=<out>/suites FBACONF_GOLDEN=<out>/golden fbaconf run``."""
+    import tempfile
+    from fbaconf.bitstreams.encoder import EncoderOptions, encode
+    from fbaconf.errors import FbaconfInputError
+    from fbaconf.bitstreams.faptext import read_fap_file, write_fap
+    src = Path(src)
+    files = sorted(p for p in src.rglob("*.fap") if p.is_file()) if src.is_dir() else []
+    if not files:
+        return None
+    out = Path(out) if out is not None else Path(tempfile.mkdtemp(prefix="fbaconf-external-"))
+    d = out / "suites" / EXTERNAL_SUITE
+    if d.exists():
+        shutil.rmtree(d)
+    d.mkdir(parents=True)
+    cases = []
+    for f in files:
+        try:
+            frames = read_fap_file(f)[0]
+        except (OSError, FbaconfInputError) as e:
+            log(f"external: {f}: skipped ({e})")
+            continue
+        stem = f"{f.parent.name}-{f.stem}".replace(" ", "_")
+        for q in EXTERNAL_QUANTS:
+            for rate in EXTERNAL_RATES:
+                cid = f"{stem}-q{q}" + (f"-{rate:g}hz" if rate else "")
+                try:
+                    res = encode(frames, EncoderOptions(fap_quant=q, frame_rate=rate, intra_period=25))
+                except FbaconfInputError as e:
+                    log(f"external: {cid}: not codable ({e.message if hasattr(e, 'message') else e})")
+                    continue
+                case = Case(id=cid, suite=EXTERNAL_SUITE, claim="simple@2", group="real", kind="decode",
+                            description=f"real file {f.relative_to(src)} at fap_quant {q}"
+                                        + (f", {rate:g} Hz" if rate else ""), tools=["arithmetic"], suite_dir=d)
+                _write(d, f"{cid}.fba", res.data, case, "fba")
+                _write(d, f"{cid}.fap", write_fap(res.recon, name=cid), case, "fap")
+                case.frames = len(res.recon)
+                case.stages = ["faps"]
+                case.goldens = {"faps": "faps.npz"}
+                cases.append(case)
+    suite = Suite(EXTERNAL_SUITE, f"EXTERNAL: the real .fap files of {src} (not committed)", "simple@2", "real",
+                  spec()["version"], cases, d)
+    atomic_write_text(d / "suite.json", json.dumps(suite.to_json(), indent=1) + "\n")
+    from fbaconf.conformance.golden import regenerate
+    regenerate([suite], out / "golden", log=lambda *_: None)
+    log(f"built external suite {EXTERNAL_SUITE}: {len(cases)} case(s) from {len(files)} file(s) in {out}")
+    return suite
+
+
+__all__ = ["build", "build_external", "spec", "SUITE_FORMAT"]
