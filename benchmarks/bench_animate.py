@@ -10,7 +10,8 @@ import time
 
 import numpy as np
 
-from fbaconf.animation import engine, models
+from fbaconf.animation import engine
+from fbaconf.generators import models
 from fbaconf.bitstreams.frames import SET, FapFrames
 from fbaconf.bitstreams.tables import fap_table
 

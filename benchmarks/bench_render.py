@@ -87,7 +87,7 @@ def bundled_states(n_frames: int) -> dict[str, FaceState]:
         from fbaconf.animation.engine import animate
         from fbaconf.bitstreams.frames import FapFrames
         out["default head"] = animate(FapFrames.empty(n_frames), scene=None)
-        from fbaconf.animation.models import level_limit_scene
+        from fbaconf.generators.models import level_limit_scene
         out["level-limit head"] = animate(FapFrames.empty(n_frames), scene=level_limit_scene())
     except Exception as e:  # the animation stage is optional for this benchmark
         print(f"(bundled heads unavailable: {type(e).__name__}: {e})")

@@ -7,6 +7,7 @@ import numpy as np
 
 
 from fbaconf.conformance.suite import SuiteError
+from fbaconf.profiles.teststreams import value_overflow_stream
 from .content import make_content
 
 
@@ -84,38 +85,8 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     if mutation == "intensity":
         return _intra_then_p(_hl_stream(1, 1, {2: [63]}), _hl_stream(2, 1, {2: [0, 30]}))
     if mutation == "value-overflow":
-        return _value_overflow()
+        return value_overflow_stream()
     raise SuiteError(f"unknown mutation {mutation!r}", rule="suite-spec")
-
-
-def _value_overflow() -> bytes:
-    """FAP 47 at the top of 0..1860 steps, then predicted planes each adding +1860 steps (written
-    with the codec's arithmetic coder: the encoder refuses such values) until 2^31 - 1 is passed."""
-    from fbaconf.bitstreams.arith import ArithEncoder, make_model
-    from fbaconf.bitstreams.bitio import BitWriter
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.frames import SET, FapFrames
-    from fbaconf.bitstreams.bitedit import end_stream, splice
-    fap = 47
-    bnd = np.zeros((68, 4), dtype=np.int64)
-    bnd[fap - 1] = (1860, 0, 1860, 0)
-    f = FapFrames.empty(1, 30.0)
-    f.status[:, fap - 1] = SET
-    f.values[0, fap - 1] = 1860 * 512
-    e = encode(f, EncoderOptions(bounds=bnd, plane_start_codes="none")).data
-    end = decode(e).planes[0].end_offset
-    w = BitWriter()
-    model = make_model(1861)
-    for _ in range(2260):
-        w.bit(0)
-        w.write(1, 2)
-        w.bit(0)
-        enc = ArithEncoder(w)
-        enc.encode(model, 1860)
-        enc.flush()
-    n = w.position
-    return end_stream(splice((e, 0, end), (w.getvalue(), 0, n)), end + n)
 
 
 def edit_valid(data: bytes, edit: str) -> bytes:

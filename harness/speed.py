@@ -140,7 +140,7 @@ class _Content:
     def scene(self) -> Path:
         if self._scene is None:
             from fbaconf.scenes import bt
-            from fbaconf.animation.models import default_head_scene
+            from fbaconf.animation.bundled import default_head_scene
             p = self.root / "default-head.bt"
             p.write_text(bt.write(default_head_scene()), encoding="utf-8")
             self._scene = p

@@ -69,3 +69,34 @@ def make_stream(n: int = 30, rate: float = 30.0, faps=range(3, 69), *, seed: int
 
 
 __all__ = ["make_stream", "smooth_frames", "stuffing_positions", "zero_heavy_plane"]
+
+
+def value_overflow_stream(planes: int = 2260) -> bytes:
+    """FAP 47 (tongue_roll, step 512), range 0..1860 steps: an intra plane at +1860 steps, then
+    predicted planes each adding +1860 steps (the top symbol of the adaptive P model, coded
+    with the codec's own arithmetic encoder, as an encoder would) until the value passes
+    2^31 - 1: the value-overflow rule. The encoder itself refuses values beyond +-1860 steps,
+    so the predicted planes are written here."""
+    from fbaconf.bitstreams.arith import ArithEncoder, make_model
+    from fbaconf.bitstreams.bitedit import end_stream, splice
+    from fbaconf.bitstreams.bitio import BitWriter
+    from fbaconf.bitstreams.decoder import decode
+    fap = 47
+    bnd = np.zeros((68, 4), dtype=np.int64)
+    bnd[fap - 1] = (1860, 0, 1860, 0)
+    f = FapFrames.empty(1, 30.0)
+    f.status[:, fap - 1] = SET
+    f.values[0, fap - 1] = 1860 * 512
+    e = encode(f, EncoderOptions(bounds=bnd, plane_start_codes="none")).data
+    end = decode(e).planes[0].end_offset
+    w = BitWriter()
+    model = make_model(1861)
+    for _ in range(planes):
+        w.bit(0)  # is_intra
+        w.write(1, 2)  # fba_object_mask 01
+        w.bit(0)  # no skip
+        enc = ArithEncoder(w)
+        enc.encode(model, 1860)
+        enc.flush()
+    n = w.position
+    return end_stream(splice((e, 0, end), (w.getvalue(), 0, n)), end + n)

@@ -190,31 +190,8 @@ def case_intensity(**_):
 
 
 def case_value_overflow(**_):
-    # FAP 47 (step 512), ranges 0..1860 steps: an intra plane at +1860 steps, then predicted
-    # planes each adding +1860 steps (the top symbol of the adaptive P model, coded with the
-    # codec's own arithmetic encoder, as the encoder would) until the value passes 2^31 - 1.
-    # The encoder itself refuses values beyond +-1860 steps, so the P planes are written here.
-    from fbaconf.bitstreams.arith import ArithEncoder, make_model
-    from fbaconf.bitstreams.bitio import BitWriter
-    fap = 47
-    bnd = np.zeros((68, 4), dtype=np.int64)
-    bnd[fap - 1] = (1860, 0, 1860, 0)
-    e_frames = FapFrames.empty(1, 30.0)
-    e_frames.status[:, fap - 1] = SET
-    e_frames.values[0, fap - 1] = 1860 * 512
-    e = encode(e_frames, EncoderOptions(bounds=bnd, plane_start_codes="none")).data
-    end = decode(e).planes[0].end_offset
-    w = BitWriter()
-    model = make_model(1861)
-    for _ in range(2260):
-        w.bit(0)  # is_intra
-        w.write(1, 2)  # fba_object_mask 01
-        w.bit(0)  # no skip
-        enc = ArithEncoder(w)
-        enc.encode(model, 1860)
-        enc.flush()
-    n = w.position
-    return end_stream(splice((e, 0, end), (w.getvalue(), 0, n)), end + n), {}
+    from fbaconf.profiles.teststreams import value_overflow_stream
+    return value_overflow_stream(), {}
 
 
 def case_single_symbol(**_):

@@ -12,13 +12,15 @@ import os
 import random
 
 import numpy as np
+
+from fbaconf.profiles.teststreams import value_overflow_stream
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fbaconf.bitstreams import arith, decoder, tables
 from fbaconf.bitstreams.arith import PURE_PYTHON_ENV, ArithDecoder, ArithEncoder, FastModel, make_model
-from fbaconf.bitstreams.bitio import VISUAL_OBJECT_SEQUENCE_END_CODE, BitReader, BitWriter
+from fbaconf.bitstreams.bitio import BitReader, BitWriter
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.errors import BitstreamError
@@ -253,32 +255,8 @@ def test_stuffing_errors_are_located_identically():
     assert "stuffing" in rules
 
 
-def _overflow_stream() -> bytes:
-    """An intra plane then P planes that each add the largest delta to FAP 47 (tongue_roll,
-    QP 512) until the value leaves 32 bits: the value-overflow rule."""
-    b = np.zeros((68, 4), dtype=np.int64)
-    b[:, 0], b[:, 1], b[:, 2], b[:, 3] = 1860, -1860, 1860, -1860
-    f = FapFrames.empty(1, 30.0)
-    f.status[0, 46] = SET
-    f.values[0, 46] = 1860 * 512
-    w = BitWriter()
-    data = encode(f, EncoderOptions(bounds=b, fap_quant=1, plane_start_codes="none", end_code=False)).data
-    intra = decode(data).planes[0]
-    for i in range(intra.end_offset):  # copy the intra plane bit by bit
-        w.bit((data[i >> 3] >> (7 - (i & 7))) & 1)
-    model = make_model(2 * 1860 + 1)
-    for _ in range(2300):
-        w.write(0b0010, 4)  # is_intra 0, fba_object_mask 01, skip_frames 0
-        enc = ArithEncoder(w)
-        enc.encode(model, 2 * 1860)
-        enc.flush()
-    w.next_start_code()
-    w.start_code(VISUAL_OBJECT_SEQUENCE_END_CODE)
-    return w.getvalue()
-
-
 def test_value_overflow_is_reported_identically():
-    out = both(_overflow_stream())
+    out = both(value_overflow_stream())
     assert out[0] == "error" and out[4] == "value-overflow" and out[7] == 47
 
 
@@ -416,7 +394,7 @@ def test_env_var_and_patched_classes_select_the_pure_path(monkeypatch):
 
 def test_checker_reports_identically():
     from fbaconf.profiles.checker import analyse
-    for data in (_wide_range_stream(), _overflow_stream(), _wide_range_stream()[:-9],
+    for data in (_wide_range_stream(), value_overflow_stream(), _wide_range_stream()[:-9],
                  encode(synthetic_sequence(60, 30.0), EncoderOptions(fap_quant=1, intra_period=20)).data):
         with fast_path():
             fast = analyse(data, claim="simple@1")
