@@ -110,7 +110,8 @@ def signature(r: CaseResult) -> str:
             continue
         fd = s.first_difference or {}
         if s.stage == "faps":
-            faps = fd.get("faps") or ([fd["fap"]] if "fap" in fd else [])
+            faps = [x["fap"] for x in fd.get("faps", []) if isinstance(x, dict)] or \
+                ([fd["fap"]] if "fap" in fd else [])
             parts.append(f"faps:{_items(faps)}" if faps else f"faps:{fd.get('what', 'differs')}")
         elif s.stage in ("vertices", "effective_faps"):
             parts.append(f"{s.stage}:{fd.get('part', fd.get('fap', 'differs'))}")

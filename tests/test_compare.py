@@ -136,9 +136,26 @@ def test_status_matters_for_npz_but_not_for_text():
     g.status[2, 30] = RETAINED  # FAP 31 held instead of set: same value
     r = compare_faps(e, g, text_output=False)
     assert r.outcome is Outcome.FAIL
-    assert r.first_difference == {"frame": 2, "frame_number": 2, "fap": 31, "name": name_of(31), "what": "status",
-                                  "expected": "SET", "got": "RETAINED"}
+    fd = dict(r.first_difference)
+    assert fd.pop("faps") == [{"fap": 31, "name": name_of(31), "frames": 1, "first": 2, "last": 2}]
+    assert fd == {"frame": 2, "frame_number": 2, "fap": 31, "name": name_of(31), "what": "status",
+                  "expected": "SET", "got": "RETAINED"}
     assert compare_faps(e, g, text_output=True).outcome is Outcome.PASS
+
+
+def test_every_differing_fap_is_listed_with_counts():
+    """A decoder that copies FAP 4 into FAP 3 in every frame: the pattern shows in the list of
+    differing FAPs, not only the first difference."""
+    e = synthetic_sequence(10, faps=[3, 4, 19, 31])
+    g = e.copy()
+    g.values[:, 2] = g.values[:, 3]
+    g.values[5:8, 18] += 1  # and FAP 19 off in frames 5..7
+    r = compare_faps(e, g, text_output=False)
+    diff3 = int((e.values[:, 2] != e.values[:, 3]).sum())
+    rows = {x["fap"]: x for x in r.first_difference["faps"]}
+    assert rows[3]["frames"] == diff3 and rows[19] == {"fap": 19, "name": name_of(19), "frames": 3, "first": 5,
+                                                       "last": 7}
+    assert "differing FAPs: 3 " in r.message and "19 " in r.message
 
 
 def test_text_output_missing_value():

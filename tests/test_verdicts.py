@@ -196,3 +196,51 @@ def _fuzz_class(m: Path, tmp_path: Path) -> str:
 def test_run_and_fuzz_agree(tmp_path, name, body, outcome, words):
     m = pydec(tmp_path, name, body)
     assert _fuzz_class(m, tmp_path) == run_one(m, ERROR_CASE, tmp_path).outcome.value
+
+
+# ------------------------------------------------------------------ baselines (deqp-runner style)
+BUGGY = """from fbaconf.pipeline import reference_outputs
+reference_outputs(sys.argv[1], faps_out=sys.argv[2])
+lines = open(sys.argv[2]).read().splitlines()
+bug = os.environ.get("BUG", "")
+if bug and "ntsc" in sys.argv[1]:
+    t = lines[2].split()
+    k = 1 if bug == "0" else len(t) - 1
+    t[k] = str(int(t[k]) + 1)
+    lines[2] = " ".join(t)
+open(sys.argv[2], "w").write(chr(10).join(lines) + chr(10))
+"""
+
+
+def _junit_failures(path: Path) -> int:
+    import junitparser
+    xml = junitparser.JUnitXml.fromfile(str(path))
+    return sum(s.failures + s.errors for s in xml)
+
+
+def test_baseline_scenario(tmp_path):
+    """One known bug -> exit 0, JUnit without failures, '0 new, 1 known'; the bug fixed ->
+    '1 fixed', exit 1; a second bug in a known-failing case -> exit 1."""
+    import subprocess
+    import sys as _sys
+
+    def run(bug: str, *extra):
+        m = pydec(tmp_path, f"dec{bug or 'ok'}", BUGGY, extra=f'[env]\nBUG = "{bug}"\n')
+        out = tmp_path / f"run-{bug or 'ok'}-{len(extra)}"
+        r = subprocess.run([_sys.executable, "-m", "fbaconf", "run", "--decoder", str(m), "--suite", "simple-l1-core",
+                            "--case", "arith-ntsc-rate", "--case", "arith-q8-visemes-expressions", "-o", str(out),
+                            "--no-progress", *extra], capture_output=True, text=True, timeout=600)
+        return r, out
+
+    bfile = tmp_path / "baseline.txt"
+    r, _ = run("0", "--write-baseline", str(bfile))
+    assert r.returncode == 1 and "arith-ntsc-rate,Fail,faps:" in bfile.read_text(), r.stdout + r.stderr
+    r, out = run("0", "--baseline", str(bfile))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "baseline: 0 new, 1 known, 0 fixed, 0 flaky" in r.stdout
+    assert _junit_failures(out / "junit.xml") == 0
+    r, out = run("", "--baseline", str(bfile))
+    assert r.returncode == 1 and "0 new, 0 known, 1 fixed" in r.stdout, r.stdout
+    assert _junit_failures(out / "junit.xml") == 1
+    r, _ = run("1", "--baseline", str(bfile))
+    assert r.returncode == 1 and "1 new, 0 known" in r.stdout, r.stdout

@@ -135,6 +135,19 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
     parts = [p for p in (count_msg,) if p]
     if detail:
         parts.append(f"{int(bad_frame.sum())} of {n} frame(s) differ; first at {detail}")
+    # every differing FAP, with how many frames and the first and last (a pattern such as one
+    # FAP always copied from another shows here, not in the first difference alone)
+    cols = np.nonzero(per_fap.any(axis=0))[0]
+    if len(cols):
+        rows = []
+        for j in cols:
+            ks = np.nonzero(per_fap[:, j])[0]
+            rows.append({"fap": int(j + 1), "name": _fap_name(int(j + 1)), "frames": int(len(ks)),
+                         "first": int(ks[0]), "last": int(ks[-1])})
+        first = dict(first, faps=rows)
+        shown = ", ".join(f"{r['fap']} {r['name']} ({r['frames']} frame(s), {r['first']}..{r['last']})"
+                          for r in rows[:8])
+        parts.append(f"differing FAPs: {shown}" + (f", and {len(rows) - 8} more" if len(rows) > 8 else ""))
     return StageResult("faps", Outcome.FAIL, "; ".join(parts), first, metrics, series)
 
 

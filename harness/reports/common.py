@@ -85,8 +85,8 @@ def format_difference(d: dict | None) -> str:
     if "expected" in d:
         vals.append(f"expected {_fmt_value(d['expected'])}")
     if "got" in d:
-        vals.append(f"got {_fmt_value(d['got'])}")
-    rest = [f"{k} {_fmt_value(v)}" for k, v in d.items() if k not in _DIFF_WHERE + ("expected", "got")]
+        vals.append("got no value" if d["got"] is None else f"got {_fmt_value(d['got'])}")
+    rest = [f"{k} {_fmt_value(v)}" for k, v in d.items() if k not in _DIFF_WHERE + ("expected", "got", "faps")]
     parts = [p for p in (text, ", ".join(vals), ", ".join(rest)) if p]
     return clean_text(": ".join(parts[:2]) + ("; " + parts[2] if len(parts) > 2 else ""))
 
@@ -130,3 +130,28 @@ def _problem_cases(record: RunRecord) -> list[CaseResult]:
 def _speed_rows(speed: list[SpeedResult]) -> list[list[str]]:
     return [[s.operation, s.claim, f"{s.rate_fps:.2f}", f"{s.required_fps:.2f}", "PASS" if s.passed else "FAIL",
              s.provenance] for s in speed]
+
+
+def _normalised(message: str) -> str:
+    """A message with what differs between identical failures (paths, numbers) masked."""
+    m = re.sub(r"/\S+", "<path>", message or "")
+    return re.sub(r"\d+(\.\d+)?", "N", m)[:160]
+
+
+def failure_groups(record: RunRecord) -> list[tuple[str, list[CaseResult]]]:
+    """The cases worth a look, identical failures grouped (same outcome, same failure
+    signature, same message up to paths and numbers), worst and largest groups first."""
+    from fbaconf.harness.baseline import signature
+    groups: dict[tuple, list[CaseResult]] = {}
+    for r in _problem_cases(record):
+        key = (r.outcome.value, signature(r), r.crash_kind or "", _normalised(r.message), r.baseline or "")
+        groups.setdefault(key, []).append(r)
+    rank = {o.value: i for i, o in enumerate(OUTCOME_ORDER)}
+    out = sorted(groups.items(), key=lambda kv: (rank[kv[0][0]], -len(kv[1]), kv[1][0].case_id))
+    return [(k[0], rs) for k, rs in out]
+
+
+def provisional_line(record: RunRecord) -> str:
+    n = len(record.provisional)
+    return (f"{n} provisional rule(s) and level limit(s) this verdict rests on (listed in report.json and "
+            f"in a certificate's statement)") if n else ""

@@ -14,7 +14,7 @@ from typing import Any
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
-from .common import COLUMNS, _by, _fmt_value, _problem_cases, _speed_rows, _speed_summary, _suite_names, _summary_counts, clean_text, profile_of, verdict
+from .common import failure_groups, COLUMNS, _by, _fmt_value, _speed_rows, _speed_summary, _suite_names, _summary_counts, clean_text, profile_of, verdict
 
 
 def _e(value: Any) -> str:
@@ -285,6 +285,38 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
     h.append(f"<h1>{_e(title)} <span class='badge verdict v-{v.split()[0]}'>{_e(v)}</span></h1>")
     h.append(f"<p class='muted'>{_e(_summary_counts(record.counts()) + _speed_summary(record.speed))}; "
              f"exit code {_e(record.exit_code)}</p>")
+    # failures first, identical failures grouped (one card, the other cases listed)
+    if record.missing:
+        h.append("<div class='card'><b>Claim not met</b>: required cases the decoder could not take:<ul>"
+                 + "".join(f"<li>{_e(m)}</li>" for m in record.missing) + "</ul></div>")
+    groups = failure_groups(record)
+    problems = [r for _o, rs in groups for r in rs]
+    if groups:
+        h.append(f"<h2>Failures and warnings ({len(problems)} cases, {len(groups)} groups)</h2>")
+        for _o, rs in groups:
+            h.append(_case_html(rs[0], out_dir, base_dir))
+            if len(rs) > 1:
+                h.append(f"<p class='muted'>The same failure in {len(rs) - 1} more case(s): "
+                         + ", ".join(f"<span class='mono'>{_e(r.case_id)}</span>" for r in rs[1:]) + "</p>")
+    # summary
+    total = record.counts()
+    h.append("<h2>Summary</h2>")
+    h.append(_counts_table_html("suite", _by(record, lambda r: r.suite), _suite_names(record), total))
+    by_profile = _by(record, lambda r: profile_of(r.claim))
+    if len(by_profile) > 1:
+        h.append(_counts_table_html("profile", by_profile, sorted(by_profile), total))
+    # speed
+    if record.speed:
+        h.append("<h2>Speed</h2><table><tr><th>operation</th><th>claim</th><th class='num'>measured fps</th>"
+                 "<th class='num'>required fps</th><th>verdict</th><th>provenance</th><th class='num'>per frame s</th>"
+                 "<th class='num'>startup s</th><th class='num'>fit r\u00b2</th><th>message</th></tr>")
+        for s, row in zip(record.speed, _speed_rows(record.speed)):
+            cls = "c-Pass" if s.passed else "c-Fail"
+            h.append(f"<tr><td>{_e(row[0])}</td><td>{_e(row[1])}</td><td class='num'>{_e(row[2])}</td>"
+                     f"<td class='num'>{_e(row[3])}</td><td class='{cls}'>{_e(row[4])}</td><td>{_e(row[5])}</td>"
+                     f"<td class='num'>{_e(_fmt_value(s.per_frame_s))}</td><td class='num'>{_e(_fmt_value(s.startup_s))}</td>"
+                     f"<td class='num'>{_e(f'{s.fit_r2:.4f}')}</td><td>{_e(s.message)}</td></tr>")
+        h.append("</table>")
     # header: decoder, run, suites, system, provisional
     run_meta = {"decoder": dec.get("name"), "kind": dec.get("kind"),
                 "manifest sha256": dec.get("manifest_sha256"),
@@ -305,33 +337,10 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
     if record.system:
         h.append("<details><summary>System</summary>" + _kv_table(record.system) + "</details>")
     if record.provisional:
-        h.append("<h2>Provisional rules and limits</h2><p class='muted'>This run depends on readings of the "
-                 "standard that are provisional (not confirmed against the ISO text):</p><ul class='prov'>"
-                 + "".join(f"<li>{_e(p)}</li>" for p in record.provisional) + "</ul>")
-    # summary
-    total = record.counts()
-    h.append("<h2>Summary</h2>")
-    h.append(_counts_table_html("suite", _by(record, lambda r: r.suite), _suite_names(record), total))
-    by_profile = _by(record, lambda r: profile_of(r.claim))
-    if len(by_profile) > 1:
-        h.append(_counts_table_html("profile", by_profile, sorted(by_profile), total))
-    # problem cases
-    problems = _problem_cases(record)
-    if problems:
-        h.append(f"<h2>Failures and warnings ({len(problems)})</h2>")
-        h.extend(_case_html(r, out_dir, base_dir) for r in problems)
-    # speed
-    if record.speed:
-        h.append("<h2>Speed</h2><table><tr><th>operation</th><th>claim</th><th class='num'>measured fps</th>"
-                 "<th class='num'>required fps</th><th>verdict</th><th>provenance</th><th class='num'>per frame s</th>"
-                 "<th class='num'>startup s</th><th class='num'>fit r\u00b2</th><th>message</th></tr>")
-        for s, row in zip(record.speed, _speed_rows(record.speed)):
-            cls = "c-Pass" if s.passed else "c-Fail"
-            h.append(f"<tr><td>{_e(row[0])}</td><td>{_e(row[1])}</td><td class='num'>{_e(row[2])}</td>"
-                     f"<td class='num'>{_e(row[3])}</td><td class='{cls}'>{_e(row[4])}</td><td>{_e(row[5])}</td>"
-                     f"<td class='num'>{_e(_fmt_value(s.per_frame_s))}</td><td class='num'>{_e(_fmt_value(s.startup_s))}</td>"
-                     f"<td class='num'>{_e(f'{s.fit_r2:.4f}')}</td><td>{_e(s.message)}</td></tr>")
-        h.append("</table>")
+        h.append(f"<details><summary>Provisional rules and limits ({len(record.provisional)})</summary>"
+                 "<p class='muted'>This run depends on readings of the standard that are provisional (not "
+                 "confirmed against the ISO text):</p><ul class='prov'>"
+                 + "".join(f"<li>{_e(p)}</li>" for p in record.provisional) + "</ul></details>")
     # the rest, compact
     listed = {id(r) for r in problems}
     rest = [r for r in record.results if id(r) not in listed]

@@ -81,7 +81,22 @@ def junit_xml(record: RunRecord) -> bytes:
                                time=_sec(r.duration_s))
             o = r.outcome
             msg = _one_line(r.message or o.value)
-            if o in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH):
+            excused = r.baseline in ("known-failure", "flake") and not o.ok
+            if excused:
+                # agrees with the exit code: a known failure or a flake does not fail the run
+                el = ET.SubElement(tc, "skipped", message=_one_line(f"{r.baseline} ({o.value}): {r.message}"))
+                el.text = _case_details(r)
+                c["skipped"] += 1
+            elif r.baseline == "fixed":
+                el = ET.SubElement(tc, "failure", message=_one_line("fixed: the baseline lists this case as "
+                                                                    "failing but it passes now: remove the line"),
+                                   type="BaselineFixed")
+                c["failures"] += 1
+            elif o is Outcome.NOT_SUPPORTED and r.required:
+                el = ET.SubElement(tc, "failure", message=_one_line(f"required by the claim but not supported: "
+                                                                    f"{r.message}"), type=o.value)
+                c["failures"] += 1
+            elif o in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH):
                 el = ET.SubElement(tc, "failure", message=msg, type=o.value)
                 el.text = _case_details(r)
                 c["failures"] += 1

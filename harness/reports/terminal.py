@@ -1,10 +1,12 @@
 """The terminal summary: aligned tables per suite, profile and outcome, the failing cases, speed, the verdict line."""
 from __future__ import annotations
 
+import re
+
 from typing import Iterable
 
 from fbaconf.harness.results import Outcome, RunRecord
-from .common import COLUMNS, _by, _problem_cases, _speed_rows, _speed_summary, _suite_names, _summary_counts, clean_text, format_difference, profile_of, verdict
+from .common import failure_groups, provisional_line, COLUMNS, _by, _speed_rows, _speed_summary, _suite_names, _summary_counts, clean_text, format_difference, profile_of, verdict
 
 
 _ANSI_COLOURS = {
@@ -32,6 +34,14 @@ def _indent(text: str, prefix: str) -> list[str]:
     return [prefix + line for line in text.splitlines()] or [prefix.rstrip()]
 
 
+def _reproduce(r) -> str:
+    """The command of a case, with the case's (deleted) work folder named for what it was."""
+    import shlex
+    cmd = " ".join(shlex.quote(c) for c in r.command)
+    cmd = re.sub(r"/\S*/work/case-[A-Za-z0-9_]+/", "<case folder>/", cmd)
+    return clean_text(cmd) + "   (rerun with --keep-workdirs)"
+
+
 def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: int = 20) -> str:
     """A plain-text summary of ``record`` (ANSI colours when ``color``), ending with the verdict line
     ``result: PASS|FAIL|SPEED FAIL|SETUP ERROR (N cases: a Pass, b Fail, ...)``."""
@@ -51,8 +61,8 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
                       + (f" ({n} cases)" if n is not None else ""))
     if suites:
         lines.append("  suites: " + ", ".join(suites))
-    for p in record.provisional:
-        lines.append(f"  provisional: {clean_text(p)}")
+    if record.provisional:
+        lines.append(f"  provisional: {provisional_line(record)}")
 
     header_cols = [o.value for o in COLUMNS] + ["total"]
 
@@ -76,35 +86,49 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
     by_profile = _by(record, lambda r: profile_of(r.claim))
     count_table("profile", by_profile, sorted(by_profile))
 
-    problems = _problem_cases(record)
-    if problems:
-        shown = problems[:max(0, max_failures)]
+    groups = failure_groups(record)
+    if groups:
+        n_cases = sum(len(rs) for _o, rs in groups)
+        shown = groups[:max(0, max_failures)]
         lines.append("")
-        lines.append(f"cases to look at ({len(shown)} of {len(problems)} shown):")
-        for r in shown:
+        lines.append(f"cases to look at: {n_cases} in {len(groups)} group(s) of identical failures"
+                     + (f" ({len(shown)} groups shown)" if len(shown) < len(groups) else ""))
+        for outcome, rs in shown:
+            r = rs[0]
             tags = []
             if not r.required:
                 tags.append("optional")
             if r.baseline:
                 tags.append(f"baseline: {clean_text(r.baseline)}")
-            head = f"  {paint(_ANSI_COLOURS[r.outcome], r.outcome.value.ljust(14))} {clean_text(r.case_id)}"
+            count = f" x{len(rs)}" if len(rs) > 1 else ""
+            head = f"  {paint(_ANSI_COLOURS[r.outcome], (outcome + count).ljust(14))} {clean_text(r.case_id)}"
+            if len(rs) > 1:
+                others = ", ".join(clean_text(x.case_id.split("/", 1)[-1]) for x in rs[1:9])
+                head += f" (and {others}" + (f", +{len(rs) - 9} more" if len(rs) > 9 else "") + ")"
             lines.append(head + (f"  [{', '.join(tags)}]" if tags else ""))
             if r.message:
                 lines.extend(_indent(clean_text(r.message), " " * 6))
-            for st in r.stages:
-                if st.outcome is not Outcome.PASS and st.message and st.message != r.message:
-                    lines.extend(_indent(f"{st.stage}: {clean_text(st.message)}", " " * 6))
             diff = r.first_difference
-            if diff:
+            if diff and format_difference(diff) not in (r.message or ""):
                 lines.append(f"      first difference: {format_difference(diff)}")
-            if r.signal or (r.exit_code not in (None, 0) and r.outcome in (Outcome.CRASH, Outcome.ERROR)):
-                lines.append(f"      exit code {r.exit_code}" + (f", signal {clean_text(r.signal)}" if r.signal else ""))
-            if r.stderr_tail and r.outcome in (Outcome.CRASH, Outcome.TIMEOUT, Outcome.ERROR):
-                tail = clean_text(r.stderr_tail).rstrip().splitlines()[-5:]
-                lines.append("      stderr (last lines):")
-                lines.extend("        " + t for t in tail)
-        if len(problems) > len(shown):
-            lines.append(f"  ... and {len(problems) - len(shown)} more (see the JSON/HTML report)")
+            if r.outcome in (Outcome.CRASH, Outcome.ERROR, Outcome.TIMEOUT):
+                how = []
+                if r.exit_code is not None:
+                    how.append(f"exit code {r.exit_code}")
+                if r.signal:
+                    how.append(f"signal {clean_text(r.signal)}")
+                if r.crash_kind:
+                    how.append(f"report: {clean_text(r.crash_kind)}")
+                if how:
+                    lines.append("      " + ", ".join(how))
+                if r.stderr_tail:
+                    tail = clean_text(r.stderr_tail).rstrip().splitlines()[-5:]
+                    lines.append("      stderr (last lines):")
+                    lines.extend("        " + t for t in tail)
+            if r.command:
+                lines.append("      reproduce: " + _reproduce(r))
+        if len(shown) < len(groups):
+            lines.append(f"  ... and {len(groups) - len(shown)} more group(s) (see the JSON/HTML report)")
 
     if record.speed:
         lines.append("")
