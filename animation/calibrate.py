@@ -61,10 +61,14 @@ def rbf_warp(src: np.ndarray, dst: np.ndarray):
     c = src.mean(0)
     s_src = (src - c) / scale
     rank = np.linalg.matrix_rank(np.c_[s_src, np.ones(n)], tol=1e-9)
-    if n >= 4 and rank == 4:
-        f = RBFInterpolator(s_src, d, kernel="thin_plate_spline", degree=1)
-    else:
-        f = RBFInterpolator(s_src, d, kernel="linear", degree=0)
+    try:
+        if n >= 4 and rank == 4:
+            f = RBFInterpolator(s_src, d, kernel="thin_plate_spline", degree=1)
+        else:
+            f = RBFInterpolator(s_src, d, kernel="linear", degree=0)
+    except (np.linalg.LinAlgError, ValueError) as e:  # near-coincident points: a singular system
+        raise SceneError(f"the feature points cannot calibrate the model (the warp is singular: {e}); "
+                         f"points too close to each other?", rule="calibration-degenerate") from None
     return lambda p: f((np.asarray(p, dtype=np.float64).reshape(-1, 3) - c) / scale).reshape(np.shape(p))
 
 
@@ -74,10 +78,14 @@ def _uv_map(proj_fp: np.ndarray, uv_fp: np.ndarray):
     rank = np.linalg.matrix_rank(np.c_[proj_fp, np.ones(n)], tol=1e-9)
     scale = float(np.ptp(proj_fp, axis=0).max()) or 1.0
     c = proj_fp.mean(0)
-    if n >= 3 and rank == 3:
-        f = RBFInterpolator((proj_fp - c) / scale, uv_fp, kernel="thin_plate_spline", degree=1)
-    else:
-        f = RBFInterpolator((proj_fp - c) / scale, uv_fp, kernel="linear", degree=0)
+    try:
+        if n >= 3 and rank == 3:
+            f = RBFInterpolator((proj_fp - c) / scale, uv_fp, kernel="thin_plate_spline", degree=1)
+        else:
+            f = RBFInterpolator((proj_fp - c) / scale, uv_fp, kernel="linear", degree=0)
+    except (np.linalg.LinAlgError, ValueError) as e:
+        raise SceneError(f"the texture coordinates cannot be mapped (the warp is singular: {e})",
+                         rule="calibration-degenerate") from None
     return lambda q: f((q - c) / scale)
 
 

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from fbaconf.errors import FbaconfInputError
+from fbaconf.safefs import confined, safe_name
 
 SUITE_FORMAT = "fbaconf.suite/1"
 KINDS = ("decode", "error", "multi")
@@ -132,6 +133,10 @@ class Case:
                                                          and k not in ("suite", "suite_dir")})
         except TypeError as e:
             raise SuiteError(f"suite {suite}: malformed case {d.get('id')!r}: {e}", rule="suite-case") from None
+        safe_name(str(c.id), what=f"suite {suite}: case id")
+        files = [v for k, v in c.inputs.items() if k != "faces"] + list(c.inputs.get("faces", [])) + list(c.sha256)
+        for rel in files:  # every file a case names stays inside its suite folder
+            confined(suite_dir or Path("."), str(rel), what=f"suite {suite}: case {c.id}: file")
         if c.kind not in KINDS:
             raise SuiteError(f"suite {suite}: case {c.id}: kind {c.kind!r} not one of {KINDS}", rule="suite-case")
         bad = [s for s in c.stages if s not in STAGES]
@@ -171,12 +176,22 @@ class Suite:
             raise SuiteError(f"no suite manifest: {mf}", rule="suite-missing", file=str(mf)) from None
         except (OSError, ValueError) as e:
             raise SuiteError(f"unreadable suite manifest: {e}", rule="suite-manifest", file=str(mf)) from None
-        if d.get("format") != SUITE_FORMAT:
+        if not isinstance(d, dict) or d.get("format") != SUITE_FORMAT:
             raise SuiteError(f"not an {SUITE_FORMAT} manifest", rule="suite-manifest", file=str(mf))
-        name = d["name"]
-        return cls(name=name, description=d.get("description", ""), claim=d["claim"], group=d.get("group", ""),
-                   version=d.get("version", ""), path=directory,
-                   cases=[Case.from_json(c, name, directory) for c in d["cases"]])
+        try:
+            name = safe_name(d["name"], what="suite name")
+            claim, cases = d["claim"], d["cases"]
+            if not isinstance(claim, str) or not isinstance(cases, list) or not all(isinstance(c, dict) for c in cases):
+                raise TypeError("claim must be a string and cases a list of objects")
+            suite = cls(name=name, description=str(d.get("description", "")), claim=claim,
+                        group=str(d.get("group", "")), version=str(d.get("version", "")), path=directory,
+                        cases=[Case.from_json(c, name, directory) for c in cases])
+        except KeyError as e:
+            raise SuiteError(f"manifest lacks {e.args[0]!r}", rule="suite-manifest", file=str(mf)) from None
+        except (TypeError, FbaconfInputError) as e:
+            raise SuiteError(f"malformed manifest: {getattr(e, 'message', e)}", rule="suite-manifest",
+                             file=str(mf)) from None
+        return suite
 
     def verify_inputs(self) -> list[str]:
         """Problems with the suite's input files (missing, digest mismatch); empty when sound."""

@@ -102,9 +102,12 @@ def load_findings(fuzz_dir: Path) -> list[tuple[Path, dict]]:
     out = []
     for p in sorted((Path(fuzz_dir) / "findings").glob("*/finding.json")):
         try:
-            out.append((p.parent, json.loads(p.read_text("utf-8"))))
+            doc = json.loads(p.read_text("utf-8"))
         except (OSError, ValueError) as e:
             raise FuzzSetupError(f"unreadable finding {p}: {e}") from None
+        if not isinstance(doc, dict):
+            raise FuzzSetupError(f"unreadable finding {p}: not a JSON object")
+        out.append((p.parent, doc))
     return out
 
 

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Callable
 
 from fbaconf.errors import FbaconfInputError
+from fbaconf.safefs import confined, read_regular, safe_name
 from .findings import load_findings
 from .targets import FuzzSetupError
 
@@ -25,6 +26,9 @@ claim = "simple@1"
 group = "regression"
 description = "Simple profile, level 1: inputs that crashed, hung or blew up decoders (fuzz findings)"
 """
+
+
+MAX_FINDING_BYTES = 16 * 2**20
 
 
 def _toml_str(s: str) -> str:
@@ -55,13 +59,18 @@ def promote(fuzz_dir: Path, data_dir: Path | None = None, *, log: Callable[[str]
     added = []
     for d, doc in findings:
         if doc.get("input_kind", "stream") != "stream":
-            log(f"skipped {doc['id']}: a {doc.get('input_kind')} finding (the regression suite holds streams)")
+            log(f"skipped {d.name}: a {doc.get('input_kind')} finding (the regression suite holds streams)")
             continue
-        cid = f"fuzz-{doc['id']}"
+        try:  # a finding folder is data: its id names a file, its minimal input must stay inside it
+            cid = "fuzz-" + safe_name(str(doc.get("id", "")), what="finding id")
+            minimal = (doc.get("minimal") or {}).get("file") if isinstance(doc.get("minimal"), dict) else None
+            data = read_regular(confined(d, str(minimal), what="minimal input"), MAX_FINDING_BYTES)
+        except FbaconfInputError as e:
+            log(f"skipped {d.name}: {e.message}")
+            continue
         if cid in existing:
             log(f"skipped {cid}: already in {reg.name}")
             continue
-        data = (d / doc["minimal"]["file"]).read_bytes()
         valid = True
         try:
             decode(data)
@@ -75,7 +84,7 @@ def promote(fuzz_dir: Path, data_dir: Path | None = None, *, log: Callable[[str]
         atomic_write_bytes(data_dir / rel, data)
         dec = doc.get("decoder") or {}
         origin = str(doc.get("origin", "")).split("<-")[-1]
-        desc = (f"fuzz finding {doc['id']}: {doc['class']} ({doc['signature']}) of decoder "
+        desc = (f"fuzz finding {doc.get('id')}: {doc.get('class')} ({doc.get('signature')}) of decoder "
                 f"{dec.get('name', doc.get('target', '?'))}; minimal input of {len(data)} bytes "
                 f"(from {origin})")[:300]
         lines = ["", "[[case]]", f"suite = {_toml_str(REGRESSION_SUITE)}", f"id = {_toml_str(cid)}",

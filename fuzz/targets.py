@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Iterable
 
 from fbaconf.errors import FbaconfInputError
-from fbaconf.harness.safefs import remove_tree
+from fbaconf.safefs import remove_tree
 from .generators import Entry
 from .model import stream_features
 from .scenes import scene_features
@@ -341,6 +341,8 @@ class SelfTarget:
             feats.add(f"rule:{getattr(e, 'rule', '?')}")
             return None
         feats |= scene_features(scene, None, text)
+        if self.count % 2 == 0:
+            self._compile(scene, feats)
         if self.scene_stream is not None and self.count % self.checker_every == 0:
             return self._check(self.scene_stream, scene)
         if self.bifs is not None and hasattr(self.bifs, "encode") and self.count % self.checker_every == 1:
@@ -355,11 +357,25 @@ class SelfTarget:
         if self.bifs is None:
             return None
         try:
-            self.bifs.decode(inp.data)
+            scene = self.bifs.decode(inp.data)
             feats.add("bifs:ok")
         except FbaconfInputError as e:
             feats.add(f"bifs-rule:{getattr(e, 'rule', '?')}")
+            return None
+        self._compile(scene, feats)
         return None
+
+    def _compile(self, scene, feats: set[str]) -> None:
+        """Scene compilation and one animated frame (FDP calibration, FIT, FaceDefTables): a scene
+        the reader accepts either animates or is refused with a typed error — anything else
+        escapes to execute() and is the finding."""
+        from fbaconf.animation.engine import animate
+        from fbaconf.bitstreams.frames import FapFrames
+        try:
+            animate(FapFrames.empty(1), scene)
+            feats.add("compile:ok")
+        except FbaconfInputError as e:
+            feats.add(f"compile-rule:{getattr(e, 'rule', '?')}")
 
 
 def _innermost_fbaconf_frame(e: BaseException) -> str:

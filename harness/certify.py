@@ -29,7 +29,7 @@ from fbaconf._atomic import atomic_write_text
 from fbaconf.conformance.suite import sha256_file
 from fbaconf.errors import FbaconfInputError
 
-from .safefs import confined, read_regular, remove_tree
+from fbaconf.safefs import confined, read_regular, remove_tree
 
 CERTIFICATE = "certificate.json"
 SUMS = "SHA256SUMS"

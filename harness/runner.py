@@ -32,7 +32,7 @@ from fbaconf.errors import FbaconfInputError
 from fbaconf.profiles.model import Claim, load_profiles
 
 from . import exits, sandbox
-from .safefs import remove_tree
+from fbaconf.safefs import remove_tree
 from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
 from .results import CaseResult, Outcome, ResultLog, StageResult
 

@@ -46,7 +46,7 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .safefs import tree_size
+from fbaconf.safefs import tree_size
 
 LIMIT_LAUNCHER = Path(__file__).with_name("_limit.py")
 _SIGNALS = {int(s) for s in signal.Signals}

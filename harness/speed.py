@@ -50,7 +50,7 @@ from fbaconf.errors import FbaconfInputError
 
 from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim
 from .results import Outcome, SpeedResult
-from .safefs import remove_tree
+from fbaconf.safefs import remove_tree
 
 OPERATIONS = ("decode", "render")
 LIMIT_FOR = {"decode": "decode_rate", "render": "render_rate"}

@@ -314,6 +314,9 @@ class _Reader:
         if integer:
             if not _INT.match(v):
                 raise self.error(f"expected an integer, got {v!r}", off, "bt-number", path)
+            if len(v.lstrip("+-").lstrip("0")) > 12:  # beyond SFInt32 by its length alone (no huge int())
+                raise self.error(f"integer {v[:20]}... ({len(v)} characters) out of SFInt32 range", off,
+                                 "bt-number", path)
             n = int(v, 10) if not v.lstrip("+-").startswith(("0x", "0X")) else int(v, 16)
             if n > 0xFFFFFFFF or n < -2147483648:
                 raise self.error(f"integer {v} out of SFInt32 range", off, "bt-number", path)

@@ -118,3 +118,19 @@ def test_cli_animate(tmp_path):
                        timeout=60)
     assert r.returncode == 2 and "1:" in r.stderr and "fapID" in r.stderr
     assert not (tmp_path / "o2.npz").exists()
+
+
+def test_a_singular_warp_is_a_typed_error(monkeypatch):
+    """Whatever makes scipy's RBF system singular becomes one clear SceneError, not a LinAlgError."""
+    import scipy.interpolate
+
+    class Singular:
+        def __init__(self, *a, **k):
+            raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(scipy.interpolate, "RBFInterpolator", Singular)
+    base = engine.compile_scene(None)
+    recv = base.feature_points.copy() + 1.0
+    with pytest.raises(SceneError) as ei:
+        calibrate(base, recv)
+    assert ei.value.rule == "calibration-degenerate"

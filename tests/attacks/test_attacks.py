@@ -402,3 +402,36 @@ def test_interruption_kills_running_decoders_and_resume_is_exact(tmp_path):
     lines = [json.loads(x)["case_id"] for x in log.read_text().splitlines()]
     assert sorted(lines) == sorted(["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/dct-q4",
                                     "simple-l1-core/dct-short-high-level"])
+
+
+@pytest.mark.parametrize("manifest", [
+    '[]', '{"format": "fbaconf.suite/1"}', '{"format": "fbaconf.suite/1", "name": "../../x", "claim": "simple@1", '
+    '"cases": []}', '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [{"id": "/etc"}]}',
+    '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [{"id": "c", "claim": "simple@1", '
+    '"inputs": {"fba": "../../../etc/passwd"}}]}',
+    '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [3]}',
+    '{"format": "fbaconf.suite/1", "name": "s", "claim": 1, "cases": {}}'])
+def test_malformed_or_escaping_suite_manifests_are_one_clear_error(tmp_path, manifest):
+    from fbaconf.conformance.suite import Suite, SuiteError
+    d = tmp_path / "s"
+    d.mkdir()
+    (d / "suite.json").write_text(manifest)
+    with pytest.raises(SuiteError):
+        Suite.load(d)
+
+
+def test_promote_confines_what_a_finding_names(tmp_path):
+    from fbaconf import fuzz as F
+    fz = tmp_path / "fz" / "findings"
+    for fid, minimal in (("../../escape", "min.fba"), ("ok1", "/etc/passwd"), ("ok2", "../../../../etc/hostname")):
+        d = fz / f"f-{abs(hash(fid))}"
+        d.mkdir(parents=True)
+        (d / "min.fba").write_bytes(b"\x00\x00\x01\xba")
+        (d / "finding.json").write_text(json.dumps({"id": fid, "class": "crash", "signature": "x",
+                                                    "minimal": {"file": minimal}}))
+    data = tmp_path / "data"
+    refused = []
+    assert F.promote(tmp_path / "fz", data, log=refused.append) == []
+    assert len(refused) == 3 and all("skipped" in x for x in refused)
+    assert not (tmp_path / "escape.fba").exists() and not any(tmp_path.rglob("passwd"))
+    assert not any(tmp_path.rglob("hostname"))
