@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf.bitstreams import dct
-from fbaconf.bitstreams.encoder import _derive_group_types
+from fbaconf.bitstreams.prepare import _derive_group_types
 from fbaconf.bitstreams.frames import SET
 
 MAX_LEN = int(os.environ.get("DCT_VLC_MAX_LEN", "14"))

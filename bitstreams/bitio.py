@@ -21,12 +21,13 @@ START_CODE_NAMES = {
 
 
 class BitWriter:
-    __slots__ = ("_buf", "_acc", "_nacc")
+    __slots__ = ("_buf", "_acc", "_nacc", "start_codes")
 
     def __init__(self) -> None:
         self._buf = bytearray()
         self._acc = 0
         self._nacc = 0
+        self.start_codes: list[int] = []
 
     @property
     def position(self) -> int:
@@ -57,12 +58,34 @@ class BitWriter:
             self._acc = acc
             self._nacc = n
 
+    def trailing_zeros(self, limit: int = 64) -> int:
+        """How many '0' bits end what was written (counted up to ``limit``)."""
+        n = 0
+        acc, k = self._acc, self._nacc
+        while k and n < limit:
+            if acc & 1:
+                return n
+            acc >>= 1
+            k -= 1
+            n += 1
+        i = len(self._buf) - 1
+        while i >= 0 and n < limit:
+            b = self._buf[i]
+            if b:
+                return n + ((b & -b).bit_length() - 1)
+            n += 8
+            i -= 1
+        return min(n, limit)
+
     def next_start_code(self) -> None:
         """Stuffing before a start code: '0' then '1's to the byte boundary (0x7F if aligned)."""
         n = 8 - self._nacc if self._nacc else 8
         self.write((1 << (n - 1)) - 1, n)
 
     def start_code(self, code: int) -> None:
+        """A start code (byte-aligned by the caller); its byte offset is recorded in
+        ``start_codes`` (the only places a 0x000001 prefix may stand, D9)."""
+        self.start_codes.append(self.position // 8)
         self.write(code, 32)
 
     def getvalue(self) -> bytes:

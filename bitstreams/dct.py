@@ -352,12 +352,13 @@ def decode_group(d, info) -> None:
     ``d`` is the frame decoder (decoder._Decoder): reader, masks, current values, rows.
     ``d.frame_number`` / ``d.time_ms`` already hold the group's first frame."""
     t = dct_tables()
-    r = d.r
     first_row = len(d.rows_values)
-    r.frame = first_row
+    d.r.frame = first_row
 
     def err(msg, rule, at=None, fap=None):
         return d.err(msg, rule, at=at, fap=fap)
+
+    r = StuffingReader(d.r, err)  # D9: the payload's own emulation prevention
 
     intra = info.is_intra
     if intra:
@@ -400,6 +401,7 @@ def decode_group(d, info) -> None:
                 raise err(f"FAP {f} value {v} overflows 32 bits", "value-overflow", start, f)
         samples[f] = x[:L]
         info.blocks.append((f"dct FAP {f}", start, r.pos - start))
+    r.end()
     rate = d.rate if d.rate is not None else DEFAULT_FRAME_RATE
     fn, tm = d.frame_number, d.time_ms
     cur = d.cur
@@ -415,6 +417,97 @@ def decode_group(d, info) -> None:
         d.rows_meta.append((fn, tm, intra and j == 0, index, CODING_DCT, info.bit_offset))
     d.high[:] = hl_rows[-1]
     d.frame_number, d.time_ms = fn, tm
+
+
+# ---------------------------------------------------------------------------- emulation prevention
+# D9, the DCT mode's own rule (provisional, fbaconf's design like the rest of the mode): inside a
+# plane group's payload (everything after segment_length_minus1's first bit ... its last AC
+# code) a '1' is inserted after every 22nd consecutive '0', the zero run counted from the last
+# '1' of the stream (so header zeros count); after the payload, a run of 20 or more zeros gets a
+# '1' too. A zero run therefore never reaches 23 bits, and no byte-aligned 0x000001 can appear
+# across the payload or at its end (the next plane header starts with at most two zeros).
+STUFF_AFTER = 22
+END_STUFF_FROM = 20
+
+
+class StuffingWriter:
+    """A BitWriter seen through the DCT payload's stuffing rule."""
+
+    def __init__(self, w) -> None:
+        self.w = w
+        self.run = w.trailing_zeros(STUFF_AFTER)
+
+    @property
+    def position(self) -> int:
+        return self.w.position
+
+    def bit(self, b: int) -> None:
+        self.w.bit(b)
+        if b:
+            self.run = 0
+            return
+        self.run += 1
+        if self.run == STUFF_AFTER:
+            self.w.bit(1)
+            self.run = 0
+
+    def write(self, value: int, nbits: int) -> None:
+        for i in range(nbits - 1, -1, -1):
+            self.bit((value >> i) & 1)
+
+    def end(self) -> None:
+        if self.run >= END_STUFF_FROM:
+            self.w.bit(1)
+            self.run = 0
+
+
+class StuffingReader:
+    """A BitReader seen through the DCT payload's stuffing rule: stuffing bits are read,
+    checked ('1', else rule ``dct-stuffing``) and dropped."""
+
+    def __init__(self, r, err) -> None:
+        object.__setattr__(self, "r", r)
+        object.__setattr__(self, "err", err)
+        run, at = 0, r.pos - 1
+        while at >= 0 and run < STUFF_AFTER and r.peek(1, at) == 0:
+            run += 1
+            at -= 1
+        object.__setattr__(self, "run", run)
+
+    def __getattr__(self, name):
+        return getattr(self.r, name)
+
+    def __setattr__(self, name, value):
+        if name == "run":
+            object.__setattr__(self, name, value)
+        else:
+            setattr(self.r, name, value)
+
+    def _stuffing(self) -> None:
+        at = self.r.pos
+        if self.r.bit("DCT stuffing bit") != 1:
+            raise self.err("DCT stuffing bit after 22 consecutive zeros is not '1' (D9)", "dct-stuffing", at)
+        self.run = 0
+
+    def bit(self, what: str = "bit") -> int:
+        b = self.r.bit(what)
+        if b:
+            self.run = 0
+        else:
+            self.run += 1
+            if self.run == STUFF_AFTER:
+                self._stuffing()
+        return b
+
+    def read(self, nbits: int, what: str = "field") -> int:
+        v = 0
+        for _ in range(nbits):
+            v = (v << 1) | self.bit(what)
+        return v
+
+    def end(self) -> None:
+        if self.run >= END_STUFF_FROM:
+            self._stuffing()
 
 
 # ---------------------------------------------------------------------------- encoder side
@@ -497,6 +590,7 @@ def write_section(ctx, src, opts, code, quants, types, header) -> SectionResult:
             ta = types[a][group_of - 1]
             tmpl = np.where(c, SET, np.where((ta == MASK_INTERPOLATE) | ~ctx.ever, FREE, RETAINED)).astype(np.uint8)
         L = b - a
+        w = StuffingWriter(ctx.w)  # D9: the payload's own emulation prevention
         w.write(L - 1, t.length_bits)
         for layout, fap in ((_VISEME_LAYOUT, 1), (_EXPRESSION_LAYOUT, 2)):
             if not c[fap - 1]:
@@ -521,6 +615,8 @@ def write_section(ctx, src, opts, code, quants, types, header) -> SectionResult:
             dc_prev[f] = levels[0]
             write_ac(w, levels, t)
             segs[f] = inverse(levels, step, t)[:L]
+        w.end()
+        w = ctx.w
         for j, k in enumerate(range(a, b)):
             if j:
                 tm = tm + 1000.0 / rate

@@ -14,7 +14,7 @@ was set before, 00 when nothing is coded, else 01.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from fractions import Fraction
 
 import numpy as np
@@ -27,6 +27,7 @@ from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .syntax import (EXPRESSION_SELECT_MAX, FAPS_MASK, INTENSITY_MAX, LIST_ORDER, MASK_ALL, MASK_INTERPOLATE,
                      MASK_NONE, MASK_RETAIN, VISEME_SELECT_MAX, FrameRateCode, _tdiv, frame_rate_code,
                      intensity_bound, intensity_step, low_level_step, quant_div, quantise, skip_chunks)
+from .prepare import _check_input, _derive_group_types, resample
 from .tables import MAX_RANGE, MAX_RANGE_CODE, NUM_FAPS, RANGE_DELTA
 
 PLANE_START_CODE_MODES = ("none", "intra", "all")
@@ -51,6 +52,10 @@ class EncoderOptions:
     end_code: bool = True
     coding_per_frame: np.ndarray | list | None = None  # per frame 'arithmetic'/'dct' (or 0/1); a change
     # starts an intra plane in the other mode (overrides ``coding``)
+    start_codes_before: frozenset = frozenset()  # frame numbers whose plane gets a plane start code
+    intra_at: frozenset = frozenset()  # frame numbers coded as intra planes (frame-based mode)
+    widen_at: frozenset = frozenset()  # (frame number, n): that intra plane's range lists n codes wider
+    # (both set by encode() itself where needed to prevent start-code emulation, D9)
 
     def validate(self) -> None:
         if not 0 <= self.fap_quant <= 31:
@@ -75,74 +80,7 @@ class EncodeResult:
     recon: FapFrames  # the encoder's own reconstruction (what a conformant decoder outputs)
     intra_frames: list[int]
     plane_offsets: list[int]
-
-
-# ---------------------------------------------------------------------------- input preparation
-
-def resample(frames: FapFrames, rate: float) -> FapFrames:
-    """Temporal subsampling to ``rate``: output frame j (time j/rate) is the latest input frame
-    at or before that time, kept as it is (its coded FAPs stay coded)."""
-    if len(frames) == 0:
-        return frames.copy()
-    t_in = frames.frame_number / frames.frame_rate
-    t_end = t_in[-1]
-    n_out = int(np.floor(t_end * rate + 1e-9)) + 1
-    t_out = np.arange(n_out) / rate
-    idx = np.searchsorted(t_in, t_out + 1e-9, side="right") - 1
-    keep = idx >= 0
-    idx, jn = idx[keep], np.arange(n_out)[keep]
-    out = frames.select(idx)
-    out.frame_number = jn.astype(np.int64)
-    out.frame_rate = float(rate)
-    out.time_ms = jn * 1000.0 / rate
-    return out
-
-
-def _derive_group_types(frames: FapFrames, partial: int | None) -> np.ndarray:
-    n = len(frames)
-    types = np.zeros((n, 10), dtype=np.int64)
-    coded = frames.status == SET
-    ever = np.zeros(NUM_FAPS, dtype=bool)
-    for k in range(n):
-        for gi, g in enumerate(tables.groups()):
-            sl = slice(g.first_fap - 1, g.last_fap)
-            c = coded[k, sl]
-            if c.all():
-                t = MASK_ALL
-            else:
-                freed = ((frames.status[k, sl] == FREE) & ever[sl] & ~c).any()
-                if c.any():
-                    t = partial if partial is not None else (MASK_INTERPOLATE if freed else MASK_RETAIN)
-                else:
-                    t = MASK_INTERPOLATE if freed else MASK_NONE
-            types[k, gi] = t
-        ever |= coded[k]
-    return types
-
-
-def _check_input(frames: FapFrames) -> None:
-    fn = frames.frame_number
-    if len(fn) and fn[0] < 0:
-        raise EncodeError("frame numbers must be >= 0", rule="frame-order", frame=0, value=int(fn[0]))
-    bad = np.nonzero(np.diff(fn) <= 0)[0]
-    if len(bad):
-        k = int(bad[0]) + 1
-        raise EncodeError(f"frame numbers must increase (frame {int(fn[k - 1])} is followed by {int(fn[k])})",
-                          rule="frame-order", frame=k, value=int(fn[k]))
-    limits = {"viseme_select1": VISEME_SELECT_MAX, "viseme_select2": VISEME_SELECT_MAX,
-              "viseme_blend": INTENSITY_MAX, "viseme_def": 1,
-              "expression_select1": EXPRESSION_SELECT_MAX, "expression_intensity1": INTENSITY_MAX,
-              "expression_select2": EXPRESSION_SELECT_MAX, "expression_intensity2": INTENSITY_MAX,
-              "init_face": 1, "expression_def": 1}
-    for j, name in enumerate(HIGH_LEVEL_FIELDS):
-        fap = 1 if j < 4 else 2
-        col = frames.high[:, j]
-        live = frames.status[:, fap - 1] == SET
-        bad = np.nonzero(live & ((col < 0) | (col > limits[name])))[0]
-        if len(bad):
-            k = int(bad[0])
-            raise EncodeError(f"{name} = {int(col[k])} outside 0..{limits[name]}", rule="high-level-range",
-                              frame=k, fap=fap, value=int(col[k]))
+    start_codes: list[int] = field(default_factory=list)  # byte offsets of the start codes written
 
 
 # ---------------------------------------------------------------------------- encoder
@@ -265,8 +203,57 @@ def _bound_code(v: int) -> int:
     return -(-abs(int(v)) // RANGE_DELTA)
 
 
+MAX_EMULATION_FIXES = 64
+
+
 def encode(frames: FapFrames, options: EncoderOptions | None = None) -> EncodeResult:
+    """Encode ``frames``; the stream never emulates a start code (D9): where a plane would
+    complete a byte-aligned 0x000001, a plane start code is written before it (or before the
+    plane preceding it), which ends the zero run and moves the plane's alignment; where that
+    is not enough, the plane is coded as an intra plane. (The DCT mode has its own stuffing.)"""
+    from dataclasses import replace
+    from .emulation import find_emulations
     opts = options or EncoderOptions()
+    sc, intra, wide = frozenset(opts.start_codes_before), frozenset(opts.intra_at), frozenset(opts.widen_at)
+    tried: set = set()
+    for _ in range(MAX_EMULATION_FIXES):
+        res = _encode_once(frames, replace(opts, start_codes_before=sc, intra_at=intra, widen_at=wide))
+        em = find_emulations(res.data, start_codes=res.start_codes)
+        if not em:
+            return res
+        tried.add((sc, intra, wide))
+        bit = em[0] * 8 + 23  # the '1' that completes the prefix
+        # the planes in stream order (a DCT plane group: its first frame), by their first bit
+        offs = res.recon.bit_offset
+        firsts = [i for i in range(len(offs)) if i == 0 or offs[i] != offs[i - 1]]
+        k = max(j for j, i in enumerate(firsts) if offs[i] <= bit)
+        fns = [int(res.recon.frame_number[i]) for i in firsts]
+        here, before = fns[k], (fns[k - 1] if k else None)
+        # choices every reading allows, the lightest first: a plane start code before the plane
+        # (or the one before it: moves the plane's alignment), then coding the plane as intra
+        cands = [(sc | {here}, intra, wide)]
+        # a start code before one of the planes before it moves this plane's alignment by that
+        # plane's and its successors' lengths: up to 8 different alignments
+        cands += [(sc | {fns[j]}, intra, wide) for j in range(k - 1, max(-1, k - 8), -1)]
+        cands += [(sc | {fns[j], here}, intra, wide) for j in range(k - 1, max(-1, k - 8), -1)]
+        if k + 1 < len(fns):
+            cands.append((sc | {fns[k + 1]}, intra, wide))
+        # then coding the plane (or the one before it) as intra: other symbols, other bits
+        cands += [(sc, intra | {here}, wide), (sc | {here}, intra | {here}, wide)]
+        if before is not None:
+            cands += [(sc, intra | {before}, wide), (sc | {here}, intra | {before}, wide),
+                      (sc | {before}, intra | {here}, wide)]
+        # last: that intra plane's range lists wider (other alphabets, other arithmetic codes)
+        cands += [(sc, intra | {here}, frozenset({p for p in wide if p[0] != here} | {(here, n)})) for n in (1, 2, 3)]
+        nxt = next((c_ for c_ in cands if c_ not in tried), None)
+        if nxt is None:
+            break
+        sc, intra, wide = nxt
+    raise EncodeError(f"cannot avoid a start-code emulation at byte {em[0]} (D9) with plane start codes or "
+                      f"intra planes or wider range lists", rule="start-code-emulation")
+
+
+def _encode_once(frames: FapFrames, opts: EncoderOptions) -> EncodeResult:
     opts.validate()
     _check_input(frames)
     src = frames
@@ -304,7 +291,7 @@ def encode(frames: FapFrames, options: EncoderOptions | None = None) -> EncodeRe
 
 
 def _plan_arithmetic(src: FapFrames, opts: EncoderOptions, quants, types) -> "_Plan":
-    forced: set[int] = set()
+    forced: set[int] = {k for k, f in enumerate(src.frame_number.tolist()) if f in opts.intra_at}
     while True:
         plan = _Plan(src, opts, quants, types, forced)
         if not plan.p_overflow:
@@ -360,7 +347,8 @@ def _plane_header(ctx: _StreamContext, opts: EncoderOptions, code: FrameRateCode
     """Write a plane header up to (excluding) coding_type, shared by both modes; return the time of
     the plane (of a DCT group's first frame) exactly as the decoder computes it (D6)."""
     w = ctx.w
-    if opts.plane_start_codes == "all" or (opts.plane_start_codes == "intra" and intra):
+    if opts.plane_start_codes == "all" or (opts.plane_start_codes == "intra" and intra) or \
+            frame_no in opts.start_codes_before:
         w.next_start_code()
         w.start_code(FACE_OBJECT_PLANE_START_CODE)
     w.bit(1 if intra else 0)
@@ -449,7 +437,8 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
         time_ms[k] = _plane_header(ctx, opts, code, intra, int(fn[k]), q, types[k], c)
         if intra:
             w.bit(0)  # coding_type 0: arithmetic
-            lists = _choose_lists(opts, explicit, bounds, plan.need[k], c, q, ctx.prev_q)
+            lists = _choose_lists(opts, explicit, bounds, plan.need[k], c, q, ctx.prev_q,
+                                  dict(opts.widen_at).get(int(fn[k]), 0))
             for name in LIST_ORDER:
                 w.bit(1 if name in lists else 0)
             for li, name in enumerate(LIST_ORDER):
@@ -483,7 +472,7 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
                       bit_offset=np.array(offsets, dtype=np.int64), gender=opts.gender)
     recon.values[:, :2] = 0
     return EncodeResult(data=w.getvalue(), recon=recon, intra_frames=[int(i) for i in np.nonzero(plan.intra)[0]],
-                        plane_offsets=offsets)
+                        plane_offsets=offsets, start_codes=list(w.start_codes))
 
 
 def _coding_modes(opts: EncoderOptions, n: int) -> np.ndarray:
@@ -562,11 +551,14 @@ def _encode_sections(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, 
                       fap_quant=quants.astype(np.int16), coding_type=modes.copy(), bit_offset=bit_offset,
                       gender=opts.gender)
     recon.values[:, :2] = 0
-    return EncodeResult(data=ctx.w.getvalue(), recon=recon, intra_frames=intra_frames, plane_offsets=offsets)
+    return EncodeResult(data=ctx.w.getvalue(), recon=recon, intra_frames=intra_frames, plane_offsets=offsets,
+                        start_codes=list(ctx.w.start_codes))
 
 
-def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, prev_q) -> dict[str, list[int]]:
-    """Which new min/max lists an intra plane sends, as 5-bit codes per FAP (index FAP-1)."""
+def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, prev_q,
+                  widen: int = 0) -> dict[str, list[int]]:
+    """Which new min/max lists an intra plane sends, as 5-bit codes per FAP (index FAP-1);
+    ``widen`` makes every sent bound that many codes wider (D9: other alphabets, other bits)."""
     codes = {}
     if explicit is not None:
         insufficient = (np.abs(need) > np.abs(explicit)) & coded[:, None]
@@ -591,6 +583,10 @@ def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, p
                  < _tdiv(abs(int(need[f, li])), quant_div(q))]
         if short:
             codes[name] = [max(n_, abs(int(b)) // RANGE_DELTA) for n_, b in zip(needed, bounds[:, li])]
+    if widen:
+        for name in list(codes):
+            codes[name] = [min(MAX_RANGE_CODE, v + widen) if coded[f] and f >= 2 else v
+                           for f, v in enumerate(codes[name])]
     for vals in codes.values():
         if max(vals[2:], default=0) > MAX_RANGE_CODE:  # cannot happen: symbols were range-checked
             raise EncodeError("range list value exceeds 31", rule="value-range")

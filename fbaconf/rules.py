@@ -99,6 +99,10 @@ SYNTAX_OTHER = _define(
 SYNTAX_DCT = _define(
     "FAP-SYNTAX-013", "error", "decision D8 (DCT segment mode, provisional tables; spec notes §4)",
     "Invalid DCT plane-group data: bad VLC codeword, run past the segment, segment too long, coefficient too large.")
+SYNTAX_EMULATION = _define(
+    "FAP-SYNTAX-014", "error", "decision D9 (no start-code emulation)",
+    "A byte-aligned 0x000001 that is not a start code the syntax consumed: a decoder or demultiplexer that "
+    "scans for start codes cuts the stream there.")
 
 # ---------------------------------------------------------------------------- semantics
 SEM_FRAME_RATE_ZERO = _define(
@@ -379,6 +383,8 @@ _rule("segment-length", "bitstreams", "segment length … exceeds …", code=SYN
 _rule("speed-claim", "harness", "the claim given to the speed measurement is not a known profile@level")
 _rule("speed-content", "harness", "generated stream lacks plane start codes / end code")
 _rule("start-code", "bitstreams", "stream must start with face_object_start_code 0x000001BA, found 0x…", code=SYNTAX_NOT_FACE)
+_rule("dct-stuffing", "bitstreams", "a DCT payload's stuffing bit after 22 consecutive zeros is not '1' (D9, the DCT mode's emulation prevention)", code=SYNTAX_DCT)
+_rule("start-code-emulation", "bitstreams", "the encoder cannot avoid a start-code emulation with plane start codes (D9)")
 _rule("stuffing", "bitstreams", "a 0 after 22 consecutive zeros in an arithmetic block (the stuffing bit must be 1; spec notes §3.3, D7)", code=SYNTAX_STUFFING)
 _rule("suite-case", "conformance", "suite …: case …: kind … not one of …")
 _rule("suite-manifest", "conformance", "a suite manifest (suite.json) is not a valid fbaconf suite manifest")

@@ -371,6 +371,12 @@ def _syntax(st: _Stream, out: list[Diagnostic]) -> None:
         return
     res = st.result
     nbits = len(st.data) * 8
+    from fbaconf.bitstreams.emulation import find_emulations
+    for byte in find_emulations(st.data, res):
+        plane = next((p.index for p in reversed(res.planes) if p.bit_offset <= byte * 8), None)
+        out.append(diag(R.SYNTAX_EMULATION, f"start-code emulation: a byte-aligned 0x000001 at byte {byte} that is "
+                        f"no start code (D9); a decoder that scans for start codes stops there",
+                        bit_offset=byte * 8, plane=plane))
     if res.end_code is None:
         out.append(diag(R.SYNTAX_NO_END_CODE, "the stream ends without the end code 0x000001B1",
                         bit_offset=res.end_offset))

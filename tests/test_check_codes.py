@@ -340,6 +340,13 @@ def case_internal(monkeypatch, **_):
     return base(), {}
 
 
+def case_emulation(**_):
+    # fbaconf's encoding of VREng's eyes.fap at fap_quant 1 written without the encoder's D9
+    # prevention: a byte-aligned 0x000001 at byte 132 (tests/data/emulation/PROVENANCE.md)
+    from pathlib import Path
+    return (Path(__file__).parent / "data" / "emulation" / "emulating.fba").read_bytes(), {}
+
+
 CASES = {
     R.SYNTAX_TOO_SHORT: case_too_short,
     R.SYNTAX_NOT_FACE: case_not_face,
@@ -354,6 +361,7 @@ CASES = {
     R.SYNTAX_UNEXPECTED_START_CODE: case_unexpected_start_code,
     R.SYNTAX_OTHER: case_other,
     R.SYNTAX_DCT: case_dct_syntax,
+    R.SYNTAX_EMULATION: case_emulation,
     R.SEM_FRAME_RATE_ZERO: case_frame_rate_zero,
     R.SEM_TIME_CODE_RANGE: case_time_code_range,
     R.SEM_TIME_BACKWARDS: case_time_backwards,

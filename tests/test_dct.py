@@ -354,8 +354,10 @@ def _hand_stream(segment_bits) -> bytes:
             w.write(0, 2)
     w.bit(0)  # gender
     w.bit(1)  # coding_type DCT
-    w.write(15, T.length_bits)
-    segment_bits(w)
+    sw = dct.StuffingWriter(w)  # the payload's emulation prevention (D9)
+    sw.write(15, T.length_bits)
+    segment_bits(sw)
+    sw.end()
     return w.getvalue()
 
 
@@ -389,6 +391,26 @@ def test_bad_segments_give_typed_errors(rule, seg):
         decode(data)
     assert ei.value.rule == rule
     assert 0 <= ei.value.bit_offset <= len(data) * 8
+
+
+def test_missing_dct_stuffing_bit_is_an_error():
+    """D9 in the DCT mode: after 22 consecutive zeros of a payload a '1' must follow."""
+    def seg(w):
+        w.w.write(0, 30)  # a DC prefix of 30 zeros straight into the stream, no stuffing bit
+    with pytest.raises(BitstreamError) as ei:
+        decode(_hand_stream(seg))
+    assert ei.value.rule == "dct-stuffing"
+
+
+def test_dct_payload_never_runs_23_zeros():
+    """The stuffing writer by hand: 22 zeros, then its '1'; a payload ending in 20 zeros gets one."""
+    w = BitWriter()
+    sw = dct.StuffingWriter(w)
+    sw.write(0, 22)
+    assert w.position == 23 and w.getvalue()[:3] == bytes([0, 0, 0b00000010])
+    sw.write(0, 20)
+    sw.end()
+    assert w.position == 23 + 21
 
 
 def test_sixteen_coefficients_then_more_is_run_overflow():
