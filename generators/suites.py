@@ -19,6 +19,8 @@ import tomllib
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
+
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 
@@ -110,6 +112,25 @@ def _error_expect(c: dict) -> dict:
     return out
 
 
+def sparse_text(frames):
+    """The frames a player is given as .fap text: a FAP's mask bit is 1 only in the frames where
+    its value (or a high-level field) changes, so the text says "keep the previous value"
+    everywhere else, as the format allows. A player's output is its state — every FAP that
+    holds a value, in every frame — so the input is never the expected output: a program that
+    copies its input fails every case with a held value."""
+    from fbaconf.bitstreams.frames import RETAINED, SET
+    out = frames.copy()
+    st = out.status
+    for k in range(1, len(out)):
+        same = frames.values[k] == frames.values[k - 1]
+        for fap, sl in ((1, slice(0, 4)), (2, slice(4, 10))):
+            same[fap - 1] = bool((frames.high[k, sl] == frames.high[k - 1, sl]).all())
+        prev_has = np.isin(frames.status[k - 1], (SET, RETAINED))
+        hold = (st[k] == SET) & same & prev_has
+        st[k] = np.where(hold, RETAINED, st[k])
+    return out
+
+
 def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
     from fbaconf.bitstreams.encoder import encode
     from fbaconf.bitstreams.faptext import write_fap
@@ -165,8 +186,8 @@ def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
     from fbaconf.bitstreams.decoder import decode
     decoded = decode(data).frames
     _write(d, f"{case.id}.fba", data, case, "fba")
-    if c.get("text", True):
-        _write(d, f"{case.id}.fap", write_fap(decoded, name=case.id), case, "fap")
+    if c.get("text", True):  # the players' input: the decoded frames as sparse text (see sparse_text)
+        _write(d, f"{case.id}.fap", write_fap(sparse_text(decoded), name=case.id), case, "fap")
     case.frames = len(decoded)
     case.stages = list(c.get("stages", ["faps"]))
     case.goldens = {"faps": "faps.npz"}

@@ -310,7 +310,8 @@ def _faps_stage(cmp, expected, got_path: Path, name: str, text_input: bool = Fal
                                                             (1 << 20) + 8192 * len(expected.values)))
     except cmp.OutputError as e:
         return StageResult(name, Outcome.FAIL, f"unreadable FAP output: {e}")
-    r = cmp.compare_faps(expected, got, text_output=text_input or got_path.suffix.lower() == ".fap")
+    r = cmp.compare_faps(expected, got, text_output=text_input or got_path.suffix.lower() == ".fap",
+                         player=text_input)
     r.stage = name
     return r
 

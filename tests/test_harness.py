@@ -105,20 +105,31 @@ def test_reference_subprocess_passes_one_case_per_suite(tmp_path):
 
 
 def test_fap_text_only_decoder_is_compared_on_values(tmp_path):
+    """A player in Python: reads the sparse .fap text and writes its state (every held FAP)."""
+    player = tmp_path / "player.py"
+    player.write_text(textwrap.dedent("""\
+        import sys
+        import numpy as np
+        from fbaconf.bitstreams.faptext import read_fap_file, write_fap_file
+        from fbaconf.bitstreams.frames import RETAINED, SET
+        f = read_fap_file(sys.argv[1])[0]
+        f.status[:] = np.where(f.status == RETAINED, SET, f.status)
+        write_fap_file(sys.argv[2], f)
+        """))
     m = tmp_path / "textref.toml"
-    m.write_text(textwrap.dedent("""\
-        name = "text-reference"
+    m.write_text(textwrap.dedent(f"""\
+        name = "text-player"
         claims = ["simple@1"]
         inputs = ["fap"]
         outputs = ["faps"]
         faps_format = "fap"
         [commands]
-        decode = ["{python}", "-m", "fbaconf.harness.refdecoder", "decode", "{input}", "--faps-out", "{faps_out}"]
+        decode = ["{{python}}", "{player}", "{{input}}", "{{faps_out}}"]
         """))
     a = adapters.resolve(m)
     r = run_one(a, case("simple-l1-core/arith-mask-interpolate"), tmp_path, claim="simple@1")
     assert r.outcome == Outcome.PASS, r.message
-    assert r.command[4].endswith(".fap")
+    assert r.command[2].endswith(".fap")
 
 
 # ----------------------------------------------------------------------------- misbehaviour

@@ -244,3 +244,21 @@ def test_baseline_scenario(tmp_path):
     assert _junit_failures(out / "junit.xml") == 1
     r, _ = run("1", "--baseline", str(bfile))
     assert r.returncode == 1 and "1 new, 0 known" in r.stdout, r.stdout
+
+
+def test_a_copying_player_fails_every_case_with_a_held_value(tmp_path):
+    """Players get sparse .fap text and must write their state: copying the input is no play."""
+    from fbaconf.bitstreams.faptext import read_fap_file
+    from fbaconf.bitstreams.frames import FREE, RETAINED, FapFrames
+    m = manifest(tmp_path, "copier", ["/bin/cp", "{input}", "{faps_out}"], inputs=("fap",))
+    (s,) = load_suites(names=["simple-l1-core"])
+    rs = run_cases(adapters.resolve(m), s.cases, claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
+
+    def holds(c) -> bool:  # the text holds a FAP whose value the standard fixes (not FREE)
+        text = read_fap_file(c.input_path("fap"))[0]
+        gold = FapFrames.load_npz(c.golden_dir() / c.goldens["faps"])
+        return bool(((text.status == RETAINED) & (gold.status != FREE)).any())
+    held = {c.full_id for c in s.cases if holds(c)}
+    assert len(held) >= 15
+    assert all(r.outcome == Outcome.FAIL for r in rs if r.case_id in held), \
+        [(r.case_id, r.outcome) for r in rs if r.case_id in held and r.outcome != Outcome.FAIL]

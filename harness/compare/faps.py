@@ -5,7 +5,7 @@ from typing import Any
 
 import numpy as np
 
-from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS, STATUS_NAMES, VISEME_FIELDS, FapFrames
+from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS, SET, STATUS_NAMES, VISEME_FIELDS, FapFrames
 from fbaconf.bitstreams.tables import fap_table
 
 from fbaconf.harness.results import Outcome, StageResult
@@ -16,7 +16,7 @@ def _fap_name(number: int) -> str:
     return fap_table()[number - 1].name
 
 
-def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> StageResult:
+def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, player: bool = False) -> StageResult:
     """Exact normative comparison of a decoder's FapFrames with the golden ones.
 
     Per frame (of the frames both have): frame number; every FAP whose expected status is
@@ -29,6 +29,9 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
     ``[faps] time_tol_ms`` of the tolerance file. With ``.fap`` output the header's frame
     rate must equal the coded rate within ``[faps] header_rate_tol_hz``, and frame numbers
     may count from 0 or from 1 (one offset for the whole file, reported in the metrics).
+    ``player=True`` (the decoder was given .fap text: a player): its output is its state, so
+    every FAP that holds a value must be written in every frame (mask 1); one left to the
+    reader's hold counts as missing — the input text was sparse, and copying it is no playing.
 
     ``first_difference``: frame (index), frame_number, fap, name, what ("value", "status",
     "missing", a high-level field name, "frame number", "frame count"), expected, got.
@@ -49,7 +52,7 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool) -> S
     vdiff[:, 0] |= hdiff[:, :nv].any(axis=1)
     vdiff[:, 1] |= hdiff[:, nv:].any(axis=1)
     if text_output:
-        missing = norm & (g.status == FREE)
+        missing = norm & ((g.status != SET) if player else (g.status == FREE))
         sdiff = np.zeros_like(norm)
     else:
         missing = np.zeros_like(norm)
