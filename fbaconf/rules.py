@@ -334,6 +334,7 @@ _rule("invalid-vlc", "bitstreams", "a DCT-mode variable-length code (Exp-Golomb 
 _rule("io", "bitstreams", "a file cannot be read or written")
 _rule("manifest-claims", "harness", "a decoder manifest's claims are missing or not profile@level")
 _rule("manifest-commands", "harness", "a decoder manifest's [commands] are missing or not argv lists")
+_rule("manifest-env", "harness", "a decoder manifest's [env] is not a table of NAME = value")
 _rule("manifest-faps-format", "harness", "a decoder manifest's faps_format is not fap or npz")
 _rule("manifest-inputs", "harness", "a decoder manifest's inputs are not a list of fba, fap, scene, bifs with a stream form")
 _rule("manifest-key", "harness", "a decoder manifest misses a required key or has an unknown one")

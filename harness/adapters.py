@@ -252,6 +252,13 @@ def _check_manifest(data: dict, path: Path | None) -> None:
     for key in data.get("limits", {}) if isinstance(data.get("limits"), dict) else ():
         if key not in LIMIT_KEYS:
             raise bad(f"[limits]: unknown key {key!r}{_did_you_mean(key, LIMIT_KEYS)}", "manifest-limits")
+    env = data.get("env", {})
+    if not isinstance(env, dict) or not all(isinstance(v, (str, int, float, bool)) for v in env.values()):
+        raise bad("[env] must be a table of NAME = value", "manifest-env")
+    if "python" in data and (not isinstance(data["python"], str) or ":" not in data["python"]):
+        raise bad('python must be "package.module:Class"', "manifest-python")
+    if "options" in data and not isinstance(data["options"], dict):
+        raise bad("[options] must be a table", "manifest-options")
     sb = data.get("sandbox", {})
     if not isinstance(sb, dict) or any(k not in SANDBOX_KEYS for k in sb) or \
             not all(isinstance(x, str) and x.startswith("/") for x in sb.get("read_only", [])):
@@ -360,7 +367,10 @@ def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
         raise ManifestError(f"python = {target!r}: cannot import: {e}", rule="manifest-python",
                             file=str(path)) from None
     kwargs = data.get("options", {})
-    adapter = cls(**kwargs)
+    try:
+        adapter = cls(**kwargs)
+    except TypeError as e:
+        raise ManifestError(f"[options] do not fit {target}: {e}", rule="manifest-options", file=str(path)) from None
     adapter.name = data["name"]
     adapter.description = data.get("description", getattr(adapter, "description", ""))
     adapter.claims = list(data["claims"])

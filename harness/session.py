@@ -167,10 +167,17 @@ def check_suites(suites, names: list[str]) -> None:
 
 
 def preflight(adapter) -> None:
-    """Before any case: a command decoder's program must exist and be executable."""
+    """Before any case: a command decoder's program must exist and be executable; one loud
+    warning when no sandbox can isolate it."""
+    import sys
+    from . import sandbox
     from .adapters import CommandAdapter
     if not isinstance(adapter, CommandAdapter):
         return
+    if sandbox.isolation() == "none":
+        print("fbaconf: WARNING: bubblewrap (bwrap) is not available: the decoder runs UNISOLATED — it can read "
+              "the goldens and write outside its folder. Install it (Debian: apt-get install bubblewrap); "
+              "certify refuses to run without it unless told --allow-unisolated.", file=sys.stderr)
     prog = adapter.program()
     if prog is None:
         raise UsageError(f"decoder {adapter.name}: program {adapter.commands['decode'][0]!r} not found "

@@ -435,3 +435,33 @@ def test_promote_confines_what_a_finding_names(tmp_path):
     assert len(refused) == 3 and all("skipped" in x for x in refused)
     assert not (tmp_path / "escape.fba").exists() and not any(tmp_path.rglob("passwd"))
     assert not any(tmp_path.rglob("hostname"))
+
+
+BASE_MANIFEST = ('name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n')
+GOOD_COMMANDS = '[commands]\ndecode = ["/bin/true", "{input}", "{faps_out}"]\n'
+
+
+@pytest.mark.parametrize("text", [
+    BASE_MANIFEST.replace('"x"', "1") + GOOD_COMMANDS,
+    BASE_MANIFEST.replace('["simple@1"]', '"simple@1"') + GOOD_COMMANDS,
+    BASE_MANIFEST.replace('["simple@1"]', '["simpel@1"]') + GOOD_COMMANDS,
+    BASE_MANIFEST.replace('["fba"]', '["xyz"]') + GOOD_COMMANDS,
+    BASE_MANIFEST + "tools = [1]\n" + GOOD_COMMANDS,
+    BASE_MANIFEST + "reject_exit_codes = [69]\n" + GOOD_COMMANDS,
+    BASE_MANIFEST + "env = [1]\n" + GOOD_COMMANDS,
+    BASE_MANIFEST + "python = 1\n" + GOOD_COMMANDS,
+    BASE_MANIFEST + 'python = "fbaconf.harness.refdecoder:ReferenceAdapter"\n[options]\nnope = 1\n',
+    BASE_MANIFEST + "sandbox = 1\n" + GOOD_COMMANDS,
+    BASE_MANIFEST + "[commands]\ndecode = [1]\n",
+    BASE_MANIFEST + '[commands]\ndecode = ["/bin/true", "{nope}"]\n',
+    BASE_MANIFEST + "commands = 1\n",
+    BASE_MANIFEST + "limits = 3\n" + GOOD_COMMANDS,
+    BASE_MANIFEST + '[limits]\ntimeout = 1\n' + GOOD_COMMANDS,
+    BASE_MANIFEST + "tmeout_s = 1\n" + GOOD_COMMANDS,
+    "\x00\x01", "name = ", "",
+])
+def test_malformed_manifests_are_one_clear_error(tmp_path, text):
+    m = tmp_path / "m.toml"
+    m.write_text(text, errors="surrogateescape")
+    with pytest.raises(adapters.ManifestError):
+        adapters.resolve(m)
