@@ -289,8 +289,9 @@ class _Runner:
             from . import exits, sandbox
             argv, job = self._argv(job_for)
             from .runner import hidden_from_decoders
-            res = sandbox.run(argv, workdir, a.limits, env=a.env or None,
-                              view=a.sandbox_view(argv, workdir, hidden=hidden_from_decoders()))
+            view = a.sandbox_view(argv, workdir, hidden=hidden_from_decoders())
+            view.read_only.append(self.content.root)  # the generated content the decoder reads
+            res = sandbox.run(argv, workdir, a.limits, env=a.env or None, view=view)
             verdict = exits.outcome_for(exits.classify(res, a.limits, a.reject_exit_codes))
             if verdict is not None:
                 raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)

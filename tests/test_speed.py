@@ -173,3 +173,14 @@ def test_fit_line_and_claims():
     assert speed.required_rate("simple@1", "render")[0] == 15.0
     with pytest.raises(speed.SpeedError):
         speed.required_rate("bogus@9", "decode")
+
+
+def test_sandboxed_command_decoder_reads_the_generated_content(tmp_path):
+    """The speed phase's content lives outside the case folder: the sandbox must show it
+    (the subprocess reference could not open it: every speed run was a set-up Error)."""
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "fbaconf", "bench", "--decoder", "reference", "--operation", "decode",
+                        "--repeats", "1", "--lengths", "4,16", "--json"], capture_output=True, text=True, timeout=300,
+                       cwd=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
