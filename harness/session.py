@@ -62,9 +62,7 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, res
     flakes file is given; 3 only when every required case passed and only speed was missed;
     else 0."""
     from . import baseline as bl
-    from .results import RunRecord
     from .runner import run_cases
-    from .sysinfo import system_info
     t0 = time.perf_counter()
     started = _now()
     out_dir = Path(out_dir).resolve()
@@ -81,13 +79,8 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, res
     if speed:
         from .speed import measure_claim
         speed_results = [s for s in measure_claim(adapter, claim) if s is not None]
-    ran = {c.suite for c in cases}
-    record = RunRecord(
-        decoder=adapter.describe(), claim=claim,
-        suites=[{"name": s.name, "version": s.version, "sha256": s.digest(), "claim": s.claim, "group": s.group,
-                 "cases": len(s.cases)} for s in suites if s.name in ran],
-        system=system_info(), results=results, speed=speed_results, started=started, finished=_now(),
-        duration_s=time.perf_counter() - t0, provisional=provisional_statements(claim))
+    record = _record(adapter, claim, suites, cases, results, started, t0)
+    record.speed = speed_results
     record.missing = missing_summary(results)
     record.baseline_summary = summary.line() if (baseline is not None or flakes is not None or retries) else ""
     if summary.failing(allow_fixed):
@@ -218,16 +211,21 @@ class interruptible:
         sandbox.reset_stop()
 
 
-def _interrupted_record(adapter, claim, suites, cases, results, started, t0, signum):
+def _record(adapter, claim, suites, cases, results, started, t0):
+    """The RunRecord of a session: decoder, claim, the suites that ran, system, results."""
     from .results import RunRecord
     from .sysinfo import system_info
     ran = {c.suite for c in cases}
-    record = RunRecord(
+    return RunRecord(
         decoder=adapter.describe(), claim=claim,
         suites=[{"name": s.name, "version": s.version, "sha256": s.digest(), "claim": s.claim, "group": s.group,
                  "cases": len(s.cases)} for s in suites if s.name in ran],
         system=system_info(), results=results, started=started, finished=_now(),
         duration_s=time.perf_counter() - t0, provisional=provisional_statements(claim))
+
+
+def _interrupted_record(adapter, claim, suites, cases, results, started, t0, signum):
+    record = _record(adapter, claim, suites, cases, results, started, t0)
     record.missing = [f"interrupted by signal {signum}: {len(cases) - len(results)} case(s) not run "
                       f"(--resume continues)"]
     record.exit_code = 128 + signum
