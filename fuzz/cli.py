@@ -94,7 +94,7 @@ def _self(args, F) -> int:
         kind = _kind_of(args.replay, args.target)
         v = F.replay(target, args.replay.read_bytes(), kind)
         return _print_replay(v, args)
-    out = args.output or Path("fbaconf-fuzz") / "self"
+    out = (args.output or Path("fbaconf-fuzz") / "self").resolve()
     fz = F.Fuzzer(target, seeds + short, seed=args.seed, seconds=args.seconds, jobs=1, out_dir=out, kinds=kinds,
                   progress=False if args.no_progress else None, minimise_seconds=args.minimise_seconds,
                   max_execs=args.max_execs, decoder_info={"name": "fbaconf-self"}, fresh_valid_share=0.003,
@@ -126,7 +126,7 @@ def _decoder(args, F, expected: set[int]) -> int:
     adapter = resolve(args.decoder)
     if args.output is None:
         args.output = Path("fbaconf-fuzz") / adapter.name
-    out: Path = args.output
+    out: Path = args.output.resolve()
     out.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="fuzz-work-", dir=out))
     try:

@@ -62,7 +62,7 @@ class DecoderTarget:
         from fbaconf.harness.sandbox import Limits
         self.adapter = adapter
         self.kind = kind
-        self.work_root = Path(work_root)
+        self.work_root = Path(work_root).resolve()  # decoders run in their own folders: absolute paths
         self.work_root.mkdir(parents=True, exist_ok=True)
         lim = adapter.limits
         self.limits = lim if timeout_s is None else Limits(min(lim.timeout_s, timeout_s), lim.memory_mb,

@@ -274,3 +274,10 @@ def test_cli(tmp_path):
     assert main(["fuzz", "--promote", str(tmp_path / "s"), "--data-dir", str(tmp_path / "d")]) == 2
     (tmp_path / "x.bt").write_text("Face { fit FIT { FAPs [01] } }")
     assert main(["fuzz", "--self", "--replay", str(tmp_path / "x.bt")]) == 0
+
+
+def test_relative_work_folder_gives_no_bogus_finding(tmp_path, monkeypatch, seeds):
+    """A relative -o used to make every command decoder miss its input (a bogus finding)."""
+    monkeypatch.chdir(tmp_path)
+    target = F.DecoderTarget(resolve("reference"), Path("rel-work"))
+    assert target.execute(seeds[0]).verdict is None
