@@ -35,8 +35,9 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed: the same seed replays the same inputs")
     p.add_argument("-j", "--jobs", type=int, default=1, help="decoder processes in parallel (--decoder)")
     p.add_argument("-o", "--output", type=Path, help="run folder (default fbaconf-fuzz/<decoder|self>)")
-    p.add_argument("--target", choices=("stream", "scene"), default="stream",
-                   help="--decoder: fuzz the stream (default) or the BT scene input (a fixed valid stream)")
+    p.add_argument("--target", choices=("stream", "scene", "text"), default=None,
+                   help="--decoder: fuzz the binary stream (default), the BT scene input (a fixed valid stream) "
+                        "or the .fap text (default for a player, a decoder that reads only .fap text)")
     p.add_argument("--timeout", type=float, default=None,
                    help="cap the per-input timeout below the adapter's timeout_s (hangs are found faster)")
     p.add_argument("--expected-exit", default=None,
@@ -84,9 +85,9 @@ def cmd_fuzz(args) -> int:
 
 
 def _self(args, F) -> int:
-    kinds = ("stream", "stream", "stream", "scene", "bifs")
-    if args.target == "scene" and args.replay is None:
-        kinds = ("scene",)
+    kinds = ("stream", "stream", "stream", "scene", "bifs", "text")
+    if args.target in ("scene", "text") and args.replay is None:
+        kinds = (args.target,)
     seeds = F.default_seeds() + _extra_seeds(args.seeds)
     short = F.short_prefixes(seeds)
     target = F.SelfTarget(scene_stream=short[0].data if short else seeds[0].data, checker_every=16)
@@ -107,7 +108,7 @@ def _self(args, F) -> int:
 
 def _kind_of(path: Path, target: str) -> str:
     suf = path.suffix.lower()
-    return {".bt": "scene", ".bifs": "bifs"}.get(suf, "scene" if target == "scene" else "stream")
+    return {".bt": "scene", ".bifs": "bifs", ".fap": "text"}.get(suf, "scene" if target == "scene" else "stream")
 
 
 def _print_replay(v, args) -> int:
@@ -127,6 +128,8 @@ def _decoder(args, F, expected: set[int]) -> int:
     if args.output is None:
         args.output = Path("fbaconf-fuzz") / adapter.name
     out: Path = args.output.resolve()
+    if args.target is None:
+        args.target = "text" if "fba" not in adapter.inputs and "fap" in adapter.inputs else "stream"
     out.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="fuzz-work-", dir=out))
     try:

@@ -19,6 +19,7 @@ from .minimise import minimise
 from .model import SCENE_FEATURES, STREAM_FEATURES
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
+from .text import mutate_text, text_seeds
 from .targets import ExecResult, FuzzSetupError, SelfTarget, Verdict
 
 
@@ -105,7 +106,7 @@ class Fuzzer:
                  decoder_info: dict | None = None, max_corpus: int = 400, valid_pool: int = 24,
                  fresh_valid_share: float = 0.04, prefer_short: float = 0.5, run_seeds_first: int = 64,
                  stop_on: Callable[[Finding], bool] | None = None) -> None:
-        if not seeds and kind == "stream":
+        if not seeds and kind == "stream" and "stream" in (kinds or (kind,)):
             raise FuzzSetupError("no seed streams (build the suites: fbaconf suites build)")
         self.target = target
         self.seed = int(seed)
@@ -114,7 +115,11 @@ class Fuzzer:
         self.out_dir = Path(out_dir) if out_dir else None
         self.kinds = kinds or (kind,)
         self.corpus: dict[str, list[Entry]] = {"stream": list(seeds), "scene": list(scene_seeds_ or []),
-                                               "bifs": []}
+                                               "bifs": [], "text": []}
+        if "text" in self.kinds:
+            self.corpus["text"] = text_seeds()
+            if not self.corpus["text"]:
+                raise FuzzSetupError("no .fap seeds (build the suites: fbaconf suites build)")
         if "scene" in self.kinds and not self.corpus["scene"]:
             self.corpus["scene"] = scene_seeds()
         if "bifs" in self.kinds:
@@ -177,6 +182,10 @@ class Fuzzer:
             e = corpus[rng.randrange(len(corpus))]
             data, how = mutate_scene(rng, e, corpus)
             return Entry(data, kind="scene", origin=f"mutate:{how}<-{e.origin}")
+        if kind == "text":
+            e = corpus[rng.randrange(len(corpus))]
+            data, how = mutate_text(rng, e, corpus)
+            return Entry(data, kind="text", origin=f"mutate:{how}<-{e.origin}")
         e = corpus[rng.randrange(len(corpus))] if corpus else Entry(b"", kind="bifs")
         name = rng.choice(list(BYTE_MUTATORS))
         return Entry(BYTE_MUTATORS[name](rng, e.data, corpus), kind="bifs", origin=f"mutate:{name}<-{e.origin}")

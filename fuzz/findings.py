@@ -31,7 +31,7 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
     from fbaconf._atomic import atomic_write_bytes, atomic_write_text
     d = Path(out_dir) / "findings" / f.id
     d.mkdir(parents=True, exist_ok=True)
-    ext = {"scene": "bt", "bifs": "bifs"}.get(f.original.kind, "fba")
+    ext = {"scene": "bt", "bifs": "bifs", "text": "fap"}.get(f.original.kind, "fba")
     atomic_write_bytes(d / f"original.{ext}", f.original.data)
     minimal = f.minimal if f.minimal is not None else f.original.data
     atomic_write_bytes(d / f"minimal.{ext}", minimal)

@@ -71,12 +71,14 @@ class DecoderTarget:
         # 0 (decoded) and 69 (not supported) are always expected endings.
         self.reject_exit_codes = (frozenset(expected_exit) - {0, 69} if expected_exit is not None
                                   else frozenset(getattr(adapter, "reject_exit_codes", (1, 2))))
-        self.oracle = oracle and kind == "stream" and "faps" in adapter.outputs
+        self.oracle = oracle and kind in ("stream", "text") and "faps" in adapter.outputs
         self.is_command = isinstance(adapter, CommandAdapter)
         self.scene_stream = scene_stream
         if kind == "stream" and "fba" not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} does not accept binary streams (inputs: "
                                  f"{', '.join(adapter.inputs)})")
+        if kind == "text" and "fap" not in adapter.inputs:
+            raise FuzzSetupError(f"decoder {adapter.name} accepts no .fap text (inputs: {', '.join(adapter.inputs)})")
         if kind == "scene" and "scene" not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} accepts no BT scene (inputs: {', '.join(adapter.inputs)})")
 
@@ -100,6 +102,10 @@ class DecoderTarget:
             fp = ind / "stream.fba"
             fp.write_bytes(self.scene_stream or b"")
             values.update(scene=str(sp), scene_bt=str(sp), fba=str(fp), input=str(fp))
+        elif self.kind == "text":
+            fp = ind / "input.fap"
+            fp.write_bytes(data)
+            values.update(fap=str(fp), input=str(fp))
         else:
             fp = ind / "input.fba"
             fp.write_bytes(data)
@@ -196,7 +202,7 @@ class DecoderTarget:
                                f"(rule {rule}): decoded an invalid stream without complaint", detail)
         if not self.oracle:
             return None
-        expected = reference_if_valid(inp)
+        expected = reference_text(inp) if self.kind == "text" else reference_if_valid(inp)
         if expected is None:
             return None
         if rc != 0:
@@ -209,11 +215,24 @@ class DecoderTarget:
             got = cmp.load_output_faps(path)
         except cmp.OutputError as e:
             return Verdict("wrong-output", "unreadable-output", f"unreadable FAP output: {e}", detail)
-        r = cmp.compare_faps(expected, got, text_output=path.suffix.lower() == ".fap")
+        r = cmp.compare_faps(expected, got, text_output=path.suffix.lower() == ".fap" or self.kind == "text",
+                             player=self.kind == "text")
         if r.outcome.ok:
             return None
         what = (r.first_difference or {}).get("what", "value")
         return Verdict("wrong-output", f"differs:{what}", r.message, {**detail, "first_difference": r.first_difference})
+
+
+def reference_text(inp: Entry):
+    """What a player must make of ``inp`` (.fap text): the frames fbaconf's reader reads from
+    it without any warning, or None when the text is invalid or relies on a lenient reading
+    (then only crashes, hangs and blow-ups are findings)."""
+    from fbaconf.bitstreams.faptext import read_fap_text
+    try:
+        frames, _header, warnings = read_fap_text(inp.data.decode("utf-8"), strict=True)
+    except (FbaconfInputError, UnicodeDecodeError):
+        return None
+    return frames if not warnings and len(frames) else None
 
 
 def reference_rejection(inp: Entry) -> str | None:
@@ -351,6 +370,17 @@ class SelfTarget:
             except FbaconfInputError:
                 return None
             self.bifs.decode(blob)
+        return None
+
+    def _text(self, inp: Entry, feats: set[str]) -> Verdict | None:
+        """The .fap reader: any text is read or refused with a typed error."""
+        from fbaconf.bitstreams.faptext import read_fap_text
+        try:
+            _frames, _header, warnings = read_fap_text(inp.data.decode("utf-8", "replace"))
+            feats |= {f"text-warning:{w.rule}" for w in warnings}
+            feats.add("text:ok")
+        except FbaconfInputError as e:
+            feats.add(f"text-rule:{getattr(e, 'rule', '?')}")
         return None
 
     def _bifs(self, inp: Entry, feats: set[str]) -> Verdict | None:

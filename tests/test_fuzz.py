@@ -281,3 +281,31 @@ def test_relative_work_folder_gives_no_bogus_finding(tmp_path, monkeypatch, seed
     monkeypatch.chdir(tmp_path)
     target = F.DecoderTarget(resolve("reference"), Path("rel-work"))
     assert target.execute(seeds[0]).verdict is None
+
+
+def test_text_fuzzing_finds_a_players_crash_and_a_copier(tmp_path):
+    """Players (decoders that read only .fap text) are fuzzed with .fap text: a player that
+    dies on a comment line is a crash finding; one that copies its input is wrong output."""
+    import textwrap
+    crashy = tmp_path / "crashy.py"
+    crashy.write_text(textwrap.dedent("""\
+        import sys
+        import numpy as np
+        from fbaconf.bitstreams.faptext import read_fap_file, write_fap_file
+        from fbaconf.bitstreams.frames import RETAINED, SET
+        if b"#" in open(sys.argv[1], "rb").read():
+            raise RuntimeError("comment lines are not handled")
+        f = read_fap_file(sys.argv[1])[0]
+        f.status[:] = np.where(f.status == RETAINED, SET, f.status)
+        write_fap_file(sys.argv[2], f)
+        """))
+    for name, argv, cls in (("crashy", f'"{{python}}", "{crashy}", "{{input}}", "{{faps_out}}"', "crash"),
+                            ("copier", '"/bin/cp", "{input}", "{faps_out}"', "wrong-output")):
+        m = tmp_path / f"{name}.toml"
+        m.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fap"]\noutputs = ["faps"]\n'
+                     f'faps_format = "fap"\n[commands]\ndecode = [{argv}]\n')
+        target = F.DecoderTarget(load_manifest(m), tmp_path / f"w-{name}", kind="text")
+        fz = F.Fuzzer(target, [], seed=3, seconds=60, max_execs=300, kinds=("text",), progress=False,
+                      out_dir=tmp_path / f"o-{name}", minimise_seconds=2, stop_on=lambda f: True)
+        fz.run()
+        assert any(f.verdict.cls == cls for f in fz.findings.values()), (name, [f.verdict.cls for f in fz.findings.values()])
