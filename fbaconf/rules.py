@@ -201,6 +201,10 @@ SCENE_UNAVAILABLE = _define(
 SCENE_INVALID = _define(
     "FAP-SCENE-002", "error", "14496-1 BIFS Face node family as read in the spec notes §6 (BT text)",
     "The scene file cannot be read or parsed.")
+SCENE_INTEROP_FDM = _define(
+    "FAP-SCENE-003", "warning", "decision D10 (BIFS as GPAC codes it); Ostermann 1998 §2.3.2 (FaceDefMesh)",
+    "FaceDefMesh.faceSceneGraphNode references an IndexedFaceSet, as the seed defines it; GPAC's MP4Box types "
+    "the field SF3DNode and refuses such a USE when decoding (the bits are the same): an interop hazard.")
 CHECK_DCT = _define(
     "FAP-CHECK-001", "warning", f"{NOTES} §4 / decision D8 (DCT segment mode)",
     "A plane uses DCT segment coding and the decoder in this build cannot parse it: checking stops there.")
@@ -252,6 +256,7 @@ _rule("bifs-node-id", "scenes", "too many DEF nodes")
 _rule("bifs-node-type", "scenes", "expected a node, got …")
 _rule("bifs-null", "scenes", "NULL is not allowed in an MFNode field")
 _rule("bifs-padding", "scenes", "padding bits at the end of the access unit are not 0")
+_rule("bifs-proto", "scenes", "a ReplaceScene with PROTOs (protoList = 1, D10): not supported")
 _rule("bifs-routes", "scenes", "ROUTEs are not supported")
 _rule("bifs-string", "scenes", "SFString is not UTF-8")
 _rule("bifs-top", "scenes", "the top node is NULL or a USE")

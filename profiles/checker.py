@@ -215,6 +215,10 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
             return None
         scene = parsed
     try:
+        _interop(scene, out)
+    except Exception:  # the interop note never stops the check
+        pass
+    try:
         return summarize_scene(scene)
     except SceneStructureError as e:
         out.append(diag(R.SCENE_INVALID, f"scene: {e}", node_path=e.node_path))
@@ -222,6 +226,22 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
     except Exception as e:
         out.append(diag(R.SCENE_INVALID, f"scene structure not understood: {type(e).__name__}: {e}"))
         return None
+
+
+def _interop(scene, out: list[Diagnostic]) -> None:
+    """D10: where fbaconf follows the seed and GPAC's MP4Box does not (one warning per scene)."""
+    if not hasattr(scene, "walk"):
+        return
+    defs = scene.defs()
+    for node, path in scene.walk():
+        if getattr(node, "type", None) != "FaceDefMesh":
+            continue
+        ref = node.fields.get("faceSceneGraphNode")
+        target = defs.get(ref.name) if hasattr(ref, "name") and not hasattr(ref, "type") else ref
+        if getattr(target, "type", None) == "IndexedFaceSet":
+            out.append(diag(R.SCENE_INTEROP_FDM, "FaceDefMesh.faceSceneGraphNode references an IndexedFaceSet "
+                            "(as the seed defines it); MP4Box refuses this USE when decoding BIFS", node_path=path))
+            return
 
 
 # ---------------------------------------------------------------------------- report

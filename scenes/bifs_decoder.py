@@ -117,7 +117,10 @@ class _Decoder:
             raise self.err(f"command code {code}: only ReplaceScene (3) is supported", "bifs-command", at=p)
         self.rd(6, "reserved")
         self.use_names = bool(self.bit("useNames"))
-        idx = self.note(p, 0, f"ReplaceScene useNames={int(self.use_names)}")
+        pp = self.pos
+        if self.bit("protoList"):  # D10: the proto-list flag after useNames
+            raise self.err("PROTOs are not supported", "bifs-proto", at=pp)
+        idx = self.note(p, 0, f"ReplaceScene useNames={int(self.use_names)} protoList=0")
         top = self.node("SFTopNode", "", 1, None, sf=False, top=True)
         p2 = self.pos
         if self.bit("hasROUTEs"):
@@ -316,7 +319,7 @@ class _Decoder:
             if n * item_bits > self.nbits - self.pos:
                 raise self.err(f"{t} count {n} needs at least {n * item_bits} bits, {self.nbits - self.pos} left",
                                "bifs-mf-count", path, at=at)
-            if t in ("MFNode", "MFString"):
+            if t in ("MFNode", "MFString", "MFURL"):
                 for i in range(n):
                     items.append(self.mf_item(t, bf, f"{path}[{i}]", depth + 1, allowed))
             else:
@@ -352,6 +355,10 @@ class _Decoder:
         if t == "MFNode":
             return self.node(bf.ndt, path, depth, allowed, sf=False, allow_null=False)
         if t == "MFString":
+            return self.sf("SFString", path)
+        if t == "MFURL":  # D10: isOD(1), then a 10-bit object descriptor ID or the URL string
+            if self.bit("isOD", path):
+                return f"od:{self.rd(10, 'objectDescriptorID', path)}"
             return self.sf("SFString", path)
         if t == "MFInt32":
             return self.sf("SFInt32", path)

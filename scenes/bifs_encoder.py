@@ -149,6 +149,18 @@ class _Encoder:
         else:
             self.mf(bf, val, path, allowed)
 
+    def string_item(self, t: str, s: str, path: str) -> None:
+        """An MFString item, or an MFURL item (D10): isOD(1), then a 10-bit object descriptor
+        ID for ``od:N`` or the URL as an SFString."""
+        if t == "MFURL":
+            m = OD_URL.match(s) if isinstance(s, str) else None
+            if m and int(m.group(1)) < 1024:
+                self.w.bit(1)
+                self.w.write(int(m.group(1)), 10)
+                return
+            self.w.bit(0)
+        self.sf("SFString", s, path)
+
     def sf(self, t: str, v, path: str) -> None:
         w = self.w
         try:
@@ -215,7 +227,7 @@ class _Encoder:
                 for i, c in enumerate(items):
                     self.node(c, bf.ndt, f"{path}[{i}]", allowed, sf=False, allow_null=False)
             return
-        if t == "MFString":
+        if t in ("MFString", "MFURL"):
             items = list(val)
             n = len(items)
             w.bit(0)
@@ -223,7 +235,7 @@ class _Encoder:
                 w.bit(1)
                 for s in items:
                     w.bit(0)
-                    self.sf("SFString", s, path)
+                    self.string_item(t, s, path)
                 w.bit(1)
             else:
                 w.bit(0)
@@ -231,7 +243,7 @@ class _Encoder:
                 w.write(nb, 5)
                 w.write(n, nb)
                 for s in items:
-                    self.sf("SFString", s, path)
+                    self.string_item(t, s, path)
             return
         arr = np.asarray(val)
         if t == "MFInt32":
@@ -267,6 +279,9 @@ class _Encoder:
             w.write_bytes(raw)
 
 
+OD_URL = re.compile(r"od:(\d+)\Z")
+
+
 def encode(scene: bt.Scene, *, use_names: bool = True) -> bytes:
     """The ``.bifs`` bytes of a scene model (raises :class:`BifsEncodeError`)."""
     t = tables()
@@ -285,6 +300,7 @@ def encode(scene: bt.Scene, *, use_names: bool = True) -> bytes:
     w.write(t.raw["command"]["replace_scene"], 2)
     w.write(0, 6)                 # reserved
     w.bit(1 if use_names else 0)  # useNames
+    w.bit(0)                      # protoList: no PROTOs (D10: GPAC writes and always reads it)
     top = bt.Node("OrderedGroup", {"children": list(scene.nodes)})
     ndt = t.ndts["SFTopNode"]
     w.bit(0)                      # isReused

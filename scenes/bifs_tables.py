@@ -126,6 +126,6 @@ def tables() -> Tables:
             raise RuntimeError(f"bifs_nodes.toml lacks node {ntype}")
         for fname, spec in fs.items():
             bf = bn.by_name.get(fname)
-            if bf is None or bf.type != spec.type:
+            if bf is None or (bf.type != spec.type and (bf.type, spec.type) != ("MFURL", "MFString")):
                 raise RuntimeError(f"bifs_nodes.toml: {ntype}.{fname} missing or not {spec.type}")
     return Tables(raw, ndts, nodes)

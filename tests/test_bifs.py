@@ -233,7 +233,7 @@ def _prefix(id_bits: int = 3) -> BifsWriter:
     t = bifs.tables()
     w = BifsWriter()
     w.write(id_bits, 5), w.write(0, 5), w.bit(1), w.bit(0), w.bit(0), w.align()
-    w.write(3, 2), w.write(0, 6), w.bit(1)
+    w.write(3, 2), w.write(0, 6), w.bit(1), w.bit(0)  # ReplaceScene: reserved, useNames, protoList (D10)
     w.bit(0), w.write(t.ndts["SFTopNode"].code("OrderedGroup"), 3), w.bit(0)
     w.bit(1), w.bit(1)             # masked; children present (order's mask bit: in _finish)
     w.bit(0), w.bit(1)             # MF reserved 0, list description
@@ -286,7 +286,7 @@ def test_unknown_and_reserved_node_codes():
         w = _prefix()
         w.bit(0), w.bit(0), w.write(code, 6)
         e = _rule(_finish(w))
-        assert e.rule == "bifs-node-code" and e.bit_offset == 16 + 9 + 5 + 2 + 2 + 1 + 1
+        assert e.rule == "bifs-node-code" and e.bit_offset == 16 + 9 + 1 + 5 + 2 + 2 + 1 + 1  # 1: protoList
     w = _prefix()
     _empty_node(w, "SF3DNode", "Anchor")
     assert _rule(_finish(w)).rule == "bifs-unsupported-node"
@@ -365,7 +365,7 @@ def test_absurd_counts_are_refused_before_allocation():
     w.bit(0), w.bit(0), w.write(1, 2)
     _node_header(w, "SFTextureNode", "ImageTexture", item=False)
     w.bit(1), w.bit(1), w.bit(0), w.bit(1)      # masked: url, MF list
-    w.bit(0), w.write(31, 5), w.write(2**31 - 1, 31)
+    w.bit(0), w.bit(0), w.write(31, 5), w.write(2**31 - 1, 31)  # endFlag, isOD 0 (MFURL, D10), string
     assert _rule(_finish(w)).rule == "bifs-truncated"
 
 
@@ -523,7 +523,9 @@ def test_check_reads_bifs_scenes_like_bt(tmp_path):
     (tmp_path / "s.bifs").write_bytes(bifs.encode(scene))
     a, b = [], []
     sa, sb = _load_scene(str(tmp_path / "s.bt"), a), _load_scene(str(tmp_path / "s.bifs"), b)
-    assert a == b == [] and sa.measures == sb.measures and sa.tools == sb.tools
+    # the only diagnostic of either form: the D10 interop note on FaceDefMesh -> IndexedFaceSet
+    assert [d.code for d in a] == [d.code for d in b] == ["FAP-SCENE-003"]
+    assert sa.measures == sb.measures and sa.tools == sb.tools
     data = make_stream(6, faps=range(3, 10))
     ra = [(d.code, d.message) for d in check_stream(data, scene=str(tmp_path / "s.bt"), claim="predictable@1")]
     rb = [(d.code, d.message) for d in check_stream(data, scene=str(tmp_path / "s.bifs"), claim="predictable@1")]
@@ -533,3 +535,18 @@ def test_check_reads_bifs_scenes_like_bt(tmp_path):
     diags = [d for d in check_stream(data, scene=str(tmp_path / "bad.bifs")) if d.code.startswith("FAP-SCENE")]
     assert [d.code for d in diags] == ["FAP-SCENE-002"]
     assert "BIFS bit offset" in diags[0].message and diags[0].location.node_path
+
+
+def test_d10_proto_list_bit_and_mfurl():
+    """D10: a ReplaceScene carries the proto-list bit after useNames (PROTOs refused), and url is
+    MFURL: per URL isOD(1), then a 10-bit object descriptor ID ("od:N") or a string."""
+    scene = bt.Scene([bt.Node("Shape", {"appearance": bt.Node("Appearance", {"texture": bt.Node(
+        "ImageTexture", {"url": ["face.png", "od:12"]})})})])
+    data = bifs.encode(scene)
+    assert bifs.decode(data) == scene
+    w = _prefix()
+    raw = bytearray(_finish(w))
+    # the protoList bit is the 1st bit after reserved(6) + useNames(1) of the command byte(s)
+    bit = 16 + 9  # config (13 bits, aligned to 16), command code 2 + reserved 6 + useNames 1
+    raw[bit // 8] |= 0x80 >> (bit % 8)
+    assert _rule(bytes(raw)).rule == "bifs-proto"

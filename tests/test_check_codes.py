@@ -323,6 +323,19 @@ def case_scene_invalid(tmp_path, **_):
     return base(), {"scene": str(tmp_path / "missing.bt")}
 
 
+def case_scene_interop(tmp_path, **_):
+    # the seed's FaceDefMesh: faceSceneGraphNode is a USE of the IndexedFaceSet it deforms
+    p = tmp_path / "fdm.bt"
+    p.write_text("""DEF FACE Face { fdp FDP {
+  faceSceneGraph [ Shape { geometry DEF MESH IndexedFaceSet {
+    coord Coordinate { point [ 0 0 0, 1 0 0, 0 1 0 ] } coordIndex [ 0 1 2 -1 ] } } ]
+  faceDefTables [ FaceDefTables { fapID 3 highLevelSelect 0
+    faceDefMesh [ FaceDefMesh { faceSceneGraphNode USE MESH intervalBorders [ 0 1024 ]
+      coordIndex [ 0 ] displacements [ 0 -1 0 ] } ] } ] } }
+""")
+    return base(), {"scene": str(p)}
+
+
 def case_check_dct(monkeypatch, **_):
     real = decmod._Decoder.intra_header
 
@@ -362,6 +375,7 @@ CASES = {
     R.SYNTAX_OTHER: case_other,
     R.SYNTAX_DCT: case_dct_syntax,
     R.SYNTAX_EMULATION: case_emulation,
+    R.SCENE_INTEROP_FDM: case_scene_interop,
     R.SEM_FRAME_RATE_ZERO: case_frame_rate_zero,
     R.SEM_TIME_CODE_RANGE: case_time_code_range,
     R.SEM_TIME_BACKWARDS: case_time_backwards,
