@@ -339,9 +339,9 @@ class _Reader:
             return tuple(self.number(path, False) for _ in range(_VEC_SIZES[t]))
         if t == "SFBool":
             kind, v, off = self.next(path, "TRUE or FALSE")
-            if v not in ("TRUE", "FALSE") or kind != "word":
+            if v not in ("TRUE", "FALSE", "true", "false") or kind != "word":  # MP4Box dumps lowercase
                 raise self.error(f"expected TRUE or FALSE, got {v!r}", off, "bt-bool", path)
-            return v == "TRUE"
+            return v in ("TRUE", "true")
         if t == "SFString":
             kind, v, off = self.next(path, "a string")
             if kind != "str":

@@ -155,3 +155,11 @@ def test_mutated_text_only_typed_errors(i, j, insert):
     except TextFormatError:
         return
     assert bt.parse(bt.write(s)) == s
+
+
+def test_reads_booleans_as_mp4box_writes_them():
+    """GPAC's MP4Box dumps SFBool as lowercase true/false (issue 18); both spellings read the same."""
+    upper = bt.parse('Face { fap FAP { viseme Viseme { viseme_def TRUE } } }')
+    lower = bt.parse('Face { fap FAP { viseme Viseme { viseme_def true } } }')
+    assert upper == lower
+    assert bt.parse('Face { fap FAP { viseme Viseme { viseme_def false } } }') != upper
