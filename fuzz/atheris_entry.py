@@ -25,7 +25,6 @@ import random
 import sys
 
 _TARGET = None
-_SCENE_STREAM: bytes | None = None
 
 
 class FuzzFinding(AssertionError):
@@ -35,7 +34,9 @@ class FuzzFinding(AssertionError):
 def _target():
     global _TARGET
     if _TARGET is None:
-        from . import RandomChooser, SelfTarget, gen_valid
+        from .choosers import RandomChooser
+        from .generators import gen_valid
+        from .targets import SelfTarget
         stream = gen_valid(RandomChooser(random.Random(0))).data
         _TARGET = SelfTarget(checker_every=4, scene_stream=stream)
     return _TARGET
@@ -43,7 +44,9 @@ def _target():
 
 def fuzz_one_input(data: bytes) -> None:
     """Run one input through fbaconf's own parsers; raise :class:`FuzzFinding` on a finding."""
-    from . import Entry, RandomChooser, gen_valid, mutate_stream
+    from .choosers import RandomChooser
+    from .generators import Entry, gen_valid
+    from .mutators import mutate_stream
     t = _target()
     sel = data[0] % 8 if data else 0
     body = bytes(data[1:])

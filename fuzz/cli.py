@@ -66,9 +66,9 @@ def _extra_seeds(paths: list[Path]):
 
 
 def cmd_fuzz(args) -> int:
-    from fbaconf import fuzz as F
     if args.promote is not None:
-        added = F.promote(args.promote, args.data_dir, log=lambda s: print(s, file=sys.stderr))
+        from .promote import promote
+        added = promote(args.promote, args.data_dir, log=lambda s: print(s, file=sys.stderr))
         print(f"promoted {len(added)} finding(s) to the regression suite")
         if args.json:
             print(json.dumps(added, indent=1))
@@ -80,30 +80,34 @@ def cmd_fuzz(args) -> int:
         print("fbaconf fuzz: error: --expected-exit must be a comma-separated list of integers", file=sys.stderr)
         return 2
     if args.self_:
-        return _self(args, F)
-    return _decoder(args, F, expected)
+        return _self(args)
+    return _decoder(args, expected)
 
 
-def _self(args, F) -> int:
+def _self(args) -> int:
+    from .corpus import default_seeds, short_prefixes
+    from .engine import Fuzzer
+    from .findings import replay
+    from .targets import SelfTarget
     kinds = ("stream", "stream", "stream", "scene", "bifs", "text")
     if args.target in ("scene", "text") and args.replay is None:
         kinds = (args.target,)
-    seeds = F.default_seeds() + _extra_seeds(args.seeds)
-    short = F.short_prefixes(seeds)
-    target = F.SelfTarget(scene_stream=short[0].data if short else seeds[0].data, checker_every=16)
+    seeds = default_seeds() + _extra_seeds(args.seeds)
+    short = short_prefixes(seeds)
+    target = SelfTarget(scene_stream=short[0].data if short else seeds[0].data, checker_every=16)
     if args.replay is not None:
         kind = _kind_of(args.replay, args.target)
-        v = F.replay(target, args.replay.read_bytes(), kind)
+        v = replay(target, args.replay.read_bytes(), kind)
         return _print_replay(v, args)
     out = (args.output or Path("fbaconf-fuzz") / "self").resolve()
-    fz = F.Fuzzer(target, seeds + short, seed=args.seed, seconds=args.seconds, jobs=1, out_dir=out, kinds=kinds,
+    fz = Fuzzer(target, seeds + short, seed=args.seed, seconds=args.seconds, jobs=1, out_dir=out, kinds=kinds,
                   progress=False if args.no_progress else None, minimise_seconds=args.minimise_seconds,
                   max_execs=args.max_execs, decoder_info={"name": "fbaconf-self"}, fresh_valid_share=0.003,
                   prefer_short=0.9, minimise_tests=5000)
     if args.jobs and args.jobs > 1:
         print("fbaconf fuzz: --self runs in one process (-j ignored)", file=sys.stderr)
     fz.run()
-    return _finish(fz, out, args, F)
+    return _finish(fz, out, args)
 
 
 def _kind_of(path: Path, target: str) -> str:
@@ -122,8 +126,12 @@ def _print_replay(v, args) -> int:
     return 0 if v is None else 1
 
 
-def _decoder(args, F, expected: set[int]) -> int:
+def _decoder(args, expected: set[int]) -> int:
     from fbaconf.harness.adapters import resolve
+    from .corpus import default_seeds
+    from .engine import Fuzzer
+    from .findings import replay
+    from .targets import DecoderTarget
     adapter = resolve(args.decoder)
     if args.output is None:
         args.output = Path("fbaconf-fuzz") / adapter.name
@@ -133,30 +141,31 @@ def _decoder(args, F, expected: set[int]) -> int:
     out.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="fuzz-work-", dir=out))
     try:
-        seeds = F.default_seeds() + _extra_seeds(args.seeds)
+        seeds = default_seeds() + _extra_seeds(args.seeds)
         scene_stream = None
         if args.target == "scene":
             scene_stream = next((s.data for s in seeds if s.origin.startswith("seed:simple-l1-core")), seeds[0].data)
-        target = F.DecoderTarget(adapter, work, kind=args.target, timeout_s=args.timeout, expected_exit=expected,
+        target = DecoderTarget(adapter, work, kind=args.target, timeout_s=args.timeout, expected_exit=expected,
                                  oracle=not args.no_oracle, scene_stream=scene_stream)
         if args.replay is not None:
-            v = F.replay(target, args.replay.read_bytes(), args.target)
+            v = replay(target, args.replay.read_bytes(), args.target)
             return _print_replay(v, args)
         info = {"name": adapter.name, "manifest": str(adapter.manifest_path) if adapter.manifest_path else None,
                 "manifest_sha256": adapter.digest(),
                 "limits": {"timeout_s": target.limits.timeout_s, "memory_mb": target.limits.memory_mb,
                            "memory_kind": target.limits.memory_kind, "output_mb": target.limits.output_mb}}
-        fz = F.Fuzzer(target, seeds, seed=args.seed, seconds=args.seconds, jobs=args.jobs, out_dir=out,
+        fz = Fuzzer(target, seeds, seed=args.seed, seconds=args.seconds, jobs=args.jobs, out_dir=out,
                       kinds=(args.target,), progress=False if args.no_progress else None,
                       minimise_seconds=args.minimise_seconds, max_execs=args.max_execs, decoder_info=info)
         fz.run()
-        return _finish(fz, out, args, F)
+        return _finish(fz, out, args)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
-def _finish(fz, out: Path, args, F) -> int:
-    doc = F.write_summary(out, fz)
+def _finish(fz, out: Path, args) -> int:
+    from .findings import write_summary
+    doc = write_summary(out, fz)
     if args.json:
         print(json.dumps(doc, indent=1))
     else:

@@ -9,26 +9,27 @@ from .generators import Entry, gen_valid
 from .scenes import gen_scene
 
 
-def conformance_seeds(root: Path | None = None) -> list[Entry]:
-    """The conformance suites' streams (``*.fba``) as seed corpus; empty when no suites are built."""
+def suite_files(suffix: str, kind: str, root: Path | None = None, max_bytes: int | None = None) -> list[Entry]:
+    """The built suites' ``*/*.<suffix>`` files (up to ``max_bytes`` each) as seeds of ``kind``;
+    empty when no suites are built."""
     from fbaconf.conformance.suite import suites_root
     root = Path(root) if root else suites_root()
     out = []
     if root.is_dir():
-        for p in sorted(root.glob("*/*.fba")):
-            out.append(Entry(p.read_bytes(), origin=f"seed:{p.parent.name}/{p.name}"))
+        for p in sorted(root.glob(f"*/*.{suffix}")):
+            if max_bytes is None or p.stat().st_size <= max_bytes:
+                out.append(Entry(p.read_bytes(), kind=kind, origin=f"seed:{p.parent.name}/{p.name}"))
     return out
+
+
+def conformance_seeds(root: Path | None = None) -> list[Entry]:
+    """The conformance suites' streams (``*.fba``) as seed corpus; empty when no suites are built."""
+    return suite_files("fba", "stream", root)
 
 
 def scene_seeds(root: Path | None = None, max_bytes: int = 8000) -> list[Entry]:
     """Small BT scenes of the suites plus generated Face-family scenes."""
-    from fbaconf.conformance.suite import suites_root
-    root = Path(root) if root else suites_root()
-    out = []
-    if root.is_dir():
-        for p in sorted(root.glob("*/*.bt")):
-            if p.stat().st_size <= max_bytes:
-                out.append(Entry(p.read_bytes(), kind="scene", origin=f"seed:{p.parent.name}/{p.name}"))
+    out = suite_files("bt", "scene", root, max_bytes)
     try:
         from fbaconf.scenes import bt
         from fbaconf.generators.suite_scenes import make_scene

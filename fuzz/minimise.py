@@ -6,7 +6,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
-from fbaconf.bitstreams.bitedit import truncate_bits
+from fbaconf.bitstreams.bitedit import from_bits, to_bits, truncate_bits
 
 
 def ddmin(units: list, test: Callable[[list], bool], *, budget: Callable[[], bool]) -> list:
@@ -70,7 +70,6 @@ def minimise(data: bytes, test: Callable[[bytes], bool], *, max_tests: int = 600
     if budget():
         best = bytes(ddmin(list(best), lambda u: t(bytes(u)), budget=budget))
     if bits and len(best) <= 512 and budget():
-        from fbaconf.bitstreams.bitedit import from_bits, to_bits
         bl = ddmin(list(to_bits(best)), lambda u: t(from_bits("".join(u))), budget=budget)
         cand = from_bits("".join(bl))
         if len(cand) <= len(best) and t(cand):

@@ -16,10 +16,6 @@ from .model import stream_features
 from .scenes import scene_features
 
 
-CLASSES = ("crash", "hang", "memory", "output-blowup", "unexpected-exit", "accepted-invalid", "wrong-output", "exception",
-           "internal-error", "bad-output", "round-trip", "slow")
-
-
 @dataclass
 class Verdict:
     cls: str

@@ -7,19 +7,14 @@ from __future__ import annotations
 import random
 from pathlib import Path
 
+from .corpus import suite_files
 from .generators import Entry
 from .mutators import BYTE_MUTATORS
 
 
 def text_seeds(root: Path | None = None, max_bytes: int = 20000) -> list[Entry]:
-    from fbaconf.conformance.suite import suites_root
-    root = Path(root) if root else suites_root()
-    out = []
-    if root.is_dir():
-        for p in sorted(root.glob("*/*.fap")):
-            if p.stat().st_size <= max_bytes:
-                out.append(Entry(p.read_bytes(), kind="text", origin=f"seed:{p.parent.name}/{p.name}"))
-    return out
+    """The suites' sparse ``.fap`` files (up to ``max_bytes`` each)."""
+    return suite_files("fap", "text", root, max_bytes)
 
 
 _NUMBERS = ("0", "-1", "1.5", "2147483648", "-2147483649", "1e9", "007", "+3", "", "nan", "99999999999999999999")

@@ -24,8 +24,16 @@ from hypothesis import strategies as st
 from fbaconf.scenes import bt
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.errors import BitstreamError, FbaconfInputError
-from fbaconf import fuzz as F
 from fbaconf.fuzz import strategies
+from fbaconf.fuzz.corpus import default_seeds, short_prefixes
+from fbaconf.fuzz.engine import Fuzzer
+from fbaconf.fuzz.findings import replay, write_summary
+from fbaconf.fuzz.generators import Entry
+from fbaconf.fuzz.minimise import minimise
+from fbaconf.fuzz.model import stream_model
+from fbaconf.fuzz.mutators import FIELD_MUTATORS, m_skip_chain, m_zero_frame_rate, mutate_stream
+from fbaconf.fuzz.promote import REGRESSION_SUITE, promote
+from fbaconf.fuzz.targets import DecoderTarget, SelfTarget, stack_hash
 from fbaconf.harness.adapters import load_manifest, resolve
 from fbaconf.bitstreams import bitedit
 
@@ -34,8 +42,8 @@ SET = settings(max_examples=8, deadline=None, suppress_health_check=list(HealthC
 
 
 @pytest.fixture(scope="module")
-def seeds() -> list[F.Entry]:
-    return F.default_seeds()
+def seeds() -> list[Entry]:
+    return default_seeds()
 
 
 # ------------------------------------------------------------------ bits and syntax model
@@ -69,7 +77,7 @@ def test_syntax_model_locates_header_fields():
     fr = synthetic_sequence(4, 25.0, faps=[3, 4, 19])
     fr.frame_number[:] = [0, 1, 40, 41]  # a skip chain of 38 frames before the third plane
     data = encode(fr, EncoderOptions(time_codes=True, plane_start_codes="all")).data
-    m = F.stream_model(data)
+    m = stream_model(data)
     assert m.error_rule is None and len(m.planes) == 4
     (rate,) = m.fields_named("frame_rate")
     assert rate.value == 25 and bitedit.get_bits(data, rate.offset, 8) == 25
@@ -80,12 +88,12 @@ def test_syntax_model_locates_header_fields():
     assert {"plane:skip-chain", "plane:time-code", "plane:start-code", "stream:end-code"} <= m.features
     # the zero-frame-rate and skip-chain mutators hit exactly those fields
     rng = random.Random(3)
-    z = F.m_zero_frame_rate(random.Random(0), F.Entry(data), [])
+    z = m_zero_frame_rate(random.Random(0), Entry(data), [])
     with pytest.raises(BitstreamError) as e:
         decode(z)
     assert e.value.rule == "frame-rate-zero"
-    long = F.m_skip_chain(rng, F.Entry(data), [])
-    assert max(p.skip for p in F.stream_model(long).planes) >= 15
+    long = m_skip_chain(rng, Entry(data), [])
+    assert max(p.skip for p in stream_model(long).planes) >= 15
 
 
 def test_every_mutator_yields_typed_errors_only(seeds):
@@ -94,13 +102,13 @@ def test_every_mutator_yields_typed_errors_only(seeds):
     names = set()
     for i in range(240):
         e = corpus[i % len(corpus)]
-        data, how = F.mutate_stream(rng, e, corpus)
+        data, how = mutate_stream(rng, e, corpus)
         names.update(how.split("+"))
         try:
             decode(data)
         except BitstreamError as err:
             assert err.rule != "internal", (how, err)
-    assert set(F.FIELD_MUTATORS) <= names
+    assert set(FIELD_MUTATORS) <= names
 
 
 @SET
@@ -114,8 +122,8 @@ def test_generated_streams_are_valid_and_round_trip(e):
 @SET
 @given(strategies.near_valid_streams())
 def test_near_valid_streams_only_typed_errors(data):
-    target = F.SelfTarget(checker_every=1)
-    assert target.execute(F.Entry(data)).verdict is None
+    target = SelfTarget(checker_every=1)
+    assert target.execute(Entry(data)).verdict is None
 
 
 @SET
@@ -138,7 +146,7 @@ def test_bt_integer_with_leading_zero():
 
 def test_minimise_finds_the_trigger():
     data = bytes(range(200)) + b"\xde\xad" + bytes(100)
-    best, stats = F.minimise(data, lambda d: b"\xde\xad" in d, max_tests=2000)
+    best, stats = minimise(data, lambda d: b"\xde\xad" in d, max_tests=2000)
     assert best == b"\xde\xad" and stats.tests < 400
 
 
@@ -146,19 +154,19 @@ def test_stack_hash_kinds():
     asan = ("==1==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x1\n"
             "    #0 0x4005 in plane /src/dec.c:40\n    #1 0x4006 in main /src/dec.c:80\n")
     py = 'Traceback (most recent call last):\n  File "/x/dec.py", line 3, in f\n    g()\nIndexError: list index'
-    assert F.stack_hash(asan)[0] == "AddressSanitizer heap-buffer-overflow"
-    assert F.stack_hash(py)[0] == "uncaught Python exception IndexError"
-    assert F.stack_hash(asan)[1] != F.stack_hash(asan.replace("plane", "other"))[1]
-    assert F.stack_hash("just an error message") is None
+    assert stack_hash(asan)[0] == "AddressSanitizer heap-buffer-overflow"
+    assert stack_hash(py)[0] == "uncaught Python exception IndexError"
+    assert stack_hash(asan)[1] != stack_hash(asan.replace("plane", "other"))[1]
+    assert stack_hash("just an error message") is None
 
 
 def test_self_fuzz_no_findings_and_entry(tmp_path, seeds):
-    target = F.SelfTarget(checker_every=8, scene_stream=seeds[0].data)
-    fz = F.Fuzzer(target, seeds + F.short_prefixes(seeds[:4]), seed=5, seconds=60, max_execs=400,
+    target = SelfTarget(checker_every=8, scene_stream=seeds[0].data)
+    fz = Fuzzer(target, seeds + short_prefixes(seeds[:4]), seed=5, seconds=60, max_execs=400,
                   kinds=("stream", "stream", "scene", "bifs"), progress=False, out_dir=tmp_path)
     st_ = fz.run()
     assert st_.execs == 400 and not fz.findings, [f.verdict.message for f in fz.findings.values()]
-    doc = F.write_summary(tmp_path, fz)
+    doc = write_summary(tmp_path, fz)
     assert doc["syntax_coverage"]["covered"] > 30
     from fbaconf.fuzz.atheris_entry import fuzz_one_input
     rng = random.Random(1)
@@ -168,8 +176,8 @@ def test_self_fuzz_no_findings_and_entry(tmp_path, seeds):
 
 
 def test_same_seed_same_inputs(seeds):
-    a = F.Fuzzer(F.SelfTarget(), seeds, seed=11, progress=False, valid_pool=2)
-    b = F.Fuzzer(F.SelfTarget(), seeds, seed=11, progress=False, valid_pool=2)
+    a = Fuzzer(SelfTarget(), seeds, seed=11, progress=False, valid_pool=2)
+    b = Fuzzer(SelfTarget(), seeds, seed=11, progress=False, valid_pool=2)
     assert [a.make_input(i).data for i in range(60, 90)] == [b.make_input(i).data for i in range(60, 90)]
 
 
@@ -193,12 +201,12 @@ def _planted(name: str, tmp_path: Path):
 def _fuzz_planted(name: str, tmp_path: Path, seeds, max_execs: int, cls: str | None = None):
     adapter = _planted(name, tmp_path)
     out = tmp_path / "out"
-    target = F.DecoderTarget(adapter, tmp_path / "work", timeout_s=1.0)
-    fz = F.Fuzzer(target, seeds, seed=1, seconds=120, jobs=2, out_dir=out, progress=False, max_execs=max_execs,
+    target = DecoderTarget(adapter, tmp_path / "work", timeout_s=1.0)
+    fz = Fuzzer(target, seeds, seed=1, seconds=120, jobs=2, out_dir=out, progress=False, max_execs=max_execs,
                   minimise_seconds=5, decoder_info={"name": adapter.name, "manifest": str(adapter.manifest_path)},
                   run_seeds_first=0, valid_pool=4, stop_on=lambda f: f.verdict.cls == cls)
     fz.run()
-    F.write_summary(out, fz)
+    write_summary(out, fz)
     return fz, target, out
 
 
@@ -233,7 +241,7 @@ def _check_planted(fz, target, out: Path, cls: str, sig: str):
     assert doc["class"] == cls and doc["minimal"]["bytes"] == len(f.minimal)
     assert (f.path / "original.fba").read_bytes() == f.original.data
     assert "--replay" in doc["reproduce"]["fbaconf"] and doc["reproduce"]["command"]
-    assert F.replay(target, f.minimal).key == f.verdict.key  # the minimal input reproduces it
+    assert replay(target, f.minimal).key == f.verdict.key  # the minimal input reproduces it
     assert fz.make_input(f.index, f.original.corpus_size).data == f.original.data  # seed + index regenerate it
     assert json.loads((out / "fuzz.json").read_text())["findings"] == len(fz.findings)
 
@@ -244,19 +252,19 @@ def test_promoted_finding_fails_buggy_decoder_passes_reference(skipchain_run, tm
     from fbaconf.harness.runner import run_cases
     fz, target, out, tmp = skipchain_run
     data_dir = tmp_path / "data"
-    added = F.promote(out, data_dir, log=lambda s: None)
+    added = promote(out, data_dir, log=lambda s: None)
     crash = [c for c in added if "crash" in c["id"]]
     assert crash and not crash[0]["valid"]
     spec = tomllib.loads((data_dir / "regression.toml").read_text())
-    assert spec["suite"][0]["name"] == F.REGRESSION_SUITE
+    assert spec["suite"][0]["name"] == REGRESSION_SUITE
     c = next(x for x in spec["case"] if x["id"] == crash[0]["id"])
     assert c["generator"] == "file" and isinstance(c["expect"], list)
-    assert F.promote(out, data_dir, log=lambda s: None) == []  # idempotent
+    assert promote(out, data_dir, log=lambda s: None) == []  # idempotent
     # the case as build.py makes it (generator = "file" with expect: an error case)
     suite_dir = tmp_path / "suite"
     suite_dir.mkdir()
     shutil.copyfile(data_dir / c["file"], suite_dir / f"{c['id']}.fba")
-    case = Case(id=c["id"], suite=F.REGRESSION_SUITE, claim="simple@1", group="error", kind="error",
+    case = Case(id=c["id"], suite=REGRESSION_SUITE, claim="simple@1", group="error", kind="error",
                 inputs={"fba": f"{c['id']}.fba"}, expect={"diagnostics": c["expect"]}, suite_dir=suite_dir)
     bad = run_cases(target.adapter, [case], claim="simple@1", out_dir=tmp_path / "run-bad", jobs=1, progress=False)
     ref = run_cases(resolve("reference-inprocess"), [case], claim="simple@1", out_dir=tmp_path / "run-ref", jobs=1,
@@ -279,7 +287,7 @@ def test_cli(tmp_path):
 def test_relative_work_folder_gives_no_bogus_finding(tmp_path, monkeypatch, seeds):
     """A relative -o used to make every command decoder miss its input (a bogus finding)."""
     monkeypatch.chdir(tmp_path)
-    target = F.DecoderTarget(resolve("reference"), Path("rel-work"))
+    target = DecoderTarget(resolve("reference"), Path("rel-work"))
     assert target.execute(seeds[0]).verdict is None
 
 
@@ -304,8 +312,8 @@ def test_text_fuzzing_finds_a_players_crash_and_a_copier(tmp_path):
         m = tmp_path / f"{name}.toml"
         m.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fap"]\noutputs = ["faps"]\n'
                      f'faps_format = "fap"\n[commands]\ndecode = [{argv}]\n')
-        target = F.DecoderTarget(load_manifest(m), tmp_path / f"w-{name}", kind="text")
-        fz = F.Fuzzer(target, [], seed=3, seconds=60, max_execs=300, kinds=("text",), progress=False,
+        target = DecoderTarget(load_manifest(m), tmp_path / f"w-{name}", kind="text")
+        fz = Fuzzer(target, [], seed=3, seconds=60, max_execs=300, kinds=("text",), progress=False,
                       out_dir=tmp_path / f"o-{name}", minimise_seconds=2, stop_on=lambda f: True)
         fz.run()
         assert any(f.verdict.cls == cls for f in fz.findings.values()), (name, [f.verdict.cls for f in fz.findings.values()])

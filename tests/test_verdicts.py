@@ -180,12 +180,13 @@ def test_frames_numbered_from_two_fail(tmp_path):
 # ------------------------------------------------------------------ run and fuzz agree
 def _fuzz_class(m: Path, tmp_path: Path) -> str:
     """How the fuzzer classifies the same decoder on the same invalid stream."""
-    from fbaconf import fuzz as F
-    target = F.DecoderTarget(adapters.resolve(m), tmp_path / "fz")
+    from fbaconf.fuzz.generators import Entry
+    from fbaconf.fuzz.targets import DecoderTarget, FuzzSetupError
+    target = DecoderTarget(adapters.resolve(m), tmp_path / "fz")
     data = case(ERROR_CASE).input_path("fba").read_bytes()
     try:
-        v = target.execute(F.Entry(data, origin="error-case")).verdict
-    except F.FuzzSetupError:
+        v = target.execute(Entry(data, origin="error-case")).verdict
+    except FuzzSetupError:
         return "Error"
     if v is None:
         return "Pass"

@@ -421,7 +421,7 @@ def test_malformed_or_escaping_suite_manifests_are_one_clear_error(tmp_path, man
 
 
 def test_promote_confines_what_a_finding_names(tmp_path):
-    from fbaconf import fuzz as F
+    from fbaconf.fuzz.promote import promote
     fz = tmp_path / "fz" / "findings"
     for fid, minimal in (("../../escape", "min.fba"), ("ok1", "/etc/passwd"), ("ok2", "../../../../etc/hostname")):
         d = fz / f"f-{abs(hash(fid))}"
@@ -431,7 +431,7 @@ def test_promote_confines_what_a_finding_names(tmp_path):
                                                     "minimal": {"file": minimal}}))
     data = tmp_path / "data"
     refused = []
-    assert F.promote(tmp_path / "fz", data, log=refused.append) == []
+    assert promote(tmp_path / "fz", data, log=refused.append) == []
     assert len(refused) == 3 and all("skipped" in x for x in refused)
     assert not (tmp_path / "escape.fba").exists() and not any(tmp_path.rglob("passwd"))
     assert not any(tmp_path.rglob("hostname"))
