@@ -206,44 +206,37 @@ class _Encoder:
             raise self.err("a float is not finite or outside the float32 range", "bifs-value", path)
         return a.astype(">f4").tobytes()
 
-    def mf(self, bf: BifsField, val, path: str, allowed) -> None:
+    def mf_items(self, n: int, write_item) -> None:
+        """An MF field's ``n`` values: reserved(1) = 0, then the cheaper of the list form
+        (isList 1, endFlag 0 before each value, endFlag 1) and the vector form (isList 0,
+        nbBits(5), count(nbBits), the values). The values cost the same in both, so the list
+        wins exactly when its n + 1 flag bits are fewer than the vector's 5 + nbBits."""
         w = self.w
+        nb = _count_bits(n)
+        w.bit(0)  # reserved
+        if n + 1 < 5 + nb:
+            w.bit(1)
+            for i in range(n):
+                w.bit(0)
+                write_item(i)
+            w.bit(1)
+        else:
+            w.bit(0)
+            w.write(nb, 5)
+            w.write(n, nb)
+            for i in range(n):
+                write_item(i)
+
+    def mf(self, bf: BifsField, val, path: str, allowed) -> None:
         t = bf.type
         if t == "MFNode":
             items = list(val)
-            n = len(items)
-            w.bit(0)  # reserved
-            if n + 1 < 5 + _count_bits(n):
-                w.bit(1)
-                for i, c in enumerate(items):
-                    w.bit(0)
-                    self.node(c, bf.ndt, f"{path}[{i}]", allowed, sf=False, allow_null=False)
-                w.bit(1)
-            else:
-                w.bit(0)
-                nb = _count_bits(n)
-                w.write(nb, 5)
-                w.write(n, nb)
-                for i, c in enumerate(items):
-                    self.node(c, bf.ndt, f"{path}[{i}]", allowed, sf=False, allow_null=False)
+            self.mf_items(len(items), lambda i: self.node(items[i], bf.ndt, f"{path}[{i}]", allowed,
+                                                          sf=False, allow_null=False))
             return
         if t in ("MFString", "MFURL"):
             items = list(val)
-            n = len(items)
-            w.bit(0)
-            if n + 1 < 5 + _count_bits(n):
-                w.bit(1)
-                for s in items:
-                    w.bit(0)
-                    self.string_item(t, s, path)
-                w.bit(1)
-            else:
-                w.bit(0)
-                nb = _count_bits(n)
-                w.write(nb, 5)
-                w.write(n, nb)
-                for s in items:
-                    self.string_item(t, s, path)
+            self.mf_items(len(items), lambda i: self.string_item(t, items[i], path))
             return
         arr = np.asarray(val)
         if t == "MFInt32":
@@ -262,22 +255,7 @@ class _Encoder:
             per = 4 * k
         else:
             raise self.err(f"field type {t} is not supported", "bifs-field-type", path)
-        n = len(raw) // per
-        item_bits = per * 8
-        w.bit(0)
-        if n * (1 + item_bits) + 1 < 5 + _count_bits(n) + n * item_bits:
-            w.bit(1)
-            for i in range(n):
-                w.bit(0)
-                w.write_bytes(raw[i * per:(i + 1) * per])
-            w.bit(1)
-        else:
-            w.bit(0)
-            nb = _count_bits(n)
-            w.write(nb, 5)
-            w.write(n, nb)
-            w.write_bytes(raw)
-
+        self.mf_items(len(raw) // per, lambda i: self.w.write_bytes(raw[i * per:(i + 1) * per]))
 
 OD_URL = re.compile(r"od:(\d+)\Z")
 
