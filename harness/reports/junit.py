@@ -60,6 +60,16 @@ def _properties(parent: ET.Element, props: list[tuple[str, Any]]) -> None:
         ET.SubElement(el, "property", name=clean_text(name), value=clean_text("" if value is None else value))
 
 
+def _close_suite(ts, c: Counter, record: RunRecord) -> None:
+    """A <testsuite>'s counts, time and timestamp from its counter ``c``."""
+    ts.set("tests", str(c["tests"]))
+    for k in ("failures", "errors", "skipped"):
+        ts.set(k, str(c[k]))
+    ts.set("time", _sec(c["time"]))
+    if record.started:
+        ts.set("timestamp", clean_text(record.started))
+
+
 def junit_xml(record: RunRecord) -> bytes:
     """The JUnit XML document written by :func:`write_junit`."""
     dec = record.decoder or {}
@@ -113,12 +123,7 @@ def junit_xml(record: RunRecord) -> bytes:
                 ET.SubElement(tc, "system-out").text = clean_text(f"baseline: {r.baseline}")
             c["tests"] += 1
             c["time"] += r.duration_s if math.isfinite(r.duration_s) and r.duration_s > 0 else 0.0
-        ts.set("tests", str(c["tests"]))
-        for k in ("failures", "errors", "skipped"):
-            ts.set(k, str(c[k]))
-        ts.set("time", _sec(c["time"]))
-        if record.started:
-            ts.set("timestamp", clean_text(record.started))
+        _close_suite(ts, c, record)
         totals.update(c)
     if record.speed:
         ts = ET.SubElement(root, "testsuite", name="speed")
@@ -141,12 +146,7 @@ def junit_xml(record: RunRecord) -> bytes:
                 ET.SubElement(tc, "system-out").text = clean_text(text)
             c["tests"] += 1
             c["time"] += t
-        ts.set("tests", str(c["tests"]))
-        for k in ("failures", "errors", "skipped"):
-            ts.set(k, str(c[k]))
-        ts.set("time", _sec(c["time"]))
-        if record.started:
-            ts.set("timestamp", clean_text(record.started))
+        _close_suite(ts, c, record)
         totals.update(c)
     root.set("tests", str(totals["tests"]))
     for k in ("failures", "errors", "skipped"):
