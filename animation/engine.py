@@ -368,12 +368,15 @@ def animate_model(frames: FapFrames, model: CompiledFace) -> FaceState:
 
 
 def load_scene(scene) -> bt.Scene | None:
+    """``scene`` as a scene model: None and bt.Scene pass through; a path is read by its
+    extension (``.bifs``/``.bif`` binary BIFS, anything else BT text)."""
     if scene is None or isinstance(scene, bt.Scene):
         return scene
     p = Path(scene)
     if not p.is_file():
         raise SceneError(f"scene file not found: {p}", rule="scene-missing", node_path=None)
-    return bt.read(p)
+    from fbaconf.scenes import bifs
+    return bifs.load_scene(p)
 
 
 def animate(frames: FapFrames, scene=None) -> FaceState:

@@ -29,17 +29,6 @@ def load_stream(path: Path):
     return decode(data, file=str(path)).frames
 
 
-def load_scene(path: Path | None):
-    if path is None:
-        return None
-    path = Path(path)
-    if path.suffix.lower() == ".bifs":
-        from fbaconf.scenes import bifs  # binary BIFS scene (issue 9)
-        return bifs.read(path)
-    from fbaconf.animation.engine import load_scene as load_bt
-    return load_bt(path)
-
-
 def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path | None = None,
                       faps_out: Path | None = None, vertices_out: Path | None = None,
                       images_dir: Path | None = None) -> None:
@@ -52,7 +41,7 @@ def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path
         return
     from fbaconf.animation.engine import animate
     from fbaconf.animation.stateio import save_npz
-    state = animate(frames, scene=load_scene(scene))
+    state = animate(frames, scene=scene)
     if vertices_out is not None:
         save_npz(state, vertices_out)
     if images_dir is not None:

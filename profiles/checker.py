@@ -190,17 +190,14 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
     if isinstance(scene, (str, Path)):
         try:
             import importlib
-            bt = importlib.import_module("fbaconf.scenes.bt")  # optional: the animation stage's reader
+            importlib.import_module("fbaconf.scenes.bt")  # optional: the scene readers (BT, and BIFS on it)
+            bifs = importlib.import_module("fbaconf.scenes.bifs")
         except Exception as e:  # ImportError, or a reader that fails to import
             out.append(diag(R.SCENE_UNAVAILABLE, f"scene {scene}: no scene reader in this build "
                             f"({type(e).__name__}: {e}); the scene was not checked"))
             return None
         try:
-            if str(scene).lower().endswith((".bifs", ".bif")):  # binary BIFS (issue 9)
-                from fbaconf.scenes import bifs
-                parsed = bifs.read(scene)
-            else:
-                parsed = bt.read(scene)
+            parsed = bifs.load_scene(scene)  # binary BIFS (issue 9) or BT text, by extension
         except OSError as e:
             out.append(diag(R.SCENE_INVALID, f"scene {scene} cannot be read: {e.strerror or e}"))
             return None

@@ -17,7 +17,8 @@ def register(subparsers) -> None:
                     "every frame of the scenario with the deterministic reference rasteriser. Images are "
                     "named frame_00000.png ... (or .exr) after the frame index.")
     p.add_argument("--scene", type=Path, default=None,
-                   help="BT scene file with the face model (default: the bundled default head)")
+                   help="scene file with the face model: BT text, or binary BIFS by its .bifs/.bif extension "
+                        "(default: the bundled default head)")
     p.add_argument("--faps", type=Path, required=True, help="FAP frames: .npz (FapFrames) or .fap text")
     p.add_argument("--scenario", type=Path, default=None,
                    help="scenario TOML (default: the bundled rendering/data/default.toml)")

@@ -537,6 +537,33 @@ def test_check_reads_bifs_scenes_like_bt(tmp_path):
     assert "BIFS bit offset" in diags[0].message and diags[0].location.node_path
 
 
+def test_animate_and_render_read_bifs_scenes_like_bt(tmp_path, capsys):
+    """`fbaconf animate/render --scene` take a binary scene (.bifs or .bif) as the reference
+    decoder and the checker do; before, both verbs parsed it as BT text and refused it."""
+    suite = Path(__file__).resolve().parents[1] / "conformance" / "suites" / "predictable-l1-core"
+    (tmp_path / "s.bt").write_bytes((suite / "logo.bt").read_bytes())
+    for name in ("s.bifs", "s.bif"):
+        (tmp_path / name).write_bytes((suite / "logo.bifs").read_bytes())
+    faps = suite / "logo.fap"
+    header = next(ln for ln in faps.read_text().splitlines() if ln.strip() and not ln.startswith("#"))
+    n_frames = int(header.split()[3])  # .fap header: version, name, rate, frame count
+    verts = {}
+    for name in ("s.bt", "s.bifs", "s.bif"):
+        out = tmp_path / f"{name}.npz"
+        assert main(["animate", "--scene", str(tmp_path / name), "--faps", str(faps), "-o", str(out)]) == 0
+        with np.load(out) as z:
+            verts[name] = z["vertices"]
+        img = tmp_path / f"img-{name}"
+        assert main(["render", "--scene", str(tmp_path / name), "--faps", str(faps), "-o", str(img)]) == 0
+        assert len(list(img.iterdir())) == len(verts[name]) == n_frames
+    # the BIFS scene carries its floats as float32: the same motion within float32 rounding
+    assert verts["s.bt"].shape == verts["s.bifs"].shape
+    assert np.abs(verts["s.bt"][1:] - verts["s.bt"][0]).max() > 0  # the FAPs move the face
+    np.testing.assert_allclose(verts["s.bifs"], verts["s.bt"], rtol=1e-5, atol=1e-4)
+    np.testing.assert_array_equal(verts["s.bif"], verts["s.bifs"])
+    capsys.readouterr()
+
+
 def test_d10_proto_list_bit_and_mfurl():
     """D10: a ReplaceScene carries the proto-list bit after useNames (PROTOs refused), and url is
     MFURL: per URL isOD(1), then a 10-bit object descriptor ID ("od:N") or a string."""
