@@ -477,7 +477,7 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
     verdict = "meets" if passed else "is below"
     what = {"decode": "decode rate (all faces together)", "render": "render rate per face"}[operation]
     msg = (f"{what} {_fmt_rate(rate)} fps {verdict} the {claim} minimum {required:g} fps ({provenance}); "
-           f"{per_frame * 1000:.3f} ms/frame + {startup:.3f} s start-up, lengths {lengths} x {repeats}, "
+           f"{per_frame * 1000:.3f} ms/frame, fitted start-up {startup:+.3f} s, lengths {lengths} x {repeats}, "
            f"{wall:.1f} s")
     if notes:
         msg += "; " + "; ".join(notes)
