@@ -463,10 +463,7 @@ def test_mutated_and_truncated_streams_only_raise_bitstream_errors():
 # ---------------------------------------------------------------------------- real files
 
 def _read(path):
-    try:
-        from fbaconf.bitstreams.faptext import read_fap_file
-    except ImportError:  # pragma: no cover - the text reader is another module's work
-        pytest.skip("faptext reader not available")
+    from fbaconf.bitstreams.faptext import read_fap_file
     return read_fap_file(path)[0]
 
 
