@@ -9,16 +9,15 @@ from .mutators import mutate_stream
 from .scenes import gen_scene, mutate_scene
 
 
-def valid_streams():
-    """Hypothesis strategy: valid streams (bytes) from the generator (content + encoder options)."""
-    from hypothesis import strategies as st
-    return st.composite(lambda draw: gen_valid(DrawChooser(draw)).data)()
-
-
 def valid_entries():
     """Hypothesis strategy: valid stream :class:`Entry` objects (with the encoder's reconstruction)."""
     from hypothesis import strategies as st
     return st.composite(lambda draw: gen_valid(DrawChooser(draw)))()
+
+
+def valid_streams():
+    """Hypothesis strategy: valid streams (bytes) from the generator (content + encoder options)."""
+    return valid_entries().map(lambda e: e.data)
 
 
 def near_valid_streams(seeds: list[bytes] | None = None):

@@ -120,6 +120,16 @@ def test_generated_streams_are_valid_and_round_trip(e):
 
 
 @SET
+@given(strategies.valid_streams())
+def test_valid_streams_pass_the_checker(data):
+    """The public bytes strategy: every stream starts with the face object start code (spec
+    notes: 0x000001BA) and the checker finds no error in it."""
+    from fbaconf.profiles.checker import check_stream
+    assert data[:4] == bytes.fromhex("000001BA")
+    assert [d.code for d in check_stream(data) if d.severity == "error"] == []
+
+
+@SET
 @given(strategies.near_valid_streams())
 def test_near_valid_streams_only_typed_errors(data):
     target = SelfTarget(checker_every=1)
