@@ -29,8 +29,8 @@ command names unconditionally are supplied too and their cost is included; a nam
 cost as far as the decoder honours ``{scenario}``). ``render``: the same command with
 ``{images_dir}`` and a scenario that renders every frame at ``render_size`` (64x64,
 no supersampling); skipped (``None``, see :func:`skip_reason`) for adapters without the
-``images`` output. A scene is written (the bundled default head, BT) only when the command
-requires ``{scene}``.
+``images`` output. A scene is written (the bundled default head; BT, or BIFS for a decoder
+that declares only the ``bifs`` input) only when the command requires ``{scene}``.
 
 A run that fails (non-zero exit, crash, timeout, missing output) raises
 :class:`SpeedRunError`; :func:`measure_claim` turns it into a failed :class:`SpeedResult`.
@@ -92,7 +92,7 @@ class _Content:
         self._enc: dict[int, bytes] = {}
         self._fba: dict[int, Path] = {}
         self._fap: dict[int, Path] = {}
-        self._scene: Path | None = None
+        self._scene: dict[str, Path] = {}
 
     def _encoded(self, n: int) -> bytes:
         if n not in self._enc:
@@ -137,14 +137,18 @@ class _Content:
             self._fap[n] = p
         return self._fap[n]
 
-    def scene(self) -> Path:
-        if self._scene is None:
-            from fbaconf.scenes import bt
+    def scene(self, kind: str) -> Path:
+        """The bundled default head as a ``bt`` (text) or ``bifs`` (binary) scene file."""
+        if kind not in self._scene:
             from fbaconf.animation.bundled import default_head_scene
-            p = self.root / "default-head.bt"
-            p.write_text(bt.write(default_head_scene()), encoding="utf-8")
-            self._scene = p
-        return self._scene
+            from fbaconf.scenes import bifs, bt
+            p = self.root / f"default-head.{kind}"
+            if kind == "bifs":
+                p.write_bytes(bifs.encode(default_head_scene()))
+            else:
+                p.write_text(bt.write(default_head_scene()), encoding="utf-8")
+            self._scene[kind] = p
+        return self._scene[kind]
 
     def scenario(self, name: str, **changes) -> Path:
         from fbaconf.rendering.scenario import Scenario
@@ -234,7 +238,9 @@ class _Runner:
         else:
             v["scenario"] = str(c.scenario("decode-one-frame", width=8, height=8, supersample=1, frames=(0,)))
         if "scene" in wanted:
-            v["scene"] = v["scene_bt"] = str(c.scene())
+            # the form the decoder reads: BT unless it declares only the binary BIFS input
+            kind = "bifs" if "bifs" in a.inputs and "scene" not in a.inputs else "bt"
+            v["scene"] = v[f"scene_{kind}"] = str(c.scene(kind))
         if "faps_out_dir" in wanted:
             v["faps_out_dir"] = str(out / "faces")
         return v
@@ -253,9 +259,6 @@ class _Runner:
                 if name in self.extra or name not in supplied:
                     raise SpeedError(f"{a.name}: the decode command needs {{{name}}}, which a speed "
                                      f"measurement cannot supply") from None
-                if name == "scene" and "scene" not in a.inputs and "bifs" in a.inputs:
-                    raise SpeedError(f"{a.name}: the decode command needs a BIFS scene; speed "
-                                     f"measurement supplies BT scenes only") from None
                 self.extra.add(name)
                 if name in ("vertices_out", "images_dir") or (name == "faps_out" and self.operation == "render"):
                     what = {"vertices_out": "vertices", "images_dir": "images (one 8x8 frame requested)",

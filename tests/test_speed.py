@@ -184,3 +184,28 @@ def test_sandboxed_command_decoder_reads_the_generated_content(tmp_path):
                         "--repeats", "1", "--lengths", "4,16", "--json"], capture_output=True, text=True, timeout=300,
                        cwd=tmp_path)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_bifs_only_decoder_gets_a_bifs_scene(tmp_path):
+    """A decoder that declares only the binary scene input is timed with the default head as
+    BIFS (it used to be refused: 'speed measurement supplies BT scenes only'). The decoder
+    checks what it got: a .bifs file the BIFS reader accepts."""
+    script = tmp_path / "bifs_only.py"
+    script.write_text(textwrap.dedent("""\
+        import sys
+        if not sys.argv[2].endswith(".bifs"):
+            sys.exit(7)
+        from fbaconf.scenes import bifs
+        bifs.read(sys.argv[2])  # BT text would raise BifsError: a non-zero exit
+        from fbaconf.pipeline import reference_outputs
+        reference_outputs(sys.argv[1], faps_out=sys.argv[3])
+    """))
+    m = tmp_path / "bifs-only.toml"
+    m.write_text('name = "bifs-only"\nclaims = ["predictable@1"]\ninputs = ["fba", "bifs"]\noutputs = ["faps"]\n'
+                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{scene}}", "{{faps_out}}"]\n'
+                 '[limits]\ntimeout_s = 60\n')
+    r = speed.measure(load_manifest(m), "predictable@1", "decode", lengths=[4, 16], repeats=1,
+                      work_dir=tmp_path / "w")
+    assert r is not None and len(r.samples) == 2, r.message
+    assert "cannot" not in r.message and "failed" not in r.message.lower(), r.message
+    assert any("scene" in n for n in r.message.split("; ")), r.message
