@@ -4,12 +4,13 @@
 Run as ``python -I -S _limit.py AS_BYTES FSIZE_BYTES CPU_S [--cgroup DIR]... -- argv...``.
 The program is usually ``bwrap …`` (the sandbox), which then execs the decoder: limits and
 cgroup membership are inherited by everything the decoder starts. Kept free of imports
-beyond the standard library's ``os``/``resource``/``sys`` so it starts in milliseconds. A
+beyond the standard library's ``os``/``resource``/``signal``/``sys`` so it starts in milliseconds. A
 limit of 0 means "not set". Exit code 127 with a message on stderr when the program
 cannot be started (not found, not executable) or a cgroup cannot be joined.
 """
 import os
 import resource
+import signal
 import sys
 
 
@@ -43,6 +44,11 @@ def main():
     _set(resource.RLIMIT_FSIZE, fsize)
     _set(resource.RLIMIT_CPU, cpu)
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    # Python starts with SIGPIPE and SIGXFSZ ignored, and an ignored signal stays ignored
+    # across exec: without this a decoder past the file-size limit gets EFBIG instead of
+    # SIGXFSZ, and one writing to a closed pipe EPIPE instead of SIGPIPE.
+    for s in (signal.SIGPIPE, signal.SIGXFSZ):
+        signal.signal(s, signal.SIG_DFL)
     argv = a[i + 1:]
     try:
         os.execvp(argv[0], argv)
