@@ -88,6 +88,26 @@ def _remove_dir_at(parent_fd: int, name: str) -> None:
             os.rmdir(dname, dir_fd=pfd)
 
 
+def empty_dir(path: Path | str, keep: frozenset[str] = frozenset()) -> None:
+    """Remove everything inside the directory ``path`` but the entries named in ``keep``
+    (links not followed: a link is removed, never its target). A ``path`` that is not a
+    real directory (a decoder put a link or a file in its place) is removed and made anew."""
+    path = os.fspath(path)
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        os.mkdir(path)
+        return
+    if not stat.S_ISDIR(st.st_mode):
+        remove_tree(path)
+        os.mkdir(path)
+        return
+    with os.scandir(path) as it:
+        names = [e.name for e in it if e.name not in keep]
+    for name in names:
+        remove_tree(os.path.join(path, name))
+
+
 def tree_size(path: Path | str, stop_at: int) -> int:
     """Bytes in the regular files below ``path`` (links not followed, any depth, no
     recursion); stops counting once past ``stop_at``."""

@@ -3,6 +3,7 @@
 ::
 
     fbaconf fuzz --decoder D.toml --seconds N [--seed S] [-j N] [-o DIR] [--target stream|scene]
+                 [--spawn] [--coverage-every N]
     fbaconf fuzz --self [--seconds N] [--seed S] [-o DIR]
     fbaconf fuzz --decoder D.toml --replay FILE         # run one input, print its classification
     fbaconf fuzz --promote DIR [--data-dir PATH]         # findings -> regression suite cases
@@ -48,6 +49,13 @@ def register(sub) -> None:
     p.add_argument("--seeds", type=Path, action="append", default=[],
                    help="extra seed files or folders (*.fba) besides the conformance suites")
     p.add_argument("--max-execs", type=int, default=None, help="stop after this many inputs")
+    p.add_argument("--spawn", action="store_true",
+                   help="--decoder: a fresh sandbox per input (slow, the strictest separation) instead of one "
+                        "sandbox per worker with a fork server, or the persistent protocol when the manifest has "
+                        "[commands] serve")
+    p.add_argument("--coverage-every", type=int, default=4, metavar="N",
+                   help="--decoder: measure the syntax-model coverage of every N-th input (a reference decode, "
+                        "~1 ms each; default 4, 1 = every input)")
     p.add_argument("--replay", type=Path, metavar="FILE", help="run one input and print its classification")
     p.add_argument("--data-dir", type=Path, help="(--promote) conformance data folder (default: the package's)")
     p.add_argument("--no-progress", action="store_true", help="no live status line")
@@ -140,26 +148,32 @@ def _decoder(args, expected: set[int]) -> int:
         args.target = "text" if "fba" not in adapter.inputs and "fap" in adapter.inputs else "stream"
     out.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="fuzz-work-", dir=out))
+    target = None
     try:
         seeds = default_seeds() + _extra_seeds(args.seeds)
         scene_stream = None
         if args.target == "scene":
             scene_stream = next((s.data for s in seeds if s.origin.startswith("seed:simple-l1-core")), seeds[0].data)
         target = DecoderTarget(adapter, work, kind=args.target, timeout_s=args.timeout, expected_exit=expected,
-                                 oracle=not args.no_oracle, scene_stream=scene_stream)
+                               oracle=not args.no_oracle, scene_stream=scene_stream,
+                               fork_server=not args.spawn, persistent=not args.spawn)
         if args.replay is not None:
             v = replay(target, args.replay.read_bytes(), args.target)
             return _print_replay(v, args)
         info = {"name": adapter.name, "manifest": str(adapter.manifest_path) if adapter.manifest_path else None,
+                "mode": "persistent" if target.persistent else "fork-server" if target.fork_server else "spawn",
                 "manifest_sha256": adapter.digest(),
                 "limits": {"timeout_s": target.limits.timeout_s, "memory_mb": target.limits.memory_mb,
                            "memory_kind": target.limits.memory_kind, "output_mb": target.limits.output_mb}}
         fz = Fuzzer(target, seeds, seed=args.seed, seconds=args.seconds, jobs=args.jobs, out_dir=out,
-                      kinds=(args.target,), progress=False if args.no_progress else None,
-                      minimise_seconds=args.minimise_seconds, max_execs=args.max_execs, decoder_info=info)
+                    kinds=(args.target,), progress=False if args.no_progress else None,
+                    minimise_seconds=args.minimise_seconds, max_execs=args.max_execs, decoder_info=info,
+                    coverage_every=args.coverage_every)
         fz.run()
         return _finish(fz, out, args)
     finally:
+        if target is not None:
+            target.close()
         shutil.rmtree(work, ignore_errors=True)
 
 

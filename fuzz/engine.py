@@ -16,7 +16,7 @@ from .corpus import scene_seeds
 from .findings import Finding, write_finding
 from .generators import Entry, gen_valid
 from .minimise import minimise
-from .model import SCENE_FEATURES, STREAM_FEATURES
+from .model import SCENE_FEATURES, STREAM_FEATURES, features_of
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
 from .text import mutate_text, text_seeds
@@ -34,6 +34,7 @@ class Stats:
     corpus: int = 0
     minimise_s: float = 0.0
     by_origin: dict[str, int] = field(default_factory=dict)
+    measured: int = 0  # inputs whose syntax-model coverage was measured (every coverage_every-th)
 
     @property
     def elapsed(self) -> float:
@@ -105,7 +106,7 @@ class Fuzzer:
                  scene_seeds_: list[Entry] | None = None, kinds: tuple[str, ...] | None = None,
                  decoder_info: dict | None = None, max_corpus: int = 400, valid_pool: int = 24,
                  fresh_valid_share: float = 0.04, prefer_short: float = 0.5, run_seeds_first: int = 64,
-                 stop_on: Callable[[Finding], bool] | None = None) -> None:
+                 stop_on: Callable[[Finding], bool] | None = None, coverage_every: int = 1) -> None:
         if not seeds and kind == "stream" and "stream" in (kinds or (kind,)):
             raise FuzzSetupError("no seed streams (build the suites: fbaconf suites build)")
         self.target = target
@@ -136,6 +137,9 @@ class Fuzzer:
         self.stop_on = stop_on
         self.stopped = False
         self.max_corpus = max_corpus
+        # Syntax-model coverage of what a decoder under test was sent costs a reference decode
+        # per input (~1 ms): measured on every input, or on every n-th (``--coverage-every``).
+        self.coverage_every = max(1, int(coverage_every))
         self.findings: dict[str, Finding] = {}
         self.stats = Stats(universe=tuple(u for k in self.kinds for u in
                                           (STREAM_FEATURES if k == "stream" else SCENE_FEATURES if k == "scene"
@@ -196,37 +200,74 @@ class Fuzzer:
         st.started = time.perf_counter()
         st.cpu_started = time.process_time()
         deadline = st.started + self.seconds
-        index = 0
-        batch = 1 if self.jobs == 1 else 4 * self.jobs
-        pool = ThreadPoolExecutor(self.jobs) if self.jobs > 1 else None
         try:
-            while (time.perf_counter() < deadline and not self.stopped
-                   and (self.max_execs is None or index < self.max_execs)):
+            if self.jobs == 1:
+                self._run_pipelined(deadline)
+            else:
+                self._run_batches(deadline)
+        finally:
+            close = getattr(self.target, "close", None)
+            if close is not None:
+                close()
+        self.progress.close(st)
+        return st
+
+    def _more(self, index: int, deadline: float) -> bool:
+        return (time.perf_counter() < deadline and not self.stopped
+                and (self.max_execs is None or index < self.max_execs))
+
+    def _run_pipelined(self, deadline: float) -> None:
+        """One decoder at a time, overlapped with the loop's own work (targets with ``start``:
+        the decoder runs while this thread makes the next input and records the previous one).
+        Input k + 1 is made before input k is recorded (its ``corpus_size`` says which corpus it
+        was made from, so a run is replayable as ever)."""
+        if not self._more(0, deadline):
+            return
+        start = getattr(self.target, "start", None) or (lambda inp: (lambda out=self.target.execute(inp): out))
+        index, cur = 0, self.make_input(0)
+        wait = start(cur)
+        while True:
+            nxt = self.make_input(index + 1) if self._more(index + 1, deadline) else None
+            out = wait()
+            # the next input runs while this one is recorded, unless this one is a finding (its
+            # minimisation needs the decoder to itself)
+            wait = start(nxt) if nxt is not None and out.verdict is None else None
+            self._record(index, cur, out, deadline)
+            self.progress.update(self.stats)
+            if nxt is None or self.stopped:
+                if wait is not None:
+                    wait()  # started, never recorded: the run stops here
+                return
+            index, cur = index + 1, nxt
+            if wait is None:
+                wait = start(cur)
+
+    def _run_batches(self, deadline: float) -> None:
+        index = 0
+        batch = 4 * self.jobs
+        with ThreadPoolExecutor(self.jobs) as pool:
+            while self._more(index, deadline):
                 n = batch if self.max_execs is None else min(batch, self.max_execs - index)
                 inputs = [self.make_input(index + k) for k in range(n)]
-                if pool is None:
-                    outs = [self.target.execute(inputs[0])]
-                else:
-                    outs = list(pool.map(self.target.execute, inputs))
+                outs = list(pool.map(self.target.execute, inputs))
                 for k, (inp, out) in enumerate(zip(inputs, outs)):
                     self._record(index + k, inp, out, deadline)
                 index += n
-                self.progress.update(st)
-        finally:
-            if pool is not None:
-                pool.shutdown(wait=True)
-        self.progress.close(st)
-        return st
+                self.progress.update(self.stats)
 
     def _record(self, index: int, inp: Entry, out: ExecResult, deadline: float) -> None:
         st = self.stats
         st.execs += 1
         feats = out.features
-        if not feats and inp.kind == "stream" and not isinstance(self.target, SelfTarget):
-            m = inp.get_model()  # coverage of the syntax model by what we sent the decoder
-            feats = m.features
-        elif not feats and inp.kind == "scene" and not isinstance(self.target, SelfTarget):
+        measure = (not feats and not isinstance(self.target, SelfTarget)
+                   and (index % self.coverage_every == 0 or inp.model is not None))
+        if measure and inp.kind == "stream":
+            # coverage of the syntax model by what we sent the decoder
+            feats = inp.model.features if inp.model is not None else features_of(inp.data)
+        elif measure and inp.kind == "scene":
             feats = _scene_feats_of(inp)
+        if measure:
+            st.measured += 1
         new = feats - st.features
         if new:
             st.features |= new
@@ -292,6 +333,7 @@ class Fuzzer:
                 "cpu_seconds": round(st.cpu_s, 2), "execs_per_cpu_s": round(st.execs / max(1e-9, st.cpu_s), 1),
                 "findings": st.findings, "finding_hits": st.hits,
                 "syntax_coverage": {"covered": c, "total": n, "features": sorted(st.features),
+                                    "measured_inputs": st.measured, "coverage_every": self.coverage_every,
                                     "missing": sorted(set(st.universe) - st.features)},
                 "corpus": st.corpus, "decoder": self.decoder_info,
                 "finding_ids": [f.id for f in self.findings.values()]}

@@ -92,8 +92,9 @@ class StreamModel:
         return sorted(x for x in out if 0 < x <= self.nbits)
 
 
-def stream_model(data: bytes) -> StreamModel:
-    """Parse ``data`` with the reference decoder (planes survive an error) and walk the headers."""
+def _parse(data: bytes):
+    """(planes, error rule, end code, end offset) of ``data`` by the reference decoder
+    (the planes decoded before an error survive it)."""
     from fbaconf.bitstreams import decoder as dec
     d = dec._Decoder(data, None)
     rule, end_code, end_offset = None, None, 0
@@ -105,10 +106,20 @@ def stream_model(data: bytes) -> StreamModel:
         end_offset = e.bit_offset
     except Exception:  # noqa: BLE001 - the decoder's own wrapper turns these into rule "internal"
         rule = "internal"
-    planes = list(d.planes)
-    fields = header_fields(data, planes)
-    return StreamModel(data, planes, fields, rule, end_code, end_offset,
+    return list(d.planes), rule, end_code, end_offset
+
+
+def stream_model(data: bytes) -> StreamModel:
+    """Parse ``data`` with the reference decoder (planes survive an error) and walk the headers."""
+    planes, rule, end_code, end_offset = _parse(data)
+    return StreamModel(data, planes, header_fields(data, planes), rule, end_code, end_offset,
                        stream_features(planes, end_code, rule, nbytes=len(data)))
+
+
+def features_of(data: bytes) -> set[str]:
+    """The syntax-model features of ``data`` alone (no header walk: what coverage needs)."""
+    planes, rule, end_code, _end = _parse(data)
+    return stream_features(planes, end_code, rule, nbytes=len(data))
 
 
 def header_fields(data: bytes, planes) -> list[Field]:

@@ -1,8 +1,10 @@
 """Targets and verdicts: the decoder under test (through the harness's sandbox and its one classifier of process endings) and fbaconf itself (--self)."""
 from __future__ import annotations
 
+import os
 import re
 import tempfile
+import threading
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -10,7 +12,7 @@ from pathlib import Path
 from typing import Iterable
 
 from fbaconf.errors import FbaconfInputError
-from fbaconf.safefs import remove_tree
+from fbaconf.safefs import empty_dir, remove_tree
 from .generators import Entry
 from .model import stream_features
 from .scenes import scene_features
@@ -47,13 +49,30 @@ class ExecResult:
     features: set[str] = field(default_factory=set)
 
 
+_KEEP = {"case": frozenset(("in", "out", "tmp")), "out": frozenset(("images", "faces"))}
+
+
+@dataclass
+class _Worker:
+    """One worker thread's folder (reused input after input) and fork server."""
+    root: Path
+    workdir: Path
+    server: object = None
+    job: object = None
+    input: Path | None = None
+    dirs: list = field(default_factory=list)
+    argv: list = field(default_factory=list)
+    input_fd: int | None = None
+    input_len: int = 0
+
+
 class DecoderTarget:
     """A decoder adapter under its limits (command manifests through the sandbox; in-process
     Python adapters called directly)."""
 
     def __init__(self, adapter, work_root: Path, *, kind: str = "stream", timeout_s: float | None = None,
                  expected_exit: Iterable[int] | None = None, oracle: bool = True,
-                 scene_stream: bytes | None = None) -> None:
+                 scene_stream: bytes | None = None, fork_server: bool = True, persistent: bool = True) -> None:
         from fbaconf.harness.adapters import CommandAdapter
         from fbaconf.harness.sandbox import Limits
         self.adapter = adapter
@@ -70,6 +89,18 @@ class DecoderTarget:
         self.oracle = oracle and kind in ("stream", "text") and "faps" in adapter.outputs
         self.is_command = isinstance(adapter, CommandAdapter)
         self.scene_stream = scene_stream
+        # Command decoders run through one fork server per worker thread (harness/spawner.py):
+        # one sandbox per worker, a fork + exec per input, the worker's folder reused.
+        self.fork_server = fork_server and self.is_command
+        # A manifest with [commands] serve gets its inputs through the persistent protocol
+        # (harness/persistent.py) unless told otherwise.
+        self.persistent = persistent and self.is_command and "serve" in adapter.commands
+        if self.persistent and kind == "scene":
+            raise FuzzSetupError("the persistent protocol carries streams and .fap text, not scenes: "
+                                 "fuzz scenes with --spawn")
+        self._local = threading.local()
+        self._workers: list = []
+        self._workers_lock = threading.Lock()
         if kind == "stream" and "fba" not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} does not accept binary streams (inputs: "
                                  f"{', '.join(adapter.inputs)})")
@@ -87,9 +118,15 @@ class DecoderTarget:
 
     # ---------------------------------------------------------------- job
     def _job(self, data: bytes, workdir: Path):
+        """The decoder's files for one input in ``workdir``: ``in/`` (the input, rewritten in
+        place: a reused worker folder keeps the folder the sandbox binds read-only) and an
+        empty ``out/``."""
         from fbaconf.harness.adapters import Job
         ind, outd = workdir / "in", workdir / "out"
-        ind.mkdir(parents=True)
+        ind.mkdir(parents=True, exist_ok=True)
+        for p in workdir.iterdir():  # what the previous input left behind
+            if p.name != "in":
+                remove_tree(p)
         outd.mkdir()
         values: dict[str, str] = {}
         if self.kind == "scene":
@@ -113,6 +150,49 @@ class DecoderTarget:
         (outd / "faces").mkdir()
         return Job(workdir=workdir, values=values, frames=0)
 
+    def _worker(self):
+        """This thread's worker: its folder, reused input after input, and (command
+        decoders) its fork server."""
+        w = getattr(self._local, "worker", None)
+        if w is None:
+            root = Path(tempfile.mkdtemp(prefix="w-", dir=self.work_root))
+            w = self._local.worker = _Worker(root, root / "case")
+            w.job = self._job(b"", w.workdir)
+            w.input = Path(w.job.values["input"] if self.kind != "scene" else w.job.values["scene"])
+            w.dirs = [str(w.workdir), str(w.workdir / "out"), *(str(w.workdir / "out" / d) for d in ("images", "faces")),
+                      str(w.workdir / "tmp")]
+            with self._workers_lock:
+                self._workers.append(w)
+        return w
+
+    def _reuse(self, w: "_Worker", data: bytes, write_input: bool = True):
+        """The worker's job for the next input: the input rewritten in place (through a
+        descriptor kept open), the outputs and everything else the previous input left
+        removed."""
+        for d in w.dirs:
+            empty_dir(d, keep=_KEEP.get(os.path.basename(d), frozenset()) if d != w.dirs[0] else _KEEP["case"])
+        if write_input:
+            if w.input_fd is None:
+                w.input_fd = os.open(w.input, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
+            os.pwrite(w.input_fd, data, 0)
+            if len(data) < w.input_len:
+                os.ftruncate(w.input_fd, len(data))
+            w.input_len = len(data)
+        return w.job
+
+    def close(self) -> None:
+        """Stop every worker's fork server (they restart on the next input)."""
+        with self._workers_lock:
+            workers, self._workers = self._workers, []
+        for w in workers:
+            if w.server is not None:
+                w.server.close()
+                w.server = None
+            if w.input_fd is not None:
+                os.close(w.input_fd)
+                w.input_fd = None
+        self._local = threading.local()
+
     def argv_for(self, job) -> list[str]:
         try:
             return self.adapter.argv("decode", job)
@@ -120,24 +200,55 @@ class DecoderTarget:
             raise FuzzSetupError(f"[commands] decode needs {{{e.args[0]}}}, which a fuzz input does not have") from None
 
     def execute(self, inp: Entry) -> ExecResult:
+        return self.start(inp)()
+
+    def start(self, inp: Entry):
+        """Start running ``inp`` and return a function that waits for its :class:`ExecResult`
+        (through a fork server, the decoder runs while the caller makes the next input)."""
+        if self.persistent:
+            w = self._worker()
+            job = self._reuse(w, inp.data, write_input=False)  # the input travels on stdin
+            if w.server is None:
+                from fbaconf.harness.persistent import PersistentDecoder
+                from fbaconf.harness.runner import hidden_from_decoders
+                w.argv = self.adapter.argv("serve", job)
+                view = self.adapter.sandbox_view(w.argv, job.workdir, hidden=hidden_from_decoders())
+                w.server = PersistentDecoder(w.argv, w.root, job.workdir, view, self.limits, env=self.adapter.env)
+            wait = w.server.start(inp.data, job.values["faps_out"])
+            return lambda: ExecResult(self._judge(inp, job, wait()))
+        if self.fork_server:
+            w = self._worker()
+            job = self._reuse(w, inp.data)
+            if w.server is None:
+                from fbaconf.harness.runner import hidden_from_decoders
+                from fbaconf.harness.spawner import ForkServer
+                w.argv = self.argv_for(job)  # the worker's paths never change
+                view = self.adapter.sandbox_view(w.argv, job.workdir, hidden=hidden_from_decoders())
+                w.server = ForkServer(w.root, view, self.limits, env=self.adapter.env, sum_outputs_every=16)
+            wait = w.server.start(w.argv, job.workdir)
+            return lambda: ExecResult(self._judge(inp, job, wait()))
         workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
         try:
             job = self._job(inp.data, workdir)
             if self.is_command:
-                return ExecResult(self._run_command(inp, job))
-            return ExecResult(self._run_python(inp, job))
+                from fbaconf.harness import sandbox
+                from fbaconf.harness.runner import hidden_from_decoders
+                argv = self.argv_for(job)
+                view = self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders())
+                out = ExecResult(self._judge(inp, job, sandbox.run(argv, job.workdir, self.limits,
+                                                                    env=self.adapter.env, view=view)))
+            else:
+                out = ExecResult(self._run_python(inp, job))
         finally:
             try:
                 remove_tree(workdir)
             except OSError:
                 pass
+        return lambda: out
 
-    def _run_command(self, inp: Entry, job) -> Verdict | None:
-        from fbaconf.harness import exits, sandbox
-        from fbaconf.harness.runner import hidden_from_decoders
-        argv = self.argv_for(job)
-        res = sandbox.run(argv, job.workdir, self.limits, env=self.adapter.env,
-                          view=self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders()))
+    def _judge(self, inp: Entry, job, res) -> Verdict | None:
+        """The finding (or None) for one finished decoder process."""
+        from fbaconf.harness import exits
         ending = exits.classify(res, self.limits, self.reject_exit_codes)
         if ending.kind == "setup":
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")

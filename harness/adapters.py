@@ -54,6 +54,10 @@ OUTPUT_KINDS = ("faps", "vertices", "images")
 FAPS_FORMATS = ("fap", "npz")
 PLACEHOLDERS = ("input", "fba", "fap", "scene", "scene_bt", "scene_bifs", "scenario", "faps_out", "vertices_out",
                 "images_dir", "frames", "workdir", "manifest_dir", "python", "faps_out_dir", "inputs")
+# decode: one process per input; decode_multi: one per multi-face case; serve: the persistent
+# protocol (harness/persistent.py), one process for many inputs, each sent on stdin.
+COMMANDS = ("decode", "decode_multi", "serve")
+SERVE_PLACEHOLDERS = ("workdir", "manifest_dir", "python")
 OUTPUT_PLACEHOLDER = {"faps": "faps_out", "vertices": "vertices_out", "images": "images_dir"}
 _PH = re.compile(r"\{([a-z_]+)\}")
 BUNDLED_DIR = Path(__file__).resolve().parent / "adapters"
@@ -301,8 +305,8 @@ def _check_manifest(data: dict, path: Path | None) -> None:
         raise bad("[commands] must define decode (an argv list), or give python = \"module:Class\"",
                   "manifest-commands")
     for cname, argv in cmds.items():
-        if cname not in ("decode", "decode_multi"):
-            raise bad(f"[commands] {cname}: unknown command (decode, decode_multi)", "manifest-commands")
+        if cname not in COMMANDS:
+            raise bad(f"[commands] {cname}: unknown command ({', '.join(COMMANDS)})", "manifest-commands")
         if not isinstance(argv, list) or not argv or not isinstance(argv[0], str):
             raise bad(f"[commands] {cname} must be an argv list starting with the program", "manifest-commands")
         for item in argv:
@@ -311,6 +315,10 @@ def _check_manifest(data: dict, path: Path | None) -> None:
                 if not isinstance(s, str):
                     raise bad(f"[commands] {cname}: argv items must be strings or lists of strings", "manifest-commands")
                 for n in _PH.findall(s):
+                    if cname == "serve" and n not in SERVE_PLACEHOLDERS:
+                        raise bad(f"[commands] serve: {{{n}}} has no value for a persistent decoder, which gets "
+                                  f"each input on stdin (usable: {', '.join('{' + p + '}' for p in SERVE_PLACEHOLDERS)})",
+                                  "manifest-placeholder")
                     if n not in PLACEHOLDERS:
                         raise bad(f"[commands] {cname}: unknown placeholder {{{n}}} (known: "
                                   f"{', '.join('{' + p + '}' for p in PLACEHOLDERS)})", "manifest-placeholder")

@@ -340,6 +340,19 @@ def python_view() -> list[Path]:
     return [Path(sys.base_prefix).resolve(), Path(sys.prefix).resolve(), Path(sys.prefix), pkg_root]
 
 
+def decoder_env(workdir: Path, env: dict[str, str] | None) -> dict[str, str]:
+    """The minimal environment a decoder gets: PATH, a UTF-8 C locale, HOME and TMPDIR in its
+    folder, a few runtime variables kept from the harness's, and the manifest's ``[env]``."""
+    tmp = Path(workdir) / "tmp"
+    out = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8",
+           "HOME": str(workdir), "TMPDIR": str(tmp), "TMP": str(tmp), "TEMP": str(tmp)}
+    for keep in ("SYSTEMROOT", "LD_LIBRARY_PATH", "JAVA_HOME", "PYTHONPATH", "VIRTUAL_ENV"):
+        if keep in os.environ:
+            out[keep] = os.environ[keep]
+    out.update(env or {})
+    return out
+
+
 def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,
         measure_dirs: list[Path] | None = None, view: View | None = None) -> ProcResult:
     """Run ``argv`` in ``workdir`` under ``limits`` (sandboxed when :func:`isolation` allows);
@@ -361,12 +374,7 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
         inner = _bwrap_argv(view or default_view(argv, workdir), workdir) + inner
     full = [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize), str(cpu),
             *cg.launcher_args(), "--", *inner]
-    base_env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8",
-                "HOME": str(workdir), "TMPDIR": str(tmp), "TMP": str(tmp), "TEMP": str(tmp)}
-    for keep in ("SYSTEMROOT", "LD_LIBRARY_PATH", "JAVA_HOME", "PYTHONPATH", "VIRTUAL_ENV"):
-        if keep in os.environ:
-            base_env[keep] = os.environ[keep]
-    base_env.update(env or {})
+    base_env = decoder_env(workdir, env)
     t0 = time.perf_counter()
     try:
         with open(out_path, "wb") as fo, open(err_path, "wb") as fe:
@@ -386,17 +394,31 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
                 pids_hit = cg.pids_exhausted()
                 cg.close()
         elapsed = time.perf_counter() - t0
-        rc = os.waitstatus_to_exitcode(status)
-        proc.returncode = rc
-        if sandboxed and 128 < rc < 128 + 65 and rc - 128 in _SIGNALS:
-            rc = -(rc - 128)  # bubblewrap reports a decoder killed by signal N as exit code 128 + N
-        res = ProcResult(argv, None if (timed_out or mem_hit) else (rc if rc >= 0 else None), elapsed_s=elapsed,
-                         timed_out=timed_out, memory_limit_hit=mem_hit or oom,
-                         cpu_s=(rusage.ru_utime + rusage.ru_stime) if rusage else 0.0,
-                         maxrss_mb=(rusage.ru_maxrss / 1024.0) if rusage else 0.0,
-                         stdout_tail=_tail(out_path), stderr_tail=_tail(err_path))
+        res = result(argv, limits, status, rusage, elapsed, timed_out=timed_out, mem_hit=mem_hit, oom=oom,
+                     pids_hit=pids_hit, bwrap_status=sandboxed, stdout_tail=_tail(out_path),
+                     stderr_tail=_tail(err_path), measure_dirs=measure_dirs or [workdir])
     finally:
         shutil.rmtree(io_dir, ignore_errors=True)
+    return res
+
+
+def result(argv: list[str], limits: Limits, status: int, rusage, elapsed: float, *, timed_out: bool,
+           mem_hit: bool, oom: bool, pids_hit: bool, bwrap_status: bool, stdout_tail: str, stderr_tail: str,
+           measure_dirs: list[Path]) -> ProcResult:
+    """The :class:`ProcResult` of one finished decoder process (its raw wait status and
+    rusage): signal names, the limit that ended it, the output it left — shared by the
+    one-shot launcher (:func:`run`) and the fork server (:mod:`.spawner`).
+    ``rusage`` is a ``resource.struct_rusage`` or a (utime, stime, maxrss_kb) tuple."""
+    rc = os.waitstatus_to_exitcode(status)
+    if bwrap_status and 128 < rc < 128 + 65 and rc - 128 in _SIGNALS:
+        rc = -(rc - 128)  # bubblewrap reports a decoder killed by signal N as exit code 128 + N
+    if rusage is not None and not isinstance(rusage, tuple):
+        rusage = (rusage.ru_utime, rusage.ru_stime, rusage.ru_maxrss)
+    res = ProcResult(argv, None if (timed_out or mem_hit) else (rc if rc >= 0 else None), elapsed_s=elapsed,
+                     timed_out=timed_out, memory_limit_hit=mem_hit or oom,
+                     cpu_s=(rusage[0] + rusage[1]) if rusage else 0.0,
+                     maxrss_mb=(rusage[2] / 1024.0) if rusage else 0.0,
+                     stdout_tail=stdout_tail, stderr_tail=stderr_tail)
     if pids_hit:
         res.notes.append("process-limit")
     if oom:
@@ -417,7 +439,7 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
                                   "outofmemoryerror", "memory allocation of", "failed to allocate")):
             res.memory_limit_hit = True
     total = 0
-    for d in measure_dirs or [workdir]:
+    for d in measure_dirs:
         total += tree_size(d, stop_at=limits.output_mb * 2**20 * 4)
     res.output_bytes = total
     if total > limits.output_mb * 2**20:

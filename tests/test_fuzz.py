@@ -208,11 +208,17 @@ def _planted(name: str, tmp_path: Path):
     return load_manifest(HERE / f"{name}.toml")
 
 
-def _fuzz_planted(name: str, tmp_path: Path, seeds, max_execs: int, cls: str | None = None):
+def _fuzz_planted(name: str, tmp_path: Path, seeds, max_execs: int, cls: str | None = None, jobs: int = 2,
+                  serve: bool = False):
     adapter = _planted(name, tmp_path)
+    if serve:  # the same program through the persistent protocol (skipchain --serve)
+        p = Path(adapter.manifest_path)
+        p.write_text(p.read_text().replace("[limits]", 'serve = ["{manifest_dir}/skipchain", "--serve"]\n[limits]'))
+        adapter = load_manifest(p)
     out = tmp_path / "out"
     target = DecoderTarget(adapter, tmp_path / "work", timeout_s=1.0)
-    fz = Fuzzer(target, seeds, seed=1, seconds=120, jobs=2, out_dir=out, progress=False, max_execs=max_execs,
+    assert target.persistent == serve
+    fz = Fuzzer(target, seeds, seed=1, seconds=120, jobs=jobs, out_dir=out, progress=False, max_execs=max_execs,
                   minimise_seconds=5, decoder_info={"name": adapter.name, "manifest": str(adapter.manifest_path)},
                   run_seeds_first=0, valid_pool=4, stop_on=lambda f: f.verdict.cls == cls)
     fz.run()
@@ -239,6 +245,14 @@ def test_planted_bug_found_classified_minimised(name, cls, sig, execs, tmp_path,
 
 def test_planted_skipchain_crash(skipchain_run):
     fz, target, out, _tmp = skipchain_run
+    _check_planted(fz, target, out, "crash", "SIGSEGV")
+
+
+def test_planted_skipchain_crash_persistent(tmp_path, seeds):
+    """The same planted crash through the persistent protocol, one input at a time: found,
+    attributed to the input that killed the process, minimised (each minimisation test
+    restarts the server after the crash) and replayable."""
+    fz, target, out = _fuzz_planted("skipchain", tmp_path, seeds, 300, "crash", jobs=1, serve=True)
     _check_planted(fz, target, out, "crash", "SIGSEGV")
 
 

@@ -178,16 +178,39 @@ def test_frames_numbered_from_two_fail(tmp_path):
 
 
 # ------------------------------------------------------------------ run and fuzz agree
-def _fuzz_class(m: Path, tmp_path: Path) -> str:
+SERVE = """import os, signal, sys
+BODY = {body!r}
+while True:
+    line = sys.stdin.buffer.readline()
+    if not line:
+        break
+    size, out = line.decode().rstrip("\\n").split(" ", 1)
+    data = sys.stdin.buffer.read(int(size))
+    path = os.path.join(os.environ["TMPDIR"], "in.fba")
+    open(path, "wb").write(data)
+    sys.argv = [sys.argv[0], path, out]
+    try:
+        exec(BODY, {{"os": os, "signal": signal, "sys": sys}})
+        code = 0
+    except SystemExit as e:  # the persistent form of an exit code is the answer
+        code = e.code or 0
+    sys.stderr.flush()
+    print(code, flush=True)
+"""
+
+
+def _fuzz_class(m: Path, tmp_path: Path, **kw) -> str:
     """How the fuzzer classifies the same decoder on the same invalid stream."""
     from fbaconf.fuzz.generators import Entry
     from fbaconf.fuzz.targets import DecoderTarget, FuzzSetupError
-    target = DecoderTarget(adapters.resolve(m), tmp_path / "fz")
+    target = DecoderTarget(adapters.resolve(m), tmp_path / "fz", **kw)
     data = case(ERROR_CASE).input_path("fba").read_bytes()
     try:
         v = target.execute(Entry(data, origin="error-case")).verdict
     except FuzzSetupError:
         return "Error"
+    finally:
+        target.close()
     if v is None:
         return "Pass"
     return {"crash": "Crash", "memory": "Crash", "hang": "Timeout"}.get(v.cls, "Fail")
@@ -195,8 +218,21 @@ def _fuzz_class(m: Path, tmp_path: Path) -> str:
 
 @pytest.mark.parametrize("name,body,outcome,words", MATRIX, ids=[m[0] for m in MATRIX])
 def test_run_and_fuzz_agree(tmp_path, name, body, outcome, words):
+    """One classifier: the conformance run, the fuzzer spawning a fresh sandbox per input,
+    the fuzzer's fork server and (where an input path means anything) the persistent
+    protocol give the same ending."""
     m = pydec(tmp_path, name, body)
-    assert _fuzz_class(m, tmp_path) == run_one(m, ERROR_CASE, tmp_path).outcome.value
+    expected = run_one(m, ERROR_CASE, tmp_path).outcome.value
+    assert expected == outcome.value
+    assert _fuzz_class(m, tmp_path / "spawn", fork_server=False) == expected
+    assert _fuzz_class(m, tmp_path / "fork", fork_server=True) == expected
+    if name != "missing-input":  # a persistent decoder gets the bytes, not a path
+        s = tmp_path / f"{name}-serve.py"
+        s.write_text(SERVE.format(body=body))
+        p = manifest(tmp_path, f"{name}-serve", ["{python}", str(script(tmp_path, name, body)), "{input}",
+                                                   "{faps_out}"])
+        p.write_text(p.read_text().replace("[limits]", f'serve = ["{{python}}", "{s}"]\n[limits]'))
+        assert _fuzz_class(p, tmp_path / "serve") == expected
 
 
 # ------------------------------------------------------------------ baselines (deqp-runner style)

@@ -3,6 +3,8 @@
  * start code) and then reports the payload as not supported (exit 69). Rejects what it cannot
  * parse with exit 2.
  *
+ * `skipchain --serve` speaks fbaconf's persistent protocol (one process, many inputs).
+ *
  * THE BUG: a frame table of 256 entries is indexed by the frame number, which includes
  * number_of_frames_to_skip, without a bounds check: a large skip chain writes far out of
  * bounds (SIGSEGV). Never ship this. */
@@ -50,19 +52,12 @@ static int plane(void) {
     return 0;
 }
 
-int main(int argc, char **argv) {
-    if (argc < 2) { fprintf(stderr, "usage: skipchain IN.fba [OUT]\n"); return 2; }
-    FILE *fp = fopen(argv[1], "rb");
-    if (!fp) { perror(argv[1]); return 2; }
-    fseek(fp, 0, SEEK_END);
-    long size = ftell(fp);
-    fseek(fp, 0, SEEK_SET);
-    unsigned char *data = malloc(size > 0 ? size : 1);
-    if (fread(data, 1, size, fp) != (size_t)size) { fclose(fp); return 2; }
-    fclose(fp);
+/* One stream in memory: 2 = reject, 69 = headers parsed, payload not supported. */
+static int decode(unsigned char *data, long size) {
     buf = data;
     nbits = size * 8;
-    frames = calloc(256, sizeof(struct frame));
+    frame_number = -1;
+    memset(frames, 0, 256 * sizeof(struct frame));
     if (size < 4 || memcmp(data, "\x00\x00\x01\xba", 4) != 0) {
         fprintf(stderr, "skipchain: not a face object stream\n");
         return 2;
@@ -81,4 +76,36 @@ int main(int argc, char **argv) {
     }
     fprintf(stderr, "skipchain: headers parsed; payload decoding not supported\n");
     return 69;
+}
+
+/* fbaconf's persistent protocol (docs/harness.md): "<size> <output path>\n" + size bytes in,
+ * "<code>\n" out, until end of input. */
+static int serve(void) {
+    char line[4096];
+    while (fgets(line, sizeof line, stdin)) {
+        long size = strtol(line, NULL, 10);
+        if (size < 0 || size > (64L << 20)) return 2;
+        unsigned char *data = malloc(size > 0 ? size : 1);
+        if (fread(data, 1, size, stdin) != (size_t)size) { free(data); return 2; }
+        int code = decode(data, size);
+        free(data);
+        printf("%d\n", code);
+        fflush(stdout);
+    }
+    return 0;
+}
+
+int main(int argc, char **argv) {
+    if (argc < 2) { fprintf(stderr, "usage: skipchain IN.fba [OUT] | skipchain --serve\n"); return 2; }
+    frames = calloc(256, sizeof(struct frame));
+    if (strcmp(argv[1], "--serve") == 0) return serve();
+    FILE *fp = fopen(argv[1], "rb");
+    if (!fp) { perror(argv[1]); return 2; }
+    fseek(fp, 0, SEEK_END);
+    long size = ftell(fp);
+    fseek(fp, 0, SEEK_SET);
+    unsigned char *data = malloc(size > 0 ? size : 1);
+    if (fread(data, 1, size, fp) != (size_t)size) { fclose(fp); return 2; }
+    fclose(fp);
+    return decode(data, size);
 }

@@ -1,0 +1,127 @@
+"""Fuzzing throughput, measured side by side in one run (issue 19).
+
+Builds the planted test decoder (``tests/fuzz_decoders/skipchain.c``) and measures, each for
+the same number of seconds on the same machine:
+
+* ``bare spawn``: a loop that only ``posix_spawn``s the decoder on one conformance stream and
+  waits (no sandbox, no limits, no input generation) — the ceiling for spawning;
+* ``fuzz --spawn``: ``fbaconf fuzz`` with a fresh sandbox per input;
+* ``fuzz (fork server)``: the default, one sandbox per worker;
+* ``fuzz (persistent)``: the same program through ``[commands] serve``;
+* ``bare persistent``: a loop that only writes one input to ``skipchain --serve`` and reads
+  the answer — the ceiling for the persistent protocol.
+
+All fuzz runs are one decoder at a time (``-j 1``) with coverage measured on every 4th input
+(the default), minimisation excluded from execs/s. Prints execs/s and the ratios the issue
+asks for: harness vs bare spawn (goal >= 0.5), persistent vs fork server.
+
+    python benchmarks/bench_fuzz.py [--seconds S]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SKIPCHAIN = HERE.parent / "tests" / "fuzz_decoders" / "skipchain.c"
+
+
+def bare_spawn(exe: Path, stream: Path, seconds: float) -> float:
+    out = str(stream.parent / "out.fap")
+    n, t0 = 0, time.perf_counter()
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        while time.perf_counter() - t0 < seconds:
+            pid = os.posix_spawn(str(exe), [exe.name, str(stream), out], {},
+                                 file_actions=[(os.POSIX_SPAWN_DUP2, devnull, 2)])
+            os.waitpid(pid, 0)
+            n += 1
+    finally:
+        os.close(devnull)
+    return n / (time.perf_counter() - t0)
+
+
+def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
+    data = stream.read_bytes()
+    p = subprocess.Popen([str(exe), "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                         stderr=subprocess.DEVNULL)
+    n, t0 = 0, time.perf_counter()
+    try:
+        while time.perf_counter() - t0 < seconds:
+            p.stdin.write(f"{len(data)} /dev/null\n".encode() + data)
+            p.stdin.flush()
+            p.stdout.readline()
+            n += 1
+    finally:
+        p.stdin.close()
+        p.wait()
+    return n / (time.perf_counter() - t0)
+
+
+def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False) -> tuple[float, str, int]:
+    from fbaconf.fuzz.corpus import default_seeds
+    from fbaconf.fuzz.engine import Fuzzer
+    from fbaconf.fuzz.targets import DecoderTarget
+    from fbaconf.harness.adapters import load_manifest
+    target = DecoderTarget(load_manifest(manifest), work, timeout_s=1.0, fork_server=not spawn, persistent=not spawn)
+    mode = "persistent" if target.persistent else "fork-server" if target.fork_server else "spawn"
+    fz = Fuzzer(target, default_seeds(), seed=7, seconds=seconds, progress=False, coverage_every=4,
+                minimise_seconds=2, minimise_tests=50)
+    fz.run()
+    return fz.stats.rate, mode, fz.stats.execs
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=8.0)
+    args = ap.parse_args()
+    cc = shutil.which("cc") or shutil.which("gcc")
+    if cc is None:
+        print("bench_fuzz: no C compiler; nothing measured")
+        return 0
+    from fbaconf.conformance.suite import load_suites
+    tmp = Path(tempfile.mkdtemp(prefix="bench-fuzz-"))
+    try:
+        exe = tmp / "skipchain"
+        subprocess.run([cc, "-O2", "-o", str(exe), str(SKIPCHAIN)], check=True)
+        stream = tmp / "in.fba"
+        (suite,) = load_suites(names=["simple-l1-core"])
+        stream.write_bytes(suite.cases[0].input_path("fba").read_bytes())
+        base = ('name = "skipchain"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+                'faps_format = "fap"\n[commands]\ndecode = ["{manifest_dir}/skipchain", "{input}", "{faps_out}"]\n')
+        limits = "[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n"
+        (tmp / "spawn.toml").write_text(base + limits)
+        (tmp / "serve.toml").write_text(base + 'serve = ["{manifest_dir}/skipchain", "--serve"]\n' + limits)
+        s = args.seconds
+        rows = [("bare spawn (posix_spawn loop)", bare_spawn(exe, stream, s), "")]
+        for label, manifest, spawn in (("fuzz --spawn", "spawn.toml", True),
+                                       ("fuzz (fork server, default)", "spawn.toml", False),
+                                       ("fuzz (persistent, [commands] serve)", "serve.toml", False)):
+            rate, mode, execs = fuzz_rate(tmp / manifest, s, tmp / f"work-{len(rows)}", spawn=spawn)
+            rows.append((label, rate, f"{execs} inputs, mode {mode}"))
+        rows.append(("bare persistent (pipe round trip)", bare_persistent(exe, stream, s), ""))
+        print(f"fuzzing throughput, {s:g} s each, one decoder at a time, {os.cpu_count()} CPUs")
+        for label, rate, note in rows:
+            print(f"  {label:<40} {rate:9,.0f} execs/s  {note}")
+        r = {label: rate for label, rate, _ in rows}
+        bare = r["bare spawn (posix_spawn loop)"]
+        fork = r["fuzz (fork server, default)"]
+        pers = r["fuzz (persistent, [commands] serve)"]
+        print(f"  harness (fork server) / bare spawn      {fork / bare:6.2f}   (goal >= 0.50)")
+        print(f"  harness (--spawn) / bare spawn          {r['fuzz --spawn'] / bare:6.2f}")
+        print(f"  persistent / fork server                {pers / fork:6.2f}")
+        print(f"  persistent / bare spawn                 {pers / bare:6.2f}")
+        print(f"  persistent harness / bare persistent    {pers / r['bare persistent (pipe round trip)']:6.2f}")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,201 @@
+"""The persistent decoder protocol: ``[commands] serve`` keeps one decoder process alive for
+many inputs (AFL++'s persistent mode, over a pipe).
+
+The harness starts ``serve`` once per worker, sandboxed and limited like any decoder (its
+folder, its view, address-space and file-size limits for the whole process — no CPU-time
+limit, which would add up over inputs), with stdin and stdout as pipes. Per input::
+
+    harness -> decoder:  "<size> <output path>\\n" then <size> bytes (the stream)
+    decoder -> harness:  "<code>[ <message>]\\n"
+
+``<code>`` means what the exit code of ``decode`` means (0 decoded, the output written to
+the path; 69 not supported; a reject code from ``reject_exit_codes``; anything else is a
+Fail). The output path's extension is the manifest's ``faps_format``. The process ends
+when its stdin closes.
+
+A crash (the process dies: a signal, a sanitizer abort, a panic), a hang (no answer within
+``timeout_s``) or a memory or output blow-up is the ending of the input being decoded; the
+harness kills the process and starts a new one for the next input. Whatever the decoder
+wrote on stderr while decoding an input is that input's stderr (crash reports are read
+from it), so a report printed without dying is judged as a crash too. The result is a
+:class:`~fbaconf.harness.sandbox.ProcResult`, judged by :mod:`.exits` like a spawned
+decoder's.
+"""
+from __future__ import annotations
+
+import os
+import select
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from . import sandbox
+from .sandbox import Limits, ProcResult, View
+
+
+class PersistentDecoder:
+    """One ``serve`` process for one worker folder; :meth:`run` sends one input."""
+
+    def __init__(self, argv: list[str], root: Path, workdir: Path, view: View, limits: Limits,
+                 env: dict[str, str] | None = None) -> None:
+        self.argv = list(argv)
+        self.root = Path(root).resolve()
+        self.workdir = Path(workdir).resolve()
+        self.view = view
+        self.limits = limits
+        self.env = env
+        self.proc: subprocess.Popen | None = None
+        self.cg = None
+        self.starts = 0
+        self.io = self.root / ".io"
+        self._err = None
+        self._buf = b""
+        self._answers = 0
+
+    def _start(self) -> None:
+        self.io.mkdir(parents=True, exist_ok=True)
+        (self.workdir / "tmp").mkdir(parents=True, exist_ok=True)
+        inner = list(self.argv)
+        if sandbox.isolation() == "bwrap":
+            inner = sandbox._bwrap_argv(self.view, self.workdir) + inner
+        self.cg = sandbox._Cgroups(self.limits)
+        lim = self.limits
+        as_bytes = lim.memory_mb * 2**20 if lim.memory_kind == "address-space" else 0
+        full = [os.path.realpath(sys.executable), "-I", "-S", str(sandbox.LIMIT_LAUNCHER), str(as_bytes),
+                str(lim.output_mb * 2**20), "0", *self.cg.launcher_args(), "--", *inner]
+        self._err = open(self.io / "stderr", "wb+")
+        try:
+            self.proc = subprocess.Popen(full, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err,
+                                         cwd=self.workdir, start_new_session=True, close_fds=True,
+                                         env=sandbox.decoder_env(self.workdir, self.env))
+        except OSError as e:
+            raise RuntimeError(f"cannot start the persistent decoder: {e}") from e
+        self._buf = b""
+        self.starts += 1
+        sandbox._RUNNING.add(self.proc.pid)
+
+    def close(self) -> None:
+        p, self.proc = self.proc, None
+        if p is not None:
+            sandbox._RUNNING.discard(p.pid)
+            for f in (p.stdin,):
+                try:
+                    f.close()  # end of input: a well-behaved server exits
+                except OSError:
+                    pass
+            try:
+                p.wait(timeout=0.5)
+            except subprocess.TimeoutExpired:
+                pass
+            sandbox._kill_group(p.pid)
+            try:
+                p.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                pass
+            p.stdout.close()
+        if self.cg is not None:
+            self.cg.close()
+            self.cg = None
+        if self._err is not None:
+            self._err.close()
+            self._err = None
+
+    def run(self, data: bytes, out_path: str) -> ProcResult:
+        """Decode one input; its ending as a :class:`ProcResult` (``returncode`` = the answered
+        code, or the process's own ending when it died)."""
+        return self.start(data, out_path)()
+
+    def start(self, data: bytes, out_path: str):
+        """Send one input; return a function that waits for its ending (one input at a time)."""
+        if sandbox.stopping():
+            res = ProcResult(self.argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
+            return lambda: res
+        if self.proc is None or self.proc.poll() is not None:
+            self.close()
+            self._start()
+        err_start = os.fstat(self._err.fileno()).st_size
+        t0 = time.perf_counter()
+        try:
+            self.proc.stdin.write(f"{len(data)} {out_path}\n".encode() + data)
+            self.proc.stdin.flush()
+            sent = True
+        except (BrokenPipeError, OSError):
+            sent = False
+
+        def finish() -> ProcResult:
+            line = self._read_line(t0 + self.limits.timeout_s) if sent else b""
+            elapsed = time.perf_counter() - t0
+            if not line:  # None: no answer in time; b"": the process closed its end (it died)
+                return self._ended(err_start, elapsed, timed_out=line is None)
+            return self._answered(line, err_start, elapsed)
+        return finish
+
+    def _answered(self, line: bytes, err_start: int, elapsed: float) -> ProcResult:
+        err = _tail_from(self._err.fileno(), err_start)
+        text = line.decode("utf-8", "replace").strip()
+        head = text.split(" ", 1)[0]
+        if not head.lstrip("-").isdigit():
+            self.close()  # the protocol is broken: start afresh, judge this answer
+            return ProcResult(self.argv, 125, elapsed_s=elapsed,
+                              stderr_tail=err + f"\n[persistent] not an answer line: {text[:120]!r}")
+        res = ProcResult(self.argv, int(head), elapsed_s=elapsed, stderr_tail=err)
+        self._answers += 1
+        if res.returncode == 0 or self._answers % 16 == 0:  # each file is capped by RLIMIT_FSIZE anyway
+            res.output_bytes = sandbox.tree_size(self.workdir, stop_at=self.limits.output_mb * 2**20 * 4)
+            if res.output_bytes > self.limits.output_mb * 2**20:
+                res.output_limit_hit = True
+        return res
+
+    def _ended(self, err_start: int, elapsed: float, timed_out: bool) -> ProcResult:
+        """The process died or hung while decoding: its ending, then a fresh start next time."""
+        p = self.proc
+        if timed_out:
+            sandbox._kill_group(p.pid)
+        if not timed_out:  # it died: give it a moment to be reaped, else it hangs with its stdout closed
+            for _ in range(200):
+                if os.waitid(os.P_PID, p.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None:
+                    break
+                time.sleep(0.005)
+            else:
+                timed_out = True
+                sandbox._kill_group(p.pid)
+        try:
+            _pid, status, ru = os.wait4(p.pid, 0)
+        except ChildProcessError:
+            status, ru = 0, None
+        p.returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
+        oom, pids_hit = self.cg.oom_killed(), self.cg.pids_exhausted()
+        err = _tail_from(self._err.fileno(), err_start)
+        res = sandbox.result(self.argv, self.limits, status, ru, elapsed, timed_out=timed_out, mem_hit=False,
+                             oom=oom, pids_hit=pids_hit, bwrap_status=sandbox.isolation() == "bwrap",
+                             stdout_tail="", stderr_tail=err, measure_dirs=[self.workdir])
+        self.close()
+        if res.returncode == 0 and not timed_out:  # it exited cleanly in the middle of an input
+            res.returncode = 125
+            res.stderr_tail += "\n[persistent] the decoder exited without answering"
+        return res
+
+    def _read_line(self, deadline: float) -> bytes | None:
+        """One answer line; b"" when the process closed its stdout; None on timeout."""
+        fd = self.proc.stdout.fileno()
+        while b"\n" not in self._buf:
+            left = deadline - time.perf_counter()
+            if left <= 0 or not select.select([fd], [], [], left)[0]:
+                return None
+            chunk = os.read(fd, 65536)
+            if not chunk:
+                return b""
+            self._buf += chunk
+            if len(self._buf) > 65536:
+                return self._buf[:200]
+        line, _, self._buf = self._buf.partition(b"\n")
+        return line
+
+
+def _tail_from(fd: int, start: int) -> str:
+    size = os.fstat(fd).st_size
+    at = max(start, size - sandbox.TAIL_BYTES)
+    data = os.pread(fd, size - at, at) if size > at else b""
+    return ("…" if at > start else "") + data.decode("utf-8", "replace")
+

@@ -1,0 +1,171 @@
+"""The fuzzer's fast paths (issue 19): one sandbox per worker with a fork server, and the
+persistent decoder protocol. Each must judge an input exactly as a fresh sandbox would, keep
+inputs apart (files, processes, stderr), and survive a decoder that dies or hangs."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+
+from fbaconf.fuzz.generators import Entry
+from fbaconf.fuzz.targets import DecoderTarget
+from fbaconf.harness import adapters, exits
+from fbaconf.harness.sandbox import Limits, default_view
+from fbaconf.harness.spawner import ForkServer
+
+STREAM = b"\x00\x00\x01\xba" + bytes(40)
+
+
+def _manifest(tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 5") -> Path:
+    prog = tmp_path / "dec.py"
+    prog.write_text("import os, signal, sys, time\n" + body)
+    lines = ['name = "t"', 'claims = ["simple@1"]', 'inputs = ["fba"]', 'outputs = ["faps"]', 'faps_format = "fap"',
+             "[commands]", f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]']
+    if serve is not None:
+        srv = tmp_path / "serve.py"
+        srv.write_text("import os, signal, sys, time\n" + serve)
+        lines.append(f'serve = ["{{python}}", "{srv}"]')
+    lines += ["[limits]", limits]
+    m = tmp_path / "t.toml"
+    m.write_text("\n".join(lines) + "\n")
+    return m
+
+
+def _target(tmp_path: Path, m: Path, **kw) -> DecoderTarget:
+    return DecoderTarget(adapters.resolve(m), tmp_path / "work", oracle=False, **kw)
+
+
+def _alive(marker: str) -> bool:
+    out = subprocess.run(["ps", "-eo", "args"], capture_output=True, text=True).stdout
+    return any(marker in line and "ps -eo" not in line for line in out.splitlines())
+
+
+def test_inputs_do_not_see_each_others_files(tmp_path):
+    """Every file an input's decoder leaves in its folder (outputs, tmp, the folder itself) is
+    gone before the next input: the second run exits 7 if it finds any."""
+    body = """work = os.getcwd()
+left = sorted(n for d in (work, os.path.join(work, 'out'), os.path.join(work, 'out', 'images'), os.environ['TMPDIR'])
+              for n in os.listdir(d) if n not in ('in', 'out', 'tmp', 'images', 'faces'))
+if left:
+    sys.stderr.write('leftovers: %r\\n' % left); sys.exit(7)
+for d in (work, os.path.join(work, 'out', 'images'), os.environ['TMPDIR']):
+    open(os.path.join(d, 'junk'), 'w').write('x')
+os.mkdir(os.path.join(work, 'out', 'sub'))
+sys.exit(69)
+"""
+    t = _target(tmp_path, _manifest(tmp_path, body))
+    try:
+        for _ in range(3):
+            assert t.execute(Entry(STREAM)).verdict is None  # 69 each time, never 7
+    finally:
+        t.close()
+
+
+def test_a_process_left_behind_dies_with_its_input(tmp_path):
+    marker = f"sleep {900 + uuid.uuid4().int % 99}.{uuid.uuid4().int % 997}"
+    body = f"""import subprocess
+subprocess.Popen({marker.split()!r}, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+time.sleep(0.2)
+sys.exit(69)
+"""
+    t = _target(tmp_path, _manifest(tmp_path, body))
+    try:
+        assert t.execute(Entry(STREAM)).verdict is None
+        assert not _alive(marker)  # even though it left its session
+    finally:
+        t.close()
+
+
+CASES = [  # argv (after the interpreter, or a program), the ending's kind
+    (["-c", "import time; time.sleep(10)"], "timeout"),
+    (["-c", "x = bytearray(800 << 20)"], "memory"),
+    (["/bin/dd", "if=/dev/zero", "of=big", "bs=1M", "count=5"], "output-limit"),  # SIGXFSZ
+    (["-c", "open('big', 'wb').write(bytes(5 << 20))"], "crash"),  # Python ignores SIGXFSZ: EFBIG, a traceback
+    (["/nonexistent/decoder"], "setup"),
+    (["-c", "import os, signal; os.kill(os.getpid(), signal.SIGSEGV)"], "crash"),
+    (["-c", "import sys; print('out'); sys.stderr.write('err'); sys.exit(1)"], "reject"),
+]
+
+
+def test_fork_server_judges_like_a_fresh_sandbox(tmp_path):
+    """The limits a one-shot launch sets hold in each forked decoder (time, address space,
+    file size, exec failure, signals), and :mod:`exits` judges the two paths alike."""
+    from fbaconf.harness import sandbox
+    root = tmp_path / "w"
+    (root / "case" / "in").mkdir(parents=True)
+    lim = Limits(timeout_s=1.0, memory_mb=300, output_mb=4)
+    py = os.path.realpath(sys.executable)
+    view = default_view([py], root / "case")
+    with ForkServer(root, view, lim) as fs:
+        for args, kind in CASES:
+            argv = args if args[0].startswith("/") else [py, *args]
+            r = fs.run(argv, root / "case")
+            one = sandbox.run(argv, root / "case", lim, view=view)
+            got = (exits.classify(r, lim, {1}).kind, exits.classify(one, lim, {1}).kind)
+            assert got == (kind, kind), (args, r, one)
+            if kind != "setup":  # (bubblewrap says exit 1 where the fork server says 127: both set-up)
+                assert r.signal == one.signal and r.returncode == one.returncode
+        r = fs.run([py, "-c", "import sys; print('out'); sys.stderr.write('err'); sys.exit(3)"], root / "case")
+        assert (r.returncode, r.stdout_tail.strip(), r.stderr_tail) == (3, "out", "err")
+        assert fs.starts == 1  # one server for all of it
+
+
+SERVE = """def answer(code):
+    print(code, flush=True)
+n = 0
+while True:
+    line = sys.stdin.buffer.readline()
+    if not line:
+        break
+    size, out = line.decode().rstrip('\\n').split(' ', 1)
+    data = sys.stdin.buffer.read(int(size))
+    n += 1
+    sys.stderr.write('input %d of this process\\n' % n)
+    if b'SEGV' in data:
+        os.kill(os.getpid(), signal.SIGSEGV)
+    if b'HANG' in data:
+        time.sleep(60)
+    if b'ASAN' in data:
+        sys.stderr.write('==1==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x1\\n')
+    if b'JUNK' in data:
+        print('what?', flush=True)
+        continue
+    if b'QUIT' in data:
+        sys.exit(0)
+    answer(1 if b'BAD' in data else 69)
+"""
+
+
+def test_persistent_protocol_survives_crashes_and_hangs(tmp_path):
+    m = _manifest(tmp_path, "sys.exit(69)", serve=SERVE, limits="timeout_s = 1")
+    t = _target(tmp_path, m)
+    assert t.persistent
+    try:
+        def run(payload):
+            return t.execute(Entry(STREAM + payload)).verdict
+        assert run(b"") is None and run(b"BAD") is None  # not supported; a clean reject
+        v = run(b"SEGV")
+        assert v.cls == "crash" and "SIGSEGV" in v.signature
+        assert run(b"") is None  # a fresh process took over
+        v = run(b"ASAN")
+        assert v.cls == "crash" and "AddressSanitizer" in v.message  # a report without dying is a crash
+        assert run(b"") is None  # ... of that input only: the next one's stderr is its own
+        assert run(b"HANG").cls == "hang"
+        assert run(b"") is None
+        assert run(b"JUNK").cls == "unexpected-exit"  # not an answer line
+        assert run(b"QUIT").cls == "unexpected-exit"  # exited without answering
+        assert run(b"") is None
+        assert t._workers[0].server.starts == 5  # the first, and one after SEGV, HANG, JUNK and QUIT
+    finally:
+        t.close()
+
+
+def test_serve_takes_no_per_input_placeholders(tmp_path):
+    m = _manifest(tmp_path, "sys.exit(69)", serve="pass")
+    m.write_text(m.read_text().replace('serve = ["{python}", ', 'serve = ["{python}", "{input}", '))
+    with pytest.raises(adapters.ManifestError, match="serve"):
+        adapters.load_manifest(m)
