@@ -20,7 +20,7 @@ from .model import SCENE_FEATURES, STREAM_FEATURES, features_of
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
 from .text import mutate_text, text_seeds
-from .targets import ExecResult, FuzzSetupError, SelfTarget, Verdict
+from .targets import ExecResult, FuzzSetupError, Run, SelfTarget, Verdict
 
 
 @dataclass
@@ -218,29 +218,28 @@ class Fuzzer:
 
     def _run_pipelined(self, deadline: float) -> None:
         """One decoder at a time, overlapped with the loop's own work (targets with ``start``:
-        the decoder runs while this thread makes the next input and records the previous one).
-        Input k + 1 is made before input k is recorded (its ``corpus_size`` says which corpus it
-        was made from, so a run is replayable as ever)."""
+        input k + 1 is sent while input k runs and starts the moment it ends; this thread
+        judges and records input k and makes input k + 2 meanwhile). Input k + 1 is made before input k is recorded (its ``corpus_size`` says
+        which corpus it was made from, so a run is replayable as ever)."""
         if not self._more(0, deadline):
             return
-        start = getattr(self.target, "start", None) or (lambda inp: (lambda out=self.target.execute(inp): out))
+        start = getattr(self.target, "start", None) or (lambda inp: Run.done(self.target.execute(inp)))
         index, cur = 0, self.make_input(0)
-        wait = start(cur)
+        run = start(cur)
         while True:
             nxt = self.make_input(index + 1) if self._more(index + 1, deadline) else None
-            out = wait()
-            # the next input runs while this one is recorded, unless this one is a finding (its
-            # minimisation needs the decoder to itself)
-            wait = start(nxt) if nxt is not None and out.verdict is None else None
+            # queued behind this one: it starts the moment this one ends, while this one is judged
+            after = start(nxt) if nxt is not None else None
+            out = run.result()
+            if out.verdict is not None and after is not None:
+                after.result()  # a finding's minimisation needs the decoder to itself
             self._record(index, cur, out, deadline)
             self.progress.update(self.stats)
             if nxt is None or self.stopped:
-                if wait is not None:
-                    wait()  # started, never recorded: the run stops here
+                if after is not None:
+                    after.result()  # started, never recorded: the run stops here
                 return
-            index, cur = index + 1, nxt
-            if wait is None:
-                wait = start(cur)
+            index, cur, run = index + 1, nxt, after
 
     def _run_batches(self, deadline: float) -> None:
         index = 0

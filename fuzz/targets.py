@@ -53,17 +53,44 @@ _KEEP = {"case": frozenset(("in", "out", "tmp")), "out": frozenset(("images", "f
 
 
 @dataclass
-class _Worker:
-    """One worker thread's folder (reused input after input) and fork server."""
-    root: Path
-    workdir: Path
-    server: object = None
-    job: object = None
-    input: Path | None = None
-    dirs: list = field(default_factory=list)
-    argv: list = field(default_factory=list)
+class _Slot:
+    """One of a worker's two case folders."""
+    job: object
+    input: Path
+    dirs: list
     input_fd: int | None = None
     input_len: int = 0
+
+
+@dataclass
+class _Worker:
+    """One worker thread's case folders (used in turn) and fork server or persistent decoder."""
+    root: Path
+    slots: list = field(default_factory=list)
+    turn: int = 0
+    server: object = None
+    argv: list = field(default_factory=list)
+
+
+class Run:
+    """An input under way: ``wait()`` until the decoder ended, ``result()`` its ExecResult."""
+
+    def __init__(self, wait, judge) -> None:
+        self._wait, self._judge, self._out = wait, judge, None
+
+    @classmethod
+    def done(cls, out: "ExecResult") -> "Run":
+        r = cls(lambda: None, lambda: out)
+        return r
+
+    def wait(self) -> None:
+        self._wait()
+
+    def result(self) -> "ExecResult":
+        if self._out is None:
+            self._wait()
+            self._out = self._judge()
+        return self._out
 
 
 class DecoderTarget:
@@ -150,35 +177,46 @@ class DecoderTarget:
         (outd / "faces").mkdir()
         return Job(workdir=workdir, values=values, frames=0)
 
-    def _worker(self):
-        """This thread's worker: its folder, reused input after input, and (command
-        decoders) its fork server."""
+    def _worker(self) -> "_Worker":
+        """This thread's worker: two case folders used in turn (one input runs in one while
+        the previous input's outputs are judged from the other), reused input after input, and
+        (command decoders) its fork server or persistent decoder."""
         w = getattr(self._local, "worker", None)
         if w is None:
             root = Path(tempfile.mkdtemp(prefix="w-", dir=self.work_root))
-            w = self._local.worker = _Worker(root, root / "case")
-            w.job = self._job(b"", w.workdir)
-            w.input = Path(w.job.values["input"] if self.kind != "scene" else w.job.values["scene"])
-            w.dirs = [str(w.workdir), str(w.workdir / "out"), *(str(w.workdir / "out" / d) for d in ("images", "faces")),
-                      str(w.workdir / "tmp")]
+            w = self._local.worker = _Worker(root)
+            for i in range(2):
+                job = self._job(b"", root / f"case{i}")
+                d = job.workdir
+                w.slots.append(_Slot(job, Path(job.values["input"] if self.kind != "scene" else job.values["scene"]),
+                                     [str(d), str(d / "out"), str(d / "out" / "images"), str(d / "out" / "faces"),
+                                      str(d / "tmp")]))
             with self._workers_lock:
                 self._workers.append(w)
         return w
 
-    def _reuse(self, w: "_Worker", data: bytes, write_input: bool = True):
-        """The worker's job for the next input: the input rewritten in place (through a
-        descriptor kept open), the outputs and everything else the previous input left
-        removed."""
-        for d in w.dirs:
-            empty_dir(d, keep=_KEEP.get(os.path.basename(d), frozenset()) if d != w.dirs[0] else _KEEP["case"])
+    def _reuse(self, slot: "_Slot", data: bytes, write_input: bool = True):
+        """The slot's job for the next input: the input rewritten in place (through a
+        descriptor kept open), the outputs and everything else an earlier input left removed."""
+        for d in slot.dirs:
+            empty_dir(d, keep=_KEEP.get(os.path.basename(d), frozenset()) if d != slot.dirs[0] else _KEEP["case"])
         if write_input:
-            if w.input_fd is None:
-                w.input_fd = os.open(w.input, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
-            os.pwrite(w.input_fd, data, 0)
-            if len(data) < w.input_len:
-                os.ftruncate(w.input_fd, len(data))
-            w.input_len = len(data)
-        return w.job
+            if slot.input_fd is None:
+                slot.input_fd = os.open(slot.input, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
+            os.pwrite(slot.input_fd, data, 0)
+            if len(data) < slot.input_len:
+                os.ftruncate(slot.input_fd, len(data))
+            slot.input_len = len(data)
+        return slot.job
+
+    def _view(self, w: "_Worker", argv: list[str]):
+        """The sandbox view of a worker: the decoder's own view of case folder 0, plus folder 1."""
+        from fbaconf.harness.runner import hidden_from_decoders
+        view = self.adapter.sandbox_view(argv, w.slots[0].job.workdir, hidden=hidden_from_decoders())
+        other = w.slots[1].job.workdir
+        view.writable.append(other)
+        view.read_only_inside.append(other / "in")
+        return view
 
     def close(self) -> None:
         """Stop every worker's fork server (they restart on the next input)."""
@@ -188,9 +226,10 @@ class DecoderTarget:
             if w.server is not None:
                 w.server.close()
                 w.server = None
-            if w.input_fd is not None:
-                os.close(w.input_fd)
-                w.input_fd = None
+            for slot in w.slots:
+                if slot.input_fd is not None:
+                    os.close(slot.input_fd)
+                    slot.input_fd = None
         self._local = threading.local()
 
     def argv_for(self, job) -> list[str]:
@@ -200,33 +239,33 @@ class DecoderTarget:
             raise FuzzSetupError(f"[commands] decode needs {{{e.args[0]}}}, which a fuzz input does not have") from None
 
     def execute(self, inp: Entry) -> ExecResult:
-        return self.start(inp)()
+        return self.start(inp).result()
 
-    def start(self, inp: Entry):
-        """Start running ``inp`` and return a function that waits for its :class:`ExecResult`
-        (through a fork server, the decoder runs while the caller makes the next input)."""
-        if self.persistent:
+    def start(self, inp: Entry) -> "Run":
+        """Start running ``inp``: ``result()`` on the :class:`Run` judges it. Through a fork
+        server or a persistent decoder the decoder runs while the caller works, and an input
+        started while another runs is queued behind it (one decoder at a time, no gap); at
+        most two inputs of a worker are under way (its two case folders)."""
+        if self.persistent or self.fork_server:
             w = self._worker()
-            job = self._reuse(w, inp.data, write_input=False)  # the input travels on stdin
-            if w.server is None:
+            k, w.turn = w.turn, w.turn ^ 1
+            slot = w.slots[k]
+            job = self._reuse(slot, inp.data, write_input=not self.persistent)  # persistent: on stdin
+            if w.server is None and self.persistent:
                 from fbaconf.harness.persistent import PersistentDecoder
-                from fbaconf.harness.runner import hidden_from_decoders
-                w.argv = self.adapter.argv("serve", job)
-                view = self.adapter.sandbox_view(w.argv, job.workdir, hidden=hidden_from_decoders())
-                w.server = PersistentDecoder(w.argv, w.root, job.workdir, view, self.limits, env=self.adapter.env)
-            wait = w.server.start(inp.data, job.values["faps_out"])
-            return lambda: ExecResult(self._judge(inp, job, wait()))
-        if self.fork_server:
-            w = self._worker()
-            job = self._reuse(w, inp.data)
-            if w.server is None:
-                from fbaconf.harness.runner import hidden_from_decoders
+                w.argv = [self.adapter.argv("serve", slot.job)]
+                w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),
+                                             self.limits, env=self.adapter.env)
+            elif w.server is None:
                 from fbaconf.harness.spawner import ForkServer
-                w.argv = self.argv_for(job)  # the worker's paths never change
-                view = self.adapter.sandbox_view(w.argv, job.workdir, hidden=hidden_from_decoders())
-                w.server = ForkServer(w.root, view, self.limits, env=self.adapter.env, sum_outputs_every=16)
-            wait = w.server.start(w.argv, job.workdir)
-            return lambda: ExecResult(self._judge(inp, job, wait()))
+                w.argv = [self.argv_for(s.job) for s in w.slots]  # a slot's paths never change
+                w.server = ForkServer(w.root, self._view(w, w.argv[0]), self.limits, env=self.adapter.env,
+                                      sum_outputs_every=16, slots=2)
+            if self.persistent:
+                pending = w.server.start(inp.data, job.values["faps_out"])
+            else:
+                pending = w.server.start(w.argv[k], job.workdir, slot=k)
+            return Run(pending.wait, lambda: ExecResult(self._judge(inp, job, pending.result())))
         workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
         try:
             job = self._job(inp.data, workdir)
@@ -244,7 +283,7 @@ class DecoderTarget:
                 remove_tree(workdir)
             except OSError:
                 pass
-        return lambda: out
+        return Run.done(out)
 
     def _judge(self, inp: Entry, job, res) -> Verdict | None:
         """The finding (or None) for one finished decoder process."""

@@ -6,14 +6,15 @@ input, several times the decoder's own run; AFL's fork server showed the way: pa
 sandbox once per worker, keep only fork + exec per input. The client is
 :class:`fbaconf.harness.spawner.ForkServer`.
 
-Run as ``python -I -S forkserver.py --fds OUT ERR [--reap-namespace]`` with the decoder's
-stdout and stderr files open as descriptors OUT and ERR (opened by the harness outside the
-sandbox: the decoder can write them, never find them by path). Kept to the standard library's ``os``,
+Run as ``python -I -S forkserver.py --fds OUT ERR [OUT ERR ...] [--reap-namespace]`` with
+the decoder's stdout and stderr files open as descriptor pairs, one pair per slot (opened by
+the harness outside the sandbox: the decoder can write them, never find them by path; with
+two slots the harness reads one input's while the next one runs). Kept to the standard library's ``os``,
 ``resource``, ``select``, ``signal``, ``struct``, ``json``, ``sys`` and ``time``, so it
 starts in milliseconds.
 
 Protocol on stdin/stdout: each message is a 4-byte big-endian length and that many bytes
-of JSON. Request: ``argv``, ``cwd``, ``env``, ``as`` (address-space bytes, 0 = none),
+of JSON. Request: ``argv``, ``cwd``, ``env``, ``slot`` (which descriptor pair), ``as`` (address-space bytes, 0 = none),
 ``fsize`` (bytes), ``cpu`` (seconds), ``timeout`` (seconds), ``rss_mb`` (0 = not sampled).
 Reply: ``status`` (the raw wait status), ``utime``, ``stime``, ``maxrss_kb``, ``elapsed``,
 ``timed_out``, ``mem_hit``. Exit code 127 with ``fbaconf-limit: cannot execute …`` on stderr
@@ -33,7 +34,7 @@ import struct
 import sys
 import time
 
-OUT_FD, ERR_FD = 3, 4  # replaced by --fds OUT ERR
+SLOTS = [(3, 4)]  # (stdout, stderr) descriptor pairs, from --fds OUT ERR [OUT ERR ...]
 
 def _read_exact(n):
     buf = b""
@@ -70,15 +71,15 @@ def _find(prog, env):
     return prog
 
 
-def _child(req):
+def _child(req, out_fd, err_fd):
     """In the forked child: own session, limits, descriptors, folder; then exec."""
     argv = req["argv"]
     try:
         os.setsid()
         null = os.open("/dev/null", os.O_RDONLY)
         os.dup2(null, 0)
-        os.dup2(OUT_FD, 1)
-        os.dup2(ERR_FD, 2)
+        os.dup2(out_fd, 1)
+        os.dup2(err_fd, 2)
         os.closerange(3, 1 << 16)
         for s in (signal.SIGPIPE, signal.SIGINT, signal.SIGTERM):
             signal.signal(s, signal.SIG_DFL)
@@ -122,50 +123,57 @@ SPAWN_MIN_AS = 256 << 20  # below this address-space limit the server forks (it 
 _LIMITS = (resource.RLIMIT_AS, resource.RLIMIT_FSIZE, resource.RLIMIT_CPU)
 
 
-def _spawn(req):
+_applied = {"limits": None, "cwd": None}
+
+
+def _spawn(req, out_fd, err_fd):
     """posix_spawn (vfork + exec: ~0.1 ms, against ~0.5 ms for forking this process) with the
-    limits set on the server for the instant of the spawn and restored after; the child's
-    signal dispositions reset. Returns the pid, or None after writing the exec error."""
+    child's limits as the server's own soft limits (set once per set of limits: the server
+    itself stays far below them, ignores SIGXCPU and writes no file) and the child's signal
+    dispositions reset. Returns the pid, or None after writing the exec error."""
     argv, env = req["argv"], req["env"]
-    saved = [resource.getrlimit(r) for r in _LIMITS]
-    os.chdir(req["cwd"])
-    try:
-        for which, value in zip(_LIMITS, (req["as"], req["fsize"], req["cpu"])):
+    limits = (req["as"], req["fsize"], req["cpu"])
+    if _applied["limits"] != limits:
+        for which, value in zip(_LIMITS, limits):
             _set_soft(which, value)
+        _applied["limits"] = limits
+    if _applied["cwd"] != req["cwd"]:
+        os.chdir(req["cwd"])
+        _applied["cwd"] = req["cwd"]
+    try:
         return os.posix_spawn(
             _find(argv[0], env), argv, env, setsid=True,
             setsigdef=(signal.SIGPIPE, signal.SIGXCPU, signal.SIGXFSZ, signal.SIGINT, signal.SIGTERM),
             file_actions=[(os.POSIX_SPAWN_OPEN, 0, "/dev/null", os.O_RDONLY, 0),
-                          (os.POSIX_SPAWN_DUP2, OUT_FD, 1), (os.POSIX_SPAWN_DUP2, ERR_FD, 2)])
+                          (os.POSIX_SPAWN_DUP2, out_fd, 1), (os.POSIX_SPAWN_DUP2, err_fd, 2)])
     except OSError as e:
-        os.write(ERR_FD, f"fbaconf-limit: cannot execute {argv[0]!r}: {e.strerror}\n".encode())
+        os.write(err_fd, f"fbaconf-limit: cannot execute {argv[0]!r}: {e.strerror}\n".encode())
         return None
-    finally:
-        for which, lim in zip(_LIMITS, saved):
-            resource.setrlimit(which, lim)
-        os.chdir("/")
 
 
 def _set_soft(which, value):
-    """The soft limit only (the hard one stays, so the server can restore its own)."""
-    if value > 0:
-        soft, hard = resource.getrlimit(which)
-        if hard != resource.RLIM_INFINITY:
-            value = min(value, hard)
-        resource.setrlimit(which, (value, hard))
+    """The soft limit only (the hard one stays, so a later request can raise it again);
+    0 = no limit."""
+    _soft, hard = resource.getrlimit(which)
+    if value <= 0:
+        value = hard
+    elif hard != resource.RLIM_INFINITY:
+        value = min(value, hard)
+    resource.setrlimit(which, (value, hard))
 
 
 def serve(req, reap):
-    for fd in (OUT_FD, ERR_FD):
+    out_fd, err_fd = SLOTS[int(req.get("slot", 0))]
+    for fd in (out_fd, err_fd):
         os.ftruncate(fd, 0)
         os.lseek(fd, 0, os.SEEK_SET)
     t0 = time.monotonic()
     if 0 < req["as"] < SPAWN_MIN_AS:
         pid = os.fork()
         if pid == 0:
-            _child(req)
+            _child(req, out_fd, err_fd)
     else:
-        pid = _spawn(req)
+        pid = _spawn(req, out_fd, err_fd)
         if pid is None:
             return {"status": 127 << 8, "utime": 0.0, "stime": 0.0, "maxrss_kb": 0,
                     "elapsed": time.monotonic() - t0, "timed_out": False, "mem_hit": False}
@@ -211,14 +219,18 @@ def serve(req, reap):
 
 
 def main():
-    global OUT_FD, ERR_FD
     args = sys.argv[1:]
     reap = "--reap-namespace" in args
     if "--fds" in args:
-        i = args.index("--fds")
-        OUT_FD, ERR_FD = int(args[i + 1]), int(args[i + 2])
-    for fd in (OUT_FD, ERR_FD):
-        os.set_inheritable(fd, False)  # children get them as 1 and 2 only
+        nums = []
+        for a in args[args.index("--fds") + 1:]:
+            if not a.isdigit():
+                break
+            nums.append(int(a))
+        SLOTS[:] = list(zip(nums[0::2], nums[1::2]))
+    for pair in SLOTS:
+        for fd in pair:
+            os.set_inheritable(fd, False)  # children get one pair as 1 and 2 only
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
     signal.signal(signal.SIGXCPU, signal.SIG_IGN)  # the server's own CPU time may pass a child's limit
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)

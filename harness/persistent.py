@@ -23,6 +23,7 @@ decoder's.
 """
 from __future__ import annotations
 
+import collections
 import os
 import select
 import subprocess
@@ -51,7 +52,10 @@ class PersistentDecoder:
         self.io = self.root / ".io"
         self._err = None
         self._buf = b""
+        self._queue: collections.deque = collections.deque()
         self._answers = 0
+        self._err_mark = 0
+        self._last_done = 0.0
 
     def _start(self) -> None:
         self.io.mkdir(parents=True, exist_ok=True)
@@ -72,6 +76,7 @@ class PersistentDecoder:
         except OSError as e:
             raise RuntimeError(f"cannot start the persistent decoder: {e}") from e
         self._buf = b""
+        self._err_mark = 0
         self.starts += 1
         sandbox._RUNNING.add(self.proc.pid)
 
@@ -104,35 +109,40 @@ class PersistentDecoder:
     def run(self, data: bytes, out_path: str) -> ProcResult:
         """Decode one input; its ending as a :class:`ProcResult` (``returncode`` = the answered
         code, or the process's own ending when it died)."""
-        return self.start(data, out_path)()
+        return self.start(data, out_path).result()
 
-    def start(self, data: bytes, out_path: str):
-        """Send one input; return a function that waits for its ending (one input at a time)."""
+    def start(self, data: bytes, out_path: str) -> "Answer":
+        """Send one input; the :class:`Answer` waits for it (one input at a time)."""
+        a = Answer(self)
         if sandbox.stopping():
-            res = ProcResult(self.argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
-            return lambda: res
-        if self.proc is None or self.proc.poll() is not None:
+            a.res = ProcResult(self.argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
+            return a
+        if not self._queue and (self.proc is None or self.proc.poll() is not None):
             self.close()
             self._start()
-        err_start = os.fstat(self._err.fileno()).st_size
-        t0 = time.perf_counter()
+        a.message = f"{len(data)} {out_path}\n".encode() + data
+        self._send(a)
+        self._queue.append(a)
+        return a
+
+    def _send(self, a: "Answer") -> None:
+        a.err_start = os.fstat(self._err.fileno()).st_size
+        a.t0 = time.perf_counter()
         try:
-            self.proc.stdin.write(f"{len(data)} {out_path}\n".encode() + data)
+            self.proc.stdin.write(a.message)
             self.proc.stdin.flush()
-            sent = True
+            a.sent = True
         except (BrokenPipeError, OSError):
-            sent = False
+            a.sent = False
 
-        def finish() -> ProcResult:
-            line = self._read_line(t0 + self.limits.timeout_s) if sent else b""
-            elapsed = time.perf_counter() - t0
-            if not line:  # None: no answer in time; b"": the process closed its end (it died)
-                return self._ended(err_start, elapsed, timed_out=line is None)
-            return self._answered(line, err_start, elapsed)
-        return finish
+    def _resend(self, a: "Answer") -> None:
+        """A fresh process for ``a`` and the inputs queued behind it."""
+        self.close()
+        self._start()
+        for x in (a, *self._queue):
+            self._send(x)
 
-    def _answered(self, line: bytes, err_start: int, elapsed: float) -> ProcResult:
-        err = _tail_from(self._err.fileno(), err_start)
+    def _answered(self, line: bytes, err: str, elapsed: float) -> ProcResult:
         text = line.decode("utf-8", "replace").strip()
         head = text.split(" ", 1)[0]
         if not head.lstrip("-").isdigit():
@@ -193,9 +203,53 @@ class PersistentDecoder:
         return line
 
 
-def _tail_from(fd: int, start: int) -> str:
-    size = os.fstat(fd).st_size
+def _tail_from(fd: int, start: int, end: int | None = None) -> str:
+    size = os.fstat(fd).st_size if end is None else end
     at = max(start, size - sandbox.TAIL_BYTES)
     data = os.pread(fd, size - at, at) if size > at else b""
     return ("…" if at > start else "") + data.decode("utf-8", "replace")
 
+
+
+class Answer:
+    """One input sent to a :class:`PersistentDecoder`: ``wait`` until it answered or ended
+    (the process is free for the next input), ``result`` judges it."""
+
+    def __init__(self, dec: PersistentDecoder) -> None:
+        self.dec = dec
+        self.res: ProcResult | None = None
+        self.sent = False
+        self.t0 = 0.0
+        self.err_start = 0
+        self.line: bytes | None = None
+        self.message = b""
+
+    def wait(self) -> None:
+        if self.res is not None or self.line is not None:
+            return
+        dec = self.dec
+        while dec._queue and dec._queue[0] is not self:
+            dec._queue[0].wait()  # inputs sent earlier answer first
+        if dec._queue and dec._queue[0] is self:
+            dec._queue.popleft()
+        if not self.sent or dec.proc is None or dec.proc.poll() is not None:
+            dec._resend(self)  # sent to a process that died under an earlier input
+        # this input's time and stderr begin where the previous answer ended
+        begun = max(self.t0, dec._last_done)
+        err_start = max(self.err_start, dec._err_mark)
+        line = dec._read_line(begun + dec.limits.timeout_s) if self.sent else b""
+        dec._last_done = time.perf_counter()
+        elapsed = dec._last_done - begun
+        if not line:  # None: no answer in time; b"": the process closed its end (it died)
+            self.res = dec._ended(err_start, elapsed, timed_out=line is None)
+            return
+        self.line, self.elapsed = line, elapsed
+        err_end = os.fstat(dec._err.fileno()).st_size
+        dec._err_mark = err_end
+        self.err = _tail_from(dec._err.fileno(), err_start, err_end)
+
+    def result(self) -> ProcResult:
+        self.wait()
+        if self.res is None:
+            self.res = self.dec._answered(self.line, self.err, self.elapsed)
+        return self.res

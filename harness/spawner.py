@@ -17,6 +17,7 @@ answering is restarted; the input it was running is reported as the decoder's en
 """
 from __future__ import annotations
 
+import collections
 import json
 import os
 import select
@@ -24,7 +25,6 @@ import shutil
 import struct
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -44,7 +44,7 @@ class ForkServer:
     result of :func:`fbaconf.harness.sandbox.run` for decoders run in that folder."""
 
     def __init__(self, root: Path, view: View, limits: Limits, env: dict[str, str] | None = None,
-                 sum_outputs_every: int = 1) -> None:
+                 sum_outputs_every: int = 1, slots: int = 1) -> None:
         self.root = Path(root).resolve()
         self.view = view
         self.limits = limits
@@ -52,12 +52,16 @@ class ForkServer:
         self.proc: subprocess.Popen | None = None
         self.cg = None
         self.starts = 0
-        self._env_key = None
+        self._req_key = None
+        self._req = b""
         self._events: list[tuple[str, int]] | None = None
         self._answers = 0
+        self._rbuf = b""
+        self._last_done = 0.0
         self.sum_outputs_every = sum_outputs_every
-        self._env: dict[str, str] = {}
-        self._lock = threading.Lock()
+        self.slots = slots  # stdout/stderr file pairs: an input's are read while the next one runs
+        self._files: list[tuple] = []
+        self._queue: collections.deque[Pending] = collections.deque()
         self.io = self.root / ".io"  # the decoder's stdout/stderr files: outside its view
         self.srv = self.root / ".srv"  # the server script, read-only in the sandbox
 
@@ -69,8 +73,10 @@ class ForkServer:
         if not script.exists():
             shutil.copyfile(SERVER_SCRIPT, script)
         py = os.path.realpath(sys.executable)
-        r3, r4 = os.dup(self._out_file().fileno()), os.dup(self._err.fileno())
-        inner = [py, "-I", "-S", str(script), "--fds", str(r3), str(r4)]
+        self._files = [(open(self.io / f"stdout{i}", "wb+"), open(self.io / f"stderr{i}", "wb+"))
+                       for i in range(self.slots)]
+        fds = [os.dup(f.fileno()) for pair in self._files for f in pair]
+        inner = [py, "-I", "-S", str(script), "--fds", *map(str, fds)]
         if sandbox.isolation() == "bwrap":
             v = View(read_only=[*self.view.read_only, self.srv, Path(sys.base_prefix).resolve(), Path(py).parent],
                      writable=list(self.view.writable), hidden=list(self.view.hidden),
@@ -82,21 +88,16 @@ class ForkServer:
             # the decoder's output files become the server's descriptors 3 and 4
             self.proc = subprocess.Popen(full, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None,
                                          cwd=self.root, start_new_session=True, close_fds=True,
-                                         pass_fds=(r3, r4),
+                                         pass_fds=tuple(fds),
                                          env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LC_ALL": "C.UTF-8"})
         except OSError as e:
             raise ForkServerError(f"cannot start the fork server: {e}") from e
         finally:
-            os.close(r3)
-            os.close(r4)
+            for fd in fds:
+                os.close(fd)
+        self._rbuf = b""
         self.starts += 1
         sandbox._RUNNING.add(self.proc.pid)
-
-    def _out_file(self):
-        """Open the decoder's stdout/stderr files (the server hands them to each child)."""
-        self._out = open(self.io / "stdout", "wb+")
-        self._err = open(self.io / "stderr", "wb+")
-        return self._out
 
     def close(self) -> None:
         p, self.proc = self.proc, None
@@ -118,11 +119,10 @@ class ForkServer:
         if self.cg is not None:
             self.cg.close()
             self.cg = None
-        for name in ("_out", "_err"):
-            f = getattr(self, name, None)
-            if f is not None:
+        for pair in self._files:
+            for f in pair:
                 f.close()
-                setattr(self, name, None)
+        self._files = []
 
     def __enter__(self) -> "ForkServer":
         return self
@@ -134,68 +134,46 @@ class ForkServer:
     def run(self, argv: list[str], workdir: Path, limits: Limits | None = None, *,
             env: dict[str, str] | None = None, measure_dirs: list[Path] | None = None) -> ProcResult:
         """Run ``argv`` in ``workdir`` (inside this server's root) and return how it ended."""
-        return self.start(argv, workdir, limits, env=env, measure_dirs=measure_dirs)()
+        return self.start(argv, workdir, limits, env=env, measure_dirs=measure_dirs).result()
 
     def start(self, argv: list[str], workdir: Path, limits: Limits | None = None, *,
-              env: dict[str, str] | None = None, measure_dirs: list[Path] | None = None):
-        """Send one input to the server and return a function that waits for its ending
-        (the caller may work meanwhile: the fuzzer makes its next input). One input at a
-        time per server: call the returned function before the next :meth:`start`."""
+              env: dict[str, str] | None = None, measure_dirs: list[Path] | None = None,
+              slot: int = 0) -> "Pending":
+        """Send one input to the server; the :class:`Pending` waits for it (``wait``: the
+        decoder has ended) and judges it (``result``: reads its stdout/stderr, which stay until
+        the next input in the same ``slot``). An input sent while another runs waits in the
+        server's pipe and starts the moment the other ends — one decoder at a time, no gap;
+        inputs are waited for in the order they were sent."""
         if not argv or not all(isinstance(a, str) for a in argv):
             raise ValueError("argv must be a non-empty list of strings")
         limits = limits or self.limits
         workdir = os.path.realpath(workdir)
         os.makedirs(os.path.join(workdir, "tmp"), exist_ok=True)
-        key = (workdir, tuple(sorted((env or {}).items())))
-        if self._env_key != key:
-            self._env_key = key
-            self._env = sandbox.decoder_env(Path(workdir), {**(self.env or {}), **(env or {})})
-        req = {"argv": argv, "cwd": workdir, "env": self._env,
-               "as": limits.memory_mb * 2**20 if limits.memory_kind == "address-space" else 0,
-               "fsize": limits.output_mb * 2**20, "cpu": int(max(1, limits.timeout_s * 2 + 1)),
-               "timeout": limits.timeout_s, "rss_mb": limits.memory_mb if limits.memory_kind == "rss" else 0}
-        self._lock.acquire()
-        try:
-            if sandbox.stopping():
-                self._lock.release()
-                res = ProcResult(argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
-                return lambda: res
-            if self.proc is None or self.proc.poll() is not None:
-                self.close()
-                self._start()
-            t0 = time.perf_counter()
-            sent = self._send(req)
-        except BaseException:
-            self._lock.release()
-            raise
-
-        def finish() -> ProcResult:
-            try:
-                reply = self._receive(t0 + limits.timeout_s + GRACE_S) if sent else None
-                elapsed = time.perf_counter() - t0
-                if reply is None:  # the server died or hung: restart it next time, judge this input
-                    self.close()
-                    return ProcResult(argv, None, timed_out=elapsed >= limits.timeout_s, elapsed_s=elapsed,
-                                      stderr_tail=sandbox._tail(self.io / "stderr"),
-                                      notes=[] if elapsed >= limits.timeout_s else ["harness-start-failed"])
-                oom, pids_hit = self._cgroup_events()
-                out_tail, err_tail = _tail_fd(self._out.fileno()), _tail_fd(self._err.fileno())
-                if oom or pids_hit:  # the cgroup's counters are per server: start afresh after a hit
-                    self.close()
-            finally:
-                self._lock.release()
-            self._answers += 1
-            # Each file is capped by RLIMIT_FSIZE; the folder's total is summed after a decode
-            # (exit 0) and every 16th input otherwise — the fuzzer's inputs are ~1 ms each.
-            dirs = measure_dirs or [Path(workdir)]
-            if self.sum_outputs_every > 1 and reply["status"] != 0 and self._answers % self.sum_outputs_every:
-                dirs = []
-            return sandbox.result(argv, limits, reply["status"],
-                                  (reply["utime"], reply["stime"], reply["maxrss_kb"]), reply["elapsed"],
-                                  timed_out=reply["timed_out"], mem_hit=reply["mem_hit"], oom=oom,
-                                  pids_hit=pids_hit, bwrap_status=False, stdout_tail=out_tail,
-                                  stderr_tail=err_tail, measure_dirs=dirs)
-        return finish
+        key = (tuple(argv), workdir, tuple(sorted((env or {}).items())), limits, slot)
+        if self._req_key != key:  # a fuzzing worker sends the same requests every time
+            self._req_key = key
+            env_ = sandbox.decoder_env(Path(workdir), {**(self.env or {}), **(env or {})})
+            req = {"argv": argv, "cwd": workdir, "env": env_, "slot": slot,
+                   "as": limits.memory_mb * 2**20 if limits.memory_kind == "address-space" else 0,
+                   "fsize": limits.output_mb * 2**20, "cpu": int(max(1, limits.timeout_s * 2 + 1)),
+                   "timeout": limits.timeout_s, "rss_mb": limits.memory_mb if limits.memory_kind == "rss" else 0}
+            data = json.dumps(req).encode()
+            self._req = struct.pack(">I", len(data)) + data
+        p = Pending(self, argv, Path(workdir), limits, measure_dirs, slot)
+        if sandbox.stopping():
+            p.res = ProcResult(argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
+            return p
+        if self._queue and self._queue[-1].slot == slot:
+            raise RuntimeError(f"slot {slot} is still in use by the previous input")
+        if not self._queue and (self.proc is None or self.proc.poll() is not None):
+            self.close()
+            self._start()
+        p.t0 = time.perf_counter()
+        p.req = self._req
+        p.sent = self.proc is not None and self._send(self._req)
+        p.files = self._files[slot] if self._files else None
+        self._queue.append(p)
+        return p
 
     def _cgroup_events(self) -> tuple[bool, bool]:
         """(memory limit hit, process limit hit) in this server's cgroups since it started:
@@ -227,34 +205,116 @@ class ForkServer:
                         oom = True
         return oom, pids
 
-    def _send(self, req: dict) -> bool:
-        data = json.dumps(req).encode()
+    def _send(self, message: bytes) -> bool:
         try:
-            self.proc.stdin.write(struct.pack(">I", len(data)) + data)
+            self.proc.stdin.write(message)
             self.proc.stdin.flush()
             return True
         except (BrokenPipeError, OSError):
             return False
 
     def _receive(self, deadline: float) -> dict | None:
+        """The next reply (replies of queued inputs may arrive in one read: the rest is kept)."""
         fd = self.proc.stdout.fileno()
-        buf, need = b"", 4
+        need = 4
         while True:
-            while len(buf) < need:
+            while len(self._rbuf) < need:
                 left = deadline - time.perf_counter()
                 if left <= 0 or not select.select([fd], [], [], left)[0]:
                     return None
                 chunk = os.read(fd, 65536)
                 if not chunk:
                     return None
-                buf += chunk
+                self._rbuf += chunk
             if need == 4:
-                need = 4 + struct.unpack(">I", buf[:4])[0]
+                need = 4 + struct.unpack(">I", self._rbuf[:4])[0]
                 continue
-            return json.loads(buf[4:need])
+            reply, self._rbuf = self._rbuf[4:need], self._rbuf[need:]
+            return json.loads(reply)
 
 def _tail_fd(fd: int) -> str:
     """The last ``TAIL_BYTES`` the decoder wrote to one of its output files (kept open)."""
     size = os.fstat(fd).st_size
     data = os.pread(fd, sandbox.TAIL_BYTES, max(0, size - sandbox.TAIL_BYTES))
     return ("…" if size > sandbox.TAIL_BYTES else "") + data.decode("utf-8", "replace")
+
+
+class Pending:
+    """One input sent to a :class:`ForkServer`."""
+
+    def __init__(self, server: ForkServer, argv, workdir: Path, limits: Limits, measure_dirs, slot: int) -> None:
+        self.server, self.argv, self.workdir, self.limits = server, argv, workdir, limits
+        self.measure_dirs, self.slot = measure_dirs, slot
+        self.t0 = 0.0
+        self.req = b""
+        self.sent = False
+        self.files = None
+        self.reply: dict | None = None
+        self.res: ProcResult | None = None
+        self._waited = False
+
+    def wait(self) -> None:
+        """Until the decoder has ended (its reply is in); the server is free after this."""
+        if self._waited or self.res is not None:
+            return
+        srv = self.server
+        while srv._queue and srv._queue[0] is not self:
+            srv._queue[0].wait()  # the inputs sent before this one answer first
+        if srv._queue and srv._queue[0] is self:
+            srv._queue.popleft()
+        self._waited = True
+        if not self.sent or srv.proc is None or srv.proc.poll() is not None:
+            # sent to a server that stopped under an earlier input: send it to a fresh one
+            srv.close()
+            srv._start()
+            for p in (self, *srv._queue):
+                p.t0 = time.perf_counter()
+                p.sent = srv._send(p.req)
+                p.files = srv._files[p.slot]
+            if not self.sent:
+                self.res = ProcResult(self.argv, None, stderr_tail="cannot start the fork server",
+                                      notes=["harness-start-failed"])
+                return
+        begun = max(self.t0, srv._last_done)
+        self.reply = srv._receive(begun + self.limits.timeout_s + GRACE_S)
+        srv._last_done = time.perf_counter()
+        self.elapsed = srv._last_done - begun
+        if self.reply is None:  # the server died or hung: judge this input, restart next time
+            err = _tail_fd(self.files[1].fileno()) if self.files else ""
+            self._close_server()
+            self.res = ProcResult(self.argv, None, timed_out=self.elapsed >= self.limits.timeout_s,
+                                  elapsed_s=self.elapsed, stderr_tail=err,
+                                  notes=[] if self.elapsed >= self.limits.timeout_s else ["harness-start-failed"])
+            return
+        self.oom, self.pids_hit = srv._cgroup_events()
+        if self.oom or self.pids_hit:  # the cgroup's counters are per server: start afresh after a hit
+            self.out_tail, self.err_tail = (_tail_fd(f.fileno()) for f in self.files)
+            self._close_server()
+
+    def _close_server(self) -> None:
+        """Stop the server; inputs queued behind this one are sent again to the next one."""
+        srv = self.server
+        for p in srv._queue:
+            p.sent = False
+        srv.close()
+
+    def result(self) -> ProcResult:
+        """How the input ended (reads its output files: before the slot's next input)."""
+        self.wait()
+        if self.res is not None:
+            return self.res
+        srv, reply = self.server, self.reply
+        if not hasattr(self, "err_tail"):
+            self.out_tail, self.err_tail = (_tail_fd(f.fileno()) for f in self.files)
+        srv._answers += 1
+        # Each file is capped by RLIMIT_FSIZE; the folder's total is summed after a decode
+        # (exit 0) and every n-th input otherwise — fuzzing inputs take ~1 ms each.
+        dirs = self.measure_dirs or [self.workdir]
+        if srv.sum_outputs_every > 1 and reply["status"] != 0 and srv._answers % srv.sum_outputs_every:
+            dirs = []
+        self.res = sandbox.result(self.argv, self.limits, reply["status"],
+                                  (reply["utime"], reply["stime"], reply["maxrss_kb"]), reply["elapsed"],
+                                  timed_out=reply["timed_out"], mem_hit=reply["mem_hit"], oom=self.oom,
+                                  pids_hit=self.pids_hit, bwrap_status=False, stdout_tail=self.out_tail,
+                                  stderr_tail=self.err_tail, measure_dirs=dirs)
+        return self.res

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 import uuid
 from pathlib import Path
 
@@ -169,3 +170,35 @@ def test_serve_takes_no_per_input_placeholders(tmp_path):
     m.write_text(m.read_text().replace('serve = ["{python}", ', 'serve = ["{python}", "{input}", '))
     with pytest.raises(adapters.ManifestError, match="serve"):
         adapters.load_manifest(m)
+
+
+def test_queued_inputs_answer_in_order(tmp_path):
+    """An input sent while another runs starts when it ends; both answers come back to their
+    own input even when they arrive together (no lost reply, no phantom hang)."""
+    root = tmp_path / "w"
+    for i in range(2):
+        (root / f"case{i}" / "in").mkdir(parents=True)
+    lim = Limits(timeout_s=2.0, memory_mb=300, output_mb=4)
+    view = default_view(["/bin/sh"], root / "case0")
+    view.writable.append(root / "case1")
+    with ForkServer(root, view, lim, slots=2) as fs:
+        for i in range(30):
+            a = fs.start(["/bin/sh", "-c", f"echo a{i} >&2; exit {i % 3}"], root / "case0", slot=0)
+            b = fs.start(["/bin/sh", "-c", f"echo b{i} >&2; exit {(i + 1) % 3}"], root / "case1", slot=1)
+            time.sleep(0.05)  # both have ended: their replies wait together in the pipe
+            rb, ra = b.result(), a.result()  # judged in any order
+            assert (ra.returncode, ra.stderr_tail.strip(), ra.timed_out) == (i % 3, f"a{i}", False)
+            assert (rb.returncode, rb.stderr_tail.strip(), rb.timed_out) == ((i + 1) % 3, f"b{i}", False)
+        assert fs.starts == 1
+
+
+def test_persistent_queued_inputs_keep_their_own_stderr(tmp_path):
+    m = _manifest(tmp_path, "sys.exit(69)", serve=SERVE, limits="timeout_s = 2")
+    t = _target(tmp_path, m)
+    try:
+        for _ in range(10):
+            runs = [t.start(Entry(STREAM + p)) for p in (b"ASAN", b"")]
+            first, second = (r.result().verdict for r in runs)
+            assert first.cls == "crash" and second is None  # the report stays with its input
+    finally:
+        t.close()
