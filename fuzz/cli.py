@@ -7,6 +7,7 @@
     fbaconf fuzz --self [--seconds N] [--seed S] [-o DIR]
     fbaconf fuzz --decoder D.toml --replay FILE         # run one input, print its classification
     fbaconf fuzz --promote DIR [--data-dir PATH]         # findings -> regression suite cases
+    fbaconf fuzz export DIR [--valid N] [--seed S]        # seeds + dictionary for libFuzzer/AFL++/OSS-Fuzz
 
 Exit codes: 0 no findings (replay: the input behaves), 1 findings, 2 usage or setup error.
 The stage's modules are listed in :mod:`fbaconf.fuzz`; see docs/fuzzing.md.
@@ -26,7 +27,13 @@ def register(sub) -> None:
                                    "byte-level mutations of the conformance streams; crashes, hangs, memory "
                                    "blow-ups, unexpected exit codes and wrong output on valid input are "
                                    "deduplicated, minimised and written to DIR/findings/.")
-    who = p.add_mutually_exclusive_group(required=True)
+    p.add_argument("export", nargs="?", choices=["export"], metavar="export",
+                   help="'export DIR': write a seed corpus, an AFL++/libFuzzer dictionary and an OSS-Fuzz "
+                        "snippet for the fuzzers vendors run (see docs/fuzzing.md)")
+    p.add_argument("export_dir", nargs="?", type=Path, metavar="DIR", help="(export) the folder to write")
+    p.add_argument("--valid", type=int, default=64, metavar="N",
+                   help="(export) generated valid streams in the seed corpus (default 64)")
+    who = p.add_mutually_exclusive_group()
     who.add_argument("--decoder", help="decoder manifest .toml or bundled adapter name")
     who.add_argument("--self", dest="self_", action="store_true",
                      help="fuzz fbaconf's own decoder, checker and scene readers in-process")
@@ -74,6 +81,19 @@ def _extra_seeds(paths: list[Path]):
 
 
 def cmd_fuzz(args) -> int:
+    if args.export is not None:
+        if args.export_dir is None or args.decoder or args.self_ or args.promote:
+            print("fbaconf fuzz: error: usage: fbaconf fuzz export DIR [--valid N] [--seed S]", file=sys.stderr)
+            return 2
+        from .export import export
+        doc = export(args.export_dir, n_valid=args.valid, seed=args.seed)
+        print(json.dumps(doc, indent=1) if args.json else
+              f"{doc['seeds']} seed streams ({doc['suite']} suite, {doc['prefixes']} prefixes, {doc['generated']} "
+              f"generated), {doc['tokens']} dictionary tokens -> {doc['dir']}")
+        return 0
+    if not (args.decoder or args.self_ or args.promote):
+        print("fbaconf fuzz: error: one of --decoder, --self, --promote or 'export DIR' is required", file=sys.stderr)
+        return 2
     if args.promote is not None:
         from .promote import promote
         added = promote(args.promote, args.data_dir, log=lambda s: print(s, file=sys.stderr))
