@@ -3,7 +3,7 @@
 ::
 
     fbaconf fuzz --decoder D.toml --seconds N [--seed S] [-j N] [-o DIR] [--target stream|scene]
-                 [--spawn] [--coverage-every N]
+                 [--spawn] [--coverage-every N] [--cluster local[:N]|tcp://HOST:PORT]
     fbaconf fuzz --self [--seconds N] [--seed S] [-o DIR]
     fbaconf fuzz --decoder D.toml --replay FILE         # run one input, print its classification
     fbaconf fuzz --promote DIR [--data-dir PATH]         # findings -> regression suite cases
@@ -56,6 +56,9 @@ def register(sub) -> None:
     p.add_argument("--seeds", type=Path, action="append", default=[],
                    help="extra seed files or folders (*.fba) besides the conformance suites")
     p.add_argument("--max-execs", type=int, default=None, help="stop after this many inputs")
+    p.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
+                   help="--decoder: run the campaign as shards on a Dask cluster (one per worker, corpus merged "
+                        "between rounds, findings deduplicated and minimised once)")
     p.add_argument("--spawn", action="store_true",
                    help="--decoder: a fresh sandbox per input (slow, the strictest separation) instead of one "
                         "sandbox per worker with a fork server, or the persistent protocol when the manifest has "
@@ -108,8 +111,57 @@ def cmd_fuzz(args) -> int:
         print("fbaconf fuzz: error: --expected-exit must be a comma-separated list of integers", file=sys.stderr)
         return 2
     if args.self_:
+        if args.cluster:
+            print("fbaconf fuzz: error: --cluster fuzzes a decoder (--decoder), not fbaconf itself", file=sys.stderr)
+            return 2
         return _self(args)
+    if args.cluster:
+        return _campaign(args, expected)
     return _decoder(args, expected)
+
+
+def _campaign(args, expected: set[int] | None) -> int:
+    from fbaconf.harness import cluster
+    from fbaconf.harness.adapters import resolve
+    from .campaign import ShardSpec, run_campaign
+    adapter = resolve(args.decoder)  # a bad manifest fails here, not in every worker
+    manifest = str(Path(args.decoder).resolve()) if Path(args.decoder).is_file() else args.decoder
+    if args.replay is not None:
+        print("fbaconf fuzz: error: --replay runs one input here; drop --cluster", file=sys.stderr)
+        return 2
+    kind = args.target or ("text" if "fba" not in adapter.inputs and "fap" in adapter.inputs else "stream")
+    spec = ShardSpec(manifest, kind=kind, timeout_s=args.timeout,
+                     expected_exit=tuple(sorted(expected)) if expected is not None else None,
+                     oracle=not args.no_oracle, coverage_every=args.coverage_every, spawn=args.spawn)
+    out = (args.output or Path("fbaconf-fuzz") / adapter.name).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    log = (lambda m: None) if args.no_progress else (lambda m: print(m, file=sys.stderr, flush=True))
+    with cluster.client(args.cluster) as c:
+        workers = max(1, len(c.scheduler_info().get("workers", {})))
+        camp, findings = run_campaign(c, spec, workers=workers, seconds=args.seconds, seed=args.seed, out=out,
+                                      minimise_seconds=args.minimise_seconds, progress=log)
+    c_, n_ = len(camp.features & camp.universe), len(camp.universe)
+    doc = {"format": "fbaconf.fuzz/1", "target": adapter.name, "seed": args.seed, "cluster": args.cluster,
+           "workers": workers, "shards": camp.shards, "seconds": round(camp.wall_s, 2),
+           "fuzz_seconds": round(camp.fuzz_seconds, 2), "execs": camp.execs,
+           "execs_per_s": round(camp.execs / max(1e-9, camp.wall_s), 1),
+           "findings": len(findings), "finding_hits": sum(f.hits for f in findings),
+           "syntax_coverage": {"covered": c_, "total": n_, "features": sorted(camp.features),
+                               "missing": sorted(camp.universe - camp.features)},
+           "corpus": len(camp.corpus), "decoder": {"name": adapter.name, "manifest": manifest, "mode": "campaign"},
+           "finding_ids": [f.id for f in findings]}
+    from fbaconf._atomic import atomic_write_text
+    atomic_write_text(out / "fuzz.json", json.dumps(doc, indent=1) + "\n")
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        print(f"{doc['execs']} inputs in {doc['seconds']:.1f} s on {workers} worker(s) ({doc['execs_per_s']:,.0f} "
+              f"execs/s), syntax coverage {c_}/{n_}, {len(findings)} finding(s) -> {out}")
+        for f in findings:
+            ms = f.min_stats
+            size = f"{ms.bytes_before} -> {ms.bytes_after} bytes" if ms else f"{len(f.original.data)} bytes"
+            print(f"  {f.id}: {f.verdict.cls} ({f.verdict.signature}) x{f.hits}, {size}: {f.verdict.message[:120]}")
+    return 1 if findings else 0
 
 
 def _self(args) -> int:

@@ -106,7 +106,8 @@ class Fuzzer:
                  scene_seeds_: list[Entry] | None = None, kinds: tuple[str, ...] | None = None,
                  decoder_info: dict | None = None, max_corpus: int = 400, valid_pool: int = 24,
                  fresh_valid_share: float = 0.04, prefer_short: float = 0.5, run_seeds_first: int = 64,
-                 stop_on: Callable[[Finding], bool] | None = None, coverage_every: int = 1) -> None:
+                 stop_on: Callable[[Finding], bool] | None = None, coverage_every: int = 1,
+                 minimise_findings: bool = True) -> None:
         if not seeds and kind == "stream" and "stream" in (kinds or (kind,)):
             raise FuzzSetupError("no seed streams (build the suites: fbaconf suites build)")
         self.target = target
@@ -140,6 +141,8 @@ class Fuzzer:
         # Syntax-model coverage of what a decoder under test was sent costs a reference decode
         # per input (~1 ms): measured on every input, or on every n-th (``--coverage-every``).
         self.coverage_every = max(1, int(coverage_every))
+        self.minimise_findings = minimise_findings  # a campaign's shards leave it to the coordinator
+        self.new_corpus: list[Entry] = []  # what this run added to the corpus (merged across shards)
         self.findings: dict[str, Finding] = {}
         self.stats = Stats(universe=tuple(u for k in self.kinds for u in
                                           (STREAM_FEATURES if k == "stream" else SCENE_FEATURES if k == "scene"
@@ -272,8 +275,9 @@ class Fuzzer:
             st.features |= new
             pool = self.corpus[inp.kind]
             if len(inp.data) <= 4096 and len(pool) < self.max_corpus and out.verdict is None:
-                pool.append(Entry(inp.data, kind=inp.kind, origin=f"corpus#{index}", valid=inp.valid,
-                                  recon=inp.recon))
+                e = Entry(inp.data, kind=inp.kind, origin=f"corpus#{index}", valid=inp.valid, recon=inp.recon)
+                pool.append(e)
+                self.new_corpus.append(e)
                 st.corpus += 1
         if out.verdict is not None:
             self._finding(index, inp, out.verdict, deadline)
@@ -291,9 +295,10 @@ class Fuzzer:
         st.findings += 1
         self.progress.message(f"finding {fid}: {v.cls} ({v.signature}): {v.message[:160]} — input #{index}, "
                               f"{len(inp.data)} bytes, {inp.origin[:80]}")
-        t0 = time.perf_counter()
-        self._minimise(f, deadline)
-        st.minimise_s += time.perf_counter() - t0
+        if self.minimise_findings:
+            t0 = time.perf_counter()
+            self._minimise(f, deadline)
+            st.minimise_s += time.perf_counter() - t0
         if self.out_dir is not None:
             write_finding(self.out_dir, f, self)
         if self.stop_on is not None and self.stop_on(f):

@@ -80,3 +80,41 @@ def test_cluster_verdicts_equal_the_pool_and_a_lost_worker_loses_nothing(tmp_pat
     assert [(r.case_id, r.outcome) for r in dist] == [(r.case_id, r.outcome) for r in pool]
     logged = ResultLog(tmp_path / "dask" / "results.jsonl").read()
     assert sorted(logged) == sorted(c.full_id for c in cases)
+
+
+def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(tmp_path):
+    """fuzz --cluster local:2: shards on two workers, one worker killed mid-round; the planted
+    skip-chain crash is found, reported once (hits merged across shards), minimised once."""
+    import json
+    import shutil
+    import subprocess
+    import threading
+    from fbaconf.fuzz.campaign import ShardSpec, run_campaign
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc not available")
+    here = Path(__file__).resolve().parent / "fuzz_decoders"
+    subprocess.run(["gcc", "-O1", "-o", str(tmp_path / "skipchain"), str(here / "skipchain.c")], check=True)
+    m = tmp_path / "skipchain.toml"
+    m.write_text('name = "planted-skipchain"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+                 'faps_format = "fap"\n[commands]\ndecode = ["{manifest_dir}/skipchain", "{input}", "{faps_out}"]\n'
+                 '[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n')
+    killed = []
+
+    def kill_one_worker():
+        workers = [p for p in _children() if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()]
+        if workers:
+            os.kill(workers[0], signal.SIGKILL)
+            killed.append(workers[0])
+    with cluster.client("local:2") as c:
+        timer = threading.Timer(4.0, kill_one_worker)
+        timer.start()
+        camp, findings = run_campaign(c, ShardSpec(str(m), timeout_s=1.0), workers=2, seconds=8, seed=5,
+                                      out=tmp_path / "out", minimise_seconds=5, progress=lambda _m: None)
+        timer.cancel()
+    assert killed, "a worker was killed mid-round"
+    assert camp.shards == 2  # the lost worker's shard was rerun, not lost nor counted twice
+    crashes = [f for f in findings if f.verdict.cls == "crash" and "SIGSEGV" in f.verdict.signature]
+    assert len(crashes) == 1 == len({f.verdict.key for f in findings})
+    doc = json.loads((crashes[0].path / "finding.json").read_text())
+    assert doc["minimal"]["bytes"] < doc["original"]["bytes"]
+    assert len(list((tmp_path / "out" / "findings").iterdir())) == len(findings)
