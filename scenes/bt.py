@@ -197,6 +197,9 @@ _FLOAT = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\Z")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_\-.]*\Z")
 
 
+TOP_GROUP = "OrderedGroup"  # the top node that carries a scene's top-level list
+
+
 class _Reader:
     def __init__(self, text: str, file: str | None) -> None:
         self.file = file
@@ -241,10 +244,51 @@ class _Reader:
 
     # nodes -----------------------------------------------------------------------
     def scene(self) -> Scene:
+        self._skip_descriptor()
+        kind, v, _off = self.peek()
+        if kind == "word" and v == TOP_GROUP:
+            nodes = self._top_group()
+            kind, v, off = self.peek()
+            if kind != "eof":
+                raise self.error(f"nothing may follow the top {TOP_GROUP} (got {v!r})", off, "bt-syntax")
+            return Scene(nodes, self.file)
         nodes = []
         while self.peek()[0] != "eof":
             nodes.append(self.node_or_use(None, allow_null=False))
         return Scene(nodes, self.file)
+
+    def _skip_descriptor(self) -> None:
+        """MP4Box's dumps start with the scene's ``InitialObjectDescriptor { ... }``: systems
+        information (ES descriptors, BIFSConfig), not part of the scene; skipped."""
+        kind, v, _off = self.peek()
+        if kind != "word" or v != "InitialObjectDescriptor":
+            return
+        self.next()
+        self.expect("{", "InitialObjectDescriptor")
+        depth = 1
+        while depth:
+            kind, v, _off = self.next("InitialObjectDescriptor", "'}'")
+            if kind == "punct" and v in "{[":
+                depth += 1
+            elif kind == "punct" and v in "}]":
+                depth -= 1
+
+    def _top_group(self) -> list:
+        """The one top node MP4Box wants, ``OrderedGroup { children [ ... ] }``: its children
+        are the scene's top-level nodes (as in binary BIFS, scenes/bifs.py)."""
+        self.next()
+        self.expect("{", TOP_GROUP)
+        nodes = []
+        kind, v, off = self.next(TOP_GROUP, "children or '}'")
+        if kind == "word" and v == "children":
+            self.expect("[", f"{TOP_GROUP}.children")
+            while self.peek()[1] != "]" or self.peek()[0] != "punct":
+                nodes.append(self.node_or_use(f"{TOP_GROUP}.children", allow_null=False))
+            self.next()
+            kind, v, off = self.next(TOP_GROUP, "'}'")
+        if kind != "punct" or v != "}":
+            raise self.error(f"the top {TOP_GROUP} carries only children (got {v!r})", off, "bt-syntax", TOP_GROUP)
+        return nodes
 
     def node_or_use(self, path, allow_null=True, sf=False, allowed=None):
         kind, v, off = self.next(path, "a node")
@@ -438,11 +482,14 @@ def _quote(s: str) -> str:
 
 
 def write(scene: Scene) -> str:
-    """The BT text of a scene (all fields present in the model, in model order)."""
-    out: list[str] = []
+    """The BT text of a scene (all fields present in the model, in model order), its
+    top-level nodes the children of one ``OrderedGroup``: the single top node GPAC's MP4Box
+    reads (and binary BIFS codes, scenes/bifs.py)."""
+    out: list[str] = [f"{TOP_GROUP} {{\n  children [\n"]
     for n in scene.nodes:
-        _write_node(n, 0, out, "")
+        _write_node(n, 2, out, "")
         out.append("\n")
+    out.append("  ]\n}\n")
     return "".join(out)
 
 
