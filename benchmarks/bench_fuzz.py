@@ -8,6 +8,8 @@ the same number of seconds on the same machine:
 * ``fuzz --spawn``: ``fbaconf fuzz`` with a fresh sandbox per input;
 * ``fuzz (fork server)``: the default, one sandbox per worker;
 * ``fuzz (persistent)``: the same program through ``[commands] serve``;
+* the last two again with the program built without its planted bug (``-DSKIPCHAIN_FIXED``):
+  a crash costs the persistent mode a process (and sandbox) start, so these show it without;
 * ``bare persistent``: a loop that only writes one input to ``skipchain --serve`` and reads
   the answer — the ceiling for the persistent protocol.
 
@@ -90,6 +92,7 @@ def main() -> int:
     try:
         exe = tmp / "skipchain"
         subprocess.run([cc, "-O2", "-o", str(exe), str(SKIPCHAIN)], check=True)
+        subprocess.run([cc, "-O2", "-DSKIPCHAIN_FIXED", "-o", str(tmp / "fixed"), str(SKIPCHAIN)], check=True)
         stream = tmp / "in.fba"
         (suite,) = load_suites(names=["simple-l1-core"])
         stream.write_bytes(suite.cases[0].input_path("fba").read_bytes())
@@ -98,11 +101,16 @@ def main() -> int:
         limits = "[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n"
         (tmp / "spawn.toml").write_text(base + limits)
         (tmp / "serve.toml").write_text(base + 'serve = ["{manifest_dir}/skipchain", "--serve"]\n' + limits)
+        fixed = base.replace("/skipchain", "/fixed")  # no planted crash: no restarts
+        (tmp / "fixed.toml").write_text(fixed + limits)
+        (tmp / "fixed-serve.toml").write_text(fixed + 'serve = ["{manifest_dir}/fixed", "--serve"]\n' + limits)
         s = args.seconds
         rows = [("bare spawn (posix_spawn loop)", bare_spawn(exe, stream, s), "")]
         for label, manifest, spawn in (("fuzz --spawn", "spawn.toml", True),
                                        ("fuzz (fork server, default)", "spawn.toml", False),
-                                       ("fuzz (persistent, [commands] serve)", "serve.toml", False)):
+                                       ("fuzz (persistent, [commands] serve)", "serve.toml", False),
+                                       ("fuzz (fork server), bug fixed", "fixed.toml", False),
+                                       ("fuzz (persistent), bug fixed", "fixed-serve.toml", False)):
             rate, mode, execs = fuzz_rate(tmp / manifest, s, tmp / f"work-{len(rows)}", spawn=spawn)
             rows.append((label, rate, f"{execs} inputs, mode {mode}"))
         rows.append(("bare persistent (pipe round trip)", bare_persistent(exe, stream, s), ""))
@@ -117,6 +125,8 @@ def main() -> int:
         print(f"  harness (--spawn) / bare spawn          {r['fuzz --spawn'] / bare:6.2f}")
         print(f"  persistent / fork server                {pers / fork:6.2f}")
         print(f"  persistent / bare spawn                 {pers / bare:6.2f}")
+        fx = r["fuzz (persistent), bug fixed"] / r["fuzz (fork server), bug fixed"]
+        print(f"  persistent / fork server, bug fixed     {fx:6.2f}   (no crash restarts)")
         print(f"  persistent harness / bare persistent    {pers / r['bare persistent (pipe round trip)']:6.2f}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

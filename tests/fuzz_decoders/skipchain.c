@@ -48,6 +48,9 @@ static int plane(void) {
         } while (v == 15);
     }
     frame_number += skip + 1;
+#ifdef SKIPCHAIN_FIXED  /* the same program without its bug (benchmarks/bench_fuzz.py) */
+    if (frame_number >= 256) return -1;
+#endif
     frames[frame_number].values[0] = 1;   /* BUG: no check against the 256-entry table */
     return 0;
 }
