@@ -34,3 +34,18 @@ def test_greta_results_are_the_documented_ones(tmp_path):
     assert res["arith-ntsc-rate"].outcome == Outcome.FAIL and "got 25 Hz" in res["arith-ntsc-rate"].message
     assert res["no-frame-rate"].outcome == Outcome.FAIL and "got none" in res["no-frame-rate"].message
     assert res["high-level-classes"].outcome == Outcome.FAIL and "viseme" in res["high-level-classes"].message
+
+
+def test_xface_results_are_the_documented_ones(tmp_path):
+    m = os.environ.get("FBACONF_XFACE_MANIFEST")
+    if not m or not Path(m).is_file():
+        pytest.skip("Xface adapter not built (examples/third-party/xface/build.sh; set FBACONF_XFACE_MANIFEST)")
+    a = adapters.resolve(m)
+    cases = _cases("range-extremes", "arith-ntsc-rate", "no-frame-rate", "arith-q1-all-faps", "timecode-past-a-minute")
+    res = {r.case_id.split("/")[-1]: r for r in run_cases(a, cases, claim="simple@1", out_dir=tmp_path,
+                                                          jobs=2, progress=False)}
+    assert res["range-extremes"].outcome == Outcome.PASS
+    assert "got 29 Hz" in res["arith-ntsc-rate"].message  # frame rate kept in a short
+    assert "got 0" in res["no-frame-rate"].message  # no keep semantics
+    assert "raise_b_lip_lm" in res["arith-q1-all-faps"].message  # inner/outer lip coupling
+    assert res["timecode-past-a-minute"].outcome == Outcome.CRASH  # frame number past the count
