@@ -267,7 +267,10 @@ class _Decoder:
         a = np.frombuffer(raw, dtype=">f4")
         if not np.all(np.isfinite(a)):
             raise self.err("a float is NaN or infinite", "bifs-float", path, at=at)
-        return a.astype(np.float32).astype(str).astype(np.float64)  # shortest decimal of each float32
+        # the shortest decimal of each float32; numpy's legacy print mode (which colour-science
+        # turns on when imported) would cut it to 6 digits, so the mode is fixed here
+        with np.printoptions(legacy=False):
+            return a.astype(np.float32).astype(str).astype(np.float64)
 
     def sf(self, t: str, path: str):
         at = self.pos

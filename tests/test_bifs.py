@@ -577,3 +577,17 @@ def test_d10_proto_list_bit_and_mfurl():
     bit = 16 + 9  # config (13 bits, aligned to 16), command code 2 + reserved 6 + useNames 1
     raw[bit // 8] |= 0x80 >> (bit % 8)
     assert _rule(bytes(raw)).rule == "bifs-proto"
+
+
+def test_float_decoding_ignores_numpy_print_mode():
+    """colour-science switches numpy to its 1.13 print mode on import, which formats float32 with
+    6 digits; BIFS float fields must still decode to the shortest decimal of the float32
+    (105.6582, not 105.658) whatever the process imported before (found by the GPAC test)."""
+    import numpy as np
+    pts = ", ".join(["0 -8.5 105.6582"] * 40)  # enough points for the vector form of an MF field
+    scene = bt.parse(f"Face {{ fdp FDP {{ featurePointsCoord Coordinate {{ point [{pts}] }} }} }}")
+    blob = bifs.encode(scene)
+    with np.printoptions(legacy="1.13"):
+        back = bifs.decode(blob)
+    pt = back.nodes[0].fields["fdp"].fields["featurePointsCoord"].fields["point"]
+    assert set(np.asarray(pt).reshape(-1, 3)[:, 2].tolist()) == {105.6582}
