@@ -499,6 +499,15 @@ def case_points(case) -> CaseCoverage:
     cc = CaseCoverage(case.full_id, case.claim)
     hits = cc.points
     try:
+        if case.kind == "error" and case.input_path("fba") is None and case.input_path("fap") is not None:
+            from fbaconf.bitstreams.faptext import read_fap_file
+            from fbaconf.errors import FbaconfInputError
+            hits.add("text.fap")  # an invalid .fap text (players): the rule its reading breaks
+            try:
+                read_fap_file(case.input_path("fap"))
+            except FbaconfInputError as e:
+                hits.add(f"error.{e.rule}")
+            return cc
         if case.kind == "error":
             data = case.input_path("fba").read_bytes()
             pts, cc.codes = diagnostic_points(data, None, True)

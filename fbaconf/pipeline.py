@@ -31,12 +31,14 @@ def load_stream(path: Path):
 
 def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path | None = None,
                       faps_out: Path | None = None, vertices_out: Path | None = None,
-                      images_dir: Path | None = None) -> None:
-    """Decode (and animate, render) one stream with the reference, writing the requested outputs."""
+                      images_dir: Path | None = None, player_state: bool = False) -> None:
+    """Decode (and animate, render) one stream with the reference, writing the requested outputs.
+    ``player_state``: the FAP output is a player's (docs/harness.md, "Players"): its state,
+    every FAP that holds a value written as set in every frame."""
     from fbaconf.bitstreams.cli import save_faps
     frames = load_stream(stream)
     if faps_out is not None:
-        save_faps(frames, faps_out)
+        save_faps(state_of(frames) if player_state else frames, faps_out)
     if vertices_out is None and images_dir is None:
         return
     from fbaconf.animation.engine import animate
@@ -49,6 +51,16 @@ def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path
         from fbaconf.rendering.scenario import Scenario
         sc = Scenario.load(scenario) if scenario is not None else Scenario.default()
         render_frames(state, sc, images_dir, scene_dir=Path(scene).resolve().parent if scene else None)
+
+
+def state_of(frames):
+    """What a player holds in each frame: every FAP with a value (SET, RETAINED or DERIVED)
+    as SET, FREE ones as they are."""
+    import numpy as np
+    from fbaconf.bitstreams.frames import DERIVED, RETAINED, SET
+    out = frames.copy()
+    out.status = np.where(np.isin(out.status, (RETAINED, DERIVED)), SET, out.status).astype(out.status.dtype)
+    return out
 
 
 def multi_outputs(streams: list[Path], out_dir: Path, fmt: str = "npz") -> None:

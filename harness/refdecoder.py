@@ -37,7 +37,12 @@ class ReferenceAdapter(PythonAdapter):
             return job.path(ph) if out in self.outputs and ph not in job.unwanted else None
         reference_outputs(job.path("input"), scene=job.path("scene"), scenario=job.path("scenario"),
                           faps_out=want("faps", "faps_out"), vertices_out=want("vertices", "vertices_out"),
-                          images_dir=want("images", "images_dir"))
+                          images_dir=want("images", "images_dir"), player_state=_is_text(job.path("input")))
+
+
+def _is_text(path) -> bool:
+    """A .fap text input: the reference is then a player, and writes its state (docs/harness.md)."""
+    return path is not None and Path(path).suffix.lower() == ".fap"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -58,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if a.cmd == "decode":
             reference_outputs(a.input, scene=a.scene, scenario=a.scenario, faps_out=a.faps_out,
-                              vertices_out=a.vertices_out, images_dir=a.images_dir)
+                              vertices_out=a.vertices_out, images_dir=a.images_dir, player_state=_is_text(a.input))
         else:
             multi_outputs(a.inputs, a.out_dir, a.format)
     except FbaconfInputError as e:

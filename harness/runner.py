@@ -47,7 +47,15 @@ def claim_covers(claimed: str, case_claim: str) -> bool:
     return ps.profile_includes(a.profile, b.profile) and b.level <= a.level
 
 
-def required_for(claim: str | None, case: Case) -> bool:
+INFORMATIVE_GROUPS = ("text",)  # player cases (.fap text): no MPEG-4 profile claim requires them
+
+
+def required_for(claim: str | None, case: Case, player: bool = False) -> bool:
+    """Whether a claim requires ``case``: its profile and level are covered, and — unless the
+    program is a player (it reads only .fap text) — it is not a player case (an MPEG-4
+    profile claim is about the binary stream; docs/harness.md)."""
+    if claim is not None and case.group in INFORMATIVE_GROUPS and not player:
+        return False
     return claim is None or claim_covers(claim, case.claim)
 
 
@@ -162,7 +170,7 @@ def _remove_quietly(path: Path) -> None:
 
 def run_case(ctx: RunContext, case: Case) -> CaseResult:
     t0 = time.perf_counter()
-    required = required_for(ctx.claim, case)
+    required = required_for(ctx.claim, case, player="fba" not in ctx.adapter.inputs)
     base = dict(case_id=case.full_id, suite=case.suite, claim=case.claim, required=required)
     why = capability(ctx.adapter, case)
     if why:

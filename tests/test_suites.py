@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from fbaconf.errors import FbaconfInputError
+
 from fbaconf.conformance import suite as suite_module
 from fbaconf.generators import suites as build
 from fbaconf.conformance.suite import load_suites
@@ -32,6 +34,12 @@ def test_error_cases_carry_the_checker_codes():
     for s in load_suites():
         for c in s.cases:
             if c.kind != "error":
+                continue
+            if c.input_path("fba") is None:  # an invalid .fap text (players): the reader's rule
+                from fbaconf.bitstreams.faptext import read_fap_file
+                with pytest.raises(FbaconfInputError) as ei:
+                    read_fap_file(c.input_path("fap"))
+                assert c.expect["diagnostics"] == [ei.value.rule], c.full_id
                 continue
             codes = {d.code for d in analyse(c.input_path("fba").read_bytes()).diagnostics}
             assert set(c.expect["diagnostics"]) <= codes, (c.full_id, codes)
