@@ -245,8 +245,9 @@ EXTERNAL_RATES = (None, 10.0)  # the file's own rate, and resampled to 10 Hz
 
 
 def build_external(src: Path, out: Path | None = None, log=print) -> Suite | None:
-    """The optional EXTERNAL suite: every ``.fap`` file under ``src`` (e.g. ../shared/data/fap),
-    encoded at several quantisers and frame rates, with goldens, under ``out`` (default: a new
+    """The optional EXTERNAL suite: every ``.fap`` file under ``src`` (e.g. ../shared/data/fap)
+    as it is (a raw text case for players) and encoded at several quantisers and frame rates,
+    with goldens, under ``out`` (default: a new
     temporary folder). Never written into the repository. Returns None when ``src`` holds no
     .fap file. Run it with ``FBACONF_SUITES=<out>/suites FBACONF_GOLDEN=<out>/golden fbaconf run``."""
     import tempfile
@@ -270,6 +271,15 @@ def build_external(src: Path, out: Path | None = None, log=print) -> Suite | Non
             log(f"external: {f}: skipped ({e})")
             continue
         stem = f"{f.parent.name}-{f.stem}".replace(" ", "_")
+        # the file itself, as its tool wrote it, for players (group "text": informative for the
+        # decoders of the binary stream); the golden is fbaconf's reading of it
+        raw = Case(id=f"{stem}-raw", suite=EXTERNAL_SUITE, claim="simple@1", group="text", kind="decode",
+                   description=f"real file {f.relative_to(src)} as written (players)", suite_dir=d)
+        _write(d, f"{raw.id}.fap", f.read_bytes(), raw, "fap")
+        raw.frames = len(frames)
+        raw.stages = ["faps"]
+        raw.goldens = {"faps": "faps.npz"}
+        cases.append(raw)
         for q in EXTERNAL_QUANTS:
             for rate in EXTERNAL_RATES:
                 cid = f"{stem}-q{q}" + (f"-{rate:g}hz" if rate else "")

@@ -88,6 +88,9 @@ def test_external_suite_from_real_files(tmp_path):
     shutil.copy(REAL / "vreng" / "joy.fap", src / "vreng" / "joy.fap")
     s = build.build_external(src, tmp_path / "out", log=lambda *_: None)
     assert s is not None and s.group == "real" and len(s.cases) >= 4
+    (raw,) = [c for c in s.cases if c.group == "text"]  # the file itself, kept as the case input
+    assert raw.input_path("fap").read_bytes() == (REAL / "vreng" / "joy.fap").read_bytes()
+    assert raw.input_path("fba") is None
     man = json.loads((tmp_path / "out" / "golden" / "MANIFEST.json").read_text())
     assert any(k.startswith(build.EXTERNAL_SUITE + "/") for k in man["files"])
     # nothing lands in the repository
