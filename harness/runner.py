@@ -16,6 +16,7 @@ it crashes, hangs or blows its memory or output limit.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -401,6 +402,18 @@ def _part_lookup(golden_vertices: Path) -> Callable[[int], str] | None:
         return None
 
 
+def image_frame_numbers(names: list[str]) -> list[int] | None:
+    """The sequence frame number of each image (``frame_00010.png`` -> 10), so reports name
+    the frames the scenario lists, not their positions; None if a name does not say."""
+    out = []
+    for n in names:
+        m = re.fullmatch(r"frame_(\d+)\.png", n)
+        if not m:
+            return None
+        out.append(int(m.group(1)))
+    return out
+
+
 def _images_stage(cmp, ctx: RunContext, case: Case, gdir: Path, job: Job) -> StageResult:
     names = case.goldens.get("images", [])
     expected = [gdir / n for n in names]
@@ -410,7 +423,7 @@ def _images_stage(cmp, ctx: RunContext, case: Case, gdir: Path, job: Job) -> Sta
     got = [job.path("images_dir") / n for n in names]
     tol = cmp.ImageTolerances.from_dict(None, case.tolerances.get("images", {}))
     art = ctx.out_dir / "artefacts" / case.suite / case.id
-    r = cmp.compare_images(expected, got, tol, art, relative_to=ctx.out_dir)
+    r = cmp.compare_images(expected, got, tol, art, relative_to=ctx.out_dir, frames=image_frame_numbers(names))
     if r.outcome == Outcome.PASS:
         shutil.rmtree(art, ignore_errors=True)
     return r

@@ -351,3 +351,34 @@ def test_outputs_a_case_does_not_compare_are_not_requested():
     assert adapters.expand(t, job, None) == ["dec", "/w/a.fba", "--faps-out", "/w/f.npz"]
     # a required (non-optional) output placeholder still gets its path
     assert adapters.expand(["dec", "{images_dir}"], job, None) == ["dec", "/w/img"]
+
+
+def test_image_reports_name_the_sequence_frame(tmp_path):
+    """A renderer wrong in the last listed frame (sequence frame 19) is reported as frame 19,
+    with artefacts frame19_*, not as the third image ("frame 2")."""
+    from fbaconf.conformance.suite import load_suites
+    from fbaconf.harness import adapters as ad
+    from fbaconf.harness.runner import run_cases
+    script = tmp_path / "badlast.py"
+    script.write_text(
+        "import sys, numpy as np, OpenImageIO as oiio\n"
+        "from pathlib import Path\n"
+        "from fbaconf.pipeline import reference_outputs\n"
+        "a = dict(zip(sys.argv[1::2], sys.argv[2::2]))\n"
+        "reference_outputs(Path(a['--in']), scene=Path(a['--scene']), scenario=Path(a['--scenario']),\n"
+        "                  images_dir=Path(a['--images']))\n"
+        "p = str(Path(a['--images']) / 'frame_00019.png')\n"
+        "img = oiio.ImageBuf(p); px = img.get_pixels(oiio.UINT8)\n"
+        "px[:, :, :3] = 255 - px[:, :, :3]\n"
+        "out = oiio.ImageOutput.create(p); out.open(p, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], oiio.UINT8))\n"
+        "out.write_image(px); out.close()\n")
+    m = tmp_path / "badlast.toml"
+    m.write_text('name = "badlast"\nclaims = ["predictable@1"]\ninputs = ["fba", "scene"]\noutputs = ["images"]\n'
+                 f'[commands]\ndecode = ["{{python}}", "{script}", "--in", "{{input}}", "--scene", "{{scene}}", '
+                 '"--scenario", "{scenario}", "--images", "{images_dir}"]\n[limits]\ntimeout_s = 120\n')
+    (s,) = load_suites(names=["predictable-l1-core"])
+    case = next(c for c in s.cases if c.id == "logo")
+    (r,) = run_cases(ad.resolve(m), [case], claim="predictable@1", out_dir=tmp_path / "run", jobs=1, progress=False)
+    st = next(x for x in r.stages if x.stage == "images")
+    assert st.first_difference["frame"] == 19, st.first_difference
+    assert "frame 19" in st.message and any(k.startswith("frame19_") for k in st.artefacts)
