@@ -651,3 +651,29 @@ def test_failed_image_write_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(ImageIOError, match="disk full"):
         write_png(tmp_path / "frame_00000.png", np.zeros((4, 4, 3)))
     assert list(tmp_path.iterdir()) == []
+
+
+def test_every_image_case_keeps_clear_of_the_near_plane():
+    """GL clips a triangle that crosses the near plane where fbaconf's rasteriser skips it
+    whole (raster.py, "Clipping"); the two agree only while no vertex of a rendered frame is
+    nearer than the near plane. Every frame of every committed image case is checked (the
+    scenario's fitted camera, the animated vertices), so the difference is never exercised."""
+    from fbaconf.animation.engine import animate, load_scene
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.conformance.suite import load_suites
+    from fbaconf.rendering.render import Renderer
+    from fbaconf.rendering.scenario import Scenario
+    checked = 0
+    for s in load_suites():
+        for c in s.cases:
+            if "images" not in c.stages:
+                continue
+            frames = decode(c.input_path("fba").read_bytes()).frames
+            state = animate(frames, load_scene(c.input_path("scene")))
+            sc = Scenario.load(c.input_path("scenario"))
+            cam = Renderer(state, sc).camera
+            right, up, fwd = cam.basis()
+            depth = (state.vertices - np.asarray(cam.position)) @ fwd  # view depth, every frame
+            assert float(depth.min()) > cam.near, (c.full_id, float(depth.min()), cam.near)
+            checked += 1
+    assert checked >= 2
