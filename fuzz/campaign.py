@@ -75,7 +75,6 @@ def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: fl
     """Minimise one finding in a worker: the smallest input with the same class and signature."""
     import shutil
     from .minimise import minimise
-    from .targets import Verdict  # noqa: F401 - pickled results carry Verdict fields only
     work = Path(tempfile.mkdtemp(prefix="fbaconf-min-"))
     target = _target(spec, work)
     last = {}

@@ -27,12 +27,12 @@ import collections
 import os
 import select
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 from . import sandbox
 from .sandbox import Limits, ProcResult, View
+from .spawner import ForkServerError
 
 
 class PersistentDecoder:
@@ -63,45 +63,23 @@ class PersistentDecoder:
         inner = list(self.argv)
         if sandbox.isolation() == "bwrap":
             inner = sandbox._bwrap_argv(self.view, self.workdir) + inner
-        self.cg = sandbox._Cgroups(self.limits)
         lim = self.limits
-        as_bytes = lim.memory_mb * 2**20 if lim.memory_kind == "address-space" else 0
-        full = [os.path.realpath(sys.executable), "-I", "-S", str(sandbox.LIMIT_LAUNCHER), str(as_bytes),
-                str(lim.output_mb * 2**20), "0", *self.cg.launcher_args(), "--", *inner]
         self._err = open(self.io / "stderr", "wb+")
         try:
-            self.proc = subprocess.Popen(full, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err,
-                                         cwd=self.workdir, start_new_session=True, close_fds=True,
-                                         env=sandbox.decoder_env(self.workdir, self.env))
+            self.proc, self.cg = sandbox.launch_server(
+                inner, lim, cwd=self.workdir, env=sandbox.decoder_env(self.workdir, self.env), stderr=self._err,
+                as_bytes=lim.memory_mb * 2**20 if lim.memory_kind == "address-space" else 0,
+                fsize=lim.output_mb * 2**20)
         except OSError as e:
-            raise RuntimeError(f"cannot start the persistent decoder: {e}") from e
+            raise ForkServerError(f"cannot start the persistent decoder: {e}") from e
         self._buf = b""
         self._err_mark = 0
         self.starts += 1
-        sandbox._RUNNING.add(self.proc.pid)
 
     def close(self) -> None:
         p, self.proc = self.proc, None
-        if p is not None:
-            sandbox._RUNNING.discard(p.pid)
-            for f in (p.stdin,):
-                try:
-                    f.close()  # end of input: a well-behaved server exits
-                except OSError:
-                    pass
-            try:
-                p.wait(timeout=0.5)
-            except subprocess.TimeoutExpired:
-                pass
-            sandbox._kill_group(p.pid)
-            try:
-                p.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                pass
-            p.stdout.close()
-        if self.cg is not None:
-            self.cg.close()
-            self.cg = None
+        sandbox.stop_server(p, self.cg, grace_s=0.5)  # end of input first: a well-behaved server exits
+        self.cg = None
         if self._err is not None:
             self._err.close()
             self._err = None

@@ -447,6 +447,52 @@ def result(argv: list[str], limits: Limits, status: int, rusage, elapsed: float,
     return res
 
 
+def launch_server(inner: list[str], limits: Limits, *, cwd: Path, env: dict[str, str], stderr=None,
+                  pass_fds: tuple[int, ...] = (), as_bytes: int = 0, fsize: int = 0) -> tuple[subprocess.Popen, "_Cgroups"]:
+    """Start a long-lived process (a fork server, a persistent decoder) through the limit
+    launcher, in its own cgroups and session, with stdin/stdout as pipes; registered so
+    :func:`stop_all` kills it. ``as_bytes``/``fsize``: rlimits for the whole process (0 = none;
+    never a CPU-time limit, which would add up over inputs). Raises OSError."""
+    cg = _Cgroups(limits)
+    full = [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize), "0",
+            *cg.launcher_args(), "--", *inner]
+    try:
+        proc = subprocess.Popen(full, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=stderr, cwd=cwd,
+                                start_new_session=True, close_fds=True, pass_fds=pass_fds, env=env)
+    except OSError:
+        cg.close()
+        raise
+    _RUNNING.add(proc.pid)
+    return proc, cg
+
+
+def stop_server(proc: subprocess.Popen | None, cg: "_Cgroups | None", *, grace_s: float = 0.0) -> None:
+    """Stop what :func:`launch_server` started: close its stdin (a well-behaved server exits;
+    ``grace_s`` to let it), kill its process group, reap it, close its pipes and cgroups."""
+    if proc is not None:
+        _RUNNING.discard(proc.pid)
+        try:
+            proc.stdin.close()
+        except OSError:
+            pass
+        if grace_s:
+            try:
+                proc.wait(timeout=grace_s)
+            except subprocess.TimeoutExpired:
+                pass
+        _kill_group(proc.pid)
+        try:
+            proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            pass
+        try:
+            proc.stdout.close()
+        except OSError:
+            pass
+    if cg is not None:
+        cg.close()
+
+
 def tempfile_dir() -> str:
     import tempfile
     return tempfile.mkdtemp(prefix="fbaconf-io-")

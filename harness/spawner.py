@@ -82,14 +82,10 @@ class ForkServer:
                      writable=list(self.view.writable), hidden=list(self.view.hidden),
                      read_only_inside=list(self.view.read_only_inside))
             inner = sandbox._bwrap_argv(v, self.root) + inner + ["--reap-namespace"]
-        self.cg = sandbox._Cgroups(self.limits)
-        full = [py, "-I", "-S", str(sandbox.LIMIT_LAUNCHER), "0", "0", "0", *self.cg.launcher_args(), "--", *inner]
-        try:
-            # the decoder's output files become the server's descriptors 3 and 4
-            self.proc = subprocess.Popen(full, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None,
-                                         cwd=self.root, start_new_session=True, close_fds=True,
-                                         pass_fds=tuple(fds),
-                                         env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LC_ALL": "C.UTF-8"})
+        try:  # the server gets the decoder's output files as descriptors (--fds)
+            self.proc, self.cg = sandbox.launch_server(
+                inner, self.limits, cwd=self.root, pass_fds=tuple(fds),
+                env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LC_ALL": "C.UTF-8"})
         except OSError as e:
             raise ForkServerError(f"cannot start the fork server: {e}") from e
         finally:
@@ -97,28 +93,14 @@ class ForkServer:
                 os.close(fd)
         self._rbuf = b""
         self.starts += 1
-        sandbox._RUNNING.add(self.proc.pid)
 
     def close(self) -> None:
         p, self.proc = self.proc, None
-        if p is not None:
-            sandbox._RUNNING.discard(p.pid)
-            sandbox._kill_group(p.pid)
-            try:
-                p.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                pass
-            for f in (p.stdin, p.stdout):
-                try:
-                    f.close()
-                except OSError:
-                    pass
         for _name, fd in self._events or ():
             os.close(fd)
         self._events = None
-        if self.cg is not None:
-            self.cg.close()
-            self.cg = None
+        sandbox.stop_server(p, self.cg)
+        self.cg = None
         for pair in self._files:
             for f in pair:
                 f.close()
