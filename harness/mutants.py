@@ -163,6 +163,9 @@ MUTANTS_LIST = [
     Mutant("wrong-rewind", "fbaconf.bitstreams.arith:ArithDecoder.finish",
            "block end: stuffing bits inside the 14-bit look-ahead counted too (S1's plain rewind)",
            "sum(1 for c in self.stuffing if c <= used)", "len(self.stuffing)", pure_decoder=True),
+    Mutant("model-no-halving", "fbaconf.bitstreams.arith:FastModel.update",
+           "a predicted model is never halved at the total 16,383 (spec notes 3.2)",
+           "if -int(a[0]) == MAX_FREQUENCY:", "if False:", pure_decoder=True),
     # --- high-level FAPs (D5)
     Mutant("viseme-prediction-sign", f"{D}.payload", "predicted viseme_select1 subtracts the difference",
            "hl[0] += d1", "hl[0] -= d1", pure_decoder=True),

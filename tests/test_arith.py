@@ -218,3 +218,35 @@ def test_uniform_model_matches_table_model():
             assert u.bounds(s) == t.bounds(s)
         for target in range(0, n, max(1, n // 50)):
             assert u.find(target) == t.find(target)
+
+
+def test_a_predicted_model_is_halved_at_16383_in_the_suite():
+    """simple-l1-stress/arith-model-rescale reaches the coder's limit (spec notes 3.2): FAP 3's
+    P alphabet at fap_quant 2 is [-180, 180] (D4: the default P range +-360, truncating
+    division), so its table starts at the total 361 and reaches 16,383 after 16,022 updates;
+    the 16,023rd update halves it first, and 476 more symbols decode with the halved table."""
+    from fbaconf.bitstreams import arith
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.conformance.suite import load_suites
+    (s,) = load_suites(names=["simple-l1-stress"])
+    case = next(c for c in s.cases if c.id == "arith-model-rescale")
+    seen = {"updates": 0, "halved_at": [], "sizes": set()}
+    orig = arith.FastModel.update
+
+    def spy(self, sym):
+        if self.adaptive:
+            seen["updates"] += 1
+            seen["sizes"].add(self.n)
+            if self.total() == arith.MAX_FREQUENCY:
+                seen["halved_at"].append(seen["updates"])
+        orig(self, sym)
+    native = arith.native_decoder
+    try:
+        arith.native_decoder = lambda: None  # the pure decoder, whose models we can watch
+        arith.FastModel.update = spy
+        frames = decode(case.input_path("fba").read_bytes()).frames
+    finally:
+        arith.FastModel.update = orig
+        arith.native_decoder = native
+    assert len(frames) == 16500 and seen["sizes"] == {361}
+    assert seen["updates"] == 16499 and seen["halved_at"] == [16023]
