@@ -12,7 +12,8 @@ are set in each child as the one-shot launcher sets them; the results are the sa
 
 What differs from a one-shot case: the sandbox (its ``/tmp``, its PID namespace) lives for the
 worker, not for one input; after each input the server kills every process the decoder left
-in the namespace, and the harness empties the worker's folder. A server that dies or stops
+in the namespace (without bubblewrap: the decoder's session; the cgroup's processes die when
+the server stops), and the harness empties the worker's folder. A server that dies or stops
 answering is restarted; the input it was running is reported as the decoder's ending.
 """
 from __future__ import annotations
