@@ -95,6 +95,7 @@ def test_differential_fuzz_short(fbadec, tmp_path):
     target = DecoderTarget(adapters.resolve(str(d / "fbadec.toml")), tmp_path / "work", timeout_s=5.0)
     fz = Fuzzer(target, default_seeds(), seed=4, seconds=120, progress=False, max_execs=1500, coverage_every=4,
                 minimise_seconds=5)
+    assert target.persistent  # the manifest's [commands] serve: fbadec --serve
     fz.run()
     assert fz.stats.execs == 1500
     assert {k: f.verdict.message[:200] for k, f in fz.findings.items()} == {}

@@ -284,12 +284,49 @@ static void render(buf *out, const fba_result *r, int fap)
 static int usage(void)
 {
     fprintf(stderr, "usage: fbadec IN.fba OUT.fap|OUT.npz\n"
-                    "       fbadec --out-dir DIR [--fap] IN1.fba [IN2.fba ...]\n");
+                    "       fbadec --out-dir DIR [--fap] IN1.fba [IN2.fba ...]\n"
+                    "       fbadec --serve   (fbaconf's persistent protocol on stdin/stdout)\n");
     return EXIT_USAGE;
+}
+
+/* fbaconf's persistent protocol (docs/fuzzing.md): per input "<size> <output path>\n" and
+ * <size> bytes on stdin; the answer "<code>\n" on stdout, the code meaning what the exit code
+ * of a one-shot run means (0 written, 1 invalid, 3 I/O). Ends at the end of stdin. Added by
+ * the project after the independent writing, for fast fuzzing. */
+static int serve(void)
+{
+    char line[4352];
+    while (fgets(line, sizeof line, stdin)) {
+        char *sp = strchr(line, ' '), *nl = strchr(line, '\n');
+        if (!sp || !nl) return EXIT_USAGE;
+        *nl = 0;
+        long long size = strtoll(line, NULL, 10);
+        if (size < 0 || size > 64LL << 20) return EXIT_USAGE;
+        uint8_t *data = malloc(size > 0 ? (size_t)size : 1);
+        if (!data) return EXIT_IO;
+        if (fread(data, 1, (size_t)size, stdin) != (size_t)size) { free(data); return EXIT_USAGE; }
+        fba_result r;
+        fba_error err;
+        int rc = fba_decode(data, (size_t)size, &r, &err) == 0 ? 0 : EXIT_INVALID;
+        free(data);
+        if (rc) {
+            fprintf(stderr, "fbadec: %s at bit %lld: %s\n", err.rule, (long long)err.bit_offset, err.message);
+        } else {
+            buf out;
+            render(&out, &r, ends_with(sp + 1, ".fap"));
+            rc = write_file(sp + 1, &out);
+            free(out.p);
+            fba_result_free(&r);
+        }
+        printf("%d\n", rc);
+        fflush(stdout);
+    }
+    return 0;
 }
 
 int main(int argc, char **argv)
 {
+    if (argc == 2 && !strcmp(argv[1], "--serve")) return serve();
     if (argc == 3 && argv[1][0] != '-') {
         int fap = ends_with(argv[2], ".fap"); /* anything else: .npz */
         fba_result r;
