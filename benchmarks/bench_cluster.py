@@ -18,7 +18,8 @@ import tempfile
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+from _skipchain import build
+
 
 
 def fbaconf(*args: str) -> tuple[float, str]:
@@ -46,12 +47,7 @@ def main() -> int:
         if cc is None:
             print("no C compiler: fuzz comparison skipped")
             return 0
-        subprocess.run([cc, "-O2", "-o", str(tmp / "skipchain"), str(HERE.parent / "tests" / "fuzz_decoders" /
-                                                                       "skipchain.c")], check=True)
-        m = tmp / "skipchain.toml"
-        m.write_text('name = "skipchain"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                     'faps_format = "fap"\n[commands]\ndecode = ["{manifest_dir}/skipchain", "{input}", '
-                     '"{faps_out}"]\n[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n')
+        m = build(cc, tmp)
         rates = []
         for label, extra in (("fuzz -j 1", []), ("fuzz --cluster local:2", ["--cluster", "local:2"])):
             import json

@@ -30,8 +30,8 @@ import tempfile
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-SKIPCHAIN = HERE.parent / "tests" / "fuzz_decoders" / "skipchain.c"
+from _skipchain import build
+
 
 
 def bare_spawn(exe: Path, stream: Path, seconds: float) -> float:
@@ -90,28 +90,22 @@ def main() -> int:
     from fbaconf.conformance.suite import load_suites
     tmp = Path(tempfile.mkdtemp(prefix="bench-fuzz-"))
     try:
+        spawn = build(cc, tmp)
+        serve = build(cc, tmp, serve=True)
+        fixed = build(cc, tmp, "fixed", fixed=True)  # no planted crash: no restarts
+        fixed_serve = build(cc, tmp, "fixed", fixed=True, serve=True)
         exe = tmp / "skipchain"
-        subprocess.run([cc, "-O2", "-o", str(exe), str(SKIPCHAIN)], check=True)
-        subprocess.run([cc, "-O2", "-DSKIPCHAIN_FIXED", "-o", str(tmp / "fixed"), str(SKIPCHAIN)], check=True)
         stream = tmp / "in.fba"
         (suite,) = load_suites(names=["simple-l1-core"])
         stream.write_bytes(suite.cases[0].input_path("fba").read_bytes())
-        base = ('name = "skipchain"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                'faps_format = "fap"\n[commands]\ndecode = ["{manifest_dir}/skipchain", "{input}", "{faps_out}"]\n')
-        limits = "[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n"
-        (tmp / "spawn.toml").write_text(base + limits)
-        (tmp / "serve.toml").write_text(base + 'serve = ["{manifest_dir}/skipchain", "--serve"]\n' + limits)
-        fixed = base.replace("/skipchain", "/fixed")  # no planted crash: no restarts
-        (tmp / "fixed.toml").write_text(fixed + limits)
-        (tmp / "fixed-serve.toml").write_text(fixed + 'serve = ["{manifest_dir}/fixed", "--serve"]\n' + limits)
         s = args.seconds
         rows = [("bare spawn (posix_spawn loop)", bare_spawn(exe, stream, s), "")]
-        for label, manifest, spawn in (("fuzz --spawn", "spawn.toml", True),
-                                       ("fuzz (fork server, default)", "spawn.toml", False),
-                                       ("fuzz (persistent, [commands] serve)", "serve.toml", False),
-                                       ("fuzz (fork server), bug fixed", "fixed.toml", False),
-                                       ("fuzz (persistent), bug fixed", "fixed-serve.toml", False)):
-            rate, mode, execs = fuzz_rate(tmp / manifest, s, tmp / f"work-{len(rows)}", spawn=spawn)
+        for label, manifest, one_shot in (("fuzz --spawn", spawn, True),
+                                          ("fuzz (fork server, default)", spawn, False),
+                                          ("fuzz (persistent, [commands] serve)", serve, False),
+                                          ("fuzz (fork server), bug fixed", fixed, False),
+                                          ("fuzz (persistent), bug fixed", fixed_serve, False)):
+            rate, mode, execs = fuzz_rate(manifest, s, tmp / f"work-{len(rows)}", spawn=one_shot)
             rows.append((label, rate, f"{execs} inputs, mode {mode}"))
         rows.append(("bare persistent (pipe round trip)", bare_persistent(exe, stream, s), ""))
         print(f"fuzzing throughput, {s:g} s each, one decoder at a time, {os.cpu_count()} CPUs")

@@ -80,8 +80,7 @@ class Run:
 
     @classmethod
     def done(cls, out: "ExecResult") -> "Run":
-        r = cls(lambda: None, lambda: out)
-        return r
+        return cls(lambda: None, lambda: out)
 
     def wait(self) -> None:
         self._wait()
