@@ -77,6 +77,8 @@ class PersistentDecoder:
         self.starts += 1
 
     def close(self) -> None:
+        for a in self._queue:  # inputs queued behind the one that ended the process: sent again
+            a.sent = False
         p, self.proc = self.proc, None
         sandbox.stop_server(p, self.cg, grace_s=0.5)  # end of input first: a well-behaved server exits
         self.cg = None
@@ -210,8 +212,8 @@ class Answer:
             dec._queue[0].wait()  # inputs sent earlier answer first
         if dec._queue and dec._queue[0] is self:
             dec._queue.popleft()
-        if not self.sent or dec.proc is None or dec.proc.poll() is not None:
-            dec._resend(self)  # sent to a process that died under an earlier input
+        if not self.sent or dec.proc is None:
+            dec._resend(self)  # sent to a process that ended under an earlier input
         # this input's time and stderr begin where the previous answer ended
         begun = max(self.t0, dec._last_done)
         err_start = max(self.err_start, dec._err_mark)

@@ -159,8 +159,11 @@ def test_persistent_protocol_survives_crashes_and_hangs(tmp_path):
         assert run(b"") is None
         assert run(b"JUNK").cls == "unexpected-exit"  # not an answer line
         assert run(b"QUIT").cls == "unexpected-exit"  # exited without answering
+        quit_ = t.start(Entry(STREAM + b"QUIT"))
+        time.sleep(0.5)  # it has exited before its ending is read: judged, never sent again
+        assert quit_.result().verdict.cls == "unexpected-exit"
         assert run(b"") is None
-        assert t._workers[0].server.starts == 5  # the first, and one after SEGV, HANG, JUNK and QUIT
+        assert t._workers[0].server.starts == 6  # the first, and one after SEGV, HANG, JUNK and each QUIT
     finally:
         t.close()
 
