@@ -31,10 +31,12 @@ def load_stream(path: Path):
 
 def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path | None = None,
                       faps_out: Path | None = None, vertices_out: Path | None = None,
-                      images_dir: Path | None = None, player_state: bool = False) -> None:
+                      images_dir: Path | None = None, player_state: bool = False,
+                      supersample: int | None = None) -> None:
     """Decode (and animate, render) one stream with the reference, writing the requested outputs.
     ``player_state``: the FAP output is a player's (docs/harness.md, "Players"): its state,
-    every FAP that holds a value written as set in every frame."""
+    every FAP that holds a value written as set in every frame. ``supersample``: render with
+    this many samples per pixel side instead of the scenario's (the goldens' 8 x 8)."""
     from fbaconf.bitstreams.cli import save_faps
     frames = load_stream(stream)
     if faps_out is not None:
@@ -50,6 +52,8 @@ def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path
         from fbaconf.rendering.render import render_frames
         from fbaconf.rendering.scenario import Scenario
         sc = Scenario.load(scenario) if scenario is not None else Scenario.default()
+        if supersample is not None:
+            sc = sc.with_(supersample=supersample)
         render_frames(state, sc, images_dir, scene_dir=Path(scene).resolve().parent if scene else None)
 
 

@@ -48,6 +48,9 @@ def _shape(part: Part, colors: dict) -> bt.Node:
     if part.color in ("eye_white", "iris", "pupil", "teeth", "lips", "tongue"):
         mat["specularColor"] = (0.4, 0.4, 0.4)
         mat["shininess"] = 0.5
+    elif part.color == "skin":  # a broad, weak sheen: large specular areas the image stage can judge
+        mat["specularColor"] = (0.3, 0.3, 0.3)
+        mat["shininess"] = 0.08
     return bt.Node("Shape", {"appearance": bt.Node("Appearance", {"material": bt.Node("Material", mat)}),
                              "geometry": _ifs(part, colors)})
 

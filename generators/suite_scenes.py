@@ -134,17 +134,30 @@ def _fit_scene(which: str):
     raise SuiteError(f"unknown FIT scene {which!r}", rule="suite-spec")
 
 
-def _png(width: int, height: int, rgb=(200, 160, 140)) -> bytes:
-    """A uniform RGB PNG (zlib level 9: deterministic for a given zlib)."""
+def _pattern_png(width: int, height: int) -> bytes:
+    """An asymmetric, low-frequency RGB texture (deterministic PNG, zlib level 9): red ramps up
+    left to right, green ramps up bottom to top (t up, as the texture is seen), blue is raised in
+    the top-left quadrant only. A player that flips t, mirrors s, or clamps where the scene says
+    repeat (the grid's s runs over [0, 2]) changes large areas; the ramps change by at most one
+    code per texel, so minified, mipmapped or multisampled reads of it agree with the golden's.
+    Rows use PNG filter 1 (Sub): constant steps compress to almost nothing."""
     import struct
     import zlib
-    row = b"\x00" + bytes(rgb) * width
-    raw = row * height
+    x = np.arange(width)
+    red = np.round(60 + 160 * x / max(width - 1, 1)).astype(np.int64)
+    raw = bytearray()
+    for j in range(height):
+        green = int(round(220 - 160 * j / max(height - 1, 1)))
+        blue = np.where((x < width // 2) & (j < height // 2), 170, 70)
+        px = np.stack([red, np.full(width, green), blue], 1).reshape(-1)
+        sub = px.copy()
+        sub[3:] = (px[3:] - px[:-3]) % 256
+        raw += b"\x01" + bytes(sub.astype(np.uint8))
 
     def chunk(t, d):
         return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
     return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
+            + chunk(b"IDAT", zlib.compress(bytes(raw), 9)) + chunk(b"IEND", b""))
 
 
 def _grid_scene(kind: str):
@@ -179,12 +192,12 @@ def _grid_scene(kind: str):
         ps = load_profiles()
         lim = {x.id: int(x.value(level)) for x in ps.limits_for(Claim.parse(f"predictable@{level}", ps))}
         tex = f"texture{lim['texture_width']}.png"
-        files[tex] = _png(lim["texture_width"], lim["texture_height"])
+        files[tex] = _pattern_png(lim["texture_width"], lim["texture_height"])
         app["texture"] = bt.Node("ImageTexture", {"url": [tex]})
     gf = {"coord": bt.Node("Coordinate", {"point": V}), "coordIndex": np.array(ci, np.int64), "solid": False}
     if level is not None:  # per-vertex texture coordinates for the texture
         gf["texCoord"] = bt.Node("TextureCoordinate", {"point": np.round(np.stack(
-            [(V[:, 0] - V[:, 0].min()) / np.ptp(V[:, 0]), (V[:, 1] - V[:, 1].min()) / np.ptp(V[:, 1])], 1), 4)})
+            [2.0 * (V[:, 0] - V[:, 0].min()) / np.ptp(V[:, 0]), (V[:, 1] - V[:, 1].min()) / np.ptp(V[:, 1])], 1), 4)})
     grid = bt.Node("IndexedFaceSet", gf, "Grid")
     kids = [bt.Node("Shape", {"appearance": bt.Node("Appearance", app), "geometry": grid})]
     if level is not None:

@@ -51,15 +51,33 @@ def spec(data_dir: Path | None = None) -> dict:
 
 
 
-def _scenario_toml(sc_spec: dict, n_frames: int) -> str:
+def scenario_names(sc_spec: dict) -> list[str]:
+    """The scenarios image cases render under (suites.toml ``[scenario] scenarios``), first = the
+    case's own, the others as ``<case>-<scenario>`` image-only cases."""
+    return list(sc_spec.get("scenarios", ["front"]))
+
+
+def compared_frames(frames, rule: str) -> list[int]:
+    """The frames an image case compares: ``"ends"`` = first, middle and last; ``"ends+extreme"``
+    adds the frame whose FAP values are largest in magnitude (the animation's extreme)."""
+    n = len(frames)
+    out = {0, n // 2, n - 1}
+    if rule == "ends+extreme" and n:
+        mag = np.where(frames.status != 0, np.abs(frames.values.astype(np.float64)), 0.0).sum(axis=1)
+        out.add(int(np.argmax(mag)))
+    return sorted(out)
+
+
+def _scenario_toml(sc_spec: dict, name: str, frames) -> str:
     from fbaconf.rendering.scenario import Scenario
-    sc = Scenario.default()
-    frames = sorted({0, n_frames // 2, n_frames - 1}) if sc_spec.get("frames") == "ends" else None
-    text = sc.to_toml()
-    d = tomllib.loads(text)
+    path = resources.files("fbaconf.conformance").joinpath("data", "scenarios", f"{name}.toml")
+    if not path.is_file():
+        raise SuiteError(f"[scenario] names scenario {name!r}: no conformance/data/scenarios/{name}.toml",
+                         rule="suite-spec")
+    d = tomllib.loads(Scenario.from_dict(tomllib.loads(path.read_text("utf-8")), file=str(path)).to_toml())
     d["width"], d["height"], d["supersample"] = sc_spec["width"], sc_spec["height"], sc_spec["supersample"]
-    if frames is not None:
-        d["frames"] = frames
+    if sc_spec.get("frames"):
+        d["frames"] = compared_frames(frames, sc_spec["frames"])
     return _dump_toml(d)
 
 
@@ -131,7 +149,14 @@ def sparse_text(frames):
     return out
 
 
-def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
+def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> list[Case]:
+    """The case ``c`` of suites.toml, built into ``d``, followed by its image-only views under
+    the other scenarios (when it compares images)."""
+    views: list[Case] = []
+    return [_build(c, suite, d, sc_spec, views)] + views
+
+
+def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> Case:
     from fbaconf.bitstreams.encoder import encode
     from fbaconf.bitstreams.faptext import write_fap
     from fbaconf.scenes import bt
@@ -207,11 +232,26 @@ def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> Case:
         if c.get("vertices_key"):
             case.tolerances.setdefault("vertices", {})["key"] = c["vertices_key"]
     if "images" in case.stages:
-        text = _scenario_toml(sc_spec, case.frames)
-        _write(d, f"{case.id}-scenario.toml", text, case, "scenario")
-        frames = tomllib.loads(text).get("frames", list(range(case.frames)))
-        case.goldens["images"] = [f"frame_{k:05d}.png" for k in frames]
+        _image_goldens(case, d, _scenario_toml(sc_spec, scenario_names(sc_spec)[0], decoded))
+        views += [_view(case, d, _scenario_toml(sc_spec, n, decoded), n) for n in scenario_names(sc_spec)[1:]]
     return case
+
+
+def _image_goldens(case: Case, d: Path, text: str) -> None:
+    _write(d, f"{case.id}-scenario.toml", text, case, "scenario")
+    frames = tomllib.loads(text).get("frames", list(range(case.frames)))
+    case.goldens["images"] = [f"frame_{k:05d}.png" for k in frames]
+
+
+def _view(case: Case, d: Path, text: str, name: str) -> Case:
+    """An image-only case: ``case``'s inputs (the same files, not copies) under another scenario."""
+    v = Case(id=f"{case.id}-{name}", suite=case.suite, claim=case.claim, group=case.group, kind="decode",
+             description=f"{case.id} rendered under scenario {name!r}", tools=list(case.tools),
+             covers=[], inputs={k: x for k, x in case.inputs.items() if k != "scenario"},
+             sha256={k: x for k, x in case.sha256.items() if not k.endswith("-scenario.toml")},
+             frames=case.frames, stages=["images"], goldens={}, suite_dir=d)
+    _image_goldens(v, d, text)
+    return v
 
 
 def build(root: Path | None = None, names: list[str] | None = None, log=print) -> list[Suite]:
@@ -231,7 +271,7 @@ def build(root: Path | None = None, names: list[str] | None = None, log=print) -
         if d.exists():
             shutil.rmtree(d)
         d.mkdir(parents=True)
-        cases = [build_case(c, sd, d, s["scenario"]) for c in s["case"] if c["suite"] == sd["name"]]
+        cases = [x for c in s["case"] if c["suite"] == sd["name"] for x in build_case(c, sd, d, s["scenario"])]
         suite = Suite(sd["name"], sd.get("description", ""), sd["claim"], sd["group"], s["version"], cases, d)
         atomic_write_text(d / "suite.json", json.dumps(suite.to_json(), indent=1, sort_keys=False) + "\n")
         suites.append(suite)

@@ -88,16 +88,19 @@ class VertexTolerances(_Tolerances):
 
 @dataclass(frozen=True)
 class ImageTolerances(_Tolerances):
-    """Image comparison limits. Thresholds are per channel on sRGB-encoded values in
-    [0, 1]; ``fail_percent`` is a percentage of pixels; ΔE limits are CIEDE2000."""
-    fail_threshold: float
-    warn_threshold: float
+    """Image comparison limits (harness/data/tolerances.toml says why each): per-pixel
+    ``abs_tol`` + ``contrast_k`` x local contrast on sRGB-encoded values in [0, 1], the number
+    of violating pixels a frame may have (``fail_pixels`` or ``fail_percent`` % of its pixels,
+    whichever is more), pixels with local contrast above ``edge_contrast`` are edges, and
+    CIEDE2000 limits on the interior and the whole image."""
+    abs_tol: float
+    contrast_k: float
+    edge_contrast: float
+    fail_pixels: float
     fail_percent: float
-    hard_fail: float
-    deltae_warn_mean: float
-    deltae_warn_p95: float
+    interior_deltae_warn_mean: float
+    interior_deltae_fail_mean: float
+    interior_deltae_fail_p99: float
     deltae_fail_mean: float
-    deltae_fail_p95: float
     _section = "images"
-    _order = (("warn_threshold", "fail_threshold"), ("deltae_warn_mean", "deltae_fail_mean"),
-              ("deltae_warn_p95", "deltae_fail_p95"))
+    _order = (("interior_deltae_warn_mean", "interior_deltae_fail_mean"),)
