@@ -1,6 +1,8 @@
 """The syntax model of a face-object stream for fuzzing: start codes and header fields found in the bytes, the features a run reports as its coverage."""
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 
 from fbaconf.errors import BitstreamError
@@ -92,21 +94,29 @@ class StreamModel:
         return sorted(x for x in out if 0 < x <= self.nbits)
 
 
-def _parse(data: bytes):
-    """(planes, error rule, end code, end offset) of ``data`` by the reference decoder
-    (the planes decoded before an error survive it)."""
+@functools.lru_cache(maxsize=8)
+def reference_parse(data: bytes):
+    """(planes, frames, error rule, end code, end offset) of ``data`` by the reference decoder
+    (the planes decoded before an error survive it; frames None on an error). Cached for the
+    last few inputs: the coverage features and the oracle of one input share one parse."""
     from fbaconf.bitstreams import decoder as dec
     d = dec._Decoder(data, None)
-    rule, end_code, end_offset = None, None, 0
+    rule, end_code, end_offset, frames = None, None, 0, None
     try:
         res = d.run()
-        end_code, end_offset = res.end_code, res.end_offset
+        end_code, end_offset, frames = res.end_code, res.end_offset, res.frames
     except BitstreamError as e:
         rule = e.rule
         end_offset = e.bit_offset
     except Exception:  # noqa: BLE001 - the decoder's own wrapper turns these into rule "internal"
         rule = "internal"
-    return list(d.planes), rule, end_code, end_offset
+    return tuple(d.planes), frames, rule, end_code, end_offset
+
+
+def _parse(data: bytes):
+    """(planes, error rule, end code, end offset) of ``data`` by the reference decoder."""
+    planes, _frames, rule, end_code, end_offset = reference_parse(data)
+    return list(planes), rule, end_code, end_offset
 
 
 def stream_model(data: bytes) -> StreamModel:

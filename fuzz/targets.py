@@ -1,6 +1,7 @@
 """Targets and verdicts: the decoder under test (through the harness's sandbox and its one classifier of process endings) and fbaconf itself (--self)."""
 from __future__ import annotations
 
+
 import os
 import re
 import tempfile
@@ -14,7 +15,7 @@ from typing import Iterable
 from fbaconf.errors import FbaconfInputError
 from fbaconf.safefs import empty_dir, remove_tree
 from .generators import Entry
-from .model import stream_features
+from .model import reference_parse, stream_features
 from .scenes import scene_features
 
 
@@ -380,25 +381,25 @@ def reference_text(inp: Entry):
     return frames if not warnings and len(frames) else None
 
 
+def _reference_decode(data: bytes):
+    """(frames, None) or (None, rule): the reference decoder's reading of ``data``, parsed once
+    per input for the oracle and the coverage features together (fuzz.model.reference_parse)."""
+    _planes, frames, rule, _code, _end = reference_parse(data)
+    return (None, rule) if rule is not None else (frames, None)
+
+
 def reference_rejection(inp: Entry) -> str | None:
     """The rule the reference decoder rejects ``inp`` with, or None when it decodes it."""
-    from fbaconf.bitstreams.decoder import decode
     if inp.valid:
         return None
-    try:
-        decode(inp.data)
-    except FbaconfInputError as e:
-        return e.rule
-    return None
+    return _reference_decode(inp.data)[1]
 
 
 def reference_if_valid(inp: Entry):
     """The reference FapFrames when ``inp`` is a valid stream (generated valid, or decoded by the
     reference with no error and no decision-dependent diagnostic), else None."""
-    from fbaconf.bitstreams.decoder import decode
-    try:
-        frames = decode(inp.data).frames
-    except FbaconfInputError:
+    frames, rule = _reference_decode(inp.data)
+    if rule is not None:
         return None
     if inp.valid:
         return frames
