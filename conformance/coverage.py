@@ -99,6 +99,7 @@ def stream_points(data: bytes) -> set[str]:
     from fbaconf.bitstreams import tables
     from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER, alphabet
     from fbaconf.bitstreams.tables import RANGE_DELTA
+    from fbaconf.bitstreams.arith import MAX_FREQUENCY
     from fbaconf.profiles.checker import ARITH_BLOCKS, lookahead_stuffing
     hits: set[str] = set()
     planes, frames, err, res = _decode_any(data)
@@ -110,8 +111,11 @@ def stream_points(data: bytes) -> set[str]:
         hits.add("stream.no-end-code")
     if res.end_offset + 8 <= len(data) * 8 and res.end_code is not None:
         hits.add("stream.trailing-data")
-    bounds = tables.default_bounds().copy()
+    default = tables.default_bounds()
+    bounds = default.copy()
     seen_p = False
+    plane_quant: list[int | None] = []
+    pred_count: dict[int, int] = {}  # predicted symbols per FAP model since the segment's intra plane
     quants, prev_coded, prev_rate = set(), None, None
     any_rate = False
     for k, p in enumerate(planes):
@@ -155,6 +159,14 @@ def stream_points(data: bytes) -> set[str]:
                 if (h, m, s) != (0, 0, 0):
                     hits.add("timecode.nonzero")
             if not dct:
+                sent = {f for vals in p.new_lists.values() for f in vals}
+                for f in p.symbols:
+                    if f in sent:
+                        continue
+                    if np.array_equal(bounds[f - 1], default[f - 1]):
+                        hits.add(f"defaults.fap.{f}")  # coded under its default ranges
+                    else:
+                        hits.add("lists.persist-intra")  # ranges from an earlier plane's lists
                 if not p.new_lists:
                     hits.add("lists.none")
                 for li, name in enumerate(LIST_ORDER):
@@ -187,7 +199,16 @@ def stream_points(data: bytes) -> set[str]:
         if p.coded is not None and (p.coded[0] or p.coded[1]) and p.fap_quant > 1:
             hits.add("highlevel.quantised")
         q = p.fap_quant
+        if p.is_intra:
+            pred_count = {}
         for f, s in p.symbols.items():
+            if not p.is_intra:
+                pred_count[f] = pred_count.get(f, 0) + 1
+                lo, hi = alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q)
+                # an adaptive model starts at one count per symbol and halves at a total of
+                # MAX_FREQUENCY before an update (notes §3.3): the update after this many halves it
+                if pred_count[f] + (hi - lo + 1) > MAX_FREQUENCY:
+                    hits.add("arith.model-rescale")
             if p.is_intra:
                 lo, hi = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)
                 if s == lo:
@@ -210,11 +231,81 @@ def stream_points(data: bytes) -> set[str]:
                     hits.add("arith.lookahead-stuffing")
     if len(quants) > 1:
         hits.add("fap_quant.change")
+    hits |= _retained_across_quant(planes, frames)
     if planes and not any_rate:
         hits.add("rate.none")
     if len({p.coding_type for p in planes}) > 1:
         hits.add("coding.switch")
     hits |= frames_points(frames)
+    return hits
+
+
+def _retained_across_quant(planes, frames) -> set[str]:
+    """``retained.quant-change``: a FAP holds (RETAINED) in a plane of another fap_quant than the
+    plane that last set it — the held value is the dequantised one, not re-scaled (notes §3.3)."""
+    from fbaconf.bitstreams.frames import RETAINED, SET
+    if frames is None or len(frames) != len(planes):
+        return set()
+    quant, last = None, {}
+    for k, p in enumerate(planes):
+        if p.is_intra:
+            quant = p.fap_quant
+        st = frames.status[k]
+        for j in np.nonzero(st == SET)[0]:
+            last[int(j)] = quant
+        for j in np.nonzero(st == RETAINED)[0]:
+            if last.get(int(j), quant) != quant:
+                return {"retained.quant-change"}
+    return set()
+
+
+def text_points(text: str) -> set[str]:
+    """The forms of a raw .fap text (players): what real tools write (docs/fap-text.md)."""
+    import re
+    hits: set[str] = set()
+    if "\r\n" in text:
+        hits.add("text.crlf")
+    lines = [ln.split("#", 1)[0].strip() for ln in text.replace("\r\n", "\n").split("\n")]
+    raw = [ln.strip() for ln in text.replace("\r\n", "\n").split("\n")]
+    if any(ln.startswith("#") for ln in raw[1:]) or any("#" in ln and not ln.startswith("#") for ln in raw):
+        hits.add("text.comment")
+    body = [ln for ln in lines if ln]
+    if not body:
+        return hits
+    head = body[0].split()
+    if head and head[0] in ("2.0", "2.1", "2.2"):
+        hits.add(f"text.version-{head[0]}")
+    if len(head) > 4:
+        hits.add("text.name-spaces")
+    if head and head[-1] == "0":
+        hits.add("text.count-0")
+    rows = body[1:]
+    if any(len(r.split()) == 69 and set(r.split()) <= {"0", "1"} for r in rows):
+        hits.add("text.mask-69")
+    if any(re.search(r"\d\.\d", r) for r in rows):
+        hits.add("text.fractional")
+    return hits
+
+
+def raw_text_points(path: Path) -> set[str]:
+    """:func:`text_points` of a raw .fap file, plus what its reading shows: frame numbers past
+    the header's count, gaps (frames held), values wrapped over several lines."""
+    from fbaconf.bitstreams.faptext import read_fap_text
+    from fbaconf.errors import FbaconfInputError
+    text = Path(path).read_bytes().decode("utf-8", errors="replace")
+    hits = text_points(text)
+    try:
+        frames, header, _warnings = read_fap_text(text)
+    except FbaconfInputError:
+        return hits
+    fn = np.asarray(frames.frame_number)
+    if header.declared_frames and len(fn) and (fn >= header.declared_frames).any():
+        hits.add("text.frame-past-count")
+    if len(fn) > 1 and (np.diff(fn) > 1).any():
+        hits.add("text.gap")
+    body = [ln for ln in (x.split("#", 1)[0].strip() for x in text.splitlines()) if ln]
+    if len(body) > 1 + 2 * len(frames):
+        hits.add("text.wrapped")
     return hits
 
 
@@ -503,6 +594,7 @@ def case_points(case) -> CaseCoverage:
             from fbaconf.bitstreams.faptext import read_fap_file
             from fbaconf.errors import FbaconfInputError
             hits.add("text.fap")  # an invalid .fap text (players): the rule its reading breaks
+            hits |= raw_text_points(case.input_path("fap"))
             try:
                 read_fap_file(case.input_path("fap"))
             except FbaconfInputError as e:
@@ -516,8 +608,13 @@ def case_points(case) -> CaseCoverage:
         if case.kind == "multi":
             streams = [p.read_bytes() for p in case.face_paths()]
             hits.add("faces.multi")
+            states = set()
             for s in streams:
-                hits |= stream_points(s)
+                pts = stream_points(s)
+                hits |= pts
+                states.add(frozenset(x for x in pts if x.startswith(("fap_quant.", "mask.", "lists.", "rate."))))
+            if len(states) > 1:
+                hits.add("faces.states-differ")  # the faces' decoder states differ: no shared state
             h, cc.measures = claim_points(None, None, faces=len(streams), face_streams=streams)
             hits |= h
             return cc
@@ -525,6 +622,8 @@ def case_points(case) -> CaseCoverage:
         scene = case.input_path("scene")
         if case.input_path("fap") is not None:
             hits.add("text.fap")
+            if case.group == "text":  # a raw file in a form real tools write, not fbaconf's rewrite
+                hits |= raw_text_points(case.input_path("fap"))
         frames = None
         if fba is not None:
             data = fba.read_bytes()

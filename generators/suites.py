@@ -188,10 +188,15 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
     opts = encoder_options(c.get("options", {}), len(content))
     if gen == "multi":
         faces = []
+        per_face = c.get("face_options", [])
         for i in range(int(c["faces"])):
             cc = dict(c.get("content", {}))
             cc["seed"] = int(cc.get("seed", 0)) * 10 + i
-            res = encode(make_content(cc), opts)
+            fo = per_face[i] if i < len(per_face) else {}
+            if "frame_rate" in fo:
+                cc["rate"] = fo["frame_rate"]
+            res = encode(make_content(cc), encoder_options({**c.get("options", {}), **fo}, len(content))
+                         if fo else opts)
             faces.append(_write(d, f"{case.id}-face{i}.fba", res.data, case, None))
         case.inputs["faces"] = faces
         case.frames = len(content)

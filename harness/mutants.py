@@ -116,6 +116,53 @@ def _camera_shift() -> None:
         render.project = project
 
 
+def _retained_rescaled() -> None:
+    from fbaconf.bitstreams import decoder
+    orig = decoder._Decoder.intra_header
+
+    def intra_header(self, info):  # held values re-scaled to a new fap_quant
+        old = getattr(self, "fap_quant", None)
+        orig(self, info)
+        q = self.fap_quant
+        if old and q and old != q:
+            self.cur = [int(v * q / old) for v in self.cur]
+    decoder._Decoder.intra_header = intra_header
+
+
+def _late_group_defaults() -> None:
+    from fbaconf.bitstreams import tables
+    orig = tables.default_bounds
+
+    def default_bounds():  # the default-range table copied wrong for FAPs 40-50 (half their ranges)
+        b = orig().copy()
+        b[39:50] = b[39:50] // 2
+        return b
+    tables.default_bounds = default_bounds
+
+
+def _faces_share_lists() -> None:
+    from fbaconf import pipeline
+    from fbaconf.bitstreams import decoder
+    from fbaconf.harness import refdecoder
+    orig = pipeline.multi_outputs
+
+    def multi_outputs(streams, out_dir, fmt="npz"):  # one range-list table for every face decoded at once
+        orig_init = decoder._Decoder.__init__
+        shared: dict = {}
+
+        def init(self, data, file=None):
+            orig_init(self, data, file)
+            if "bounds" in shared:
+                self.bounds = shared["bounds"]
+            shared["bounds"] = self.bounds
+        decoder._Decoder.__init__ = init
+        try:
+            return orig(streams, out_dir, fmt)
+        finally:
+            decoder._Decoder.__init__ = orig_init
+    pipeline.multi_outputs = refdecoder.multi_outputs = multi_outputs
+
+
 # ------------------------------------------------------------------ the mutants
 
 D = "fbaconf.bitstreams.decoder:_Decoder"
@@ -250,6 +297,19 @@ MUTANTS_LIST = [
            "MNS (mouth-nose separation) taken from ENS (eye-nose separation)",
            "return Fapu(**{n: vals[n] for n in FAPU_NAMES})",
            'return Fapu(**{n: vals["ENS" if n == "MNS" else n] for n in FAPU_NAMES})'),
+    # --- decoder state across planes and faces (issue 15)
+    Mutant("lists-reset-at-intra", f"{D}.intra_header",
+           "range lists forgotten at each intra plane: ranges not sent again fall back to the defaults",
+           "flags = [r.bit(f\"is_{name.replace('_', '_new_')}\") for name in LIST_ORDER]",
+           "self.bounds = tables.default_bounds().copy()\n    "
+           "flags = [r.bit(f\"is_{name.replace('_', '_new_')}\") for name in LIST_ORDER]", pure_decoder=True),
+    Mutant("defaults-late-groups", "fbaconf.bitstreams.tables:default_bounds",
+           "the default ranges of FAPs 40-50 copied wrong (halved)", patch=_late_group_defaults, pure_decoder=True),
+    Mutant("retained-rescaled", f"{D}.intra_header",
+           "values held across a fap_quant change re-scaled to the new quantiser", patch=_retained_rescaled,
+           pure_decoder=True),
+    Mutant("faces-share-lists", "fbaconf.pipeline:multi_outputs",
+           "faces decoded at once share one range-list table", patch=_faces_share_lists, pure_decoder=True),
     # --- rendering
     Mutant("render-shifted-camera", "fbaconf.rendering.raster:project", "image centre one pixel off",
            patch=_camera_shift),
