@@ -135,21 +135,24 @@ def _fit_scene(which: str):
 
 
 def _pattern_png(width: int, height: int) -> bytes:
-    """An asymmetric, low-frequency RGB texture (deterministic PNG, zlib level 9): red ramps up
-    left to right, green ramps up bottom to top (t up, as the texture is seen), blue is raised in
-    the top-left quadrant only. A player that flips t, mirrors s, or clamps where the scene says
-    repeat (the grid's s runs over [0, 2]) changes large areas; the ramps change by at most one
-    code per texel, so minified, mipmapped or multisampled reads of it agree with the golden's.
-    Rows use PNG filter 1 (Sub): constant steps compress to almost nothing."""
+    """An asymmetric, low-frequency RGB texture (deterministic PNG, zlib level 9): red rises and
+    falls once across s (a triangle wave, equal at both borders, so repeat has no seam), green
+    ramps up bottom to top (t up, as the texture is seen), blue is a smooth bump in the top-left
+    quadrant only. A player that flips t or mirrors s moves the bump; one that clamps where the
+    scene says repeat (the grid's s runs over [0, 2]) loses the second red wave. Nothing in it is
+    sharper than a few texels, so minified, mipmapped or multisampled reads of it (one texture
+    sample per pixel) agree with the golden's supersampled one. Rows use PNG filter 1 (Sub)."""
     import struct
     import zlib
-    x = np.arange(width)
-    red = np.round(60 + 160 * x / max(width - 1, 1)).astype(np.int64)
+    u = (np.arange(width) + 0.5) / width
+    red = np.round(60 + 160 * (1.0 - np.abs(2.0 * u - 1.0))).astype(np.int64)
     raw = bytearray()
     for j in range(height):
-        green = int(round(220 - 160 * j / max(height - 1, 1)))
-        blue = np.where((x < width // 2) & (j < height // 2), 170, 70)
-        px = np.stack([red, np.full(width, green), blue], 1).reshape(-1)
+        v = 1.0 - (j + 0.5) / height  # t of this row (row 0 is the top, t = 1)
+        green = int(round(60 + 160 * v))
+        d2 = ((u - 0.25) / 0.2) ** 2 + ((v - 0.75) / 0.2) ** 2
+        blue = np.round(70 + 110 * np.where(d2 < 1.0, 0.5 + 0.5 * np.cos(np.pi * np.sqrt(d2)), 0.0))
+        px = np.stack([red, np.full(width, green), blue.astype(np.int64)], 1).reshape(-1)
         sub = px.copy()
         sub[3:] = (px[3:] - px[:-3]) % 256
         raw += b"\x01" + bytes(sub.astype(np.uint8))
