@@ -7,6 +7,11 @@ head-sized (~2,500 triangles) deformed ellipsoid with a nose, and a 5,000-vertex
 per-frame normals are recomputed. Prints frames/s for supersample 1 and 3, rendering only
 and rendering + PNG writing (sRGB encoding + zlib), under the bundled default scenario.
 
+Then, where an OpenGL context can be made (moderngl on Mesa's llvmpipe, headless EGL:
+examples/glrender), the same frames side by side: the reference at 3 x 3 supersampling against
+the OpenGL renderer-under-test at 3 x 3 (examples/glrender ``ssaa3``: draw, resolve, sRGB
+encode, read back), both on the one core this benchmark is pinned to, and the ratio.
+
     python benchmarks/bench_render.py [--frames N] [--repeat R]
 """
 from __future__ import annotations
@@ -119,7 +124,40 @@ def main(argv=None) -> int:
             print(f"{name:<22}{state.vertices.shape[1]:>7}{n_tri:>7}  {ss:>2}  {w:>7.1f} ({c:>6.1f})"
                   f"  {ww:>7.1f} ({cw:>6.1f})")
     sys.stdout.flush()
+    side_by_side(states, args.frames, args.repeat)
     return 0
+
+
+def side_by_side(states: dict, n_frames: int, repeat: int) -> None:
+    """The reference against llvmpipe (examples/glrender) at 3 x 3 supersampling, same frames."""
+    import importlib
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "examples" / "glrender"))
+    try:
+        glrender = importlib.import_module("glrender")
+        ctx = glrender.gl_context()
+    except Exception as e:  # noqa: BLE001 - no moderngl / no GL context: say so and stop
+        print(f"\nreference vs OpenGL: skipped ({type(e).__name__}: {e})")
+        return
+    print(f"\nreference vs OpenGL ({ctx.info['GL_RENDERER']}), 256x256, 3x3 supersampling, same frames, one core")
+    print(f"{'mesh':<22}{'reference fps':>15}{'OpenGL fps':>12}{'ratio':>8}")
+    sc = Scenario.default().with_(supersample=3, width=256, height=256)
+    for name, state in states.items():
+        n = min(n_frames, state.n_frames)
+        ref, gl = Renderer(state, sc), glrender.GLRenderer(state, sc, "ssaa3")
+        rates = []
+        for fn in (ref.render, gl.render_srgb8):
+            fn(0)
+            best = 0.0
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                for k in range(n):
+                    fn(k)
+                best = max(best, n / (time.perf_counter() - t0))
+            rates.append(best)
+        gl.release()
+        print(f"{name:<22}{rates[0]:>15.1f}{rates[1]:>12.1f}{rates[0] / rates[1]:>7.2f}x")
+    sys.stdout.flush()
 
 
 if __name__ == "__main__":

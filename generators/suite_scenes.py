@@ -136,12 +136,13 @@ def _fit_scene(which: str):
 
 def _pattern_png(width: int, height: int) -> bytes:
     """An asymmetric, low-frequency RGB texture (deterministic PNG, zlib level 9): red rises and
-    falls once across s (a triangle wave, equal at both borders, so repeat has no seam), green
-    ramps up bottom to top (t up, as the texture is seen), blue is a smooth bump in the top-left
-    quadrant only. A player that flips t or mirrors s moves the bump; one that clamps where the
-    scene says repeat (the grid's s runs over [0, 2]) loses the second red wave. Nothing in it is
-    sharper than a few texels, so minified, mipmapped or multisampled reads of it (one texture
-    sample per pixel) agree with the golden's supersampled one. Rows use PNG filter 1 (Sub)."""
+    falls once across s, green once across t (triangle waves, equal at both borders: no seam where
+    the texture repeats, so texture coordinates a multisampling player extrapolates past a
+    silhouette wrap to the same colour), blue is a smooth bump in the top-left quadrant only (t up,
+    as the texture is seen). A player that flips t or mirrors s moves the bump; one that clamps
+    where the scene says repeat (the grid's s runs over [0, 2]) loses the second red wave. Nothing
+    in it is sharper than a few texels, so minified, mipmapped or multisampled reads of it (one
+    texture sample per pixel) agree with the golden's supersampled one. Rows use PNG filter 1 (Sub)."""
     import struct
     import zlib
     u = (np.arange(width) + 0.5) / width
@@ -149,7 +150,7 @@ def _pattern_png(width: int, height: int) -> bytes:
     raw = bytearray()
     for j in range(height):
         v = 1.0 - (j + 0.5) / height  # t of this row (row 0 is the top, t = 1)
-        green = int(round(60 + 160 * v))
+        green = int(round(60 + 160 * (1.0 - abs(2.0 * v - 1.0))))
         d2 = ((u - 0.25) / 0.2) ** 2 + ((v - 0.75) / 0.2) ** 2
         blue = np.round(70 + 110 * np.where(d2 < 1.0, 0.5 + 0.5 * np.cos(np.pi * np.sqrt(d2)), 0.0))
         px = np.stack([red, np.full(width, green), blue.astype(np.int64)], 1).reshape(-1)

@@ -475,19 +475,24 @@ def test_small_uniform_noise_passes_and_a_small_uniform_shift_warns(rendered, tm
     for i, p in enumerate(rendered):
         px = _read8(p).astype(np.int16)
         noisy.append(_write8(tmp_path / f"n{i}.png", np.clip(px + rng.integers(-1, 2, size=px.shape), 0, 255)))
-        shifted.append(_write8(tmp_path / f"s{i}.png", np.clip(px + 3, 0, 255)))
+        shifted.append(_write8(tmp_path / f"s{i}.png", np.clip(px + 2, 0, 255)))
     # +-1 code of noise on every channel (8-bit rounding of another float pipeline) is no difference
     r = compare_images(rendered, noisy, TOL, tmp_path / "art")
     assert r.outcome is Outcome.PASS and r.metrics["violations_max"] == 0, r.message
-    # 3 codes brighter everywhere: under abs_tol (4 codes) per pixel, but a uniform shift just
-    # under one just-noticeable difference (3 codes of a mid-grey are about 1 L* unit) -> QualityWarning
+    # 2 codes brighter everywhere: under abs_tol (4 codes) per pixel, but a uniform shift of about
+    # two thirds of a just-noticeable difference (3 codes of a mid-grey are about 1 L* unit) -> QualityWarning
     r = compare_images(rendered, shifted, TOL, tmp_path / "art")
     assert r.outcome is Outcome.QUALITY_WARNING, r.message
-    assert 0.5 < r.metrics["interior_deltae_mean_max"] < 1.2 and r.metrics["violations_max"] == 0
+    assert 0.45 < r.metrics["interior_deltae_mean_max"] < 0.75 and r.metrics["violations_max"] == 0
     assert r.first_difference["frame"] == 0 and len(r.first_difference["pixel"]) == 2
     assert Path(r.artefacts["frame0_diff"]).is_absolute() and Path(r.artefacts["frame0_diff"]).is_file()
-    loose = ImageTolerances.from_dict(TOL, {"interior_deltae_warn_mean": 1.1})
+    loose = ImageTolerances.from_dict(TOL, {"interior_deltae_warn_mean": 0.7})
     assert compare_images(rendered, shifted, loose, tmp_path / "art2").outcome is Outcome.PASS
+    # 3 codes: about one just-noticeable difference, visible -> Fail, never hidden in a warning
+    three = [_write8(tmp_path / f"t{i}.png", np.clip(_read8(p).astype(np.int16) + 3, 0, 255))
+             for i, p in enumerate(rendered)]
+    r = compare_images(rendered, three, TOL, tmp_path / "art3")
+    assert r.outcome is Outcome.FAIL and "interior ΔE2000 mean" in r.message, r.message
 
 
 def test_large_colour_shift_fails(rendered, tmp_path):
