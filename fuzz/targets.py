@@ -348,22 +348,30 @@ class DecoderTarget:
                                f"(rule {rule}): decoded an invalid stream without complaint", detail)
         if not self.oracle:
             return None
-        expected = reference_text(inp) if self.kind == "text" else reference_if_valid(inp)
+        # the reference's frames first; whether the stream's reading is decision-free (a second,
+        # slower parse by the checker) is asked only when the verdict depends on it
+        expected = reference_text(inp) if self.kind == "text" else reference_frames(inp)
         if expected is None:
             return None
         if rc != 0:
+            if self.kind == "stream" and not decision_free(inp):
+                return None
             return Verdict("wrong-output", "rejected-valid", f"rejected a valid stream (exit code {rc})", detail)
         from fbaconf.harness import compare as cmp
         path = job.path("faps_out")
         if path is None or not path.is_file():
+            if self.kind == "stream" and not decision_free(inp):
+                return None
             return Verdict("wrong-output", "no-output", "exit code 0 but no FAP output for a valid stream", detail)
         try:
             got = cmp.load_output_faps(path)
         except cmp.OutputError as e:
+            if self.kind == "stream" and not decision_free(inp):
+                return None
             return Verdict("wrong-output", "unreadable-output", f"unreadable FAP output: {e}", detail)
         r = cmp.compare_faps(expected, got, text_output=path.suffix.lower() == ".fap" or self.kind == "text",
                              player=self.kind == "text")
-        if r.outcome.ok:
+        if r.outcome.ok or (self.kind == "stream" and not decision_free(inp)):
             return None
         what = (r.first_difference or {}).get("what", "value")
         return Verdict("wrong-output", f"differs:{what}", r.message, {**detail, "first_difference": r.first_difference})
@@ -395,21 +403,22 @@ def reference_rejection(inp: Entry) -> str | None:
     return _reference_decode(inp.data)[1]
 
 
-def reference_if_valid(inp: Entry):
-    """The reference FapFrames when ``inp`` is a valid stream (generated valid, or decoded by the
-    reference with no error and no decision-dependent diagnostic), else None."""
+def reference_frames(inp: Entry):
+    """The reference FapFrames of ``inp`` when it is an oracle candidate (generated valid, or
+    decoded by the reference into at least one frame), else None."""
     frames, rule = _reference_decode(inp.data)
-    if rule is not None:
-        return None
-    if inp.valid:
-        return frames
-    if len(frames) == 0:  # no plane: nothing to compare, and rejecting it is no defect
-        return None
-    from fbaconf.profiles.checker import check_stream
-    diags = check_stream(inp.data)
-    if any(d.severity == "error" or d.code.startswith("FAP-DECISION") for d in diags):
-        return None
+    if rule is not None or (not inp.valid and len(frames) == 0):
+        return None  # no plane: nothing to compare, and rejecting it is no defect
     return frames
+
+
+def decision_free(inp: Entry) -> bool:
+    """Whether the reference's reading of ``inp`` is normative: generated valid, or no error and
+    no decision-dependent (FAP-DECISION-*) diagnostic from the checker."""
+    if inp.valid:
+        return True
+    from fbaconf.profiles.checker import check_stream
+    return not any(d.severity == "error" or d.code.startswith("FAP-DECISION") for d in check_stream(inp.data))
 
 
 class SelfTarget:
