@@ -228,13 +228,33 @@ class Coverage:
         return np.stack([self.v0, self.v1, self.v2], axis=1)
 
 
+PURE_PYTHON_ENV = "FBACONF_PURE_PYTHON"
+
+try:
+    from . import _fastraster as _native_module
+except ImportError:  # not built (no compiler): the numpy path is used
+    _native_module = None
+
+
+def native():
+    """The C scan converter (rendering/_fastraster.c), or None when it was not built or
+    FBACONF_PURE_PYTHON is set: the numpy path below is the reference either way."""
+    import os
+    if _native_module is None or os.environ.get(PURE_PYTHON_ENV, "").strip() not in ("", "0"):
+        return None
+    return _native_module
+
+
 def _scratch_buf(scratch: dict | None, name: str, size: int, dtype, fill) -> np.ndarray:
+    """A work buffer of ``size`` items kept in ``scratch`` between calls, filled with ``fill``
+    (None: left as it is, for outputs written before they are read)."""
     buf = None if scratch is None else scratch.get(name)
     if buf is None or buf.shape[0] != size or buf.dtype != dtype:
         buf = np.empty(size, dtype=dtype)
         if scratch is not None:
             scratch[name] = buf
-    buf.fill(fill)
+    if fill is not None:
+        buf.fill(fill)
     return buf
 
 
@@ -242,7 +262,8 @@ def rasterize(proj: Projected, tris: np.ndarray, width: int, height: int, near: 
               cull_backfaces: bool = False, *, scratch: dict | None = None) -> Coverage:
     """Scan-convert all triangles into the samples of a ``width x height`` grid and resolve
     visibility with the depth test. ``tris`` is int64[m, 3] (global vertex indices).
-    ``scratch``: an optional dict in which per-image work buffers are kept between calls."""
+    ``scratch``: an optional dict in which per-image work buffers are kept between calls (with
+    the C scan converter the returned arrays may be views into them, valid until the next call)."""
     tris = np.asarray(tris, dtype=np.int64)
     cx, cy = width / 2.0, height / 2.0
     vok = ((proj.depth >= near) & (np.abs(proj.sx - cx) <= MAX_SCREEN_PX)
@@ -350,43 +371,66 @@ def rasterize(proj: Projected, tris: np.ndarray, width: int, height: int, near: 
             f_iz = np.where((f_iz * far >= 1.0) | ~beyond[f_tri], f_iz, -1.0)
         return f_pix, f_tri, f_iz
 
-    # Triangles are processed in chunks whose boxes hold at most _MAX_FRAGMENTS samples
-    # (bounded working memory; a single larger triangle is a chunk of its own): pass 1
-    # builds the depth buffer, pass 2 keeps the samples equal to it.
-    csum = np.cumsum(bw * bh)
-    bounds = [0]
-    while True:
-        start = bounds[-1]
-        base = int(csum[start - 1]) if start else 0
-        if int(csum[-1]) - base <= _MAX_FRAGMENTS:
-            break
-        nxt = int(np.searchsorted(csum, base + _MAX_FRAGMENTS, side="right"))
-        bounds.append(max(nxt, start + 1))
-    bounds.append(sel.size)
-    zbuf = _scratch_buf(scratch, "zbuf", width * height, np.float64, 0.0)
-    single = None
-    for t0, t1 in zip(bounds[:-1], bounds[1:]):
-        fp, ft, fz = fragments(t0, t1)
-        np.maximum.at(zbuf, fp, fz)
-        if len(bounds) == 2:
-            single = (fp, ft, fz)
-    wps, wts = [], []
-    for t0, t1 in zip(bounds[:-1], bounds[1:]):
-        fp, ft, fz = single if single is not None else fragments(t0, t1)
-        keep = np.flatnonzero(fz == zbuf[fp])
-        wps.append(fp[keep])
-        wts.append(ft[keep])
-    wp = np.concatenate(wps)
-    wt = np.concatenate(wts)
-    if wp.size == 0:
-        return empty
-    mark = _scratch_buf(scratch, "mark", width * height, np.bool_, False)
-    mark[wp] = True
-    if np.count_nonzero(mark) != wp.size:  # exact depth ties: lowest triangle index wins
-        tbuf = _scratch_buf(scratch, "tbuf", width * height, np.int64, np.iinfo(np.int64).max)
-        np.minimum.at(tbuf, wp, wt)
-        keep = wt == tbuf[wp]
-        wp, wt = wp[keep], wt[keep]
+    fast = native()
+    if fast is not None:  # the same winners from the C extension (rendering/_fastraster.c)
+        tri_i = np.stack([X0, Y0, px0, py0, si0, sj0, bw, bh]
+                         + [a for term in edge_terms for a in (term[0], term[1], term[2], term[3])], axis=1)
+        tri_f = np.stack([iz0, A, B, ASUB], axis=1)
+        zbuf = _scratch_buf(scratch, "zbuf", width * height, np.float64, 0.0)
+        tbuf = _scratch_buf(scratch, "wbuf", width * height, np.int64, -1)
+        fast.winners(width, height, float(far), any_beyond, np.ascontiguousarray(tri_i, dtype=np.int64),
+                     np.ascontiguousarray(tri_f, dtype=np.float64), np.ascontiguousarray(beyond, dtype=np.uint8),
+                     zbuf, tbuf)
+        size = width * height
+        out = [_scratch_buf(scratch, f"res{i}", size, np.int64 if i < 2 else np.float64, None) for i in range(5)]
+        tri_i = np.stack([X0, Y0, X1, Y1, X2, Y2, area[sel]], axis=1)
+        tri_f = np.stack([ar, iz0, iz1, iz2], axis=1)
+        n = fast.resolve(width, tbuf, np.ascontiguousarray(tri_i, dtype=np.int64),
+                         np.ascontiguousarray(tri_f, dtype=np.float64), *out)
+        if n == 0:
+            return empty
+        # with ``scratch`` the winners and barycentrics are views into it, valid until its next use
+        wp, wt, b0, b1, b2 = (x[:n] if scratch is not None else x[:n].copy() for x in out)
+        tg = sel[wt]
+        return Coverage(wp, tg, s0[wt], s1[wt], s2[wt], b0, b1, b2, front[tg], n_skipped)
+    else:
+        # Triangles are processed in chunks whose boxes hold at most _MAX_FRAGMENTS samples
+        # (bounded working memory; a single larger triangle is a chunk of its own): pass 1
+        # builds the depth buffer, pass 2 keeps the samples equal to it.
+        csum = np.cumsum(bw * bh)
+        bounds = [0]
+        while True:
+            start = bounds[-1]
+            base = int(csum[start - 1]) if start else 0
+            if int(csum[-1]) - base <= _MAX_FRAGMENTS:
+                break
+            nxt = int(np.searchsorted(csum, base + _MAX_FRAGMENTS, side="right"))
+            bounds.append(max(nxt, start + 1))
+        bounds.append(sel.size)
+        zbuf = _scratch_buf(scratch, "zbuf", width * height, np.float64, 0.0)
+        single = None
+        for t0, t1 in zip(bounds[:-1], bounds[1:]):
+            fp, ft, fz = fragments(t0, t1)
+            np.maximum.at(zbuf, fp, fz)
+            if len(bounds) == 2:
+                single = (fp, ft, fz)
+        wps, wts = [], []
+        for t0, t1 in zip(bounds[:-1], bounds[1:]):
+            fp, ft, fz = single if single is not None else fragments(t0, t1)
+            keep = np.flatnonzero(fz == zbuf[fp])
+            wps.append(fp[keep])
+            wts.append(ft[keep])
+        wp = np.concatenate(wps)
+        wt = np.concatenate(wts)
+        if wp.size == 0:
+            return empty
+        mark = _scratch_buf(scratch, "mark", width * height, np.bool_, False)
+        mark[wp] = True
+        if np.count_nonzero(mark) != wp.size:  # exact depth ties: lowest triangle index wins
+            tbuf = _scratch_buf(scratch, "tbuf", width * height, np.int64, np.iinfo(np.int64).max)
+            np.minimum.at(tbuf, wp, wt)
+            keep = wt == tbuf[wp]
+            wp, wt = wp[keep], wt[keep]
 
     # Exact barycentrics of the winners, then perspective correction.
     spx = (wp % width) * SUB + HALF
@@ -434,6 +478,11 @@ def box_downsample_planes(planes: np.ndarray, n: int) -> np.ndarray:
         return planes
     C, Hn, Wn = planes.shape
     H, W = Hn // n, Wn // n
+    fast = native()
+    if fast is not None and planes.dtype == np.float64 and planes.flags.c_contiguous:
+        out = np.empty((C, H, W), dtype=np.float64)
+        fast.box_downsample(planes, C, H, W, n, out)
+        return out
     v = planes.reshape(C * Hn, W, n)
     sx = v[:, :, 0] + v[:, :, 1]
     for dx in range(2, n):

@@ -232,6 +232,16 @@ class Renderer:
             if textured:
                 St = np.ascontiguousarray(np.concatenate([Sf, Sb]).T)
                 tex = self._texture_samples(cov)
+            fast = raster.native()
+            if fast is not None:  # the same sums in C (rendering/_fastraster.c), then the textured samples
+                fast.interp_scatter(Ft, i0, i1, i2, b0, b1, b2, pix, img)
+                if tex is not None:
+                    m, ts = tex
+                    for c in range(3):
+                        f, s = Ft[c], St[c]
+                        col = b0[m] * f[i0[m]] + b1[m] * f[i1[m]] + b2[m] * f[i2[m]]
+                        img[c][pix[m]] = ts[:, c] * col + (b0[m] * s[i0[m]] + b1[m] * s[i1[m]] + b2[m] * s[i2[m]])
+                return img.reshape(3, H, W)
             for c in range(3):
                 f = Ft[c]
                 col = b0 * f[i0] + b1 * f[i1] + b2 * f[i2]

@@ -677,3 +677,63 @@ def test_every_image_case_keeps_clear_of_the_near_plane():
             assert float(depth.min()) > cam.near, (c.full_id, float(depth.min()), cam.near)
             checked += 1
     assert checked >= 39
+
+
+# ----------------------------------------------------------------------------- the C fast path
+needs_native = pytest.mark.skipif(raster.native() is None, reason="rendering/_fastraster.c was not built here")
+
+
+def _coverage_by_pixel(cov):
+    order = np.argsort(cov.pix, kind="stable")
+    return {k: np.asarray(getattr(cov, k))[order] for k in ("pix", "tri", "v0", "v1", "v2", "b0", "b1", "b2",
+                                                               "front")}
+
+
+@needs_native
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 2**31 - 1), st.integers(1, 40), st.booleans(), st.sampled_from([(8, 8), (31, 17), (64, 48)]))
+def test_native_scan_conversion_equals_the_numpy_reference(seed, n_tri, cull, size):
+    """Random triangle soups (shared edges, slivers, corners on sample centres, some beyond the
+    far plane): the C winners and barycentrics are the numpy path's, bit for bit."""
+    rng = np.random.default_rng(seed)
+    w, h = size
+    nv = 3 * n_tri
+    sx = rng.uniform(-4, w + 4, nv)
+    sy = rng.uniform(-4, h + 4, nv)
+    snap = rng.random(nv) < 0.3  # some corners exactly on sample centres
+    sx[snap], sy[snap] = np.floor(sx[snap]) + 0.5, np.floor(sy[snap]) + 0.5
+    depth = rng.uniform(1.0, 12.0, nv)
+    tris = rng.integers(0, nv, size=(n_tri, 3))
+    tris[: n_tri // 2] = np.arange(3 * (n_tri // 2)).reshape(-1, 3)  # distinct corners
+    proj = raster.Projected(sx, sy, depth)
+    fast = raster.rasterize(proj, tris, w, h, 0.5, 10.0, cull)
+    assert raster.native() is not None
+    os.environ["FBACONF_PURE_PYTHON"] = "1"
+    try:
+        ref = raster.rasterize(proj, tris, w, h, 0.5, 10.0, cull)
+    finally:
+        del os.environ["FBACONF_PURE_PYTHON"]
+    a, b = _coverage_by_pixel(fast), _coverage_by_pixel(ref)
+    for k in a:
+        assert np.array_equal(a[k], b[k]), k
+    assert fast.n_skipped_near == ref.n_skipped_near
+
+
+@needs_native
+@pytest.mark.parametrize("shading,texture", [("gouraud", False), ("flat", False), ("gouraud", True)])
+def test_native_images_equal_the_numpy_reference(monkeypatch, shading, texture):
+    """Whole frames (scan conversion, Gouraud interpolation, box filter) byte for byte: the
+    goldens do not depend on whether the extension was built."""
+    from fbaconf.conformance.suite import load_suites
+    case = next(c for s in load_suites() for c in s.cases
+                if c.id == ("grid-limits-l1" if texture else "default-head"))
+    from fbaconf.animation.engine import animate
+    from fbaconf.pipeline import load_stream
+    state = animate(load_stream(case.input_path("fba")), scene=case.input_path("scene"))
+    sc = Scenario.load(case.input_path("scenario")).with_(shading=shading, supersample=3)
+    scene_dir = case.input_path("scene").parent
+    fast = [Renderer(state, sc, scene_dir=scene_dir).render(k) for k in (0, state.n_frames - 1)]
+    monkeypatch.setenv("FBACONF_PURE_PYTHON", "1")
+    ref = [Renderer(state, sc, scene_dir=scene_dir).render(k) for k in (0, state.n_frames - 1)]
+    for x, y in zip(fast, ref):
+        assert x.tobytes() == y.tobytes()
