@@ -54,7 +54,7 @@ def main() -> int:
         fz_rates = {}
         for label, d in decoders[:2]:
             t = DecoderTarget(resolve(d), tmp / f"work-{len(fz_rates)}", timeout_s=10.0)
-            fz = Fuzzer(t, default_seeds(), seed=3, seconds=args.seconds, progress=False, coverage_every=4,
+            fz = Fuzzer(t, default_seeds(), seed=3, seconds=args.seconds, progress=False, coverage_every=8,
                         minimise_seconds=2, minimise_tests=20)
             fz.run()
             fz_rates[label] = fz.stats.rate

@@ -73,7 +73,7 @@ def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False
     from fbaconf.harness.adapters import load_manifest
     target = DecoderTarget(load_manifest(manifest), work, timeout_s=1.0, fork_server=not spawn, persistent=not spawn)
     mode = "persistent" if target.persistent else "fork-server" if target.fork_server else "spawn"
-    fz = Fuzzer(target, default_seeds(), seed=7, seconds=seconds, progress=False, coverage_every=4,
+    fz = Fuzzer(target, default_seeds(), seed=7, seconds=seconds, progress=False, coverage_every=8,
                 minimise_seconds=2, minimise_tests=50)
     fz.run()
     return fz.stats.rate, mode, fz.stats.execs

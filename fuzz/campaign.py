@@ -33,7 +33,7 @@ class ShardSpec:
     timeout_s: float | None = None
     expected_exit: tuple[int, ...] | None = None
     oracle: bool = True
-    coverage_every: int = 4
+    coverage_every: int = 8
     spawn: bool = False
 
 

@@ -63,9 +63,9 @@ def register(sub) -> None:
                    help="--decoder: a fresh sandbox per input (slow, the strictest separation) instead of one "
                         "sandbox per worker with a fork server, or the persistent protocol when the manifest has "
                         "[commands] serve")
-    p.add_argument("--coverage-every", type=int, default=4, metavar="N",
+    p.add_argument("--coverage-every", type=int, default=8, metavar="N",
                    help="--decoder: measure the syntax-model coverage of every N-th input (a reference decode, "
-                        "~1 ms each; default 4, 1 = every input)")
+                        "~1 ms each; default 8, 1 = every input), and of every input the oracle decoded anyway")
     p.add_argument("--replay", type=Path, metavar="FILE", help="run one input and print its classification")
     p.add_argument("--data-dir", type=Path, help="(--promote) conformance data folder (default: the package's)")
     p.add_argument("--no-progress", action="store_true", help="no live status line")

@@ -16,7 +16,7 @@ from .corpus import scene_seeds
 from .findings import Finding, write_finding
 from .generators import Entry, gen_valid
 from .minimise import minimise
-from .model import SCENE_FEATURES, STREAM_FEATURES, features_of
+from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
 from .text import mutate_text, text_seeds
@@ -262,7 +262,8 @@ class Fuzzer:
         st.execs += 1
         feats = out.features
         measure = (not feats and not isinstance(self.target, SelfTarget)
-                   and (index % self.coverage_every == 0 or inp.model is not None))
+                   and (index % self.coverage_every == 0 or inp.model is not None
+                        or (inp.kind == "stream" and parsed(inp.data))))  # the oracle's parse: free
         if measure and inp.kind == "stream":
             # coverage of the syntax model by what we sent the decoder
             feats = inp.model.features if inp.model is not None else features_of(inp.data)

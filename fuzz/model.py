@@ -1,7 +1,8 @@
 """The syntax model of a face-object stream for fuzzing: start codes and header fields found in the bytes, the features a run reports as its coverage."""
 from __future__ import annotations
 
-import functools
+import collections
+import threading
 
 from dataclasses import dataclass
 
@@ -94,11 +95,20 @@ class StreamModel:
         return sorted(x for x in out if 0 < x <= self.nbits)
 
 
-@functools.lru_cache(maxsize=8)
+_PARSES: "collections.OrderedDict[bytes, tuple]" = collections.OrderedDict()
+_PARSES_KEEP = 8
+_PARSES_LOCK = threading.Lock()
+
+
 def reference_parse(data: bytes):
     """(planes, frames, error rule, end code, end offset) of ``data`` by the reference decoder
-    (the planes decoded before an error survive it; frames None on an error). Cached for the
-    last few inputs: the coverage features and the oracle of one input share one parse."""
+    (the planes decoded before an error survive it; frames None on an error). The last few
+    parses are kept: the coverage features and the oracle of one input share one parse."""
+    with _PARSES_LOCK:
+        hit = _PARSES.get(data)
+        if hit is not None:
+            _PARSES.move_to_end(data)
+            return hit
     from fbaconf.bitstreams import decoder as dec
     d = dec._Decoder(data, None)
     rule, end_code, end_offset, frames = None, None, 0, None
@@ -110,7 +120,18 @@ def reference_parse(data: bytes):
         end_offset = e.bit_offset
     except Exception:  # noqa: BLE001 - the decoder's own wrapper turns these into rule "internal"
         rule = "internal"
-    return tuple(d.planes), frames, rule, end_code, end_offset
+    out = (tuple(d.planes), frames, rule, end_code, end_offset)
+    with _PARSES_LOCK:
+        _PARSES[data] = out
+        while len(_PARSES) > _PARSES_KEEP:
+            _PARSES.popitem(last=False)
+    return out
+
+
+def parsed(data: bytes) -> bool:
+    """Whether the reference's parse of ``data`` is at hand (its coverage costs nothing)."""
+    with _PARSES_LOCK:
+        return data in _PARSES
 
 
 def _parse(data: bytes):
