@@ -349,29 +349,30 @@ class DecoderTarget:
         if not self.oracle:
             return None
         # the reference's frames first; whether the stream's reading is decision-free (a second,
-        # slower parse by the checker) is asked only when the verdict depends on it
+        # slower parse by the checker) is asked only when there is a finding to report
         expected = reference_text(inp) if self.kind == "text" else reference_frames(inp)
         if expected is None:
             return None
+        v = self._output_verdict(expected, job, rc, detail)
+        if v is not None and self.kind == "stream" and not decision_free(inp):
+            return None
+        return v
+
+    def _output_verdict(self, expected, job, rc: int, detail: dict) -> Verdict | None:
+        """The finding (or None) of a decoder's ending and FAP output on an oracle input."""
         if rc != 0:
-            if self.kind == "stream" and not decision_free(inp):
-                return None
             return Verdict("wrong-output", "rejected-valid", f"rejected a valid stream (exit code {rc})", detail)
         from fbaconf.harness import compare as cmp
         path = job.path("faps_out")
         if path is None or not path.is_file():
-            if self.kind == "stream" and not decision_free(inp):
-                return None
             return Verdict("wrong-output", "no-output", "exit code 0 but no FAP output for a valid stream", detail)
         try:
             got = cmp.load_output_faps(path)
         except cmp.OutputError as e:
-            if self.kind == "stream" and not decision_free(inp):
-                return None
             return Verdict("wrong-output", "unreadable-output", f"unreadable FAP output: {e}", detail)
         r = cmp.compare_faps(expected, got, text_output=path.suffix.lower() == ".fap" or self.kind == "text",
                              player=self.kind == "text")
-        if r.outcome.ok or (self.kind == "stream" and not decision_free(inp)):
+        if r.outcome.ok:
             return None
         what = (r.first_difference or {}).get("what", "value")
         return Verdict("wrong-output", f"differs:{what}", r.message, {**detail, "first_difference": r.first_difference})

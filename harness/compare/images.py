@@ -105,16 +105,19 @@ def _px8(v: np.ndarray) -> list[int]:
     return [int(x) for x in np.floor(np.asarray(v, dtype=np.float64) * 255.0 + 0.5)]
 
 
-def local_range(px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-channel minimum and maximum of each pixel's 3x3 neighbourhood (edge-replicated)."""
+def _neighbourhood(px: np.ndarray):
+    """The nine 3x3-shifted views of ``px`` (edge-replicated): each pixel's neighbours in turn."""
     h, w = px.shape[:2]
     pad = np.pad(px, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    return [pad[dy:dy + h, dx:dx + w] for dy in (0, 1, 2) for dx in (0, 1, 2)]
+
+
+def local_range(px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel minimum and maximum of each pixel's 3x3 neighbourhood (edge-replicated)."""
     lo, hi = px.copy(), px.copy()
-    for dy in (0, 1, 2):
-        for dx in (0, 1, 2):
-            win = pad[dy:dy + h, dx:dx + w]
-            np.minimum(lo, win, out=lo)
-            np.maximum(hi, win, out=hi)
+    for win in _neighbourhood(px):
+        np.minimum(lo, win, out=lo)
+        np.maximum(hi, win, out=hi)
     return lo, hi
 
 
@@ -162,12 +165,9 @@ def _box3(px: np.ndarray) -> np.ndarray:
     """Each pixel replaced by the mean of its 3x3 neighbourhood (edge-replicated): colour
     difference is judged as seen, after the eye's spatial blur (the idea of S-CIELAB), so
     uncorrelated 1-code rounding noise does not count as a colour change while a uniform shift does."""
-    h, w = px.shape[:2]
-    pad = np.pad(px, ((1, 1), (1, 1), (0, 0)), mode="edge")
     acc = np.zeros_like(px)
-    for dy in (0, 1, 2):
-        for dx in (0, 1, 2):
-            acc += pad[dy:dy + h, dx:dx + w]
+    for win in _neighbourhood(px):
+        acc += win
     return acc / 9.0
 
 
