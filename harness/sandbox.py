@@ -23,9 +23,12 @@ Limits per invocation:
   decoder) and in total over the working directory (checked after the run);
 * CPU seconds (RLIMIT_CPU, a backstop at twice the timeout); no core dumps.
 
-The limits are applied by a tiny launcher (``_limit.py``) that joins the cgroups, sets the
-rlimits and execs bubblewrap (or the program), so nothing runs between fork and exec in
-this (threaded) process. stdout and stderr go to files outside the decoder's view; only
+The limits are applied by a launcher, so nothing runs between fork and exec in this
+(threaded) process: util-linux's ``prlimit`` (about 1.5 ms), which sets the rlimits and execs
+bubblewrap (or the program); with cgroups, ``/bin/sh`` holds the launch until the harness
+has moved it into the case's cgroups, so everything the decoder starts is counted. Without
+``prlimit``, a Python launcher (``_limit.py``, about 13 ms) joins the cgroups and sets the
+rlimits itself. stdout and stderr go to files outside the decoder's view; only
 their tails are kept, read without following links or blocking.
 
 The result names what happened — exit code, signal name, timeout, output limit, memory
@@ -354,6 +357,59 @@ def decoder_env(workdir: Path, env: dict[str, str] | None) -> dict[str, str]:
     return out
 
 
+USE_PRLIMIT = True  # False: always the Python launcher (benchmarks/bench_run.py compares the two)
+
+# The shell waits for the harness's go (a line on stdin) once it has been moved into the
+# case's cgroups, then execs the launcher with stdin from /dev/null.
+_HOLD = 'read -r _ || exit 126; exec "$@" </dev/null'
+
+
+def _rlimit_arg(which: int, value: int) -> str:
+    """prlimit's SOFT:HARD for ``value`` as ``_limit._set`` sets it: capped by the current
+    hard limit, which it lowers to the value only when it was unlimited."""
+    import resource
+    _soft, hard = resource.getrlimit(which)
+    if hard == resource.RLIM_INFINITY:
+        return f"{value}:{value}"
+    return f"{min(value, hard)}:{hard}"
+
+
+def launch_argv(as_bytes: int, fsize: int, cpu: int, cgroups: list[Path], inner: list[str]) -> tuple[list[str], bool]:
+    """The launcher command that applies the limits and execs ``inner``, and whether it waits
+    for the harness to move it into ``cgroups`` (then write a line to its stdin)."""
+    import resource
+    prlimit = shutil.which("prlimit") if USE_PRLIMIT else None
+    if prlimit is None:
+        cg = [x for d in cgroups for x in ("--cgroup", str(d))]
+        return [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize),
+                str(cpu), *cg, "--", *inner], False
+    lim = [f"--{name}={_rlimit_arg(which, v)}" for name, which, v in
+           (("as", resource.RLIMIT_AS, as_bytes), ("fsize", resource.RLIMIT_FSIZE, fsize),
+            ("cpu", resource.RLIMIT_CPU, cpu)) if v > 0]
+    argv = [prlimit, *lim, "--core=0:0", "--", *inner]
+    if cgroups:
+        return ["/bin/sh", "-c", _HOLD, "fbaconf-launch", *argv], True
+    return argv, False
+
+
+def _release(proc, cgroups: list[Path]) -> str | None:
+    """Move the held launcher into ``cgroups`` and let it go; the reason when it cannot be."""
+    try:
+        for d in cgroups:
+            with open(d / "cgroup.procs", "w") as f:
+                f.write(str(proc.pid))
+    except OSError as e:
+        proc.kill()
+        proc.wait()
+        return f"fbaconf-limit: cannot join cgroup {d}: {e.strerror}"
+    try:
+        proc.stdin.write(b"go\n")
+        proc.stdin.close()
+    except OSError:
+        pass  # the shell died: its ending is the result
+    return None
+
+
 def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,
         measure_dirs: list[Path] | None = None, view: View | None = None) -> ProcResult:
     """Run ``argv`` in ``workdir`` under ``limits`` (sandboxed when :func:`isolation` allows);
@@ -373,18 +429,22 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
     sandboxed = isolation() == "bwrap"
     if sandboxed:
         inner = _bwrap_argv(view or default_view(argv, workdir), workdir) + inner
-    full = [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize), str(cpu),
-            *cg.launcher_args(), "--", *inner]
+    full, held = launch_argv(as_bytes, fsize, cpu, [d for _k, d in cg.dirs], inner)
     base_env = decoder_env(workdir, env)
     t0 = time.perf_counter()
     try:
         with open(out_path, "wb") as fo, open(err_path, "wb") as fe:
             try:
-                proc = subprocess.Popen(full, cwd=workdir, stdin=subprocess.DEVNULL, stdout=fo, stderr=fe,
-                                        env=base_env, start_new_session=True, close_fds=True)
+                proc = subprocess.Popen(full, cwd=workdir, stdin=subprocess.PIPE if held else subprocess.DEVNULL,
+                                        stdout=fo, stderr=fe, env=base_env, start_new_session=True, close_fds=True)
             except OSError as e:  # the launcher itself could not start: a harness problem
+                cg.close()
                 return ProcResult(argv, None, elapsed_s=0.0, stderr_tail=f"cannot start: {e}",
                                   notes=["harness-start-failed"])
+            why = _release(proc, [d for _k, d in cg.dirs]) if held else None
+            if why is not None:
+                cg.close()
+                return ProcResult(argv, None, elapsed_s=0.0, stderr_tail=why, notes=["harness-start-failed"])
             _RUNNING.add(proc.pid)
             try:
                 status, rusage, timed_out, mem_hit = _wait(proc, t0, limits)
