@@ -6,7 +6,11 @@ already aligned.
 """
 from __future__ import annotations
 
+import re
+
 from fbaconf.errors import BitstreamError
+
+_NOT_FF = re.compile(rb"[^\xff]")
 
 START_CODE_PREFIX = 0x000001
 FACE_OBJECT_START_CODE = 0x000001BA
@@ -150,6 +154,31 @@ class BitReader:
             raise self.error(f"stream ends before {what}", "truncated")
         self.pos = pos + 1
         return (self.data[pos >> 3] >> (7 - (pos & 7))) & 1
+
+    def ones_run(self, at: int | None = None) -> int:
+        """How many consecutive '1' bits start at ``at`` (default: pos), up to the stream end."""
+        pos = self.pos if at is None else at
+        if pos >= self.nbits:
+            return 0
+        data = self.data
+        i, off = pos >> 3, pos & 7
+        lead = 8 - ((~(data[i] << off)) & 0xFF).bit_length()  # leading ones of the byte's rest
+        if lead < 8 - off:
+            return lead
+        m = _NOT_FF.search(data, i + 1)
+        j = m.start() if m else len(data)
+        count = 8 - off + (j - i - 1) * 8
+        if m:
+            count += 8 - ((~data[j]) & 0xFF).bit_length()
+        return min(count, self.nbits - pos)
+
+    def skip_chain(self, what: str = "number_of_frames_to_skip") -> int:
+        """A chain of 4-bit chunks where 15 continues and the first chunk < 15 ends it; returns
+        the sum. Reads whole runs of 1111 at once (a hostile chain can be megabits long); the
+        errors and the final position are those of reading it chunk by chunk."""
+        n15 = self.ones_run() // 4
+        self.pos += 4 * n15
+        return 15 * n15 + self.read(4, what)  # < 15: the run of ones ended inside it
 
     def peek(self, nbits: int, at: int | None = None) -> int | None:
         """The next nbits at ``at`` (default: pos) without moving, or None past the end."""

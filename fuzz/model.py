@@ -10,6 +10,7 @@ from fbaconf.errors import BitstreamError
 
 
 START_CODES = {"face_object": 0x000001BA, "plane": 0x000001BB, "end": 0x000001B1}
+SKIP_CHUNK_FIELDS = 64  # header_fields: chunks of a skip chain listed one by one (the rest as one field)
 
 # Start codes and header field patterns, as (bit value, bit width, name).
 DICTIONARY: list[tuple[int, int, str]] = [
@@ -182,8 +183,14 @@ def header_fields(data: bytes, planes) -> list[Field]:
                     rd("time_code_hours", 5), rd("time_code_minutes", 6), rd("marker_bit", 1)
                     rd("time_code_seconds", 6)
             if rd("skip_frames", 1):
-                while rd("number_of_frames_to_skip", 4) == 15:
-                    pass
+                n15 = r.ones_run() // 4  # chunks of 15: one field each up to 64, then one for the rest
+                for _ in range(min(n15, SKIP_CHUNK_FIELDS)):
+                    rd("number_of_frames_to_skip", 4)
+                if n15 > SKIP_CHUNK_FIELDS:
+                    rest = n15 - SKIP_CHUNK_FIELDS
+                    out.append(Field("number_of_frames_to_skip", r.pos, 4 * rest, idx, 15))
+                    r.pos += 4 * rest
+                rd("number_of_frames_to_skip", 4)
             if not intra:
                 continue
             rd("fap_quant", 5)
