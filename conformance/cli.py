@@ -32,14 +32,19 @@ def register(sub) -> None:
     cv.set_defaults(func=cmd_coverage)
     mu = ss.add_parser("mutants", help="run every mutant decoder against the suites (mutation score)",
                        description="Run each mutant decoder (the reference with one realistic bug, "
-                                   "harness/mutants.py) against the required cases of the claim, each "
-                                   "mutant in its own process, and print the case that kills it; the last "
-                                   "line is `mutation score: K/N`.")
+                                   "harness/mutants.py, harness/mutants_independent/) against the cases "
+                                   "of the claim (required and .fap player cases, with .npz and then .fap "
+                                   "output), each mutant in its own process, and print the case that "
+                                   "kills it; then the score of each family and, last, "
+                                   "`mutation score: K/N` (equivalent mutants listed, not scored).")
     mu.add_argument("names", nargs="*", help="only these mutants")
     mu.add_argument("-j", "--jobs", type=int, default=None, help="mutants run in parallel (default: CPU cores)")
     mu.add_argument("--claim", default="predictable@2", help="claim whose required cases are run")
     mu.add_argument("--all-cases", action="store_true",
                     help="run every case against each mutant (default: stop at the first killing case)")
+    mu.add_argument("--family", choices=("suite", "independent"), default=None,
+                    help="only the suite's own mutants, or only the independent ones (written from the spec "
+                         "notes alone, harness/mutants_independent/; default: both)")
     mu.add_argument("--list", action="store_true", help="only list the mutants")
     mu.add_argument("--json", action="store_true")
     mu.set_defaults(func=cmd_mutants)
@@ -126,16 +131,18 @@ def cmd_coverage(args) -> int:
 
 def cmd_mutants(args) -> int:
     from fbaconf.harness import mutants
+    chosen = [m.name for m in mutants.MUTANTS_LIST if args.family in (None, m.family)]
     if args.list:
-        for m in mutants.MUTANTS.values():
+        for n in chosen:
+            m = mutants.MUTANTS[n]
             print(f"{m.name:32s} {m.where:40s} {m.description}")
-        print(f"{len(mutants.MUTANTS)} mutant(s)")
+        print(f"{len(chosen)} mutant(s)")
         return 0
     unknown = [n for n in args.names if n not in mutants.MUTANTS]
     if unknown:
         print(f"fbaconf suites mutants: error: unknown mutant(s) {', '.join(unknown)}", file=sys.stderr)
         return 2
-    results = mutants.run_all(args.names or None, claim=args.claim, jobs=args.jobs,
+    results = mutants.run_all(args.names or chosen, claim=args.claim, jobs=args.jobs,
                               stop_at_first=not args.all_cases)
     if args.json:
         print(json.dumps(results, indent=1))

@@ -25,58 +25,15 @@ the table and, last, ``mutation score: K/N``.
 from __future__ import annotations
 
 import argparse
-import importlib
-import inspect
 import json
 import os
 import subprocess
 import sys
-import textwrap
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
-
-@dataclass(frozen=True)
-class Mutant:
-    name: str
-    where: str  # module:qualname
-    description: str
-    old: str = ""  # source mutation: exact snippet ...
-    new: str = ""  # ... replaced by this
-    patch: Callable[[], None] | None = None  # or a custom patch
-    pure_decoder: bool = False  # needs the pure-Python arithmetic decoder
-
-
-def _src(where: str, old: str, new: str) -> None:
-    """Replace ``old`` (must occur exactly once) by ``new`` in the source of ``module:qualname``,
-    recompile it in the module's namespace and install it."""
-    mod_name, qual = where.split(":")
-    mod = importlib.import_module(mod_name)
-    owner = mod
-    parts = qual.split(".")
-    for p in parts[:-1]:
-        owner = getattr(owner, p)
-    raw = inspect.getattr_static(owner, parts[-1])
-    fn = raw.__func__ if isinstance(raw, (staticmethod, classmethod)) else raw
-    src = textwrap.dedent(inspect.getsource(fn))
-    n = src.count(old)
-    if n != 1:
-        raise RuntimeError(f"mutant source snippet occurs {n} times in {where} (must be once): {old!r}")
-    src = src.replace(old, new)
-    ns: dict = {}
-    exec(compile(src, f"<mutant of {where}>", "exec"), mod.__dict__, ns)
-    obj = ns[parts[-1]]
-    if isinstance(raw, staticmethod) and not isinstance(obj, staticmethod):
-        obj = staticmethod(obj)
-    setattr(owner, parts[-1], obj)
-
-
-def _pure_decoder() -> None:
-    from fbaconf.bitstreams import arith
-    arith.native_decoder = lambda: None
+from fbaconf.harness.mutant_core import Mutant, apply_mutant
 
 
 # ------------------------------------------------------------------ custom patches
@@ -228,8 +185,9 @@ MUTANTS_LIST = [
     # --- timing (D6)
     Mutant("skip-not-counted", f"{D}.plane", "skipped frames not counted in frame_number",
            "self.frame_number = self.frame_number + info.skip + 1", "self.frame_number = self.frame_number + 1"),
-    Mutant("skip-chain-not-continued", f"{D}.plane", "number_of_frames_to_skip = 15 does not continue the chain",
-           "if v != 15:", "if True:"),
+    Mutant("skip-chain-not-continued", "fbaconf.bitstreams.bitio:BitReader.skip_chain",
+           "number_of_frames_to_skip = 15 does not continue the chain",
+           "n15 = self.ones_run() // 4", "n15 = 0"),
     Mutant("time-code-ignored", f"{D}.plane", "time codes ignored: plane times keep counting frames",
            "if info.time_code is not None:", "if False:", pure_decoder=True),
     Mutant("time-code-minutes-as-seconds", f"{D}.plane", "time code minutes counted as seconds",
@@ -314,19 +272,22 @@ MUTANTS_LIST = [
     Mutant("render-shifted-camera", "fbaconf.rendering.raster:project", "image centre one pixel off",
            patch=_camera_shift),
 ]
+OWN = list(MUTANTS_LIST)
+
+
+def _independent() -> list[Mutant]:
+    from fbaconf.harness.mutants_independent import MUTANTS_LIST as independent
+    return independent
+
+
+MUTANTS_LIST = OWN + _independent()
 MUTANTS: dict[str, Mutant] = {m.name: m for m in MUTANTS_LIST}
+FAMILIES = ("suite", "independent")
 
 
 def apply(name: str) -> Mutant:
     """Apply mutant ``name`` to this process (irreversible)."""
-    m = MUTANTS[name]
-    if m.pure_decoder:
-        _pure_decoder()
-    if m.patch is not None:
-        m.patch()
-    else:
-        _src(m.where, m.old, m.new)
-    return m
+    return apply_mutant(MUTANTS[name])
 
 
 # ------------------------------------------------------------------ running one mutant
@@ -339,9 +300,12 @@ def _case_cost(c) -> tuple:
 
 
 def run_mutant(name: str | None, claim: str = "predictable@2", *, stop_at_first: bool = True,
-               out_dir: Path | None = None, cases=None) -> dict:
-    """Apply ``name`` (None: the plain reference) and run the required cases of ``claim``
-    (cheapest first) through the harness; returns {mutant, killed, killed_by, failing, ran, seconds}."""
+               out_dir: Path | None = None, cases=None, formats: tuple[str, ...] = ("npz", "fap")) -> dict:
+    """Apply ``name`` (None: the plain reference) and run the cases of ``claim`` through the
+    harness, cheapest first: the required ones and the .fap player cases (the reference reads
+    both, and a decoder's .fap reader is code a mutant can break), once with each FAP output
+    format in ``formats`` (the second format only for the cases that compare FAPs, only while
+    the mutant lives). Returns {mutant, killed, killed_by, failing, ran, total, seconds}."""
     import tempfile
     from fbaconf.conformance.suite import load_suites
     from fbaconf.harness.adapters import resolve
@@ -353,24 +317,29 @@ def run_mutant(name: str | None, claim: str = "predictable@2", *, stop_at_first:
     adapter = resolve("reference-inprocess")
     all_outputs = list(adapter.outputs)
     if cases is None:
-        cases = [c for s in load_suites() for c in s.cases if required_for(claim, c)]
+        cases = [c for s in load_suites() for c in s.cases if required_for(claim, c, player=True)]
     cases = sorted(cases, key=_case_cost)
     if stop_at_first:
         cases = [c for c in cases if c.kind != "error"] + [c for c in cases if c.kind == "error"]
+    plan = [(c, formats[0]) for c in cases]
+    for fmt in formats[1:]:
+        plan += [(c, fmt) for c in cases if "faps" in (c.stages or ["faps"]) and c.kind != "error"]
     failing, ran = [], 0
     with tempfile.TemporaryDirectory(prefix="fbaconf-mutant-") as tmp:
         ctx = RunContext(adapter, claim, Path(out_dir or tmp), golden_root(), False, Path(tmp))
-        for c in cases:
+        for c, fmt in plan:
             # produce only what the case compares (the in-process reference renders otherwise)
             adapter.outputs = [s for s in all_outputs if s in (c.stages or ["faps"])] or ["faps"]
+            adapter.faps_format = fmt
             r = run_case(ctx, c)
             ran += 1
             if r.outcome.failing:
-                failing.append({"case": c.full_id, "outcome": r.outcome.value, "message": r.message[:300]})
+                failing.append({"case": c.full_id if fmt == formats[0] else f"{c.full_id} ({fmt})",
+                                "outcome": r.outcome.value, "message": r.message[:300]})
                 if stop_at_first:
                     break
     return {"mutant": name or "reference", "killed": bool(failing), "killed_by": failing[0]["case"] if failing else None,
-            "failing": failing, "ran": ran, "total": len(cases), "seconds": round(time.perf_counter() - t0, 2)}
+            "failing": failing, "ran": ran, "total": len(plan), "seconds": round(time.perf_counter() - t0, 2)}
 
 
 def run_all(names: list[str] | None = None, *, claim: str = "predictable@2", jobs: int | None = None,
@@ -397,17 +366,30 @@ def run_all(names: list[str] | None = None, *, claim: str = "predictable@2", job
         return list(ex.map(one, names))
 
 
+def score(results: list[dict], family: str | None = None) -> tuple[int, int, int]:
+    """(killed, scored, equivalent) over ``results`` (of one mutant ``family``, or all)."""
+    rows = [r for r in results if family is None or getattr(MUTANTS.get(r["mutant"]), "family", None) == family]
+    equivalent = [r for r in rows if getattr(MUTANTS.get(r["mutant"]), "equivalent", "")]
+    scored = [r for r in rows if r not in equivalent]
+    return sum(1 for r in scored if r["killed"]), len(scored), len(equivalent)
+
+
 def format_results(results: list[dict]) -> str:
-    lines = [f"{'mutant':38s} {'verdict':8s} killed by"]
+    lines = [f"{'mutant':38s} {'verdict':10s} killed by"]
     for r in results:
         m = MUTANTS.get(r["mutant"])
-        verdict = "killed" if r["killed"] else "SURVIVED"
+        eq = getattr(m, "equivalent", "")
+        verdict = "killed" if r["killed"] else "equivalent" if eq else "SURVIVED"
         by = r.get("killed_by") or r.get("error") or "-"
-        lines.append(f"{r['mutant']:38s} {verdict:8s} {by}")
+        lines.append(f"{r['mutant']:38s} {verdict:10s} {by}")
         if not r["killed"] and m is not None:
-            lines.append(f"{'':38s}          ({m.description}; {m.where})")
-    k = sum(1 for r in results if r["killed"])
-    lines.append(f"mutation score: {k}/{len(results)}")
+            lines.append(f"{'':38s}            ({eq or m.description}; {m.where})")
+    for fam in FAMILIES:
+        k, n, e = score(results, fam)
+        if n or e:
+            lines.append(f"{fam} mutants: {k}/{n} killed" + (f", {e} equivalent (not scored)" if e else ""))
+    k, n, _ = score(results)
+    lines.append(f"mutation score: {k}/{n}")
     return "\n".join(lines)
 
 
@@ -481,7 +463,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"unknown mutant {a.name!r}", file=sys.stderr)
         return 2
     if a.cmd == "decode":
-        apply(a.name)
+        if a.name != "reference":
+            apply(a.name)
         from fbaconf.harness import refdecoder
         return refdecoder.main(a.rest)
     res = run_mutant(None if a.name == "reference" else a.name, a.claim, stop_at_first=not a.all_cases)
