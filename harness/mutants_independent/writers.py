@@ -1,0 +1,6 @@
+"""Independent mutants: writers (see the package docstring)."""
+from __future__ import annotations
+
+from fbaconf.harness.mutant_core import Mutant
+
+MUTANTS_LIST: list[Mutant] = []
