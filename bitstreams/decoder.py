@@ -171,14 +171,8 @@ class _Decoder:
                     raise self.err("time code marker_bit must be 1", "marker", at=at + 11)
                 s = r.read(6, "time_code_seconds")
                 info.time_code = (h, m, mk, s)
-        if r.bit("skip_frames"):
-            total = 0
-            while True:
-                v = r.read(4, "number_of_frames_to_skip")
-                total += v
-                if v != 15:
-                    break
-            info.skip = total
+        if r.bit("skip_frames"):  # 4-bit chunks: 15 continues the chain, the first chunk < 15 ends it
+            info.skip = r.skip_chain("number_of_frames_to_skip")
         # timing (D6)
         rate = self.rate if self.rate is not None else DEFAULT_FRAME_RATE
         self.frame_number = self.frame_number + info.skip + 1
