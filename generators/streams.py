@@ -60,6 +60,18 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     if mutation == "unexpected-start-code":
         assert data[-4:] == b"\x00\x00\x01\xb1"
         return data[:-1] + b"\xb6"
+    if mutation == "first-predicted-decodable":  # a predicted plane first that decodes under default state
+        return first_predicted_decodable()
+    if mutation == "trailing-zero-byte":
+        return trailing_zero_byte()
+    if mutation == "time-code-marker":  # the marker bit between time code minutes and seconds
+        (at, bit), = [m for m in planes[0].marker_offsets[:1]]
+        assert planes[0].time_code is not None and bit == 1
+        return bitedit.flip_bit(data, at)
+    if mutation == "start-code-stuffing":  # next_start_code(): '0' then '1's up to the byte boundary
+        p = planes[1]
+        assert p.start_code
+        return bitedit.flip_bit(data, p.bit_offset)
     if mutation == "time-code-hours":
         assert planes[0].time_code is not None
         return bitedit.set_bits(data, hdr + 18, 5, 24)
@@ -89,14 +101,43 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     raise SuiteError(f"unknown mutation {mutation!r}", rule="suite-spec")
 
 
+def first_predicted_decodable() -> bytes:
+    """The face object start code, then two predicted planes that code nothing (an intra plane
+    coding nothing would make them decodable), then the end code: only D2 makes it invalid."""
+    from fbaconf.bitstreams.bitedit import end_stream, splice
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.bitstreams.encoder import EncoderOptions, encode
+    from fbaconf.bitstreams.frames import FapFrames
+    data = encode(FapFrames.empty(3, 25.0), EncoderOptions(plane_start_codes="none")).data
+    p = decode(data).planes
+    assert p[0].is_intra and not p[1].is_intra and p[0].bit_offset == 32
+    joined = splice((data, 0, 32), (data, p[1].bit_offset, p[2].end_offset))
+    return end_stream(joined, 32 + p[2].end_offset - p[1].bit_offset)
+
+
+def trailing_zero_byte() -> bytes:
+    """A stream without an end code whose last plane ends on a byte boundary, and one more
+    0x00 byte: the byte is neither a plane (fba_object_mask 00) nor next_start_code()."""
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.bitstreams.encoder import EncoderOptions, encode
+    from fbaconf.bitstreams.synth import synthetic_sequence
+    for n in range(2, 60):
+        data = encode(synthetic_sequence(n, 25.0, seed=3), EncoderOptions(fap_quant=2, end_code=False)).data
+        if decode(data).planes[-1].end_offset == len(data) * 8:
+            return data + b"\x00"
+    raise SuiteError("no byte-aligned stream end found for trailing-zero-byte", rule="suite-spec")
+
+
 def edit_valid(data: bytes, edit: str) -> bytes:
-    """Bit edits that keep a stream decodable (warnings only): ``no-frame-rate``, ``trailing``,
-    ``time-backwards``, ``quant-no-lists``."""
+    """Bit edits that keep a stream decodable (warnings only): ``no-frame-rate``,
+    ``frame-rate-first-only``, ``trailing``, ``time-backwards``, ``quant-no-lists``."""
     from fbaconf.bitstreams.decoder import decode
     from fbaconf.bitstreams import bitedit
     planes = decode(data).planes
-    if edit == "no-frame-rate":
+    if edit in ("no-frame-rate", "frame-rate-first-only"):  # every intra plane, or all but the first
         intra = [p for p in planes if p.is_intra and p.frame_rate is not None]
+        if edit == "frame-rate-first-only":
+            intra = intra[1:]
         out = data
         removed = 0
         for p in intra:  # drop the 13 frame-rate bits of every intra plane (is_frame_rate = 0)
@@ -145,4 +186,7 @@ def special_stream(name: str) -> bytes:
         pa, pb = decode(a.data).planes, decode(b.data).planes
         joined = splice((a.data, 0, pa[-1].end_offset), (b.data, pb[0].bit_offset, pb[-1].end_offset))
         return end_stream(joined, pa[-1].end_offset + pb[-1].end_offset - pb[0].bit_offset)
+    from .recipes import RECIPES
+    if name in RECIPES:
+        return RECIPES[name]()
     raise SuiteError(f"unknown special stream {name!r}", rule="suite-spec")

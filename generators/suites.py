@@ -181,7 +181,8 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
             case.goldens = {"faps": "faps.npz"}
         return case
     if gen == "error" and c.get("mutation") in ("too-short", "not-face", "stuffing", "viseme-select",
-                                                 "expression-select", "intensity", "value-overflow") \
+                                                 "expression-select", "intensity", "value-overflow",
+                                                 "first-predicted-decodable", "trailing-zero-byte") \
             and "content" not in c:
         c = dict(c, content={"frames": 5, "faps": [3, 4]})
     content = make_content(c.get("content", {}))
@@ -189,8 +190,9 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
     if gen == "multi":
         faces = []
         per_face = c.get("face_options", [])
+        per_content = c.get("face_content", [])
         for i in range(int(c["faces"])):
-            cc = dict(c.get("content", {}))
+            cc = dict(c.get("content", {}), **(per_content[i] if i < len(per_content) else {}))
             cc["seed"] = int(cc.get("seed", 0)) * 10 + i
             fo = per_face[i] if i < len(per_face) else {}
             if "frame_rate" in fo:

@@ -48,8 +48,8 @@ def test_error_cases_carry_the_checker_codes():
 
 
 # Stream cases without the .fap form (suites.toml text = false), each for its reason: the
-# model-halving case is 16,500 frames (~2.5 MB of text) and tests the binary coder only.
-NO_TEXT = {"simple-l1-stress/arith-model-rescale"}
+# model-halving cases are 16,500 frames (~2.5 MB of text) and test the binary coder only.
+NO_TEXT = {"simple-l1-stress/arith-model-rescale", "simple-l1-stress/arith-halving-random"}
 
 
 def test_suite_groups_and_claims():
