@@ -54,6 +54,8 @@ class EncoderOptions:
     # starts an intra plane in the other mode (overrides ``coding``)
     start_codes_before: frozenset = frozenset()  # frame numbers whose plane gets a plane start code
     intra_at: frozenset = frozenset()  # frame numbers coded as intra planes (frame-based mode)
+    full_intensity_alphabet: bool = False  # blend/intensity levels up to D5's alphabet end, even past
+    # 63 (64 at fap_quant 2): a value a decoder must output; off, the level is lowered to stay <= 63
     widen_at: frozenset = frozenset()  # (frame number, n): that intra plane's range lists n codes wider
     # (both set by encode() itself where needed to prevent start-code emulation, D9)
 
@@ -93,6 +95,7 @@ class _Plan:
         n = len(frames)
         coded = frames.status == SET
         self.coded = coded
+        self.full_alphabet = opts.full_intensity_alphabet
         self.intra = np.zeros(n, dtype=bool)
         for k in range(n):
             if k == 0 or k in forced:
@@ -185,12 +188,13 @@ class _Plan:
         """Quantise a blend/intensity closed-loop, keeping the reconstruction inside 0..63.
 
         D5's alphabet allows floor((63 + floor(q/2)) / q) x q, which can exceed 63 (64 at
-        q = 2); a decoder must output it, but this encoder never produces it: the level is
-        lowered to the largest multiple of q <= 63 instead (error < q there, else <= q/2)."""
+        q = 2); a decoder must output it, but this encoder produces it only with
+        ``full_intensity_alphabet``: otherwise the level is lowered to the largest multiple of
+        q <= 63 instead (error < q there, else <= q/2)."""
         base = 0 if self.intra[k] else int(hcur[j])
         level = quantise(int(high[k, j]) - base, istep)
         r = base + level * istep
-        if r > INTENSITY_MAX:
+        if r > INTENSITY_MAX and not self.full_alphabet:
             level = (INTENSITY_MAX - base) // istep
         elif r < 0:
             level = -(base // istep)

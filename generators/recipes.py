@@ -184,7 +184,23 @@ def high_level_held() -> bytes:
     return data
 
 
+def blend_64() -> bytes:
+    """viseme_blend and both intensities at 63, fap_quant 2, with D5's whole alphabet: the intra
+    level 32 dequantises to 64 (D5 allows it), which a decoder outputs as is, never clamped."""
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS
+    from fbaconf.bitstreams.synth import synthetic_sequence
+    fr = synthetic_sequence(6, 25.0, seed=56, visemes=True, expressions=True, faps=[3, 4])
+    for name in ("viseme_blend", "expression_intensity1", "expression_intensity2"):
+        fr.high[:, HIGH_LEVEL_FIELDS.index(name)] = 63
+    data = _encode(fr, fap_quant=2, full_intensity_alphabet=True)
+    out = decode(data).frames
+    _need(int(out.high[0, HIGH_LEVEL_FIELDS.index("viseme_blend")]) == 64, "blend-64", "viseme_blend 64 in frame 0")
+    return data
+
+
 RECIPES = {
+    "blend-64": blend_64,
     "high-level-held": high_level_held,
     "mask-00-after-set": mask_00_after_set,
     "extreme-steps": extreme_steps,

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from fbaconf.bitstreams import tables
@@ -274,3 +274,27 @@ def test_reconstruction_metadata():
     got = decode(res.data).frames
     assert list(np.nonzero(got.is_intra)[0]) == [0, 4, 8]
     assert (got.fap_quant == 3).all() and (got.coding_type == 0).all()
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 31), st.integers(0, 63))
+@example(2, 63)  # 64: past 63, inside D5's alphabet
+@example(2, 1)  # the dead zone
+def test_full_intensity_alphabet_reaches_d5_end(q, v):
+    """D5: blend/intensity levels 0..floor((63 + floor(q/2)) / q), times q. With the whole
+    alphabet the reconstruction is the nearest multiple of q (it may pass 63: 64 at q = 2);
+    without it, the largest multiple of q <= 63 when the nearest would pass 63."""
+    from fbaconf.bitstreams.decoder import decode
+    from fbaconf.bitstreams.encoder import EncoderOptions, encode
+    from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS
+    from fbaconf.bitstreams.synth import synthetic_sequence
+    fr = synthetic_sequence(2, 25.0, seed=1, visemes=True, expressions=False, faps=[3])
+    col = HIGH_LEVEL_FIELDS.index("viseme_blend")
+    fr.high[:, col] = v
+    top = (63 + q // 2) // q * q  # D5's largest value, by hand from the spec notes
+    h = q // 2  # spec notes 3.4: a dead zone of floor(q/2), then round half up
+    nearest = min((0 if v <= h else (v + h) // q) * q, top)
+    full = decode(encode(fr, EncoderOptions(fap_quant=q, full_intensity_alphabet=True)).data).frames
+    assert int(full.high[0, col]) == nearest
+    capped = decode(encode(fr, EncoderOptions(fap_quant=q)).data).frames
+    assert int(capped.high[0, col]) == (nearest if nearest <= 63 else 63 // q * q)
