@@ -132,7 +132,11 @@ MUTANTS_LIST: list[Mutant] = [
        "elif low >= Q2:", "elif low > Q2:", "§3.3 renormalisation at q2"),
     _m("ind-cod-renorm-middle-high-le-q3", f"{AD}.decode",
        "middle renormalisation when high <= q3 (boundary included)",
-       "elif low >= Q1 and high < Q3:", "elif low >= Q1 and high <= Q3:", "§3.3 q1/q3 middle case"),
+       "elif low >= Q1 and high < Q3:", "elif low >= Q1 and high <= Q3:", "§3.3 q1/q3 middle case",
+       equivalent="observed, not proven: its condition (high = 49152 right after narrowing, low in [q1, q2)) "
+                  "was reached in plane 1020 of a 1,025-frame search stream (seed 1) and the output was "
+                  "identical; the extra middle step leaves the interval doubled (high 65537), the decoder "
+                  "one shift early, and the next shift brings it back in step"),
     _m("ind-cod-renorm-middle-low-gt-q1", f"{AD}.decode",
        "middle renormalisation only when low > q1 (boundary excluded)",
        "elif low >= Q1 and high < Q3:", "elif low > Q1 and high < Q3:", "§3.3 q1/q3 middle case"),
