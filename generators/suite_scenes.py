@@ -131,6 +131,17 @@ def _fit_scene(which: str):
             numeratorTerms [{arr(nt)}] denominatorTerms [{arr(dt)}]
             numeratorExp [{arr(ne)}] denominatorExp [{arr(de)}]
             numeratorCoefs [{arr(nc)}] denominatorCoefs [{arr(dc)}] }} }}""")
+    if which == "order":
+        # node numbers against the graph's order: node 0 = {35} is the child of node 2 = {34, 36},
+        # itself the child of node 1 = {3}; FAP 36 is sent, FAP 34 is not
+        # (1,2): FAP34 = 0.5*x3, FAP36 = 0.8*x3 (never written: it is sent)   (2,0): FAP35 = x34
+        return bt.parse("""Face { fit FIT {
+            FAPs [35 -1 3 -1 34 36]
+            Graph [1 2 2 0]
+            numeratorTerms [1 1 1] denominatorTerms [1 1 1]
+            numeratorExp [1 1 1 0] denominatorExp [0 0 0 0]
+            numeratorImpulse []
+            numeratorCoefs [0.5 0.8 1.0] denominatorCoefs [1 1 1] } }""")
     raise SuiteError(f"unknown FIT scene {which!r}", rule="suite-spec")
 
 
@@ -214,7 +225,10 @@ def _grid_scene(kind: str):
         for k in range(parts):
             kids.append(bt.Node("Shape", {"geometry": bt.Node("IndexedFaceSet", {
                 "coord": fill if k == 0 else bt.Use("FILL"), "coordIndex": np.array([0, 1, 2, -1], np.int64)})}))
-    inner = bt.Node("Transform", {"center": (0.0, -20.0, 0.0), "children": kids}, "Inner")
+    inner_fields = {"center": (0.0, -20.0, 0.0), "children": kids}
+    if kind == "transforms":  # a neutral scale other than 1 (a FAP's scale multiplies it)
+        inner_fields["scale"] = (1.2, 0.9, 1.0)
+    inner = bt.Node("Transform", inner_fields, "Inner")
     outer = bt.Node("Transform", {"children": [inner]}, "Outer")
 
     def mesh(idx, borders, disp):
@@ -261,6 +275,16 @@ def _grid_scene(kind: str):
         tables.append(table(50, trs=[xform("Inner", 1, (0.0, 0.0, 1.0, 1.0))]))
         tables.append(table(1, [mesh(g[-1, :], [-1, 1], [(0.0, 0.05, 0.0)])], hls=3))
         tables.append(table(2, trs=[xform("Inner", 3, (0.02, 0.0, 0.0))], hls=1))
+    elif kind == "equal-borders":  # invalid: intervalBorders must increase strictly
+        tables.append(table(3, [mesh(g[:, 3], [-100, 0, 0, 100], [(0.0, 0.02, 0.0)])]))
+    elif kind == "transforms":
+        # tables of one Transform listed against ascending fapID (they apply in fapID order): two
+        # rotations of one node about different axes (50 about z before 48 about x), which do not commute
+        tables.append(table(50, trs=[xform("Inner", 1, (0.0, 0.0, 1.0, 1.0))]))
+        tables.append(table(48, trs=[xform("Inner", 1, (1.0, 0.0, 0.0, 1.0))]))
+        tables.append(table(14, trs=[xform("Inner", 3, (0.0, 0.01, 0.0))]))
+        tables.append(table(6, trs=[xform("Inner", 2, (1.002, 1.0, 1.0))]))
+        tables.append(table(3, [mesh(g[:, 3], [-1, 1], [(0.0, 0.02, 0.0)])]))
     elif level is not None:
         nint = lim["intervals_per_facedefmesh"]
         am = a(4)

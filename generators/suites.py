@@ -121,6 +121,20 @@ def _write(dirpath: Path, name: str, data: bytes | str, case: Case, key: str | N
     return name
 
 
+def _write_scene(d: Path, case: Case, spec: str) -> None:
+    """The case's scene as BT and binary BIFS, and the files it names (textures)."""
+    from fbaconf.scenes import bifs, bt
+    scene, files = make_scene(spec)
+    for name, blob in sorted(files.items()):
+        if not (d / name).is_file():
+            _write(d, name, blob, case, None)
+        else:
+            case.sha256[name] = sha256_file(d / name)
+    scene = bt.rounded(scene, GEOMETRY_DECIMALS)
+    _write(d, f"{case.id}.bt", bt.write(scene), case, "scene")
+    _write(d, f"{case.id}.bifs", bifs.encode(scene), case, "bifs")
+
+
 def _error_expect(c: dict) -> dict:
     """An error case's expectation: the checker's diagnostics, and whether a decoder may
     decode (conceal) instead of rejecting (``conceal = true`` in suites.toml)."""
@@ -224,16 +238,7 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
     case.stages = list(c.get("stages", ["faps"]))
     case.goldens = {"faps": "faps.npz"}
     if "scene" in c:
-        scene, files = make_scene(c["scene"])
-        for name, blob in sorted(files.items()):
-            if not (d / name).is_file():
-                _write(d, name, blob, case, None)
-            else:
-                case.sha256[name] = sha256_file(d / name)
-        from fbaconf.scenes import bifs
-        scene = bt.rounded(scene, GEOMETRY_DECIMALS)
-        _write(d, f"{case.id}.bt", bt.write(scene), case, "scene")
-        _write(d, f"{case.id}.bifs", bifs.encode(scene), case, "bifs")
+        _write_scene(d, case, c["scene"])
     if "vertices" in case.stages:
         case.goldens["vertices"] = "vertices.npz"
         if c.get("vertices_key"):

@@ -144,6 +144,13 @@ def summarize_scene(scene: Any, base_dir: Path | None = None) -> SceneSummary:
         elif n.type == "FaceDefMesh":
             nb = len(n.get("intervalBorders"))
             s.measure("intervals_per_facedefmesh", max(nb - 1, 0), f"{path}.intervalBorders")
+            from fbaconf.animation.facedef import validate_borders
+            from fbaconf.errors import SceneError
+            try:  # the rules the engine applies: >= 2 borders, finite, strictly increasing, a 0
+                validate_borders(n.get("intervalBorders"), node_path=f"{path}.intervalBorders")
+            except SceneError as e:
+                raise SceneStructureError(e.message if hasattr(e, "message") else str(e),
+                                          node_path=f"{path}.intervalBorders") from None
         elif n.type == "FIT":
             s.tools.setdefault("fit", path)
             faps = [int(x) for x in n.get("FAPs")]

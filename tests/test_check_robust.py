@@ -84,3 +84,21 @@ def test_odd_scenes(scene):
 def test_non_bytes_input():
     rep = analyse(bytearray(SEEDS[0]))
     assert rep.diagnostics == []
+
+
+@pytest.mark.parametrize("borders, why", [([-100, 0, 0, 100], "strictly increasing"),
+                                          ([-100, 50, 10, 100], "strictly increasing"),
+                                          ([-100, 40, 100], "must be 0")])
+def test_scene_interval_borders_are_checked(tmp_path, borders, why):
+    """The checker applies the engine's FaceDefMesh border rules (found by the independent mutant
+    ind-anim-borders-equal-accepted: the checker passed a scene the engine refuses)."""
+    from fbaconf.generators.suite_scenes import make_scene
+    from fbaconf.scenes import bt
+    scene, _files = make_scene("grid:equal-borders")
+    want = f"intervalBorders [{', '.join(map(str, borders))}]"
+    text = bt.write(scene).replace("intervalBorders [-100, 0, 0, 100]", want)
+    assert want in text
+    p = tmp_path / "s.bt"
+    p.write_text(text)
+    bad = [d for d in analyse(SEEDS[0], scene=p).diagnostics if d.code == "FAP-SCENE-002"]
+    assert bad and why in bad[0].message and "intervalBorders" in str(bad[0].location)

@@ -71,7 +71,11 @@ MUTANTS_LIST: list[Mutant] = [
        "in frames with a viseme/expression every FREE low-level FAP becomes DERIVED (0 where no table entry)",
        "target = touched & (status == FREE)",
        "touched[:, 2:] = ((wv.sum(axis=1) + we.sum(axis=1)) > 0)[:, None]\n    target = touched & (status == FREE)",
-       "highlevel.py: only FAPs the tables mention"),
+       "highlevel.py: only FAPs the tables mention",
+       equivalent="it runs last (after the FIT and the left/right fill) and turns only FAPs no table mentions "
+                  "into DERIVED 0: a FAP of value 0 moves no vertex, and a FREE FAP's value is the decoder's "
+                  "choice (docs/harness.md), so vertices, images and the compared FAPs are equal; only the "
+                  "status bookkeeping in extra_fap_status differs"),
     # ------------------------------------------------------------------ FaceDefMesh (Ostermann 1998 2.3.2)
     _m("ind-anim-mesh-top-interval-closed", f"{FDEF}:interval_weights",
        "a FAP above the last border saturates (the last interval is not extended, step 3 ignored)",
