@@ -221,8 +221,12 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
         return case
     res = encode(content, opts)
     if gen == "error":
-        data = mutate(res.data, c["mutation"], int(c.get("content", {}).get("seed", 0)))
+        data = mutate(res.data, c["mutation"], int(c.get("content", {}).get("seed", 0))) \
+            if c.get("mutation") else res.data
         _write(d, f"{case.id}.fba", data, case, "fba")
+        if "scene" in c:  # a valid stream with an invalid scene: the decoder must load it to see
+            _write_scene(d, case, c["scene"])
+            case.stages = ["faps", "vertices"]
         case.expect = _error_expect(c)
         case.frames = len(content)
         return case

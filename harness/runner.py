@@ -307,8 +307,9 @@ def compare_outputs(ctx: RunContext, case: Case, job: Job) -> list[StageResult]:
 
 
 def _faps_stage(cmp, expected, got_path: Path, name: str, text_input: bool = False) -> StageResult:
-    """Decoded FAPs, exactly. With ``.fap`` text on either side there is no SET/RETAINED
-    distinction to compare, only the values of every FAP the standard fixes."""
+    """Decoded FAPs, exactly. With ``.fap`` text output there is no SET/RETAINED distinction to
+    compare, only the values of every FAP the standard fixes; a player (``.fap`` input) is
+    compared on its state (harness/compare/faps.py)."""
     if got_path is None or not os.path.lexists(got_path):
         return StageResult(name, Outcome.FAIL, "decoder exited 0 but wrote no FAP output"
                            + (f" ({got_path.name})" if got_path else ""))
@@ -319,8 +320,7 @@ def _faps_stage(cmp, expected, got_path: Path, name: str, text_input: bool = Fal
                                                             (1 << 20) + 8192 * len(expected.values)))
     except cmp.OutputError as e:
         return StageResult(name, Outcome.FAIL, f"unreadable FAP output: {e}")
-    r = cmp.compare_faps(expected, got, text_output=text_input or got_path.suffix.lower() == ".fap",
-                         player=text_input)
+    r = cmp.compare_faps(expected, got, text_output=got_path.suffix.lower() == ".fap", player=text_input)
     r.stage = name
     return r
 

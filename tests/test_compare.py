@@ -604,3 +604,59 @@ def test_plane_times_are_compared_for_npz_output_only():
     assert compare_faps(exp, got, text_output=False).outcome.value == "Pass"
     got.time_ms[5:] += 100.0
     assert compare_faps(exp, got, text_output=True).outcome.value == "Pass"
+
+
+def _player_golden():
+    """Three frames at 30 Hz (times 0, 33.33, 66.67 ms): FAP 3 sent in frame 0 and held; FAP 4
+    first sent in frame 1 (no value in frame 0); FAP 5 never sent."""
+    from fbaconf.bitstreams.frames import FREE, RETAINED, SET, FapFrames
+    e = FapFrames.empty(3, 30.0)
+    e.status[:, 2] = [SET, RETAINED, RETAINED]
+    e.values[:, 2] = 100
+    e.status[:, 3] = [FREE, SET, SET]
+    e.values[1:, 3] = [40, 50]
+    return e
+
+
+def _player_state(e):
+    """What a player writes as .npz: its state, SET wherever a value is held."""
+    from fbaconf.bitstreams.frames import FREE, SET
+    g = e.copy()
+    g.status[e.status != FREE] = SET
+    return g
+
+
+def test_player_npz_state_times_and_presence_are_compared():
+    from fbaconf.bitstreams.frames import FREE, SET
+    from fbaconf.harness.compare import compare_faps
+    e = _player_golden()
+    assert compare_faps(e, _player_state(e), text_output=False, player=True).outcome.value == "Pass"
+    late = _player_state(e)
+    late.time_ms[2] = 66.0  # truncated to whole ms: 0.67 ms off (tolerance 0.5)
+    r = compare_faps(e, late, text_output=False, player=True)
+    assert r.outcome.value == "Fail" and r.first_difference["what"] == "time_ms"
+    held_early = _player_state(e)
+    held_early.status[0, 3] = SET  # a value for FAP 4 before it was ever sent
+    r = compare_faps(e, held_early, text_output=False, player=True)
+    assert r.outcome.value == "Fail" and r.first_difference["fap"] == 4
+    dropped = _player_state(e)
+    dropped.status[1, 2] = FREE  # the held FAP 3 left out of the state
+    r = compare_faps(e, dropped, text_output=False, player=True)
+    fd = r.first_difference
+    assert r.outcome.value == "Fail" and (fd["frame"], fd["fap"], fd["what"], fd["expected"], fd["got"]) == \
+        (1, 3, "missing", 100, None)
+
+
+@pytest.mark.parametrize("declared, ok", [(2, True), (3, False), (0, False)])
+def test_fap_output_header_count_must_match(tmp_path, declared, ok):
+    """A decoder's .fap output must declare the frames it holds (readers size by it)."""
+    from fbaconf.harness.compare import OutputError, load_output_faps
+    m = " ".join(["0", "0", "1"] + ["0"] * 65)
+    p = tmp_path / "out.fap"
+    p.write_text(f"2.1 out 25 {declared}\n{m}\n0 10\n{m}\n1 20\n")
+    if ok:
+        assert list(load_output_faps(p).values[:, 2]) == [10, 20]
+    else:
+        with pytest.raises(OutputError) as e:
+            load_output_faps(p)
+        assert e.value.rule == "output-fap-count" and f"says {declared} frame(s)" in str(e.value)

@@ -41,7 +41,8 @@ def test_error_cases_carry_the_checker_codes():
                     read_fap_file(c.input_path("fap"))
                 assert c.expect["diagnostics"] == [ei.value.rule], c.full_id
                 continue
-            codes = {d.code for d in analyse(c.input_path("fba").read_bytes()).diagnostics}
+            scene = c.input_path("scene")  # a valid stream with an invalid scene
+            codes = {d.code for d in analyse(c.input_path("fba").read_bytes(), scene=scene).diagnostics}
             assert set(c.expect["diagnostics"]) <= codes, (c.full_id, codes)
             n += 1
     assert n >= 15

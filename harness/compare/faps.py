@@ -32,6 +32,8 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
     ``player=True`` (the decoder was given .fap text: a player): its output is its state, so
     every FAP that holds a value must be written in every frame (mask 1); one left to the
     reader's hold counts as missing — the input text was sparse, and copying it is no playing.
+    A player's ``.npz`` state is compared the same way (SET exactly where the golden holds a
+    value, FREE where it has none), and its plane times as for any ``.npz`` output.
 
     ``first_difference``: frame (index), frame_number, fap, name, what ("value", "status",
     "missing", a high-level field name, "frame number", "frame count"), expected, got.
@@ -54,6 +56,9 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
     if text_output:
         missing = norm & ((g.status != SET) if player else (g.status == FREE))
         sdiff = np.zeros_like(norm)
+    elif player:  # a player's .npz state: SET where the golden holds a value, FREE where it has none
+        missing = norm & (g.status != SET)
+        sdiff = ~norm & (g.status != FREE)
     else:
         missing = np.zeros_like(norm)
         sdiff = e.status != g.status

@@ -196,14 +196,19 @@ def load_output_faps(path, *, max_bytes: int = DEFAULT_MAX_BYTES) -> FapFrames:
     Raises :class:`OutputError` naming the file for anything unusable (missing, larger than
     ``max_bytes``, not text / not a zip, wrong format tag, missing arrays, wrong shapes or
     dtypes, out-of-range integers, non-finite times); never another exception. ``.fap``
-    reader warnings (recoverable quirks) are accepted silently."""
+    reader warnings (recoverable quirks) are accepted silently, except a header frame count
+    that is not the number of frames written: readers size their buffers by it (Xface 1.0
+    crashes on a frame past it), so a decoder writing it wrong writes a broken file."""
     path = Path(path)
     try:
         check_output_file(path, max_bytes)
         if _is_zip(path) or path.suffix.lower() == ".npz":
             return _load_fapframes_npz(path, max_bytes)
         from fbaconf.bitstreams.faptext import read_fap_file
-        frames, _header, _warnings = read_fap_file(path)
+        frames, header, _warnings = read_fap_file(path)
+        if header.declared_frames != len(frames):
+            raise OutputError(f"unusable FAP output: the header says {header.declared_frames} frame(s), the file holds "
+                              f"{len(frames)}", rule="output-fap-count", file=str(path))
         return frames
     except OutputError:
         raise

@@ -36,7 +36,10 @@ MUTANTS_LIST: list[Mutant] = [
     _src("ind-wr-rate-2dp", _RATE,
          "a fractional frame rate is written with two decimals (29.97002997 -> 29.97)",
          "return str(int(r)) if r.is_integer() else repr(r)",
-         """return str(int(r)) if r.is_integer() else f"{r:.2f}\""""),
+         """return str(int(r)) if r.is_integer() else f"{r:.2f}\"""",
+         equivalent="two decimals is what the .fap header is held to: the header rate must equal the coded "
+                    "rate within [faps] header_rate_tol_hz = 0.005 (tolerances.toml: 29.97 for 30000/1001), "
+                    "and rounding to two decimals is always within it"),
     _src("ind-wr-count-last-plus1", _W,
          "the header frame count is last frame number + 1 instead of the number of frames",
          """out = [f"{version} {name} {_format_rate(rate)} {n}"]""",
@@ -44,7 +47,9 @@ MUTANTS_LIST: list[Mutant] = [
     # ---------------------------------------------------------------- .fap masks / values
     _src("ind-wr-mask-not-free", _W,
          "every FAP holding a value (SET or RETAINED) is written as masked",
-         "masks = frames.status == SET", "masks = frames.status != FREE"),
+         "masks = frames.status == SET", "masks = frames.status != FREE",
+         equivalent="the .fap format can only say 'set' or 'keep' (docs/fap-text.md): a held value written "
+                    "again as set is the same state, and text outputs are compared on values"),
     _src("ind-wr-mask-nonzero", _W,
          "only FAPs with a non-zero value are written (a FAP set to 0, and FAP1/FAP2, are dropped)",
          "masks = frames.status == SET", "masks = (frames.status == SET) & (frames.values != 0)"),
@@ -66,11 +71,16 @@ MUTANTS_LIST: list[Mutant] = [
          "data = [str(int(fnums[k]))]", "data = [str(k)]"),
     _src("ind-wr-frame-one-based", _W,
          "frame numbers written 1-based (frame number + 1)",
-         "data = [str(int(fnums[k]))]", "data = [str(int(fnums[k]) + 1)]"),
+         "data = [str(int(fnums[k]))]", "data = [str(int(fnums[k]) + 1)]",
+         equivalent="real .fap files number frames from 0 or from 1, so a text output may count from either "
+                    "(one offset for the whole file, harness/compare/faps.py); a constant +1 is that offset"),
     # ---------------------------------------------------------------- .npz
     _src("ind-wr-npz-time-rounded", _NPZ,
          "times written rounded to whole milliseconds",
-         _ARR, _ARR + "; arrays[\"time_ms\"] = np.round(arrays[\"time_ms\"])", rule=_OUT + ", times"),
+         _ARR, _ARR + "; arrays[\"time_ms\"] = np.round(arrays[\"time_ms\"])", rule=_OUT + ", times",
+         equivalent="rounding moves a time by at most 0.5 ms, which is the plane-time tolerance itself "
+                    "([faps] time_tol_ms = 0.5 in tolerances.toml): a decoder keeping whole milliseconds "
+                    "is within it by design"),
     _src("ind-wr-npz-status-mask", _NPZ,
          "status written as the mask of sent FAPs (bool) instead of the status codes",
          _ARR, _ARR + "; arrays[\"status\"] = arrays[\"status\"] == SET", rule=_OUT + ", statuses"),
