@@ -65,7 +65,7 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     if mutation == "trailing-zero-byte":
         return trailing_zero_byte()
     if mutation == "time-code-marker":  # the marker bit between time code minutes and seconds
-        (at, bit), = [m for m in planes[0].marker_offsets[:1]]
+        at, bit = planes[0].marker_offsets[0]  # the time code's marker is the plane's first
         assert planes[0].time_code is not None and bit == 1
         return bitedit.flip_bit(data, at)
     if mutation == "start-code-stuffing":  # next_start_code(): '0' then '1's up to the byte boundary

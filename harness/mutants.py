@@ -34,6 +34,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from fbaconf.harness.mutant_core import Mutant, apply_mutant
+from fbaconf.harness.mutants_independent import MUTANTS_LIST as INDEPENDENT
 
 
 # ------------------------------------------------------------------ custom patches
@@ -272,15 +273,7 @@ MUTANTS_LIST = [
     Mutant("render-shifted-camera", "fbaconf.rendering.raster:project", "image centre one pixel off",
            patch=_camera_shift),
 ]
-OWN = list(MUTANTS_LIST)
-
-
-def _independent() -> list[Mutant]:
-    from fbaconf.harness.mutants_independent import MUTANTS_LIST as independent
-    return independent
-
-
-MUTANTS_LIST = OWN + _independent()
+MUTANTS_LIST = MUTANTS_LIST + INDEPENDENT  # the suite's own (family "suite"), then the independent ones
 MUTANTS: dict[str, Mutant] = {m.name: m for m in MUTANTS_LIST}
 FAMILIES = ("suite", "independent")
 

@@ -429,7 +429,8 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
     sandboxed = isolation() == "bwrap"
     if sandboxed:
         inner = _bwrap_argv(view or default_view(argv, workdir), workdir) + inner
-    full, held = launch_argv(as_bytes, fsize, cpu, [d for _k, d in cg.dirs], inner)
+    cg_dirs = [d for _k, d in cg.dirs]
+    full, held = launch_argv(as_bytes, fsize, cpu, cg_dirs, inner)
     base_env = decoder_env(workdir, env)
     t0 = time.perf_counter()
     try:
@@ -441,7 +442,7 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
                 cg.close()
                 return ProcResult(argv, None, elapsed_s=0.0, stderr_tail=f"cannot start: {e}",
                                   notes=["harness-start-failed"])
-            why = _release(proc, [d for _k, d in cg.dirs]) if held else None
+            why = _release(proc, cg_dirs) if held else None
             if why is not None:
                 cg.close()
                 return ProcResult(argv, None, elapsed_s=0.0, stderr_tail=why, notes=["harness-start-failed"])

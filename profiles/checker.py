@@ -149,8 +149,7 @@ def summarize_scene(scene: Any, base_dir: Path | None = None) -> SceneSummary:
             try:  # the rules the engine applies: >= 2 borders, finite, strictly increasing, a 0
                 validate_borders(n.get("intervalBorders"), node_path=f"{path}.intervalBorders")
             except SceneError as e:
-                raise SceneStructureError(e.message if hasattr(e, "message") else str(e),
-                                          node_path=f"{path}.intervalBorders") from None
+                raise SceneStructureError(e.message, node_path=f"{path}.intervalBorders") from None
         elif n.type == "FIT":
             s.tools.setdefault("fit", path)
             faps = [int(x) for x in n.get("FAPs")]
