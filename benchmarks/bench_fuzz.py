@@ -6,7 +6,9 @@ the same number of seconds on the same machine:
 * ``bare spawn``: a loop that only ``posix_spawn``s the decoder on one conformance stream and
   waits (no sandbox, no limits, no input generation) — the ceiling for spawning;
 * ``fuzz --spawn``: ``fbaconf fuzz`` with a fresh sandbox per input;
-* ``fuzz (fork server)``: the default, one sandbox per worker;
+* ``fuzz (fork server)``: the default, one sandbox per worker, its server in C
+  (``harness/forkserver.c``, compiled on first use), and again with the Python server
+  (``harness/forkserver.py``, the fallback without a C compiler);
 * ``fuzz (persistent)``: the same program through ``[commands] serve``;
 * the last two again with the program built without its planted bug (``-DSKIPCHAIN_FIXED``):
   a crash costs the persistent mode a process (and sandbox) start, so these show it without;
@@ -66,13 +68,17 @@ def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False) -> tuple[float, str, int]:
+def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False,
+              c_server: bool = True) -> tuple[float, str, int]:
     from fbaconf.fuzz.corpus import default_seeds
     from fbaconf.fuzz.engine import Fuzzer
     from fbaconf.fuzz.targets import DecoderTarget
+    from fbaconf.harness import native
     from fbaconf.harness.adapters import load_manifest
+    native.USE_NATIVE = c_server
     target = DecoderTarget(load_manifest(manifest), work, timeout_s=1.0, fork_server=not spawn, persistent=not spawn)
-    mode = "persistent" if target.persistent else "fork-server" if target.fork_server else "spawn"
+    server = "C" if native.forkserver_binary() is not None else "Python"
+    mode = ("persistent" if target.persistent else f"fork server in {server}" if target.fork_server else "spawn")
     fz = Fuzzer(target, default_seeds(), seed=7, seconds=seconds, progress=False, coverage_every=8,
                 minimise_seconds=2, minimise_tests=50)
     fz.run()
@@ -100,12 +106,13 @@ def main() -> int:
         stream.write_bytes(suite.cases[0].input_path("fba").read_bytes())
         s = args.seconds
         rows = [("bare spawn (posix_spawn loop)", bare_spawn(exe, stream, s), "")]
-        for label, manifest, one_shot in (("fuzz --spawn", spawn, True),
-                                          ("fuzz (fork server, default)", spawn, False),
-                                          ("fuzz (persistent, [commands] serve)", serve, False),
-                                          ("fuzz (fork server), bug fixed", fixed, False),
-                                          ("fuzz (persistent), bug fixed", fixed_serve, False)):
-            rate, mode, execs = fuzz_rate(manifest, s, tmp / f"work-{len(rows)}", spawn=one_shot)
+        for label, manifest, one_shot, c_server in (("fuzz --spawn", spawn, True, True),
+                                                    ("fuzz (fork server, default)", spawn, False, True),
+                                                    ("fuzz (fork server in Python)", spawn, False, False),
+                                                    ("fuzz (persistent, [commands] serve)", serve, False, True),
+                                                    ("fuzz (fork server), bug fixed", fixed, False, True),
+                                                    ("fuzz (persistent), bug fixed", fixed_serve, False, True)):
+            rate, mode, execs = fuzz_rate(manifest, s, tmp / f"work-{len(rows)}", spawn=one_shot, c_server=c_server)
             rows.append((label, rate, f"{execs} inputs, mode {mode}"))
         rows.append(("bare persistent (pipe round trip)", bare_persistent(exe, stream, s), ""))
         print(f"fuzzing throughput, {s:g} s each, one decoder at a time, {os.cpu_count()} CPUs")
@@ -116,7 +123,9 @@ def main() -> int:
         fork = r["fuzz (fork server, default)"]
         pers = r["fuzz (persistent, [commands] serve)"]
         print(f"  harness (fork server) / bare spawn      {fork / bare:6.2f}   (goal >= 0.50)")
+        print(f"  harness (fork server in Python) / bare  {r['fuzz (fork server in Python)'] / bare:6.2f}")
         print(f"  harness (--spawn) / bare spawn          {r['fuzz --spawn'] / bare:6.2f}")
+        print(f"  persistent / --spawn                    {pers / r['fuzz --spawn']:6.2f}   (goal >= 10)")
         print(f"  persistent / fork server                {pers / fork:6.2f}")
         print(f"  persistent / bare spawn                 {pers / bare:6.2f}")
         fx = r["fuzz (persistent), bug fixed"] / r["fuzz (fork server), bug fixed"]

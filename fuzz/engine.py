@@ -1,6 +1,7 @@
 """The fuzzing loop: batches of reproducible inputs, the corpus grown by new syntax features, findings deduplicated and minimised."""
 from __future__ import annotations
 
+import collections
 import hashlib
 import random
 import sys
@@ -220,29 +221,35 @@ class Fuzzer:
                 and (self.max_execs is None or index < self.max_execs))
 
     def _run_pipelined(self, deadline: float) -> None:
-        """One decoder at a time, overlapped with the loop's own work (targets with ``start``:
-        input k + 1 is sent while input k runs and starts the moment it ends; this thread
-        judges and records input k and makes input k + 2 meanwhile). Input k + 1 is made before input k is recorded (its ``corpus_size`` says
-        which corpus it was made from, so a run is replayable as ever)."""
-        if not self._more(0, deadline):
-            return
+        """One decoder at a time, overlapped with the loop's own work: targets with ``start``
+        and a ``depth`` (a fork server, a persistent decoder) get up to ``depth`` inputs queued,
+        each starting the moment the one before ends, while this thread judges and records the
+        oldest and makes the next — a slow input to make (a fresh valid stream) leaves the
+        decoder the queue to run. Inputs are recorded in input order; input k + depth - 1 is
+        made before input k is recorded (its ``corpus_size`` says which corpus it was made
+        from, so a run is replayable as ever)."""
         start = getattr(self.target, "start", None) or (lambda inp: Run.done(self.target.execute(inp)))
-        index, cur = 0, self.make_input(0)
-        run = start(cur)
+        depth = max(2, int(getattr(self.target, "depth", 2)))
+        queue: collections.deque = collections.deque()  # (index, input, run), oldest first
+        index = 0
         while True:
-            nxt = self.make_input(index + 1) if self._more(index + 1, deadline) else None
-            # queued behind this one: it starts the moment this one ends, while this one is judged
-            after = start(nxt) if nxt is not None else None
-            out = run.result()
-            if out.verdict is not None and after is not None:
-                after.result()  # a finding's minimisation needs the decoder to itself
-            self._record(index, cur, out, deadline)
-            self.progress.update(self.stats)
-            if nxt is None or self.stopped:
-                if after is not None:
-                    after.result()  # started, never recorded: the run stops here
+            while len(queue) < depth and self._more(index, deadline):
+                inp = self.make_input(index)
+                queue.append((index, inp, start(inp)))
+                index += 1
+            if not queue:
                 return
-            index, cur, run = index + 1, nxt, after
+            k, cur, run = queue.popleft()
+            out = run.result()
+            if out.verdict is not None:
+                for _k, _inp, later in queue:
+                    later.result()  # a finding's minimisation needs the decoder to itself
+            self._record(k, cur, out, deadline)
+            self.progress.update(self.stats)
+            if self.stopped:
+                for _k, _inp, later in queue:
+                    later.result()  # started, never recorded: the run stops here
+                return
 
     def _run_batches(self, deadline: float) -> None:
         index = 0

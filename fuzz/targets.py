@@ -50,6 +50,8 @@ class ExecResult:
     features: set[str] = field(default_factory=set)
 
 
+PIPELINE_DEPTH = 8  # case folders per worker of a fork server or persistent decoder
+
 _KEEP = {"case": frozenset(("in", "out", "tmp")), "out": frozenset(("images", "faces"))}
 
 
@@ -125,6 +127,10 @@ class DecoderTarget:
         if self.persistent and kind == "scene":
             raise FuzzSetupError("the persistent protocol carries streams and .fap text, not scenes: "
                                  "fuzz scenes with --spawn")
+        # Inputs a worker may have under way (queued to its server, running, or being judged):
+        # a queue of a few absorbs the loop's slow inputs (a fresh valid stream takes ~8 ms
+        # to encode) while the decoder keeps running; the spawning path runs one at a time.
+        self.depth = PIPELINE_DEPTH if (self.fork_server or self.persistent) else 1
         self._local = threading.local()
         self._workers: list = []
         self._workers_lock = threading.Lock()
@@ -139,6 +145,12 @@ class DecoderTarget:
     @property
     def name(self) -> str:
         return self.adapter.name
+
+    @staticmethod
+    def server_kind() -> str:
+        """Which fork server runs the inputs: "C" (forkserver.c, built here) or "Python"."""
+        from fbaconf.harness.native import forkserver_binary
+        return "C" if forkserver_binary() is not None else "Python"
 
     def ext(self) -> str:
         return "bt" if self.kind == "scene" else "fba"
@@ -178,14 +190,14 @@ class DecoderTarget:
         return Job(workdir=workdir, values=values, frames=0)
 
     def _worker(self) -> "_Worker":
-        """This thread's worker: two case folders used in turn (one input runs in one while
-        the previous input's outputs are judged from the other), reused input after input, and
-        (command decoders) its fork server or persistent decoder."""
+        """This thread's worker: ``depth`` case folders used in turn (inputs queued and running
+        in some while an earlier input's outputs are judged from another), reused input after
+        input, and (command decoders) its fork server or persistent decoder."""
         w = getattr(self._local, "worker", None)
         if w is None:
             root = Path(tempfile.mkdtemp(prefix="w-", dir=self.work_root))
             w = self._local.worker = _Worker(root)
-            for i in range(2):
+            for i in range(self.depth):
                 job = self._job(b"", root / f"case{i}")
                 d = job.workdir
                 w.slots.append(_Slot(job, Path(job.values["input"] if self.kind != "scene" else job.values["scene"]),
@@ -210,12 +222,12 @@ class DecoderTarget:
         return slot.job
 
     def _view(self, w: "_Worker", argv: list[str]):
-        """The sandbox view of a worker: the decoder's own view of case folder 0, plus folder 1."""
+        """The sandbox view of a worker: the decoder's own view of case folder 0, plus the others."""
         from fbaconf.harness.runner import hidden_from_decoders
         view = self.adapter.sandbox_view(argv, w.slots[0].job.workdir, hidden=hidden_from_decoders())
-        other = w.slots[1].job.workdir
-        view.writable.append(other)
-        view.read_only_inside.append(other / "in")
+        for slot in w.slots[1:]:
+            view.writable.append(slot.job.workdir)
+            view.read_only_inside.append(slot.job.workdir / "in")
         return view
 
     def close(self) -> None:
@@ -245,10 +257,10 @@ class DecoderTarget:
         """Start running ``inp``: ``result()`` on the :class:`Run` judges it. Through a fork
         server or a persistent decoder the decoder runs while the caller works, and an input
         started while another runs is queued behind it (one decoder at a time, no gap); at
-        most two inputs of a worker are under way (its two case folders)."""
+        most ``depth`` inputs of a worker are under way (its case folders)."""
         if self.persistent or self.fork_server:
             w = self._worker()
-            k, w.turn = w.turn, w.turn ^ 1
+            k, w.turn = w.turn, (w.turn + 1) % len(w.slots)
             slot = w.slots[k]
             job = self._reuse(slot, inp.data, write_input=not self.persistent)  # persistent: on stdin
             if w.server is None and self.persistent:
@@ -260,7 +272,7 @@ class DecoderTarget:
                 from fbaconf.harness.spawner import ForkServer
                 w.argv = [self.argv_for(s.job) for s in w.slots]  # a slot's paths never change
                 w.server = ForkServer(w.root, self._view(w, w.argv[0]), self.limits, env=self.adapter.env,
-                                      sum_outputs_every=16, slots=2)
+                                      sum_outputs_every=16, slots=len(w.slots))
             if self.persistent:
                 pending = w.server.start(inp.data, job.values["faps_out"])
             else:

@@ -9,23 +9,24 @@ sandbox once per worker, keep only fork + exec per input. The client is
 Run as ``python -I -S forkserver.py --fds OUT ERR [OUT ERR ...] [--reap-namespace]`` with
 the decoder's stdout and stderr files open as descriptor pairs, one pair per slot (opened by
 the harness outside the sandbox: the decoder can write them, never find them by path; with
-two slots the harness reads one input's while the next one runs). Kept to the standard library's ``os``,
-``resource``, ``select``, ``signal``, ``struct``, ``json``, ``sys`` and ``time``, so it
+several slots the harness reads one input's while the next ones run). Kept to the standard
+library's ``os``, ``resource``, ``select``, ``signal``, ``struct``, ``sys`` and ``time``, so it
 starts in milliseconds.
 
-Protocol on stdin/stdout: each message is a 4-byte big-endian length and that many bytes
-of JSON. Request: ``argv``, ``cwd``, ``env``, ``slot`` (which descriptor pair), ``as`` (address-space bytes, 0 = none),
-``fsize`` (bytes), ``cpu`` (seconds), ``timeout`` (seconds), ``rss_mb`` (0 = not sampled).
-Reply: ``status`` (the raw wait status), ``utime``, ``stime``, ``maxrss_kb``, ``elapsed``,
-``timed_out``, ``mem_hit``. Exit code 127 with ``fbaconf-limit: cannot execute …`` on stderr
-when the program cannot be started — the message the one-shot launcher prints, so
-:mod:`.exits` judges both paths alike.
+Protocol on stdin/stdout (the same for ``forkserver.c``, the server in C the harness uses when
+it can compile it): each message is a 4-byte big-endian length and that many bytes. A request
+is NUL-terminated fields: ``slot`` (which descriptor pair), ``as`` (address-space bytes, 0 =
+none), ``fsize`` (bytes), ``cpu`` (seconds), ``timeout`` (seconds), ``rss_mb`` (0 = not
+sampled), ``cwd``, ``argc``, the arguments, ``envc``, the ``NAME=value`` entries. A reply is
+ASCII ``status utime stime maxrss_kb elapsed timed_out mem_hit`` (``status`` the raw wait
+status). Exit code 127 with ``fbaconf-limit: cannot execute …`` on stderr when the program
+cannot be started — the message the one-shot launcher prints, so :mod:`.exits` judges both
+paths alike.
 
 ``--reap-namespace`` (only inside the sandbox's own PID namespace, where ``/proc`` lists the
 sandbox's processes alone): after each input every process but the sandbox's init and the
 server itself is killed — a decoder that forked away or left its session dies with its input.
 """
-import json
 import os
 import resource
 import select
@@ -46,8 +47,9 @@ def _read_exact(n):
     return buf
 
 
-def _send(obj):
-    data = json.dumps(obj).encode()
+def _send(reply):
+    data = ("%d %.6f %.6f %d %.6f %d %d" % (reply["status"], reply["utime"], reply["stime"], reply["maxrss_kb"],
+                                           reply["elapsed"], reply["timed_out"], reply["mem_hit"])).encode()
     data = struct.pack(">I", len(data)) + data
     while data:
         data = data[os.write(1, data):]
@@ -162,6 +164,17 @@ def _set_soft(which, value):
     resource.setrlimit(which, (value, hard))
 
 
+def _request(body):
+    """The request's fields (see the protocol above) as a dict."""
+    f = body.split(b"\0")[:-1]
+    argc = int(f[7])
+    envc = int(f[8 + argc])
+    env = dict(e.decode("utf-8", "surrogateescape").partition("=")[::2] for e in f[9 + argc:9 + argc + envc])
+    return {"slot": int(f[0]), "as": int(f[1]), "fsize": int(f[2]), "cpu": int(f[3]), "timeout": float(f[4]),
+            "rss_mb": float(f[5]), "cwd": f[6].decode("utf-8", "surrogateescape"),
+            "argv": [a.decode("utf-8", "surrogateescape") for a in f[8:8 + argc]], "env": env}
+
+
 def serve(req, reap):
     out_fd, err_fd = SLOTS[int(req.get("slot", 0))]
     for fd in (out_fd, err_fd):
@@ -241,7 +254,7 @@ def main():
         body = _read_exact(struct.unpack(">I", head)[0])
         if body is None:
             return
-        _send(serve(json.loads(body), reap))
+        _send(serve(_request(body), reap))
 
 
 if __name__ == "__main__":

@@ -15,7 +15,8 @@ when its stdin closes.
 
 A crash (the process dies: a signal, a sanitizer abort, a panic), a hang (no answer within
 ``timeout_s``) or a memory or output blow-up is the ending of the input being decoded; the
-harness kills the process and starts a new one for the next input. Whatever the decoder
+harness kills the process and starts a new one for the next input (after a first crash, a
+spare process is kept starting in the background, so the next input need not wait for it). Whatever the decoder
 wrote on stderr while decoding an input is that input's stderr (crash reports are read
 from it), so a report printed without dying is judged as a crash too. The result is a
 :class:`~fbaconf.harness.sandbox.ProcResult`, judged by :mod:`.exits` like a spawned
@@ -56,35 +57,57 @@ class PersistentDecoder:
         self._answers = 0
         self._err_mark = 0
         self._last_done = 0.0
+        self._launches = 0
+        self._spare: tuple | None = None  # (process, cgroups, stderr) started ahead, after a first crash
 
-    def _start(self) -> None:
+    def _launch(self) -> tuple:
+        """One sandboxed ``serve`` process, not yet given an input: (process, cgroups, stderr)."""
         self.io.mkdir(parents=True, exist_ok=True)
         (self.workdir / "tmp").mkdir(parents=True, exist_ok=True)
         inner = list(self.argv)
         if sandbox.isolation() == "bwrap":
             inner = sandbox._bwrap_argv(self.view, self.workdir) + inner
         lim = self.limits
-        self._err = open(self.io / "stderr", "wb+")
+        self._launches += 1
+        err = open(self.io / f"stderr{self._launches % 2}", "wb+")  # the process in use and its spare
         try:
-            self.proc, self.cg = sandbox.launch_server(
-                inner, lim, cwd=self.workdir, env=sandbox.decoder_env(self.workdir, self.env), stderr=self._err,
+            proc, cg = sandbox.launch_server(
+                inner, lim, cwd=self.workdir, env=sandbox.decoder_env(self.workdir, self.env), stderr=err,
                 as_bytes=lim.memory_mb * 2**20 if lim.memory_kind == "address-space" else 0,
                 fsize=lim.output_mb * 2**20)
         except OSError as e:
+            err.close()
             raise ForkServerError(f"cannot start the persistent decoder: {e}") from e
+        return proc, cg, err
+
+    def _start(self) -> None:
+        """The process for the next inputs: the spare if one is ready, else a new one. After a
+        first restart a spare is kept starting in the background, so a decoder that crashes
+        often does not wait for a sandbox to start before each next input."""
+        spare, self._spare = self._spare, None
+        if spare is not None and spare[0].poll() is not None:  # it died waiting
+            _stop(spare)
+            spare = None
+        self.proc, self.cg, self._err = spare or self._launch()
         self._buf = b""
         self._err_mark = 0
         self.starts += 1
+        if self.starts > 1:
+            self._spare = self._launch()
 
-    def close(self) -> None:
+    def _drop(self) -> None:
+        """Stop the process in use (it ended or broke the protocol); the spare stays."""
         for a in self._queue:  # inputs queued behind the one that ended the process: sent again
             a.sent = False
         p, self.proc = self.proc, None
-        sandbox.stop_server(p, self.cg, grace_s=0.5)  # end of input first: a well-behaved server exits
-        self.cg = None
-        if self._err is not None:
-            self._err.close()
-            self._err = None
+        _stop((p, self.cg, self._err))
+        self.cg = self._err = None
+
+    def close(self) -> None:
+        self._drop()
+        spare, self._spare = self._spare, None
+        if spare is not None:
+            _stop(spare)
 
     def run(self, data: bytes, out_path: str) -> ProcResult:
         """Decode one input; its ending as a :class:`ProcResult` (``returncode`` = the answered
@@ -98,7 +121,7 @@ class PersistentDecoder:
             a.res = ProcResult(self.argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
             return a
         if not self._queue and (self.proc is None or self.proc.poll() is not None):
-            self.close()
+            self._drop()
             self._start()
         a.message = f"{len(data)} {out_path}\n".encode() + data
         self._send(a)
@@ -117,7 +140,7 @@ class PersistentDecoder:
 
     def _resend(self, a: "Answer") -> None:
         """A fresh process for ``a`` and the inputs queued behind it."""
-        self.close()
+        self._drop()
         self._start()
         for x in (a, *self._queue):
             self._send(x)
@@ -126,7 +149,7 @@ class PersistentDecoder:
         text = line.decode("utf-8", "replace").strip()
         head = text.split(" ", 1)[0]
         if not head.lstrip("-").isdigit():
-            self.close()  # the protocol is broken: start afresh, judge this answer
+            self._drop()  # the protocol is broken: start afresh, judge this answer
             return ProcResult(self.argv, 125, elapsed_s=elapsed,
                               stderr_tail=err + f"\n[persistent] not an answer line: {text[:120]!r}")
         res = ProcResult(self.argv, int(head), elapsed_s=elapsed, stderr_tail=err)
@@ -160,7 +183,7 @@ class PersistentDecoder:
         res = sandbox.result(self.argv, self.limits, status, ru, elapsed, timed_out=timed_out, mem_hit=False,
                              oom=oom, pids_hit=pids_hit, bwrap_status=sandbox.isolation() == "bwrap",
                              stdout_tail="", stderr_tail=err, measure_dirs=[self.workdir])
-        self.close()
+        self._drop()
         if res.returncode == 0 and not timed_out:  # it exited cleanly in the middle of an input
             res.returncode = 125
             res.stderr_tail += "\n[persistent] the decoder exited without answering"
@@ -181,6 +204,14 @@ class PersistentDecoder:
                 return self._buf[:200]
         line, _, self._buf = self._buf.partition(b"\n")
         return line
+
+
+def _stop(server: tuple) -> None:
+    """Stop one (process, cgroups, stderr) of :meth:`PersistentDecoder._launch`."""
+    proc, cg, err = server
+    sandbox.stop_server(proc, cg, grace_s=0.5)  # end of input first: a well-behaved server exits
+    if err is not None:
+        err.close()
 
 
 def _tail_from(fd: int, start: int, end: int | None = None) -> str:

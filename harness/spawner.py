@@ -19,7 +19,6 @@ answering is restarted; the input it was running is reported as the decoder's en
 from __future__ import annotations
 
 import collections
-import json
 import os
 import select
 import shutil
@@ -45,7 +44,7 @@ class ForkServer:
     result of :func:`fbaconf.harness.sandbox.run` for decoders run in that folder."""
 
     def __init__(self, root: Path, view: View, limits: Limits, env: dict[str, str] | None = None,
-                 sum_outputs_every: int = 1, slots: int = 1) -> None:
+                 sum_outputs_every: int = 1, slots: int = 1, native: bool | None = None) -> None:
         self.root = Path(root).resolve()
         self.view = view
         self.limits = limits
@@ -53,8 +52,7 @@ class ForkServer:
         self.proc: subprocess.Popen | None = None
         self.cg = None
         self.starts = 0
-        self._req_key = None
-        self._req = b""
+        self._reqs: dict[tuple, tuple[bytes, Path]] = {}  # request bytes and workdir by request
         self._events: list[tuple[str, int]] | None = None
         self._answers = 0
         self._rbuf = b""
@@ -63,6 +61,12 @@ class ForkServer:
         self.slots = slots  # stdout/stderr file pairs: an input's are read while the next one runs
         self._files: list[tuple] = []
         self._queue: collections.deque[Pending] = collections.deque()
+        # The server in C when it can be built (harness/native.py), else the Python one;
+        # native=False asks for the Python one, native=True for the C one or an error.
+        from .native import forkserver_binary
+        self.native = forkserver_binary() if native is not False else None
+        if native and self.native is None:
+            raise ForkServerError("the fork server in C cannot be built here (no C compiler?)")
         self.io = self.root / ".io"  # the decoder's stdout/stderr files: outside its view
         self.srv = self.root / ".srv"  # the server script, read-only in the sandbox
 
@@ -70,16 +74,23 @@ class ForkServer:
     def _start(self) -> None:
         for d in (self.io, self.srv):
             d.mkdir(parents=True, exist_ok=True)
-        script = self.srv / SERVER_SCRIPT.name
-        if not script.exists():
-            shutil.copyfile(SERVER_SCRIPT, script)
         py = os.path.realpath(sys.executable)
+        if self.native is not None:
+            script = self.srv / self.native.name
+            if not script.exists():
+                shutil.copy2(self.native, script)
+            head, runtime = [str(script)], []
+        else:
+            script = self.srv / SERVER_SCRIPT.name
+            if not script.exists():
+                shutil.copyfile(SERVER_SCRIPT, script)
+            head, runtime = [py, "-I", "-S", str(script)], [Path(sys.base_prefix).resolve(), Path(py).parent]
         self._files = [(open(self.io / f"stdout{i}", "wb+"), open(self.io / f"stderr{i}", "wb+"))
                        for i in range(self.slots)]
         fds = [os.dup(f.fileno()) for pair in self._files for f in pair]
-        inner = [py, "-I", "-S", str(script), "--fds", *map(str, fds)]
+        inner = [*head, "--fds", *map(str, fds)]
         if sandbox.isolation() == "bwrap":
-            v = View(read_only=[*self.view.read_only, self.srv, Path(sys.base_prefix).resolve(), Path(py).parent],
+            v = View(read_only=[*self.view.read_only, self.srv, *runtime],
                      writable=list(self.view.writable), hidden=list(self.view.hidden),
                      read_only_inside=list(self.view.read_only_inside))
             inner = sandbox._bwrap_argv(v, self.root) + inner + ["--reap-namespace"]
@@ -127,22 +138,31 @@ class ForkServer:
         the next input in the same ``slot``). An input sent while another runs waits in the
         server's pipe and starts the moment the other ends — one decoder at a time, no gap;
         inputs are waited for in the order they were sent."""
-        if not argv or not all(isinstance(a, str) for a in argv):
-            raise ValueError("argv must be a non-empty list of strings")
+        if not argv or not all(isinstance(a, str) and "\0" not in a for a in argv):
+            raise ValueError("argv must be a non-empty list of strings without NUL")
         limits = limits or self.limits
-        workdir = os.path.realpath(workdir)
-        os.makedirs(os.path.join(workdir, "tmp"), exist_ok=True)
-        key = (tuple(argv), workdir, tuple(sorted((env or {}).items())), limits, slot)
-        if self._req_key != key:  # a fuzzing worker sends the same requests every time
-            self._req_key = key
-            env_ = sandbox.decoder_env(Path(workdir), {**(self.env or {}), **(env or {})})
-            req = {"argv": argv, "cwd": workdir, "env": env_, "slot": slot,
-                   "as": limits.memory_mb * 2**20 if limits.memory_kind == "address-space" else 0,
-                   "fsize": limits.output_mb * 2**20, "cpu": int(max(1, limits.timeout_s * 2 + 1)),
-                   "timeout": limits.timeout_s, "rss_mb": limits.memory_mb if limits.memory_kind == "rss" else 0}
-            data = json.dumps(req).encode()
-            self._req = struct.pack(">I", len(data)) + data
-        p = Pending(self, argv, Path(workdir), limits, measure_dirs, slot)
+        key = (tuple(argv), os.fspath(workdir), tuple(sorted(env.items())) if env else (), limits, slot)
+        cached = self._reqs.get(key)  # a fuzzing worker sends the same requests every time
+        if cached is None:
+            wd = os.path.realpath(workdir)
+            os.makedirs(os.path.join(wd, "tmp"), exist_ok=True)
+            env_ = sandbox.decoder_env(Path(wd), {**(self.env or {}), **(env or {})})
+            fields = [slot, limits.memory_mb * 2**20 if limits.memory_kind == "address-space" else 0,
+                      limits.output_mb * 2**20, int(max(1, limits.timeout_s * 2 + 1)), repr(float(limits.timeout_s)),
+                      repr(float(limits.memory_mb if limits.memory_kind == "rss" else 0)), wd, len(argv), *argv,
+                      len(env_), *(f"{k}={v}" for k, v in env_.items())]
+            if any("\0" in str(f) for f in fields):
+                raise ValueError("a NUL in the decoder's environment or folder")
+            data = b"".join(os.fsencode(str(f)) + b"\0" for f in fields)
+            if len(self._reqs) > 64:
+                self._reqs.clear()
+            cached = self._reqs[key] = (struct.pack(">I", len(data)) + data, Path(wd))
+        message, wd = cached
+        try:
+            os.mkdir(wd / "tmp")  # the decoder's TMPDIR, if a caller emptied the folder
+        except FileExistsError:
+            pass
+        p = Pending(self, argv, wd, limits, measure_dirs, slot)
         if sandbox.stopping():
             p.res = ProcResult(argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
             return p
@@ -152,8 +172,8 @@ class ForkServer:
             self.close()
             self._start()
         p.t0 = time.perf_counter()
-        p.req = self._req
-        p.sent = self.proc is not None and self._send(self._req)
+        p.req = message
+        p.sent = self.proc is not None and self._send(message)
         p.files = self._files[slot] if self._files else None
         self._queue.append(p)
         return p
@@ -213,7 +233,9 @@ class ForkServer:
                 need = 4 + struct.unpack(">I", self._rbuf[:4])[0]
                 continue
             reply, self._rbuf = self._rbuf[4:need], self._rbuf[need:]
-            return json.loads(reply)
+            status, utime, stime, maxrss, elapsed, timed_out, mem_hit = reply.split()
+            return {"status": int(status), "utime": float(utime), "stime": float(stime), "maxrss_kb": int(maxrss),
+                    "elapsed": float(elapsed), "timed_out": timed_out == b"1", "mem_hit": mem_hit == b"1"}
 
 def _tail_fd(fd: int) -> str:
     """The last ``TAIL_BYTES`` the decoder wrote to one of its output files (kept open)."""

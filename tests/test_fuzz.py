@@ -256,6 +256,29 @@ def test_planted_skipchain_crash_persistent(tmp_path, seeds):
     _check_planted(fz, target, out, "crash", "SIGSEGV")
 
 
+def test_one_at_a_time_runs_replay_exactly(tmp_path, seeds):
+    """One decoder at a time, inputs are queued to the fork server ``depth`` deep while the loop
+    makes the next ones; the corpus still grows in input order, so two runs of one seed record
+    the same inputs, grow the same corpus and find the same findings at the same inputs."""
+    runs = []
+    for k in range(2):
+        (tmp_path / f"r{k}").mkdir()
+        adapter = _planted("skipchain", tmp_path / f"r{k}")
+        target = DecoderTarget(adapter, tmp_path / f"w{k}", timeout_s=1.0)
+        assert target.depth > 2
+        recorded = []
+        fz = Fuzzer(target, seeds, seed=5, seconds=120, progress=False, max_execs=160, minimise_findings=False,
+                    run_seeds_first=0, valid_pool=4)
+        record = fz._record
+        fz._record = lambda i, inp, out, dl: (recorded.append((i, inp.data)), record(i, inp, out, dl))
+        fz.run()
+        assert [i for i, _d in recorded] == list(range(160))  # each input recorded once, in order
+        runs.append((recorded, [e.data for e in fz.new_corpus],
+                     sorted((f.index, f.verdict.key) for f in fz.findings.values())))
+    assert runs[0] == runs[1]
+    assert runs[0][1] and runs[0][2]  # the corpus grew and the planted crash was found
+
+
 def _check_planted(fz, target, out: Path, cls: str, sig: str):
     found = [f for f in fz.findings.values() if f.verdict.cls == cls and f.verdict.signature == sig]
     assert found, {f.id: f.verdict.message for f in fz.findings.values()}

@@ -14,7 +14,7 @@ import pytest
 
 from fbaconf.fuzz.generators import Entry
 from fbaconf.fuzz.targets import DecoderTarget
-from fbaconf.harness import adapters, exits
+from fbaconf.harness import adapters, exits, native
 from fbaconf.harness.sandbox import Limits, default_view
 from fbaconf.harness.spawner import ForkServer
 
@@ -40,12 +40,28 @@ def _target(tmp_path: Path, m: Path, **kw) -> DecoderTarget:
     return DecoderTarget(adapters.resolve(m), tmp_path / "work", oracle=False, **kw)
 
 
+@pytest.fixture(params=["c", "python"])
+def server(request, monkeypatch):
+    """Each fork-server test runs through both servers: forkserver.c, compiled here, and
+    forkserver.py (the fallback without a C compiler). They speak one protocol and must judge alike."""
+    if request.param == "c":
+        if native.forkserver_binary() is None:
+            pytest.skip("no C compiler: the fork server in C cannot be built")
+    else:
+        monkeypatch.setattr(native, "forkserver_binary", lambda: None)
+    return request.param
+
+
+def _check_server(fs: ForkServer, server: str) -> None:
+    assert (fs.native is not None) == (server == "c")
+
+
 def _alive(marker: str) -> bool:
     out = subprocess.run(["ps", "-eo", "args"], capture_output=True, text=True).stdout
     return any(marker in line and "ps -eo" not in line for line in out.splitlines())
 
 
-def test_inputs_do_not_see_each_others_files(tmp_path):
+def test_inputs_do_not_see_each_others_files(tmp_path, server):
     """Every file an input's decoder leaves in its folder (outputs, tmp, the folder itself) is
     gone before the next input: the second run exits 7 if it finds any."""
     body = """work = os.getcwd()
@@ -60,13 +76,14 @@ sys.exit(69)
 """
     t = _target(tmp_path, _manifest(tmp_path, body))
     try:
-        for _ in range(3):
+        for _ in range(2 * t.depth + 1):  # every case folder used, one of them twice
             assert t.execute(Entry(STREAM)).verdict is None  # 69 each time, never 7
+        _check_server(t._workers[0].server, server)
     finally:
         t.close()
 
 
-def test_a_process_left_behind_dies_with_its_input(tmp_path):
+def test_a_process_left_behind_dies_with_its_input(tmp_path, server):
     marker = f"sleep {900 + uuid.uuid4().int % 99}.{uuid.uuid4().int % 997}"
     body = f"""import subprocess
 subprocess.Popen({marker.split()!r}, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -77,6 +94,7 @@ sys.exit(69)
     try:
         assert t.execute(Entry(STREAM)).verdict is None
         assert not _alive(marker)  # even though it left its session
+        _check_server(t._workers[0].server, server)
     finally:
         t.close()
 
@@ -92,7 +110,7 @@ CASES = [  # argv (after the interpreter, or a program), the ending's kind
 ]
 
 
-def test_fork_server_judges_like_a_fresh_sandbox(tmp_path):
+def test_fork_server_judges_like_a_fresh_sandbox(tmp_path, server):
     """The limits a one-shot launch sets hold in each forked decoder (time, address space,
     file size, exec failure, signals), and :mod:`exits` judges the two paths alike."""
     from fbaconf.harness import sandbox
@@ -102,6 +120,7 @@ def test_fork_server_judges_like_a_fresh_sandbox(tmp_path):
     py = os.path.realpath(sys.executable)
     view = default_view([py], root / "case")
     with ForkServer(root, view, lim) as fs:
+        _check_server(fs, server)
         for args, kind in CASES:
             argv = args if args[0].startswith("/") else [py, *args]
             r = fs.run(argv, root / "case")
@@ -113,6 +132,37 @@ def test_fork_server_judges_like_a_fresh_sandbox(tmp_path):
         r = fs.run([py, "-c", "import sys; print('out'); sys.stderr.write('err'); sys.exit(3)"], root / "case")
         assert (r.returncode, r.stdout_tail.strip(), r.stderr_tail) == (3, "out", "err")
         assert fs.starts == 1  # one server for all of it
+
+
+def test_fork_server_environment_path_search_and_resident_memory(tmp_path, server):
+    """The decoder gets the harness's minimal environment (HOME and TMPDIR in its folder), a
+    bare program name is found on that environment's PATH (a missing one is a set-up failure),
+    and a resident-set limit is sampled and enforced — in both servers."""
+    root = tmp_path / "w"
+    (root / "case" / "in").mkdir(parents=True)
+    py = os.path.realpath(sys.executable)
+    view = default_view([py], root / "case")
+    case = os.path.realpath(root / "case")
+    with ForkServer(root, view, Limits(timeout_s=5.0, memory_mb=300, output_mb=4)) as fs:
+        _check_server(fs, server)
+        r = fs.run([py, "-c", "import os; print(os.environ['HOME'], os.environ['TMPDIR'], os.getcwd(), sorted(os.environ))"],
+                   root / "case")
+        home, tmp, cwd, names = r.stdout_tail.split(" ", 3)
+        assert (r.returncode, home, tmp, cwd) == (0, case, os.path.join(case, "tmp"), case)
+        assert "FBACONF" not in names and "PYTEST" not in names  # nothing of the harness's own environment
+        r = fs.run(["sh", "-c", "echo found"], root / "case")
+        assert (r.returncode, r.stdout_tail.strip()) == (0, "found")
+        r = fs.run(["no-such-decoder-on-path"], root / "case")
+        assert exits.classify(r, fs.limits, {1}).kind == "setup"
+        assert "no-such-decoder-on-path" in r.stderr_tail
+    rss = Limits(timeout_s=5.0, memory_mb=100, memory_kind="rss", output_mb=4)
+    with ForkServer(root, view, rss) as fs:
+        _check_server(fs, server)
+        grow = "import time\nx = []\nfor _ in range(60):\n    x.append(bytearray(8 << 20)); time.sleep(0.01)\n"
+        r = fs.run([py, "-c", grow], root / "case")
+        assert exits.classify(r, rss, {1}).kind == "memory", r
+        r = fs.run([py, "-c", "x = bytearray(20 << 20)"], root / "case")
+        assert (r.returncode, exits.classify(r, rss, {1}).kind) == (0, "decoded")
 
 
 SERVE = """def answer(code):
@@ -163,9 +213,15 @@ def test_persistent_protocol_survives_crashes_and_hangs(tmp_path):
         time.sleep(0.5)  # it has exited before its ending is read: judged, never sent again
         assert quit_.result().verdict.cls == "unexpected-exit"
         assert run(b"") is None
-        assert t._workers[0].server.starts == 6  # the first, and one after SEGV, HANG, JUNK and each QUIT
+        dec = t._workers[0].server
+        assert dec.starts == 6  # the first, and one after SEGV, HANG, JUNK and each QUIT
+        # after the first restart a spare was kept starting, and each later restart took it
+        assert dec._launches == dec.starts + 1
+        spare = dec._spare[0]
+        assert spare.poll() is None  # ready for the next crash
     finally:
         t.close()
+    assert spare.poll() is not None  # stopped with the worker
 
 
 def test_serve_takes_no_per_input_placeholders(tmp_path):
@@ -175,7 +231,7 @@ def test_serve_takes_no_per_input_placeholders(tmp_path):
         adapters.load_manifest(m)
 
 
-def test_queued_inputs_answer_in_order(tmp_path):
+def test_queued_inputs_answer_in_order(tmp_path, server):
     """An input sent while another runs starts when it ends; both answers come back to their
     own input even when they arrive together (no lost reply, no phantom hang)."""
     root = tmp_path / "w"
@@ -185,6 +241,7 @@ def test_queued_inputs_answer_in_order(tmp_path):
     view = default_view(["/bin/sh"], root / "case0")
     view.writable.append(root / "case1")
     with ForkServer(root, view, lim, slots=2) as fs:
+        _check_server(fs, server)
         for i in range(30):
             a = fs.start(["/bin/sh", "-c", f"echo a{i} >&2; exit {i % 3}"], root / "case0", slot=0)
             b = fs.start(["/bin/sh", "-c", f"echo b{i} >&2; exit {(i + 1) % 3}"], root / "case1", slot=1)

@@ -1,0 +1,61 @@
+"""The fork server in C (``forkserver.c``), compiled on first use.
+
+A decoder that runs in a millisecond spends a fifth of its fork-server round trip in the
+Python server's own work (parsing the request, ``posix_spawn`` through the interpreter,
+waiting, replying); the same loop in C costs a few microseconds. It is built once per
+harness process with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``)
+into a private temporary folder, removed at exit. Without a compiler, or with
+``FBACONF_PURE_PYTHON=1``, the harness uses ``forkserver.py``, which speaks the same protocol
+and behaves the same (``tests/test_spawner.py`` runs its cases through both).
+"""
+from __future__ import annotations
+
+import atexit
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+from pathlib import Path
+
+SOURCE = Path(__file__).with_name("forkserver.c")
+NAME = "fbaconf-forkserver"
+
+USE_NATIVE = True  # False: always forkserver.py (benchmarks/bench_fuzz.py compares the two)
+
+_lock = threading.Lock()
+_built: dict[str, Path | None] = {}
+
+
+def compiler() -> str | None:
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name:
+            path = shutil.which(name)
+            if path:
+                return path
+    return None
+
+
+def forkserver_binary() -> Path | None:
+    """The compiled fork server, or None (no compiler, the build failed, or pure Python asked)."""
+    if not USE_NATIVE or os.environ.get("FBACONF_PURE_PYTHON") == "1":
+        return None
+    with _lock:
+        if "forkserver" not in _built:
+            _built["forkserver"] = _build()
+        return _built["forkserver"]
+
+
+def _build() -> Path | None:
+    cc = compiler()
+    if cc is None or not SOURCE.is_file():
+        return None
+    folder = Path(tempfile.mkdtemp(prefix="fbaconf-native-"))
+    atexit.register(shutil.rmtree, folder, True)
+    exe = folder / NAME
+    try:
+        r = subprocess.run([cc, "-O2", "-o", str(exe), str(SOURCE)], stdin=subprocess.DEVNULL,
+                           capture_output=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return exe if r.returncode == 0 and exe.is_file() else None
