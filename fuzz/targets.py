@@ -304,6 +304,7 @@ class DecoderTarget:
         if ending.kind == "setup":
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
         detail = {"exit_code": res.returncode, "signal": res.signal, "elapsed_s": round(res.elapsed_s, 3),
+                  **({"notes": list(res.notes)} if res.notes else {}),
                   "maxrss_mb": round(res.maxrss_mb, 1), "stderr_tail": res.stderr_tail[-1500:]}
         return self.verdict_for(ending, inp, job, detail)
 
@@ -324,7 +325,8 @@ class DecoderTarget:
             return Verdict("crash", sig or "crash", ending.message, {**detail, "crash_kind": rep.kind if rep else None})
         if k == "unexpected":
             rc = detail.get("exit_code")
-            return Verdict("unexpected-exit", f"exit-{rc}", ending.message, detail)
+            sig = "fork-server-killed" if "supervisor-lost" in detail.get("notes", ()) else f"exit-{rc}"
+            return Verdict("unexpected-exit", sig, ending.message, detail)
         rc = {"decoded": 0, "not-supported": 69}.get(k, detail.get("exit_code"))
         return self._oracle(inp, job, rc, detail)
 

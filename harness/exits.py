@@ -129,6 +129,10 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
                 "resident-set" if limits.memory_kind == "rss" else "address-space")
         return Ending("memory", f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; "
                                 f"peak RSS {res.maxrss_mb:.0f} MB)")
+    if "supervisor-lost" in res.notes:
+        return Ending("unexpected", f"the fork server running {cmd} died during this input (the decoder killed "
+                                    f"its parent process, or a process-tree limit did): its ending is unknown — "
+                                    f"a decoder must not signal processes it did not start{_last_line(err)}")
     if res.output_limit_hit:
         return Ending("output-limit", f"{cmd} wrote more than the {limits.output_mb} MB output limit "
                                       f"({res.output_bytes / 2**20:.0f} MB seen" +

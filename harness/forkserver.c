@@ -8,6 +8,7 @@
  *   slot, as, fsize, cpu, timeout, rss_mb, cwd, argc, argv..., envc, env...
  * Reply (after a 4-byte big-endian length), ASCII:
  *   status utime stime maxrss_kb elapsed timed_out mem_hit
+ * The first message is "ready", once the server runs inside its sandbox.
  */
 #define _GNU_SOURCE
 #include <dirent.h>
@@ -260,6 +261,7 @@ int main(int argc, char **argv) {
     setrlimit(RLIMIT_CORE, &zero);
     signal(SIGXCPU, SIG_IGN); /* the server's own CPU time may pass a child's limit */
     signal(SIGPIPE, SIG_DFL);
+    reply("ready"); /* the hello: started inside the sandbox */
     for (;;) {
         unsigned char head[4];
         if (read_exact((char *)head, 4) != 0) return 0;

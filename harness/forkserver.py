@@ -19,7 +19,7 @@ is NUL-terminated fields: ``slot`` (which descriptor pair), ``as`` (address-spac
 none), ``fsize`` (bytes), ``cpu`` (seconds), ``timeout`` (seconds), ``rss_mb`` (0 = not
 sampled), ``cwd``, ``argc``, the arguments, ``envc``, the ``NAME=value`` entries. A reply is
 ASCII ``status utime stime maxrss_kb elapsed timed_out mem_hit`` (``status`` the raw wait
-status). Exit code 127 with ``fbaconf-limit: cannot execute …`` on stderr when the program
+status). The server's first message is ``ready``, once it runs inside its sandbox. Exit code 127 with ``fbaconf-limit: cannot execute …`` on stderr when the program
 cannot be started — the message the one-shot launcher prints, so :mod:`.exits` judges both
 paths alike.
 
@@ -247,6 +247,7 @@ def main():
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
     signal.signal(signal.SIGXCPU, signal.SIG_IGN)  # the server's own CPU time may pass a child's limit
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+    os.write(1, struct.pack(">I", 5) + b"ready")  # the hello: started inside the sandbox
     while True:
         head = _read_exact(4)
         if head is None:

@@ -104,6 +104,7 @@ class ForkServer:
             for fd in fds:
                 os.close(fd)
         self._rbuf = b""
+        self.ready = False  # the server's hello has been read: it started inside its sandbox
         self.starts += 1
 
     def close(self) -> None:
@@ -217,7 +218,9 @@ class ForkServer:
             return False
 
     def _receive(self, deadline: float) -> dict | None:
-        """The next reply (replies of queued inputs may arrive in one read: the rest is kept)."""
+        """The next reply (replies of queued inputs may arrive in one read: the rest is kept).
+        The server's first message is its hello (``ready``): a server that dies before it
+        never started; one that dies after it was ended by what it was running."""
         fd = self.proc.stdout.fileno()
         need = 4
         while True:
@@ -233,6 +236,10 @@ class ForkServer:
                 need = 4 + struct.unpack(">I", self._rbuf[:4])[0]
                 continue
             reply, self._rbuf = self._rbuf[4:need], self._rbuf[need:]
+            if not self.ready:
+                self.ready = reply == b"ready"
+                need = 4
+                continue
             status, utime, stime, maxrss, elapsed, timed_out, mem_hit = reply.split()
             return {"status": int(status), "utime": float(utime), "stime": float(stime), "maxrss_kb": int(maxrss),
                     "elapsed": float(elapsed), "timed_out": timed_out == b"1", "mem_hit": mem_hit == b"1"}
@@ -286,10 +293,15 @@ class Pending:
         self.elapsed = srv._last_done - begun
         if self.reply is None:  # the server died or hung: judge this input, restart next time
             err = _tail_fd(self.files[1].fileno()) if self.files else ""
+            timed_out = self.elapsed >= self.limits.timeout_s
+            oom, pids = srv._cgroup_events() if srv.cg is not None else (False, False)
+            # a server that said hello and died under this input was ended by it (a decoder that
+            # killed its parent, a tree memory or process limit): the input's ending, not set-up
+            notes = ([] if timed_out else ["supervisor-lost"] if srv.ready else ["harness-start-failed"])
+            notes += ["tree-memory-limit"] * oom + ["process-limit"] * pids
             self._close_server()
-            self.res = ProcResult(self.argv, None, timed_out=self.elapsed >= self.limits.timeout_s,
-                                  elapsed_s=self.elapsed, stderr_tail=err,
-                                  notes=[] if self.elapsed >= self.limits.timeout_s else ["harness-start-failed"])
+            self.res = ProcResult(self.argv, None, timed_out=timed_out, memory_limit_hit=oom,
+                                  elapsed_s=self.elapsed, stderr_tail=err, notes=notes)
             return
         self.oom, self.pids_hit = srv._cgroup_events()
         if self.oom or self.pids_hit:  # the cgroup's counters are per server: start afresh after a hit

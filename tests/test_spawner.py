@@ -165,6 +165,52 @@ def test_fork_server_environment_path_search_and_resident_memory(tmp_path, serve
         assert (r.returncode, exits.classify(r, rss, {1}).kind) == (0, "decoded")
 
 
+@pytest.mark.parametrize("how", ["os.kill(os.getppid(), signal.SIGKILL)", "os.kill(-1, signal.SIGKILL)"])
+def test_a_decoder_that_kills_its_fork_server_is_its_inputs_finding(tmp_path, server, how):
+    """A hostile decoder kills the fork server (its parent, or everything it may signal). That
+    is the finding of the input that did it, named as such — not a set-up failure that stops the
+    campaign — and the next input runs in a fresh server and is judged as usual."""
+    body = f"""data = open(sys.argv[1], 'rb').read()
+if b'KILL' in data:
+    try:
+        {how}
+    except OSError:
+        pass
+sys.exit(69)
+"""
+    from fbaconf.harness import sandbox
+    if "-1" in how and sandbox.isolation() != "bwrap":
+        pytest.skip("kill(-1) outside a PID namespace would signal every process of this user")
+    t = _target(tmp_path, _manifest(tmp_path, body))
+    try:
+        assert t.execute(Entry(STREAM)).verdict is None
+        for _ in range(2):
+            v = t.execute(Entry(STREAM + b"KILL")).verdict
+            assert (v.cls, v.signature) == ("unexpected-exit", "fork-server-killed"), v
+            assert "killed its parent" in v.message
+            assert t.execute(Entry(STREAM)).verdict is None  # a fresh server took over
+        _check_server(t._workers[0].server, server)
+        assert t._workers[0].server.starts == 3
+    finally:
+        t.close()
+
+
+def test_a_fork_server_that_cannot_start_is_a_set_up_failure(tmp_path, monkeypatch):
+    """The other side of the hello: a server that dies before saying it is a set-up failure."""
+    from fbaconf.fuzz.targets import FuzzSetupError
+    from fbaconf.harness import spawner
+    monkeypatch.setattr(native, "forkserver_binary", lambda: None)
+    broken = tmp_path / "broken_server.py"
+    broken.write_text("import sys\nsys.exit(3)\n")
+    monkeypatch.setattr(spawner, "SERVER_SCRIPT", broken)
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)"))
+    try:
+        with pytest.raises(FuzzSetupError, match="could not start"):
+            t.execute(Entry(STREAM))
+    finally:
+        t.close()
+
+
 SERVE = """def answer(code):
     print(code, flush=True)
 n = 0
