@@ -32,7 +32,18 @@ no supersampling); skipped (``None``, see :func:`skip_reason`) for adapters with
 ``images`` output. A scene is written (the bundled default head; BT, or BIFS for a decoder
 that declares only the ``bifs`` input) only when the command requires ``{scene}``.
 
-A run that fails (non-zero exit, crash, timeout, missing output) raises
+Persistent decoders. A command decoder with ``[commands] serve`` (the persistent protocol,
+docs/fuzzing.md) that reads binary streams and writes FAPs is measured through it for
+``decode`` (``persistent=False`` to spawn instead): one process decodes every run, so each
+sample is one answer's round trip and the fitted start-up is the protocol's per-input cost,
+not a process start. The result's message says which way it was measured.
+
+Output check. Every run's output must hold the frames it was given: a FAP output of ``n``
+frames (``.npz``: its arrays; ``.fap``: its header count and at least one line per frame),
+or a non-empty vertices file or image folder — a decoder cannot earn a rate by
+stopping early on long streams.
+
+A run that fails (non-zero exit, crash, timeout, missing or short output) raises
 :class:`SpeedRunError`; :func:`measure_claim` turns it into a failed :class:`SpeedResult`.
 """
 from __future__ import annotations
@@ -191,8 +202,11 @@ def skip_reason(adapter: Adapter, operation: str) -> str | None:
 
 class _Runner:
     def __init__(self, adapter: Adapter, operation: str, content: _Content, runs_dir: Path,
-                 render_size: tuple[int, int]) -> None:
+                 render_size: tuple[int, int], persistent: bool = True) -> None:
         self.adapter = adapter
+        self.persistent = (persistent and operation == "decode" and isinstance(adapter, CommandAdapter)
+                           and "serve" in adapter.commands and "fba" in adapter.inputs and "faps" in adapter.outputs)
+        self._server = None  # the persistent decoder, started at the first run
         self.operation = operation
         self.content = content
         self.runs_dir = runs_dir
@@ -267,8 +281,15 @@ class _Runner:
                 elif name == "scene":
                     self.notes.append("the command requires a scene: the bundled default head is given")
 
+    def close(self) -> None:
+        if self._server is not None:
+            self._server.close()
+            self._server = None
+
     def run(self, n: int) -> float:
         """Time one invocation on ``n`` frames (seconds); raises SpeedRunError on failure."""
+        if self.persistent:
+            return self._run_persistent(n)
         self.count += 1
         workdir = self.runs_dir / f"run-{self.count:04d}"
         if workdir.exists():
@@ -322,14 +343,71 @@ class _Runner:
         self._check_output(job, n, argv)
         return elapsed
 
+    def _run_persistent(self, n: int) -> float:
+        """One input to the persistent decoder: the time from sending it to its answer."""
+        from . import exits
+        from .persistent import PersistentDecoder
+        from .runner import hidden_from_decoders
+        a = self.adapter
+        root = self.runs_dir / "serve"
+        workdir = root / "case"
+        if self._server is None:
+            (workdir / "in").mkdir(parents=True, exist_ok=True)
+            job = Job(workdir=workdir, values={}, frames=0)
+            argv = a.argv("serve", job)
+            view = a.sandbox_view(argv, workdir, hidden=hidden_from_decoders())
+            self._server = PersistentDecoder(argv, root, workdir, view, a.limits, env=a.env or None)
+            self.notes.append("measured through the persistent protocol ([commands] serve): one process for "
+                              "every run, no process start-up per sample")
+        out = workdir / "out"
+        if out.exists():
+            remove_tree(out)
+        out.mkdir(parents=True)
+        path = out / f"faps.{'npz' if a.faps_format == 'npz' else 'fap'}"
+        res = self._server.run(self.content.stream_bytes(n), str(path))
+        verdict = exits.outcome_for(exits.classify(res, a.limits, a.reject_exit_codes))
+        if verdict is not None:
+            raise SpeedRunError(self.operation, n, verdict[0], verdict[1], self._server.argv, res.stderr_tail)
+        self.last_cpu_s = None
+        self._check_output(Job(workdir=workdir, values={"faps_out": str(path)}, frames=n), n, self._server.argv)
+        return res.elapsed_s
+
     def _check_output(self, job: Job, n: int, argv) -> None:
+        from .compare.loaders import OutputError, check_output_file
         key = "images_dir" if self.operation == "render" else next(
             k for k in ("faps_out", "vertices_out", "images_dir") if k in job.values)
         p = job.path(key)
+        if key == "faps_out":
+            try:
+                check_output_file(p, self.adapter.limits.output_mb * 2**20)
+                got = output_frames(p)
+            except OutputError as e:
+                why = (f"wrote no output at {{{key}}} ({p})" if e.rule == "output-missing" else
+                       f"its output at {{{key}}} is unusable: {e}")
+                raise SpeedRunError(self.operation, n, Outcome.FAIL, f"the decoder finished but {why}", argv) from None
+            if got != n:
+                raise SpeedRunError(self.operation, n, Outcome.FAIL,
+                                    f"the decoder was given {n} frames but its output at {{{key}}} holds {got}", argv)
+            return
         ok = p is not None and (any(p.iterdir()) if p.is_dir() else (p.is_file() and p.stat().st_size > 0))
         if not ok:
             raise SpeedRunError(self.operation, n, Outcome.FAIL,
                                 f"the decoder finished but wrote no output at {{{key}}} ({p})", argv)
+
+
+def output_frames(path: Path) -> int:
+    """How many frames a decoder's FAP output holds, cheaply (speed runs reach 100,000 frames):
+    an ``.npz``'s frame arrays; a ``.fap`` file's header count, provided at least that many
+    lines follow it (a header alone does not count). Raises OutputError when unreadable."""
+    from .compare.loaders import OutputError, load_output_faps
+    if path.suffix != ".fap":
+        return len(load_output_faps(path).frame_number)
+    lines = [ln for ln in path.read_bytes().splitlines() if ln.strip() and not ln.lstrip().startswith(b"#")]
+    try:
+        declared = int(lines[0].split()[-1])
+    except (IndexError, ValueError):
+        raise OutputError("no .fap header with a frame count", rule="output-fap-count", file=str(path)) from None
+    return min(declared, len(lines) - 1)  # each frame takes at least one line (its values)
 
 
 # --------------------------------------------------------------------------- fitting
@@ -403,7 +481,7 @@ def required_rate(claim: str, operation: str) -> tuple[float, str, str]:
 def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] | None = None,
             repeats: int = 3, work_dir: Path | None = None, target_s: float = 0.5,
             max_frames: int = 100_000, max_run_s: float | None = None,
-            render_size: tuple[int, int] = DEFAULT_RENDER_SIZE) -> SpeedResult | None:
+            render_size: tuple[int, int] = DEFAULT_RENDER_SIZE, persistent: bool = True) -> SpeedResult | None:
     """Measure ``operation`` (``decode`` | ``render``) of ``adapter`` against ``claim``'s minimum.
 
     Returns None when the adapter cannot do the operation (:func:`skip_reason` says why).
@@ -423,7 +501,7 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
     required, provenance, _desc = required_rate(claim, operation)
     if max_run_s is None:
         max_run_s = min(20.0, 0.4 * adapter.limits.timeout_s)
-    tmp = None
+    tmp = runner = None
     if work_dir is None:
         tmp = tempfile.TemporaryDirectory(prefix="fbaconf-speed-")
         root = Path(tmp.name)
@@ -431,7 +509,7 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
         root = Path(work_dir)
     try:
         runner = _Runner(adapter, operation, _Content(root / "content"), root / f"runs-{operation}",
-                         tuple(render_size))
+                         tuple(render_size), persistent=persistent)
         t_start = time.perf_counter()
         if lengths is None:
             lengths = _choose_lengths(runner.run, target_s=target_s, max_frames=max_frames, max_run_s=max_run_s)
@@ -456,6 +534,8 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
         r2 = _r2([s["frames"] for s in samples], [s["seconds"] for s in samples], per_frame, startup)
         wall = time.perf_counter() - t_start
     finally:
+        if runner is not None:
+            runner.close()
         if tmp is not None:
             tmp.cleanup()
     notes = list(runner.notes)

@@ -24,8 +24,8 @@ DECODER = textwrap.dedent("""\
     time.sleep(per_frame * frames)
     if len(sys.argv) > 6 and sys.argv[6] == "fail":
         sys.exit(5)
-    with open(sys.argv[5], "w") as f:
-        f.write("%d frames from %s\\n" % (frames, sys.argv[3]))
+    with open(sys.argv[5], "w") as f:  # a .fap header and a line per frame (the check counts them)
+        f.write("2.1 timed 25 %d\\n" % frames + "".join("%d 0\\n" % i for i in range(frames)))
 """)
 
 
@@ -129,8 +129,9 @@ class _SleepyRenderer(PythonAdapter):
             (d / "000000.png").write_bytes(b"x")
         else:
             time.sleep(0.005 * n)
-        if "faps_out" in job.values:
-            job.path("faps_out").write_bytes(b"x")
+        if "faps_out" in job.values:  # the frames it was given (the speed check counts them)
+            from fbaconf.bitstreams.frames import FapFrames
+            FapFrames.empty(n).save_npz(job.path("faps_out"))
 
 
 def test_in_process_adapter_decode_and_render():
@@ -209,3 +210,19 @@ def test_bifs_only_decoder_gets_a_bifs_scene(tmp_path):
     assert r is not None and len(r.samples) == 2, r.message
     assert "cannot" not in r.message and "failed" not in r.message.lower(), r.message
     assert any("scene" in n for n in r.message.split("; ")), r.message
+
+
+def test_a_decoder_that_stops_early_on_long_streams_fails(tmp_path):
+    """A lazy decoder cannot earn a rate by decoding only the start of a long stream: every
+    run's output must hold the frames it was given."""
+    script = tmp_path / "lazy.py"
+    script.write_text("import sys\nn = min(int(sys.argv[1]), 50)\n"
+                      "open(sys.argv[2], 'w').write('2.1 lazy 25 %d\\n' % n + '0\\n' * n)\n")
+    m = tmp_path / "lazy.toml"
+    m.write_text('name = "lazy"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{frames}}", "{{faps_out}}"]\n')
+    a = load_manifest(m)
+    with pytest.raises(speed.SpeedRunError, match="was given 200 frames but its output .* holds 50"):
+        speed.measure(a, "simple@1", "decode", lengths=[20, 200], repeats=1)
+    (r,) = [x for x in speed.measure_claim(a, lengths=[20, 200], repeats=1) if x is not None]
+    assert not r.passed
