@@ -56,6 +56,11 @@ def _build() -> Path | None:
     try:
         r = subprocess.run([cc, "-O2", "-o", str(exe), str(SOURCE)], stdin=subprocess.DEVNULL,
                            capture_output=True, timeout=120)
+        if r.returncode != 0 or not exe.is_file():
+            return None
+        # it must run here (a temporary folder mounted noexec, a cross compiler): with its
+        # input closed it says its hello and ends
+        r = subprocess.run([str(exe)], stdin=subprocess.DEVNULL, capture_output=True, timeout=10)
     except (OSError, subprocess.TimeoutExpired):
         return None
-    return exe if r.returncode == 0 and exe.is_file() else None
+    return exe if r.returncode == 0 and r.stdout == b"\0\0\0\x05ready" else None

@@ -79,6 +79,9 @@ class ForkServer:
             script = self.srv / self.native.name
             if not script.exists():
                 shutil.copy2(self.native, script)
+            if not os.access(script, os.X_OK):  # the worker's folder is on a noexec mount
+                self.native = None
+        if self.native is not None:
             head, runtime = [str(script)], []
         else:
             script = self.srv / SERVER_SCRIPT.name

@@ -52,6 +52,19 @@ def server(request, monkeypatch):
     return request.param
 
 
+def test_without_a_working_compiler_the_python_server_runs(tmp_path, monkeypatch):
+    """A compiler that fails (or none) is no error: the harness falls back to forkserver.py."""
+    monkeypatch.setattr(native, "_built", {})
+    monkeypatch.setenv("CC", "false")
+    assert native.forkserver_binary() is None
+    root = tmp_path / "w"
+    (root / "case" / "in").mkdir(parents=True)
+    with ForkServer(root, default_view(["/bin/sh"], root / "case"), Limits(timeout_s=2.0)) as fs:
+        assert fs.native is None
+        r = fs.run(["/bin/sh", "-c", "echo python server; exit 4"], root / "case")
+        assert (r.returncode, r.stdout_tail.strip()) == (4, "python server")
+
+
 def _check_server(fs: ForkServer, server: str) -> None:
     assert (fs.native is not None) == (server == "c")
 
