@@ -57,7 +57,7 @@ _KEEP = {"case": frozenset(("in", "out", "tmp")), "out": frozenset(("images", "f
 
 @dataclass
 class _Slot:
-    """One of a worker's two case folders."""
+    """One of a worker's case folders."""
     job: object
     input: Path
     dirs: list
