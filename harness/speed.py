@@ -40,7 +40,7 @@ not a process start. The result's message says which way it was measured.
 
 Output check. Every run's output must hold the frames it was given: a FAP output of ``n``
 frames (``.npz``: its arrays; ``.fap``: its header count and at least one line per frame),
-or a non-empty vertices file or image folder — a decoder cannot earn a rate by
+a render an image per frame, or a non-empty vertices file — a decoder cannot earn a rate by
 stopping early on long streams.
 
 A run that fails (non-zero exit, crash, timeout, missing or short output) raises
@@ -49,6 +49,7 @@ A run that fails (non-zero exit, crash, timeout, missing or short output) raises
 from __future__ import annotations
 
 import math
+import os
 import statistics
 import tempfile
 import time
@@ -393,6 +394,12 @@ class _Runner:
         if not ok:
             raise SpeedRunError(self.operation, n, Outcome.FAIL,
                                 f"the decoder finished but wrote no output at {{{key}}} ({p})", argv)
+        if self.operation == "render":  # every frame rendered: a file per frame (any face folders below)
+            got = sum(1 for _dir, _subdirs, files in os.walk(p) for _f in files)
+            if got < n:
+                raise SpeedRunError(self.operation, n, Outcome.FAIL,
+                                    f"the decoder was asked to render {n} frames but wrote {got} images at "
+                                    f"{{{key}}}", argv)
 
 
 def output_frames(path: Path) -> int:

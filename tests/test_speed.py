@@ -126,7 +126,8 @@ class _SleepyRenderer(PythonAdapter):
             d = job.path("images_dir")
             d.mkdir(parents=True, exist_ok=True)
             time.sleep(0.003 * n)
-            (d / "000000.png").write_bytes(b"x")
+            for i in range(n):  # an image per frame (the speed check counts them)
+                (d / f"{i:06d}.png").write_bytes(b"x")
         else:
             time.sleep(0.005 * n)
         if "faps_out" in job.values:  # the frames it was given (the speed check counts them)
@@ -226,3 +227,20 @@ def test_a_decoder_that_stops_early_on_long_streams_fails(tmp_path):
         speed.measure(a, "simple@1", "decode", lengths=[20, 200], repeats=1)
     (r,) = [x for x in speed.measure_claim(a, lengths=[20, 200], repeats=1) if x is not None]
     assert not r.passed
+
+
+class _OneImageRenderer(_SleepyRenderer):
+    """A lazy renderer: one image, whatever the number of frames it was asked for."""
+
+    def run(self, job):
+        if "images_dir" in job.values:
+            d = job.path("images_dir")
+            d.mkdir(parents=True, exist_ok=True)
+            (d / "000000.png").write_bytes(b"x")
+        elif "faps_out" in job.values:
+            super().run(job)
+
+
+def test_a_renderer_that_skips_frames_fails():
+    with pytest.raises(speed.SpeedRunError, match="asked to render 10 frames but wrote 1 images"):
+        speed.measure(_OneImageRenderer(), "simple@2", "render", lengths=[10, 20], repeats=1)
