@@ -321,3 +321,33 @@ def test_persistent_queued_inputs_keep_their_own_stderr(tmp_path):
             assert first.cls == "crash" and second is None  # the report stays with its input
     finally:
         t.close()
+
+
+def test_the_c_server_under_address_and_undefined_behaviour_sanitizers(tmp_path, monkeypatch, capfd):
+    """forkserver.c built with ASan + UBSan (aborting on the first report) serves every kind of
+    ending without a report on its stderr (the harness's, captured here) and without dying
+    (a server is started afresh only after a cgroup memory hit, by design). A resident-set
+    limit: ASan cannot map its shadow memory under an address-space limit."""
+    cc = native.compiler()
+    exe = tmp_path / "fbaconf-forkserver"
+    if cc is None or subprocess.run([cc, "-O1", "-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=all",
+                                     "-o", str(exe), str(native.SOURCE)], capture_output=True).returncode != 0:
+        pytest.skip("no compiler with AddressSanitizer and UndefinedBehaviorSanitizer here")
+    monkeypatch.setattr(native, "forkserver_binary", lambda: exe)
+    monkeypatch.setenv("ASAN_OPTIONS", "detect_leaks=0")
+    root = tmp_path / "w"
+    (root / "case" / "in").mkdir(parents=True)
+    lim = Limits(timeout_s=1.0, memory_mb=200, memory_kind="rss", output_mb=4)
+    py = os.path.realpath(sys.executable)
+    with ForkServer(root, default_view([py], root / "case"), lim) as fs:
+        assert fs.native == exe
+        endings = [(["/bin/sh", "-c", "exit 3"], "unexpected"), (["/bin/sh", "-c", "kill -SEGV $$"], "crash"),
+                   (["/nonexistent/decoder"], "setup"), (["/bin/sh", "-c", "sleep 5"], "timeout"),
+                   ([py, "-c", "x = [bytearray(8 << 20) for _ in range(60)]"], "memory")]
+        for argv, kind in endings * 2:
+            assert exits.classify(fs.run(argv, root / "case"), lim, {1}).kind == kind, argv
+        for i in range(100):
+            r = fs.run(["/bin/sh", "-c", f"echo {i}; exit {i % 5}"], root / "case")
+            assert (r.returncode, r.stdout_tail.strip()) == (i % 5, str(i))
+        assert fs.starts <= 3  # the first, and at most one after each of the two memory endings
+    assert "Sanitizer" not in capfd.readouterr().err
