@@ -77,8 +77,8 @@ def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False
     from fbaconf.harness.adapters import load_manifest
     native.USE_NATIVE = c_server
     target = DecoderTarget(load_manifest(manifest), work, timeout_s=1.0, fork_server=not spawn, persistent=not spawn)
-    server = "C" if native.forkserver_binary() is not None else "Python"
-    mode = ("persistent" if target.persistent else f"fork server in {server}" if target.fork_server else "spawn")
+    mode = ("persistent" if target.persistent else f"fork server in {native.server_kind()}" if target.fork_server
+            else "spawn")
     fz = Fuzzer(target, default_seeds(), seed=7, seconds=seconds, progress=False, coverage_every=8,
                 minimise_seconds=2, minimise_tests=50)
     fz.run()

@@ -207,6 +207,7 @@ def _print_replay(v, args) -> int:
 
 
 def _decoder(args, expected: set[int]) -> int:
+    from fbaconf.harness import native
     from fbaconf.harness.adapters import resolve
     from .corpus import default_seeds
     from .engine import Fuzzer
@@ -234,7 +235,7 @@ def _decoder(args, expected: set[int]) -> int:
             return _print_replay(v, args)
         info = {"name": adapter.name, "manifest": str(adapter.manifest_path) if adapter.manifest_path else None,
                 "mode": "persistent" if target.persistent else "fork-server" if target.fork_server else "spawn",
-                **({"fork_server": target.server_kind()} if target.fork_server and not target.persistent else {}),
+                **({"fork_server": native.server_kind()} if target.fork_server and not target.persistent else {}),
                 "manifest_sha256": adapter.digest(),
                 "limits": {"timeout_s": target.limits.timeout_s, "memory_mb": target.limits.memory_mb,
                            "memory_kind": target.limits.memory_kind, "output_mb": target.limits.output_mb}}

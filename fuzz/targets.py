@@ -146,12 +146,6 @@ class DecoderTarget:
     def name(self) -> str:
         return self.adapter.name
 
-    @staticmethod
-    def server_kind() -> str:
-        """Which fork server runs the inputs: "C" (forkserver.c, built here) or "Python"."""
-        from fbaconf.harness.native import forkserver_binary
-        return "C" if forkserver_binary() is not None else "Python"
-
     def ext(self) -> str:
         return "bt" if self.kind == "scene" else "fba"
 

@@ -19,9 +19,9 @@ is NUL-terminated fields: ``slot`` (which descriptor pair), ``as`` (address-spac
 none), ``fsize`` (bytes), ``cpu`` (seconds), ``timeout`` (seconds), ``rss_mb`` (0 = not
 sampled), ``cwd``, ``argc``, the arguments, ``envc``, the ``NAME=value`` entries. A reply is
 ASCII ``status utime stime maxrss_kb elapsed timed_out mem_hit`` (``status`` the raw wait
-status). The server's first message is ``ready``, once it runs inside its sandbox. Exit code 127 with ``fbaconf-limit: cannot execute …`` on stderr when the program
-cannot be started — the message the one-shot launcher prints, so :mod:`.exits` judges both
-paths alike.
+status). The server's first message is ``ready``, once it runs inside its sandbox. Exit code
+127 with ``fbaconf-limit: cannot execute …`` on stderr when the program cannot be started —
+the message the one-shot launcher prints, so :mod:`.exits` judges both paths alike.
 
 ``--reap-namespace`` (only inside the sandbox's own PID namespace, where ``/proc`` lists the
 sandbox's processes alone): after each input every process but the sandbox's init and the

@@ -46,6 +46,11 @@ def forkserver_binary() -> Path | None:
         return _built["forkserver"]
 
 
+def server_kind() -> str:
+    """Which fork server the harness runs: "C" (forkserver.c, built here) or "Python"."""
+    return "C" if forkserver_binary() is not None else "Python"
+
+
 def _build() -> Path | None:
     cc = compiler()
     if cc is None or not SOURCE.is_file():

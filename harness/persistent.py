@@ -16,9 +16,9 @@ when its stdin closes.
 A crash (the process dies: a signal, a sanitizer abort, a panic), a hang (no answer within
 ``timeout_s``) or a memory or output blow-up is the ending of the input being decoded; the
 harness kills the process and starts a new one for the next input (after a first crash, a
-spare process is kept starting in the background, so the next input need not wait for it). Whatever the decoder
-wrote on stderr while decoding an input is that input's stderr (crash reports are read
-from it), so a report printed without dying is judged as a crash too. The result is a
+spare process is kept starting in the background, so the next input need not wait for it).
+Whatever the decoder wrote on stderr while decoding an input is that input's stderr (crash
+reports are read from it), so a report printed without dying is judged as a crash too. The result is a
 :class:`~fbaconf.harness.sandbox.ProcResult`, judged by :mod:`.exits` like a spawned
 decoder's.
 """

@@ -44,7 +44,7 @@ class ForkServer:
     result of :func:`fbaconf.harness.sandbox.run` for decoders run in that folder."""
 
     def __init__(self, root: Path, view: View, limits: Limits, env: dict[str, str] | None = None,
-                 sum_outputs_every: int = 1, slots: int = 1, native: bool | None = None) -> None:
+                 sum_outputs_every: int = 1, slots: int = 1) -> None:
         self.root = Path(root).resolve()
         self.view = view
         self.limits = limits
@@ -61,12 +61,9 @@ class ForkServer:
         self.slots = slots  # stdout/stderr file pairs: an input's are read while the next one runs
         self._files: list[tuple] = []
         self._queue: collections.deque[Pending] = collections.deque()
-        # The server in C when it can be built (harness/native.py), else the Python one;
-        # native=False asks for the Python one, native=True for the C one or an error.
+        # The server in C when it can be built (harness/native.py), else the Python one.
         from .native import forkserver_binary
-        self.native = forkserver_binary() if native is not False else None
-        if native and self.native is None:
-            raise ForkServerError("the fork server in C cannot be built here (no C compiler?)")
+        self.native = forkserver_binary()
         self.io = self.root / ".io"  # the decoder's stdout/stderr files: outside its view
         self.srv = self.root / ".srv"  # the server script, read-only in the sandbox
 

@@ -311,15 +311,13 @@ class _Runner:
             return Job(workdir=workdir, values=self._values(n, workdir), frames=n)
 
         if isinstance(a, CommandAdapter):
-            from . import exits, sandbox
+            from . import sandbox
             argv, job = self._argv(job_for)
             from .runner import hidden_from_decoders
             view = a.sandbox_view(argv, workdir, hidden=hidden_from_decoders())
             view.read_only.append(self.content.root)  # the generated content the decoder reads
             res = sandbox.run(argv, workdir, a.limits, env=a.env or None, view=view)
-            verdict = exits.outcome_for(exits.classify(res, a.limits, a.reject_exit_codes))
-            if verdict is not None:
-                raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
+            self._judge(res, n, argv)
             elapsed = res.elapsed_s
             self.last_cpu_s = res.cpu_s
         elif isinstance(a, PythonAdapter):
@@ -346,7 +344,6 @@ class _Runner:
 
     def _run_persistent(self, n: int) -> float:
         """One input to the persistent decoder: the time from sending it to its answer."""
-        from . import exits
         from .persistent import PersistentDecoder
         from .runner import hidden_from_decoders
         a = self.adapter
@@ -366,12 +363,18 @@ class _Runner:
         out.mkdir(parents=True)
         path = out / f"faps.{'npz' if a.faps_format == 'npz' else 'fap'}"
         res = self._server.run(self.content.stream_bytes(n), str(path))
-        verdict = exits.outcome_for(exits.classify(res, a.limits, a.reject_exit_codes))
-        if verdict is not None:
-            raise SpeedRunError(self.operation, n, verdict[0], verdict[1], self._server.argv, res.stderr_tail)
+        self._judge(res, n, self._server.argv)
         self.last_cpu_s = None
         self._check_output(Job(workdir=workdir, values={"faps_out": str(path)}, frames=n), n, self._server.argv)
         return res.elapsed_s
+
+    def _judge(self, res, n: int, argv) -> None:
+        """A run that did not decode (exit code, crash, timeout...) fails the measurement."""
+        from . import exits
+        a = self.adapter
+        verdict = exits.outcome_for(exits.classify(res, a.limits, a.reject_exit_codes))
+        if verdict is not None:
+            raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
 
     def _check_output(self, job: Job, n: int, argv) -> None:
         from .compare.loaders import OutputError, check_output_file
