@@ -30,7 +30,7 @@ def main() -> int:
         print("bench_fbadec: no C compiler; nothing measured")
         return 0
     from fbaconf.fuzz.corpus import default_seeds
-    from fbaconf.fuzz.engine import Fuzzer
+    from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
     from fbaconf.fuzz.targets import DecoderTarget
     from fbaconf.harness import speed
     from fbaconf.harness.adapters import resolve
@@ -54,8 +54,9 @@ def main() -> int:
         fz_rates = {}
         for label, d in decoders[:2]:
             t = DecoderTarget(resolve(d), tmp / f"work-{len(fz_rates)}", timeout_s=10.0)
-            fz = Fuzzer(t, default_seeds(), seed=3, seconds=args.seconds, progress=False, coverage_every=8,
-                        minimise_seconds=2, minimise_tests=20)
+            fz = Fuzzer(t, default_seeds(),
+                        FuzzConfig(seed=3, seconds=args.seconds, progress=False, coverage_every=8, minimise_seconds=2,
+                                   minimise_tests=20))
             fz.run()
             fz_rates[label] = fz.stats.rate
             print(f"  {label:<34} {fz.stats.rate:10,.0f} execs/s ({1000 / max(fz.stats.rate, 1e-9):.2f} ms per input), "

@@ -7,8 +7,8 @@ the same number of seconds on the same machine:
   waits (no sandbox, no limits, no input generation) — the ceiling for spawning;
 * ``fuzz --spawn``: ``fbaconf fuzz`` with a fresh sandbox per input;
 * ``fuzz (fork server)``: the default, one sandbox per worker, its server in C
-  (``harness/forkserver.c``, compiled on first use), and again with the Python server
-  (``harness/forkserver.py``, the fallback without a C compiler);
+  (``isolation/forkserver.c``, compiled on first use), and again with the Python server
+  (``isolation/forkserver.py``, the fallback without a C compiler);
 * ``fuzz (persistent)``: the same program through ``[commands] serve``;
 * the last two again with the program built without its planted bug (``-DSKIPCHAIN_FIXED``):
   a crash costs the persistent mode a process (and sandbox) start, so these show it without;
@@ -71,16 +71,17 @@ def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
 def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False,
               c_server: bool = True) -> tuple[float, str, int]:
     from fbaconf.fuzz.corpus import default_seeds
-    from fbaconf.fuzz.engine import Fuzzer
+    from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
     from fbaconf.fuzz.targets import DecoderTarget
-    from fbaconf.harness import native
+    from fbaconf.isolation import forkserver_build
     from fbaconf.harness.adapters import load_manifest
-    native.USE_NATIVE = c_server
+    os.environ["FBACONF_FORKSERVER"] = "c" if c_server else "python"
     target = DecoderTarget(load_manifest(manifest), work, timeout_s=1.0, fork_server=not spawn, persistent=not spawn)
-    mode = ("persistent" if target.persistent else f"fork server in {native.server_kind()}" if target.fork_server
+    mode = ("persistent" if target.persistent else f"fork server in {forkserver_build.server_kind()}" if target.fork_server
             else "spawn")
-    fz = Fuzzer(target, default_seeds(), seed=7, seconds=seconds, progress=False, coverage_every=8,
-                minimise_seconds=2, minimise_tests=50)
+    fz = Fuzzer(target, default_seeds(),
+                FuzzConfig(seed=7, seconds=seconds, progress=False, coverage_every=8, minimise_seconds=2,
+                           minimise_tests=50))
     fz.run()
     return fz.stats.rate, mode, fz.stats.execs
 

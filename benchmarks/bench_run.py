@@ -5,7 +5,7 @@ conformance stream,
 * ``bare spawn``: ``posix_spawn`` + wait, nothing else — the floor;
 * ``sandbox.run, prlimit launcher``: the harness's one-shot path (limits, bubblewrap when
   available, output files, the result) with util-linux ``prlimit`` as the launcher;
-* ``sandbox.run, Python launcher``: the same with ``_limit.py`` (the fallback without prlimit);
+* ``sandbox.run, Python launcher``: the same with ``isolation/launcher.py`` (the fallback without prlimit);
 
 and the wall time of ``fbaconf run --decoder fbadec.toml --claim simple@2 -j 1`` with each
 launcher (every case: decode, read the output, compare, write the reports).
@@ -35,7 +35,7 @@ def bare(exe: Path, stream: Path, out: Path, n: int) -> float:
 
 
 def harness(exe: Path, stream: Path, work: Path, n: int) -> float:
-    from fbaconf.harness import sandbox
+    from fbaconf.isolation import sandbox
     limits = sandbox.Limits(timeout_s=10, memory_mb=256, output_mb=64)
     t0 = time.perf_counter()
     for i in range(n):
@@ -49,12 +49,9 @@ def harness(exe: Path, stream: Path, work: Path, n: int) -> float:
 
 
 def run_wall(manifest: Path, out: Path, python_launcher: bool) -> float:
-    env = dict(os.environ, **({"FBACONF_BENCH_PYTHON_LAUNCHER": "1"} if python_launcher else {}))
-    code = ("import os, sys\nfrom fbaconf.harness import sandbox\n"
-            "sandbox.USE_PRLIMIT = not os.environ.get('FBACONF_BENCH_PYTHON_LAUNCHER')\n"
-            "from fbaconf.cli import main\nsys.exit(main(sys.argv[1:]))")
+    env = dict(os.environ, FBACONF_LAUNCHER="python" if python_launcher else "prlimit")
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", code, "run", "--decoder", str(manifest), "--claim", "simple@2",
+    subprocess.run([sys.executable, "-m", "fbaconf", "run", "--decoder", str(manifest), "--claim", "simple@2",
                     "-j", "1", "-o", str(out)], check=True, capture_output=True, env=env)
     return time.perf_counter() - t0
 
@@ -67,7 +64,7 @@ def main() -> int:
         print("bench_run: no C compiler or make; nothing measured")
         return 0
     from fbaconf.conformance.suite import load_suites
-    from fbaconf.harness import sandbox
+    from fbaconf.isolation import sandbox
     tmp = Path(tempfile.mkdtemp(prefix="bench-run-"))
     try:
         build = tmp / "fbadec"
@@ -78,9 +75,9 @@ def main() -> int:
         stream = tmp / "in.fba"
         stream.write_bytes(suite.cases[0].input_path("fba").read_bytes())
         rows = [("bare spawn", bare(exe, stream, tmp / "bare.npz", a.n))]
-        sandbox.USE_PRLIMIT = True
+        os.environ["FBACONF_LAUNCHER"] = "prlimit"
         rows.append(("sandbox.run, prlimit launcher", harness(exe, stream, tmp / "p", a.n)))
-        sandbox.USE_PRLIMIT = False
+        os.environ["FBACONF_LAUNCHER"] = "python"
         rows.append(("sandbox.run, Python launcher", harness(exe, stream, tmp / "y", a.n)))
         print(f"one case, {a.n} runs each, isolation {sandbox.isolation()}, prlimit "
               f"{'found' if shutil.which('prlimit') else 'MISSING (both rows use the Python launcher)'}")

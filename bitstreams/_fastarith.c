@@ -4,7 +4,7 @@
  * Written for fbaconf from the spec notes (../shared/spec/fap-bitstream.md section 3 and
  * decision D7) and the pure-Python reference in arith.py / decoder.py / encoder.py, which
  * stay the reference and the fallback: this module must give bit-identical results and
- * report every error at the same place (tests/test_native.py checks it differentially).
+ * report every error at the same place (tests/unit/test_native.py checks it differentially).
  *
  * Coder: 16-bit registers (top 65535, q1 16384, q2 32768, q3 49152); cumulative
  * frequency tables c[0..n] in descending suffix-sum form (c[0] = total, c[n] = 0),

@@ -9,7 +9,7 @@ at least 8 bits for at most 16 frames) and so is memory
 The arithmetic blocks run through the optional C extension (arith.native_decoder(),
 bitstreams/_fastarith.c) when it is built; the pure-Python ArithDecoder is the reference
 and the fallback (FBACONF_PURE_PYTHON=1 forces it). Both give identical frames, plane
-records and errors (tests/test_native.py).
+records and errors (tests/unit/test_native.py).
 """
 from __future__ import annotations
 

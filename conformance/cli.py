@@ -32,7 +32,7 @@ def register(sub) -> None:
     cv.set_defaults(func=cmd_coverage)
     mu = ss.add_parser("mutants", help="run every mutant decoder against the suites (mutation score)",
                        description="Run each mutant decoder (the reference with one realistic bug, "
-                                   "harness/mutants.py, harness/mutants_independent/) against the cases "
+                                   "mutation/measure.py, mutation/independent/) against the cases "
                                    "of the claim (required and .fap player cases, with .npz and then .fap "
                                    "output), each mutant in its own process, and print the case that "
                                    "kills it; then the score of each family and, last, "
@@ -44,7 +44,7 @@ def register(sub) -> None:
                     help="run every case against each mutant (default: stop at the first killing case)")
     mu.add_argument("--family", choices=("suite", "independent"), default=None,
                     help="only the suite's own mutants, or only the independent ones (written from the spec "
-                         "notes alone, harness/mutants_independent/; default: both)")
+                         "notes alone, mutation/independent/; default: both)")
     mu.add_argument("--list", action="store_true", help="only list the mutants")
     mu.add_argument("--json", action="store_true")
     mu.set_defaults(func=cmd_mutants)
@@ -116,8 +116,8 @@ def cmd_verify(args) -> int:
 
 
 def cmd_coverage(args) -> int:
-    from .coverage import compute, format_table
-    rep = compute()
+    from . import coverage
+    rep = coverage.compute()
     if args.json:
         print(json.dumps(rep, indent=1))
         return 0
@@ -125,27 +125,27 @@ def cmd_coverage(args) -> int:
         for c in rep["cases"]:
             print(f"{c['case']}: {len(c['points'])} point(s): {' '.join(c['points'])}")
         print()
-    print(format_table(rep))
+    print(coverage.format_table(rep))
     return 0
 
 
 def cmd_mutants(args) -> int:
-    from fbaconf.harness import mutants
-    chosen = [m.name for m in mutants.MUTANTS_LIST if args.family in (None, m.family)]
+    from fbaconf.mutation import measure
+    chosen = [m.name for m in measure.MUTANTS_LIST if args.family in (None, m.family)]
     if args.list:
         for n in chosen:
-            m = mutants.MUTANTS[n]
+            m = measure.MUTANTS[n]
             print(f"{m.name:32s} {m.where:40s} {m.description}")
         print(f"{len(chosen)} mutant(s)")
         return 0
-    unknown = [n for n in args.names if n not in mutants.MUTANTS]
+    unknown = [n for n in args.names if n not in measure.MUTANTS]
     if unknown:
         print(f"fbaconf suites mutants: error: unknown mutant(s) {', '.join(unknown)}", file=sys.stderr)
         return 2
-    results = mutants.run_all(args.names or chosen, claim=args.claim, jobs=args.jobs,
+    results = measure.run_all(args.names or chosen, claim=args.claim, jobs=args.jobs,
                               stop_at_first=not args.all_cases)
     if args.json:
         print(json.dumps(results, indent=1))
     else:
-        print(mutants.format_results(results))
+        print(measure.format_results(results))
     return 0

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .suite import CaseKind
+
 FORMAT = "fbaconf.coverage/1"
 BITRATE_BAND = 0.10  # "at the limit" for the (continuous) bitrate: within the top 10 % below it
 
@@ -590,7 +592,7 @@ def case_points(case) -> CaseCoverage:
     cc = CaseCoverage(case.full_id, case.claim)
     hits = cc.points
     try:
-        if case.kind == "error" and case.input_path("fba") is None and case.input_path("fap") is not None:
+        if case.kind == CaseKind.ERROR and case.input_path("fba") is None and case.input_path("fap") is not None:
             from fbaconf.bitstreams.faptext import read_fap_file
             from fbaconf.errors import FbaconfInputError
             hits.add("text.fap")  # an invalid .fap text (players): the rule its reading breaks
@@ -600,12 +602,12 @@ def case_points(case) -> CaseCoverage:
             except FbaconfInputError as e:
                 hits.add(f"error.{e.rule}")
             return cc
-        if case.kind == "error":
+        if case.kind == CaseKind.ERROR:
             data = case.input_path("fba").read_bytes()
             pts, cc.codes = diagnostic_points(data, None, True)
             hits |= pts
             return cc
-        if case.kind == "multi":
+        if case.kind == CaseKind.MULTI:
             streams = [p.read_bytes() for p in case.face_paths()]
             hits.add("faces.multi")
             states = set()

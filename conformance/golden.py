@@ -24,7 +24,7 @@ import numpy as np
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 
-from .suite import Suite, SuiteError, digest_problems, golden_root, load_suites, sha256_file
+from .suite import CaseKind, Suite, SuiteError, digest_problems, golden_root, load_suites, sha256_file
 
 MANIFEST = "MANIFEST.json"
 # Image goldens approximate the ideal (infinitely supersampled) image: 8 x 8 ordered samples per
@@ -66,9 +66,9 @@ def generate_case(case, out: Path) -> list[Path]:
     from fbaconf.pipeline import multi_outputs, reference_outputs
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
-    if case.kind == "error":
+    if case.kind == CaseKind.ERROR:
         return written
-    if case.kind == "multi":
+    if case.kind == CaseKind.MULTI:
         tmp = out / ".faces"
         multi_outputs(case.face_paths(), tmp, "npz")
         for src, name in zip(case.face_paths(), case.goldens["faces"]):

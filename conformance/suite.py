@@ -30,6 +30,7 @@ import hashlib
 import json
 import os
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,15 @@ from fbaconf.errors import FbaconfInputError
 from fbaconf.safefs import confined, safe_name
 
 SUITE_FORMAT = "fbaconf.suite/1"
-KINDS = ("decode", "error", "multi")
+class CaseKind(StrEnum):
+    """What a case asks of a decoder: decode a valid stream, reject an invalid one, or decode
+    several faces at once."""
+    DECODE = "decode"
+    ERROR = "error"
+    MULTI = "multi"
+
+
+KINDS = tuple(k.value for k in CaseKind)
 STAGES = ("faps", "vertices", "images")
 INPUT_KEYS = ("fba", "fap", "scene", "bifs", "scenario", "faces")
 
@@ -91,7 +100,7 @@ class Case:
     suite: str
     claim: str
     group: str = "core"
-    kind: str = "decode"
+    kind: CaseKind = CaseKind.DECODE
     description: str = ""
     tools: list[str] = field(default_factory=list)
     covers: list[str] = field(default_factory=list)
@@ -139,6 +148,7 @@ class Case:
             confined(suite_dir or Path("."), str(rel), what=f"suite {suite}: case {c.id}: file")
         if c.kind not in KINDS:
             raise SuiteError(f"suite {suite}: case {c.id}: kind {c.kind!r} not one of {KINDS}", rule="suite-case")
+        c.kind = CaseKind(c.kind)
         bad = [s for s in c.stages if s not in STAGES]
         if bad:
             raise SuiteError(f"suite {suite}: case {c.id}: unknown stage(s) {bad}", rule="suite-case")

@@ -21,7 +21,7 @@ VERB_MODULES = (
     "fbaconf.animation.cli",
     "fbaconf.rendering.cli",
     "fbaconf.conformance.cli",
-    "fbaconf.harness.verbs",
+    "fbaconf.harness.cli",
     "fbaconf.fuzz.cli",
 )
 

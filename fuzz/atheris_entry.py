@@ -35,7 +35,7 @@ def _target():
     global _TARGET
     if _TARGET is None:
         from .choosers import RandomChooser
-        from .generators import gen_valid
+        from .inputs import gen_valid
         from .targets import SelfTarget
         stream = gen_valid(RandomChooser(random.Random(0))).data
         _TARGET = SelfTarget(checker_every=4, scene_stream=stream)
@@ -45,7 +45,7 @@ def _target():
 def fuzz_one_input(data: bytes) -> None:
     """Run one input through fbaconf's own parsers; raise :class:`FuzzFinding` on a finding."""
     from .choosers import RandomChooser
-    from .generators import Entry, gen_valid
+    from .inputs import Entry, gen_valid
     from .mutators import mutate_stream
     t = _target()
     sel = data[0] % 8 if data else 0

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
-from .generators import Entry
+from .inputs import Entry
 
 ROUND_S = 30.0  # a shard's length: corpus merged between rounds
 MAX_MERGED = 2000
@@ -49,13 +49,14 @@ def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -
     """One shard, in a worker: fuzz for ``seconds`` and report (no minimisation, no files)."""
     import shutil
     from .corpus import default_seeds
-    from .engine import Fuzzer
+    from .engine import FuzzConfig, Fuzzer
     work = Path(tempfile.mkdtemp(prefix="fbaconf-shard-"))
     try:
         target = _target(spec, work)
         seeds = default_seeds() + [Entry(b, origin=f"merged#{i}") for i, b in enumerate(merged)]
-        fz = Fuzzer(target, seeds, seed=seed, seconds=seconds, jobs=1, progress=False, kinds=(spec.kind,),
-                    coverage_every=spec.coverage_every, minimise_findings=False)
+        fz = Fuzzer(target, seeds,
+                    FuzzConfig(seed=seed, seconds=seconds, jobs=1, progress=False, kinds=(spec.kind,),
+                               coverage_every=spec.coverage_every, minimise_findings=False))
         fz.run()
         st = fz.stats
         return {"seed": seed, "execs": st.execs, "fuzz_seconds": st.elapsed - st.minimise_s,

@@ -74,7 +74,7 @@ def register(sub) -> None:
 
 
 def _extra_seeds(paths: list[Path]):
-    from .generators import Entry
+    from .inputs import Entry
     out = []
     for p in paths:
         files = sorted(p.rglob("*.fba")) if p.is_dir() else [p]
@@ -166,7 +166,7 @@ def _campaign(args, expected: set[int] | None) -> int:
 
 def _self(args) -> int:
     from .corpus import default_seeds, short_prefixes
-    from .engine import Fuzzer
+    from .engine import FuzzConfig, Fuzzer
     from .findings import replay
     from .targets import SelfTarget
     kinds = ("stream", "stream", "stream", "scene", "bifs", "text")
@@ -180,10 +180,11 @@ def _self(args) -> int:
         v = replay(target, args.replay.read_bytes(), kind)
         return _print_replay(v, args)
     out = (args.output or Path("fbaconf-fuzz") / "self").resolve()
-    fz = Fuzzer(target, seeds + short, seed=args.seed, seconds=args.seconds, jobs=1, out_dir=out, kinds=kinds,
-                  progress=False if args.no_progress else None, minimise_seconds=args.minimise_seconds,
-                  max_execs=args.max_execs, decoder_info={"name": "fbaconf-self"}, fresh_valid_share=0.003,
-                  prefer_short=0.9, minimise_tests=5000)
+    fz = Fuzzer(target, seeds + short,
+                FuzzConfig(seed=args.seed, seconds=args.seconds, jobs=1, out_dir=out, kinds=kinds,
+                           progress=False if args.no_progress else None, minimise_seconds=args.minimise_seconds,
+                           max_execs=args.max_execs, fresh_valid_share=0.003, prefer_short=0.9, minimise_tests=5000),
+                decoder_info={"name": "fbaconf-self"})
     if args.jobs and args.jobs > 1:
         print("fbaconf fuzz: --self runs in one process (-j ignored)", file=sys.stderr)
     fz.run()
@@ -207,10 +208,10 @@ def _print_replay(v, args) -> int:
 
 
 def _decoder(args, expected: set[int]) -> int:
-    from fbaconf.harness import native
+    from fbaconf.isolation import forkserver_build
     from fbaconf.harness.adapters import resolve
     from .corpus import default_seeds
-    from .engine import Fuzzer
+    from .engine import FuzzConfig, Fuzzer
     from .findings import replay
     from .targets import DecoderTarget
     adapter = resolve(args.decoder)
@@ -235,14 +236,16 @@ def _decoder(args, expected: set[int]) -> int:
             return _print_replay(v, args)
         info = {"name": adapter.name, "manifest": str(adapter.manifest_path) if adapter.manifest_path else None,
                 "mode": "persistent" if target.persistent else "fork-server" if target.fork_server else "spawn",
-                **({"fork_server": native.server_kind()} if target.fork_server and not target.persistent else {}),
+                **({"fork_server": forkserver_build.server_kind()} if target.fork_server and not target.persistent else {}),
                 "manifest_sha256": adapter.digest(),
                 "limits": {"timeout_s": target.limits.timeout_s, "memory_mb": target.limits.memory_mb,
                            "memory_kind": target.limits.memory_kind, "output_mb": target.limits.output_mb}}
-        fz = Fuzzer(target, seeds, seed=args.seed, seconds=args.seconds, jobs=args.jobs, out_dir=out,
-                    kinds=(args.target,), progress=False if args.no_progress else None,
-                    minimise_seconds=args.minimise_seconds, max_execs=args.max_execs, decoder_info=info,
-                    coverage_every=args.coverage_every)
+        fz = Fuzzer(target, seeds,
+                    FuzzConfig(seed=args.seed, seconds=args.seconds, jobs=args.jobs, out_dir=out,
+                               kinds=(args.target,), progress=False if args.no_progress else None,
+                               minimise_seconds=args.minimise_seconds, max_execs=args.max_execs,
+                               coverage_every=args.coverage_every),
+                    decoder_info=info)
         fz.run()
         return _finish(fz, out, args)
     finally:

@@ -5,7 +5,7 @@ import random
 from pathlib import Path
 
 from .choosers import RandomChooser
-from .generators import Entry, gen_valid
+from .inputs import Entry, gen_valid
 from .scenes import gen_scene
 
 

@@ -15,7 +15,7 @@ from fbaconf.errors import FbaconfInputError
 from .choosers import RandomChooser
 from .corpus import scene_seeds
 from .findings import Finding, write_finding
-from .generators import Entry, gen_valid
+from .inputs import Entry, gen_valid
 from .minimise import minimise
 from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
@@ -96,19 +96,44 @@ class Progress:
                 self.stream.flush()
 
 
+@dataclass
+class FuzzConfig:
+    """How a fuzz run goes: its seed and budget (``seconds``, ``max_execs``), parallelism, the
+    input kinds, the corpus and valid-stream policy, minimisation, and where findings go."""
+    seed: int = 0
+    seconds: float = 60.0
+    jobs: int = 1
+    out_dir: Path | None = None
+    kind: str = "stream"
+    kinds: tuple[str, ...] | None = None
+    progress: bool | None = None
+    max_execs: int | None = None
+    max_corpus: int = 400
+    valid_pool: int = 24  # fresh valid streams made up front
+    fresh_valid_share: float = 0.04  # share of inputs that are a fresh valid stream
+    prefer_short: float = 0.5
+    run_seeds_first: int = 64
+    coverage_every: int = 1  # measure syntax-model coverage on every n-th input
+    minimise_seconds: float = 30.0
+    minimise_tests: int = 600
+    minimise_findings: bool = True  # a campaign's shards leave it to the coordinator
+
+
 class Fuzzer:
     """The loop: generate a batch of inputs (pure function of seed and index), run it (``jobs`` in
     parallel), then, in input order, record coverage, grow the corpus and handle findings
     (dedup, minimise, write)."""
 
-    def __init__(self, target, seeds: list[Entry], *, seed: int = 0, seconds: float = 60.0, jobs: int = 1,
-                 out_dir: Path | None = None, kind: str = "stream", progress: bool | None = None,
-                 minimise_seconds: float = 30.0, minimise_tests: int = 600, max_execs: int | None = None,
-                 scene_seeds_: list[Entry] | None = None, kinds: tuple[str, ...] | None = None,
-                 decoder_info: dict | None = None, max_corpus: int = 400, valid_pool: int = 24,
-                 fresh_valid_share: float = 0.04, prefer_short: float = 0.5, run_seeds_first: int = 64,
-                 stop_on: Callable[[Finding], bool] | None = None, coverage_every: int = 1,
-                 minimise_findings: bool = True) -> None:
+    def __init__(self, target, seeds: list[Entry], config: FuzzConfig | None = None, *,
+                 scene_seeds_: list[Entry] | None = None, decoder_info: dict | None = None,
+                 stop_on: Callable[[Finding], bool] | None = None) -> None:
+        c = config or FuzzConfig()
+        seed, seconds, jobs, out_dir, kind, kinds = c.seed, c.seconds, c.jobs, c.out_dir, c.kind, c.kinds
+        progress, valid_pool, fresh_valid_share, prefer_short = c.progress, c.valid_pool, c.fresh_valid_share, \
+            c.prefer_short
+        run_seeds_first, minimise_seconds, minimise_tests, max_execs = c.run_seeds_first, c.minimise_seconds, \
+            c.minimise_tests, c.max_execs
+        max_corpus, coverage_every, minimise_findings = c.max_corpus, c.coverage_every, c.minimise_findings
         if not seeds and kind == "stream" and "stream" in (kinds or (kind,)):
             raise FuzzSetupError("no seed streams (build the suites: fbaconf suites build)")
         self.target = target

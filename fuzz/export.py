@@ -21,7 +21,7 @@ from pathlib import Path
 
 from .choosers import RandomChooser
 from .corpus import conformance_seeds, short_prefixes
-from .generators import Entry, gen_valid
+from .inputs import Entry, gen_valid
 from .model import DICTIONARY
 
 # Byte sequences worth splicing in, beyond the start codes of the syntax model's dictionary:

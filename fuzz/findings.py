@@ -8,7 +8,7 @@ import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
-from .generators import Entry
+from .inputs import Entry
 from .minimise import MinimiseStats
 from .targets import DecoderTarget, FuzzSetupError, SelfTarget, Verdict
 

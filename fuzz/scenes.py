@@ -5,7 +5,7 @@ import random
 import re
 
 from .choosers import Chooser
-from .generators import Entry
+from .inputs import Entry
 from .mutators import BYTE_MUTATORS, _pick
 
 

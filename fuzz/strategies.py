@@ -4,7 +4,7 @@ from __future__ import annotations
 import random
 
 from .choosers import DrawChooser
-from .generators import Entry, gen_valid
+from .inputs import Entry, gen_valid
 from .mutators import mutate_stream
 from .scenes import gen_scene, mutate_scene
 

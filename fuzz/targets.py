@@ -14,7 +14,7 @@ from typing import Iterable
 
 from fbaconf.errors import FbaconfInputError
 from fbaconf.safefs import empty_dir, remove_tree
-from .generators import Entry
+from .inputs import Entry
 from .model import reference_parse, stream_features
 from .scenes import scene_features
 
@@ -38,8 +38,8 @@ class FuzzSetupError(FbaconfInputError):
 
 def stack_hash(text: str) -> tuple[str, str] | None:
     """(kind, short hash) of the crash report a decoder printed — the harness's one crash
-    classifier (:func:`fbaconf.harness.exits.crash_report`)."""
-    from fbaconf.harness.exits import crash_report
+    classifier (:func:`fbaconf.isolation.endings.crash_report`)."""
+    from fbaconf.isolation.endings import crash_report
     r = crash_report(text)
     return (r.kind, r.signature) if r else None
 
@@ -103,7 +103,7 @@ class DecoderTarget:
                  expected_exit: Iterable[int] | None = None, oracle: bool = True,
                  scene_stream: bytes | None = None, fork_server: bool = True, persistent: bool = True) -> None:
         from fbaconf.harness.adapters import CommandAdapter
-        from fbaconf.harness.sandbox import Limits
+        from fbaconf.isolation.sandbox import Limits
         self.adapter = adapter
         self.kind = kind
         self.work_root = Path(work_root).resolve()  # decoders run in their own folders: absolute paths
@@ -118,11 +118,11 @@ class DecoderTarget:
         self.oracle = oracle and kind in ("stream", "text") and "faps" in adapter.outputs
         self.is_command = isinstance(adapter, CommandAdapter)
         self.scene_stream = scene_stream
-        # Command decoders run through one fork server per worker thread (harness/spawner.py):
+        # Command decoders run through one fork server per worker thread (isolation/forkclient.py):
         # one sandbox per worker, a fork + exec per input, the worker's folder reused.
         self.fork_server = fork_server and self.is_command
         # A manifest with [commands] serve gets its inputs through the persistent protocol
-        # (harness/persistent.py) unless told otherwise.
+        # (isolation/persistent.py) unless told otherwise.
         self.persistent = persistent and self.is_command and "serve" in adapter.commands
         if self.persistent and kind == "scene":
             raise FuzzSetupError("the persistent protocol carries streams and .fap text, not scenes: "
@@ -258,12 +258,12 @@ class DecoderTarget:
             slot = w.slots[k]
             job = self._reuse(slot, inp.data, write_input=not self.persistent)  # persistent: on stdin
             if w.server is None and self.persistent:
-                from fbaconf.harness.persistent import PersistentDecoder
+                from fbaconf.isolation.persistent import PersistentDecoder
                 w.argv = [self.adapter.argv("serve", slot.job)]
                 w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),
                                              self.limits, env=self.adapter.env)
             elif w.server is None:
-                from fbaconf.harness.spawner import ForkServer
+                from fbaconf.isolation.forkclient import ForkServer
                 w.argv = [self.argv_for(s.job) for s in w.slots]  # a slot's paths never change
                 w.server = ForkServer(w.root, self._view(w, w.argv[0]), self.limits, env=self.adapter.env,
                                       sum_outputs_every=16, slots=len(w.slots))
@@ -276,7 +276,7 @@ class DecoderTarget:
         try:
             job = self._job(inp.data, workdir)
             if self.is_command:
-                from fbaconf.harness import sandbox
+                from fbaconf.isolation import sandbox
                 from fbaconf.harness.runner import hidden_from_decoders
                 argv = self.argv_for(job)
                 view = self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders())
@@ -293,8 +293,8 @@ class DecoderTarget:
 
     def _judge(self, inp: Entry, job, res) -> Verdict | None:
         """The finding (or None) for one finished decoder process."""
-        from fbaconf.harness import exits
-        ending = exits.classify(res, self.limits, self.reject_exit_codes)
+        from fbaconf.isolation import endings
+        ending = endings.classify(res, self.limits, self.reject_exit_codes)
         if ending.kind == "setup":
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
         detail = {"exit_code": res.returncode, "signal": res.signal, "elapsed_s": round(res.elapsed_s, 3),
@@ -304,7 +304,7 @@ class DecoderTarget:
 
     def verdict_for(self, ending, inp: Entry, job, detail: dict) -> Verdict | None:
         """The finding (or None) for one process ending — the run's classifier
-        (:mod:`fbaconf.harness.exits`), so fuzz and run judge an ending the same way."""
+        (:mod:`fbaconf.isolation.endings`), so fuzz and run judge an ending the same way."""
         k = ending.kind
         rep = ending.report
         if k == "timeout":

@@ -8,7 +8,7 @@ import random
 from pathlib import Path
 
 from .corpus import suite_files
-from .generators import Entry
+from .inputs import Entry
 from .mutators import BYTE_MUTATORS
 
 

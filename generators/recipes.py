@@ -1,6 +1,6 @@
 """Hand-made frame recipes: valid streams whose content no ``content = {...}`` table expresses,
 each aimed at a rule an independent mutant showed the suite did not exercise
-(``harness/data/mutants-independent.md``). ``special = "<name>"`` in ``suites.toml``.
+(``mutation/data/mutants-independent.md``). ``special = "<name>"`` in ``suites.toml``.
 
 Each recipe builds its FAP frames by hand and encodes them with the reference encoder; the
 recipe asserts the property it exists for (a bit pattern, a mask type), so an encoder change
@@ -49,7 +49,7 @@ def extreme_steps() -> bytes:
     fap_quant 3: the arithmetic output has long zero runs, stuffing bits close together."""
     from fbaconf.bitstreams import tables
     from fbaconf.bitstreams.frames import SET, FapFrames
-    from fbaconf.profiles.teststreams import stuffing_positions
+    from fbaconf.profiles.sample_streams import stuffing_positions
     from fbaconf.bitstreams.decoder import decode
     qp = tables.quant_steps()
     fr = FapFrames.empty(40, 25.0)
@@ -131,7 +131,7 @@ def block_end_stuffing() -> bytes:
     from fbaconf.bitstreams import tables
     from fbaconf.bitstreams.frames import SET, FapFrames
     from fbaconf.bitstreams.decoder import decode
-    from fbaconf.profiles.teststreams import stuffing_positions
+    from fbaconf.profiles.sample_streams import stuffing_positions
     seq = [(15, 901), (16, 694), (24, 1440), (30, 1679), (2, 119), (5, 396), (26, 2269)]
     qp = tables.quant_steps()
     fr = FapFrames.empty(3, 25.0)

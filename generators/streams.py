@@ -7,7 +7,7 @@ import numpy as np
 
 
 from fbaconf.conformance.suite import SuiteError
-from fbaconf.profiles.teststreams import value_overflow_stream
+from fbaconf.profiles.sample_streams import value_overflow_stream
 from .content import make_content
 
 
@@ -35,7 +35,7 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     from fbaconf.bitstreams.decoder import decode
     from fbaconf.errors import BitstreamError
     from fbaconf.bitstreams import bitedit
-    from fbaconf.profiles.teststreams import stuffing_positions, zero_heavy_plane
+    from fbaconf.profiles.sample_streams import stuffing_positions, zero_heavy_plane
     planes = decode(data).planes
     hdr = planes[0].header_offset
     if mutation == "truncate:plane1-middle":

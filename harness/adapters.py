@@ -46,8 +46,8 @@ from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
 
-from .exits import DEFAULT_REJECT_EXIT_CODES
-from .sandbox import Limits
+from fbaconf.isolation.endings import DEFAULT_REJECT_EXIT_CODES
+from fbaconf.isolation.sandbox import Limits
 
 INPUT_KINDS = ("fba", "fap", "scene", "bifs")
 OUTPUT_KINDS = ("faps", "vertices", "images")
@@ -55,7 +55,7 @@ FAPS_FORMATS = ("fap", "npz")
 PLACEHOLDERS = ("input", "fba", "fap", "scene", "scene_bt", "scene_bifs", "scenario", "faps_out", "vertices_out",
                 "images_dir", "frames", "workdir", "manifest_dir", "python", "faps_out_dir", "inputs")
 # decode: one process per input; decode_multi: one per multi-face case; serve: the persistent
-# protocol (harness/persistent.py), one process for many inputs, each sent on stdin.
+# protocol (isolation/persistent.py), one process for many inputs, each sent on stdin.
 COMMANDS = ("decode", "decode_multi", "serve")
 SERVE_PLACEHOLDERS = ("workdir", "manifest_dir", "python")
 OUTPUT_PLACEHOLDER = {"faps": "faps_out", "vertices": "vertices_out", "images": "images_dir"}
@@ -174,7 +174,7 @@ class CommandAdapter(Adapter):
         manifest's ``[sandbox] read_only`` paths read-only, its case folder (inputs read-only),
         and — when started through ``{python}`` — the Python installation and the fbaconf
         package read-only with ``hidden`` (goldens, suites, the run folder) emptied."""
-        from .sandbox import default_view, python_view
+        from fbaconf.isolation.sandbox import default_view, python_view
         v = default_view(argv, workdir)
         if self.manifest_path is not None:
             v.read_only.append(Path(self.manifest_path).resolve().parent)

@@ -42,7 +42,8 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
     from fbaconf.conformance.suite import golden_root, load_suites
     from . import reports
     from .adapters import resolve
-    from .session import execute, preflight, resolve_claim, select_cases, write_reports
+    from .selection import select_cases
+    from .session import RunOptions, execute, preflight, resolve_claim, write_reports
     t0 = time.perf_counter()
     adapter = resolve(decoder)
     claim = resolve_claim(claim, adapter)
@@ -57,7 +58,7 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
               f"requires decoding the binary face-object stream (inputs must include \"fba\"). Test a player "
               f"with `fbaconf run` (docs/harness.md, \"Players\").", file=sys.stderr)
         return 2
-    from . import sandbox
+    from fbaconf.isolation import sandbox
     from .adapters import CommandAdapter
     isolated = sandbox.isolation() != "none" or not isinstance(adapter, CommandAdapter)
     if not isolated and not allow_unisolated:
@@ -68,10 +69,10 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
     if key is not None:
         _load_key(Path(key), private=True)  # a bad key is a set-up error before anything runs
     suites = load_suites()
-    cases = select_cases(suites, claim, [], [], only_required=True)
+    cases = select_cases(suites, claim, [], [], only_required=True, adapter=adapter)
     out = Path(out).resolve()
     prepare_output(out, force)
-    record = execute(adapter, claim, cases, suites, out, jobs=jobs, progress=None, speed=speed, cluster=cluster)
+    record = execute(adapter, claim, cases, suites, out, RunOptions(jobs=jobs, speed=speed, cluster=cluster))
     write_reports(record, out)
     if record.exit_code >= 128:
         print(f"fbaconf certify: interrupted: no certificate written; partial report in {out}", file=sys.stderr)
@@ -117,7 +118,7 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
 
 
 def _covers(claimed: str, claim: str) -> bool:
-    from .runner import claim_covers
+    from .selection import claim_covers
     return claim_covers(claimed, claim)
 
 

@@ -72,9 +72,10 @@ class FbaconfItem(pytest.Item):
 
     def runtest(self) -> None:
         from .results import Outcome
-        from .runner import RunContext, required_for, run_case
+        from .runner import RunContext, run_case
+        from .selection import required_for
         st = self.state
-        if not required_for(st.claim, self.case):
+        if not required_for(st.claim, self.case, st.adapter):
             pytest.skip(f"outside the claim {st.claim} (case requires {self.case.claim})")
         work = st.out / "work"
         work.mkdir(parents=True, exist_ok=True)

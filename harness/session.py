@@ -5,11 +5,11 @@ Used by ``fbaconf run`` and ``fbaconf certify`` alike (:mod:`.verbs`, :mod:`.cer
 from __future__ import annotations
 
 import datetime as _dt
-import fnmatch
 import os
 import time
 import tomllib
 from importlib import resources
+from dataclasses import dataclass
 from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
@@ -33,28 +33,28 @@ def provisional_statements(claim: str | None) -> list[str]:
     return out
 
 
-def select_cases(suites, claim: str | None, suite_names: list[str], case_globs: list[str], only_required: bool):
-    from .runner import required_for
-    cases = []
-    for s in suites:
-        if suite_names and s.name not in suite_names:
-            continue
-        for c in s.cases:
-            if case_globs and not any(fnmatch.fnmatch(c.id, g) or fnmatch.fnmatch(c.full_id, g) for g in case_globs):
-                continue
-            if only_required and not required_for(claim, c):
-                continue
-            cases.append(c)
-    return cases
-
-
 def _now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
 
-def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, resume=False, keep=False,
-            progress=None, baseline=None, flakes=None, retries: int = 0, allow_fixed: bool = False, speed=False,
-            cluster: str | None = None):
+@dataclass
+class RunOptions:
+    """How ``run``/``certify`` run the selected cases: parallelism (``jobs`` or a Dask
+    ``cluster``), resumption, kept case folders, progress, the baseline and flakes files,
+    retries, and whether the speed phase runs."""
+    jobs: int | None = None
+    cluster: str | None = None
+    resume: bool = False
+    keep_workdirs: bool = False
+    progress: bool | None = None
+    baseline: Path | None = None
+    flakes: Path | None = None
+    retries: int = 0
+    allow_fixed: bool = False
+    speed: bool = False
+
+
+def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptions | None = None):
     """Run cases (+ speed); returns the RunRecord with its exit code set.
 
     Exit code: 1 when a required case fails or could not be taken (a claim means all of it),
@@ -63,12 +63,14 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, res
     else 0."""
     from . import baseline as bl
     from .runner import run_cases
+    o = options or RunOptions()
+    jobs, baseline, flakes, retries, speed = o.jobs, o.baseline, o.flakes, o.retries, o.speed
     t0 = time.perf_counter()
     started = _now()
     out_dir = Path(out_dir).resolve()
     with interruptible() as stop:
-        results = run_cases(adapter, cases, claim=claim, out_dir=out_dir, jobs=jobs, resume=resume,
-                            keep_workdirs=keep, progress=progress, cluster=cluster)
+        results = run_cases(adapter, cases, claim=claim, out_dir=out_dir, jobs=jobs, resume=o.resume,
+                            keep_workdirs=o.keep_workdirs, progress=o.progress, cluster=o.cluster)
     if stop.signum is not None:
         return _interrupted_record(adapter, claim, suites, cases, results, started, t0, stop.signum)
     if retries:
@@ -83,7 +85,7 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, *, jobs=None, res
     record.speed = speed_results
     record.missing = missing_summary(results)
     record.baseline_summary = summary.line() if (baseline is not None or flakes is not None or retries) else ""
-    if summary.failing(allow_fixed):
+    if summary.failing(o.allow_fixed):
         record.exit_code = 1
     elif any(not s.passed for s in speed_results):
         record.exit_code = 3
@@ -163,7 +165,7 @@ def preflight(adapter) -> None:
     """Before any case: a command decoder's program must exist and be executable; one loud
     warning when no sandbox can isolate it."""
     import sys
-    from . import sandbox
+    from fbaconf.isolation import sandbox
     from .adapters import CommandAdapter
     if not isinstance(adapter, CommandAdapter):
         return
@@ -191,7 +193,7 @@ class interruptible:
     def __enter__(self) -> _Stop:
         import signal
         import threading
-        from . import sandbox
+        from fbaconf.isolation import sandbox
         self.stop = _Stop()
         self.old = {}
         sandbox.reset_stop()
@@ -205,7 +207,7 @@ class interruptible:
 
     def __exit__(self, *exc) -> None:
         import signal
-        from . import sandbox
+        from fbaconf.isolation import sandbox
         for sig, h in self.old.items():
             signal.signal(sig, h)
         sandbox.reset_stop()

@@ -311,7 +311,7 @@ class _Runner:
             return Job(workdir=workdir, values=self._values(n, workdir), frames=n)
 
         if isinstance(a, CommandAdapter):
-            from . import sandbox
+            from fbaconf.isolation import sandbox
             argv, job = self._argv(job_for)
             from .runner import hidden_from_decoders
             view = a.sandbox_view(argv, workdir, hidden=hidden_from_decoders())
@@ -344,7 +344,7 @@ class _Runner:
 
     def _run_persistent(self, n: int) -> float:
         """One input to the persistent decoder: the time from sending it to its answer."""
-        from .persistent import PersistentDecoder
+        from fbaconf.isolation.persistent import PersistentDecoder
         from .runner import hidden_from_decoders
         a = self.adapter
         root = self.runs_dir / "serve"
@@ -370,9 +370,10 @@ class _Runner:
 
     def _judge(self, res, n: int, argv) -> None:
         """A run that did not decode (exit code, crash, timeout...) fails the measurement."""
-        from . import exits
+        from fbaconf.isolation import endings
+        from .compare.ladder import outcome_for
         a = self.adapter
-        verdict = exits.outcome_for(exits.classify(res, a.limits, a.reject_exit_codes))
+        verdict = outcome_for(endings.classify(res, a.limits, a.reject_exit_codes))
         if verdict is not None:
             raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
 

@@ -6,7 +6,7 @@
  * interpolated 1/d), exact ties to the lowest triangle index — with the same integer edge
  * functions and the same floating-point operations in the same order (built with
  * -ffp-contract=off: no fused multiply-add), so the winners are identical; the barycentrics of
- * the winners are then computed by raster.py in numpy as before. tests/test_rendering.py checks
+ * the winners are then computed by raster.py in numpy as before. tests/unit/test_rendering.py checks
  * the two paths against each other; `fbaconf golden verify` reproduces every golden image.
  *
  * winners(width, height, far, any_beyond, tri_i64, tri_f64, beyond_u8, zbuf_f64, tbuf_i64)

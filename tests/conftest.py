@@ -1,7 +1,22 @@
-"""Shared test configuration: hypothesis profiles and the optional external data folder."""
+"""Shared test configuration: the tiers, hypothesis profiles, the optional external data folder
+and the fixtures several tiers share (one certified package per session).
+
+Tiers, by folder (each test is marked with its folder's name, so ``-m unit`` works too):
+
+* ``tests/unit/`` — one module or one verb in-process: the fast tier of the developer loop
+  (``python -m pytest tests/unit -n auto``, under 3 minutes on 2 cores);
+* ``tests/integration/`` — decoders run through the harness, the sandbox, the fuzzer, the
+  cluster, the installed wheel;
+* ``tests/suites/`` — the suites' own checks: rebuilt byte for byte, coverage, mutants, the
+  image-stage renderer matrices;
+* ``tests/attacks/`` — hostile decoders, manifests and packages.
+"""
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -16,6 +31,18 @@ settings.register_profile("stress", max_examples=2000, deadline=None,
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
 REPO = Path(__file__).resolve().parents[1]
+TESTS = REPO / "tests"
+TIERS = ("unit", "integration", "suites", "attacks")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark each test with its tier (its folder under tests/)."""
+    for item in items:
+        path = Path(item.path).resolve()
+        if path.is_relative_to(TESTS):
+            tier = path.relative_to(TESTS).parts[0]
+            if tier in TIERS:
+                item.add_marker(getattr(pytest.mark, tier))
 SHARED_FAP = REPO.parent / "shared" / "data" / "fap"
 
 
@@ -29,3 +56,40 @@ def real_files() -> list[Path]:
     if not files:
         pytest.skip("../shared/data/fap is not present (external suite)")
     return files
+
+
+# ------------------------------------------------------------------ one certified package per session
+def _certify(out: Path, *extra: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", "reference-inprocess",
+                           "--claim", "simple@1", "--no-speed", "-o", str(out), *extra],
+                          capture_output=True, text=True, timeout=600)
+
+
+@pytest.fixture(scope="session")
+def _packages(tmp_path_factory):
+    """``certify --decoder reference-inprocess --claim simple@1 --no-speed``, made once per session
+    (per worker under xdist): unsigned, and signed with a fresh key."""
+    from fbaconf.harness import certify
+    root = tmp_path_factory.mktemp("packages")
+    unsigned = _certify(root / "unsigned")
+    certify.keygen(root / "keys")
+    signed = _certify(root / "signed", "--key", str(root / "keys" / certify.KEY_FILE))
+    return root, unsigned, signed
+
+
+@pytest.fixture
+def certified_package(_packages, tmp_path) -> Path:
+    """A fresh copy of the session's unsigned simple@1 package (the test may change it)."""
+    root, run, _ = _packages
+    assert run.returncode == 0, run.stdout + run.stderr
+    return Path(shutil.copytree(root / "unsigned", tmp_path / "package", symlinks=True))
+
+
+@pytest.fixture
+def signed_package(_packages, tmp_path) -> tuple[Path, Path]:
+    """A fresh copy of the session's signed simple@1 package and the public key that checks it."""
+    from fbaconf.harness import certify
+    root, _, run = _packages
+    assert run.returncode == 0, run.stdout + run.stderr
+    pkg = Path(shutil.copytree(root / "signed", tmp_path / "package", symlinks=True))
+    return pkg, root / "keys" / certify.PUB_FILE

@@ -12,7 +12,7 @@ from fbaconf.harness.results import RunRecord
 from .common import _NONFINITE
 
 
-def _jsonable(obj: Any) -> Any:
+def jsonable(obj: Any) -> Any:
     """Plain JSON values: numpy scalars/arrays, paths and enums converted; non-finite floats as
     the strings ``Infinity``/``-Infinity``/``NaN`` (strict JSON has no such numbers)."""
     if obj is None or isinstance(obj, (bool, str, int)):
@@ -22,13 +22,13 @@ def _jsonable(obj: Any) -> Any:
             return obj
         return "NaN" if math.isnan(obj) else ("Infinity" if obj > 0 else "-Infinity")
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if hasattr(obj, "value") and isinstance(getattr(obj, "value"), str):  # Enum
         return obj.value
     if hasattr(obj, "tolist"):  # numpy array or scalar
-        return _jsonable(obj.tolist())
+        return jsonable(obj.tolist())
     if isinstance(obj, os.PathLike):
         return os.fspath(obj)
     return str(obj)
@@ -56,7 +56,7 @@ def _restore(doc: dict) -> dict:
 
 def report_json(record: RunRecord) -> dict:
     """The JSON document written by :func:`write_json` (``record.to_json()`` made strict JSON)."""
-    return _jsonable(record.to_json())
+    return jsonable(record.to_json())
 
 
 def write_json(record: RunRecord, path) -> Path:

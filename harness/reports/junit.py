@@ -12,7 +12,7 @@ from xml.etree import ElementTree as ET
 from fbaconf._atomic import atomic_write_bytes
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
 from .common import _fmt_value, _suite_names, clean_text, format_difference, verdict
-from .jsonreport import _jsonable
+from .jsonreport import jsonable
 
 
 def _sec(x: float) -> str:
@@ -56,7 +56,7 @@ def _properties(parent: ET.Element, props: list[tuple[str, Any]]) -> None:
     el = ET.SubElement(parent, "properties")
     for name, value in props:
         if isinstance(value, (dict, list)):
-            value = json.dumps(_jsonable(value), sort_keys=True, ensure_ascii=False)
+            value = json.dumps(jsonable(value), sort_keys=True, ensure_ascii=False)
         ET.SubElement(el, "property", name=clean_text(name), value=clean_text("" if value is None else value))
 
 

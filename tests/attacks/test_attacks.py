@@ -21,7 +21,8 @@ import pytest
 
 import fbaconf
 from fbaconf.conformance.suite import golden_root, load_suites
-from fbaconf.harness import adapters, certify, sandbox
+from fbaconf.harness import adapters, certify
+from fbaconf.isolation import cgroups, sandbox
 from fbaconf.harness.results import Outcome, ResultLog
 from fbaconf.harness.runner import run_cases
 
@@ -37,7 +38,7 @@ def needs_sandbox():
 
 
 def needs_cgroups():
-    if not sandbox._cgroup_bases():
+    if not cgroups.cgroup_bases():
         if os.environ.get("CI") and os.geteuid() == 0:
             pytest.fail("no writable cgroups in CI (running as root)")
         pytest.skip("no writable cgroup hierarchy here (not root?): no whole-tree limits")
@@ -315,14 +316,8 @@ def test_certify_leaves_a_users_folder_intact(tmp_path):
     assert (mine / "notes.txt").read_text() == "keep me" and (mine / ".git").is_dir()
 
 
-def test_a_re_signed_package_fails_verification(tmp_path):
-    keys = tmp_path / "keys"
-    certify.keygen(keys)
-    out = tmp_path / "cert"
-    r = fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(out),
-                    "--no-speed", "--key", str(keys / certify.KEY_FILE))
-    assert r.returncode == 0, r.stdout + r.stderr
-    pub = keys / certify.PUB_FILE
+def test_a_re_signed_package_fails_verification(signed_package):
+    out, pub = signed_package
     assert certify.verify(out, pub) == ([], "signed")
     # The attacker edits the report, recomputes every digest and the certificate's — but has no key.
     report = out / "report.json"
@@ -344,26 +339,20 @@ def test_a_re_signed_package_fails_verification(tmp_path):
     assert v.returncode == 1
 
 
-def test_unsigned_packages_say_so(tmp_path):
-    out = tmp_path / "cert"
-    assert fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(out),
-                       "--no-speed").returncode == 0
+def test_unsigned_packages_say_so(certified_package):
+    out = certified_package
     v = fbaconf_cli("certify", "verify", str(out))
     assert v.returncode == 0 and "unsigned" in v.stdout
 
 
-def test_sums_entries_outside_the_package_are_refused(tmp_path):
-    out = tmp_path / "cert"
-    assert fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(out),
-                       "--no-speed").returncode == 0
+def test_sums_entries_outside_the_package_are_refused(certified_package):
+    out = certified_package
     sums = out / certify.SUMS
     sums.write_text(sums.read_text() + f"{digest(Path('/etc/hostname'))}  ../../../../../../etc/hostname\n")
     assert any("would leave" in p for p in certify.verify_package(out))
     (out / "fifo").unlink(missing_ok=True)
     os.mkfifo(out / "fifo")
-    t0 = time.perf_counter()
-    certify.verify_package(out)
-    assert time.perf_counter() - t0 < 10
+    certify.verify_package(out)  # returns (a FIFO is refused unopened, never read: no hang)
 
 
 def test_interruption_kills_running_decoders_and_resume_is_exact(tmp_path):

@@ -1,4 +1,4 @@
-/* Planted-bug decoder for the fuzzer's acceptance test (tests/test_fuzz.py): a face object
+/* Planted-bug decoder for the fuzzer's acceptance test (tests/integration/test_fuzz.py): a face object
  * stream front-end that parses plane headers (the first plane and every plane after a plane
  * start code) and then reports the payload as not supported (exit 69). Rejects what it cannot
  * parse with exit 2.

@@ -1,0 +1,137 @@
+"""``fbaconf bench``: a decoder's decode and render speed against the claimed level's minimums
+(the measurement itself is :mod:`.speed`)."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+from .adapters import resolve
+from .reports.jsonreport import jsonable
+from .session import preflight, resolve_claim
+from .speed import OPERATIONS, SpeedError, SpeedRunError, failed_result, measure, skip_reason
+
+
+def register(sub) -> None:
+    p = sub.add_parser("bench", help="measure decode/render speed against the level minimums",
+                       description="Measure a decoder's per-frame decode and render cost (free of process "
+                                   "start-up: several content lengths, a linear fit, median over repeats) and "
+                                   "compare the rates with the claimed level's minimums. Exit 0 all pass, "
+                                   "1 a decoder run failed, 2 setup error, 3 too slow.")
+    p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
+    p.add_argument("--claim", help="profile@level (default: the decoder's highest claim)")
+    p.add_argument("--repeats", type=int, default=3, help="repeats of the length series (default 3; median)")
+    p.add_argument("--operation", choices=("decode", "render"), action="append",
+                   help="only this operation (repeatable; default both, render when the decoder outputs images)")
+    p.add_argument("--lengths", help="fixed content lengths in frames, comma-separated (default: adaptive)")
+    p.add_argument("--target-seconds", type=float, default=0.5,
+                   help="adaptive lengths: frame-dependent time of the longest run (default 0.5; at least "
+                        "the start-up time)")
+    p.add_argument("--render-size", default="64x64", help="image size of the render measurement (default 64x64)")
+    p.add_argument("--work-dir", type=Path, help="keep the generated content here (default: a temporary folder)")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.set_defaults(func=cmd_bench)
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+        if w < 1 or h < 1:
+            raise ValueError
+        return w, h
+    except ValueError:
+        raise ValueError(f"--render-size must be WxH, e.g. 64x64, not {text!r}") from None
+
+
+def _usage(msg: str) -> int:
+    print(f"fbaconf bench: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def cmd_bench(args) -> int:
+    adapter = resolve(args.decoder)  # ManifestError -> exit 2 (cli.main)
+    claim = resolve_claim(args.claim, adapter)
+    preflight(adapter)
+    if args.work_dir:
+        args.work_dir = args.work_dir.resolve()
+    if args.repeats < 1:
+        return _usage("--repeats must be >= 1")
+    lengths = None
+    if args.lengths:
+        try:
+            lengths = [int(x) for x in args.lengths.split(",") if x.strip()]
+        except ValueError:
+            return _usage(f"--lengths must be comma-separated frame counts, not {args.lengths!r}")
+    try:
+        size = _parse_size(args.render_size)
+    except ValueError as e:
+        return _usage(str(e))
+    ops = args.operation or list(OPERATIONS)
+    results, skipped, failed = [], [], False
+    for op in ops:
+        reason = skip_reason(adapter, op)
+        if reason:
+            skipped.append((op, reason))
+            continue
+        if not args.json:
+            print(f"measuring {op} speed of {adapter.name} for {claim}...", file=sys.stderr, flush=True)
+        try:
+            r = measure(adapter, claim, op, lengths=lengths, repeats=args.repeats,
+                        work_dir=(args.work_dir / op) if args.work_dir else None,
+                        target_s=args.target_seconds, render_size=size)
+        except SpeedRunError as e:
+            r = failed_result(e, claim)
+            failed = True
+        except SpeedError as e:
+            return _usage(str(e))
+        results.append(r)
+    code = 1 if failed else (3 if any(not r.passed for r in results) else 0)
+    if args.json:
+        doc = {"format": "fbaconf.bench/1", "decoder": adapter.describe(), "claim": claim, "exit_code": code,
+               "speed": [r.to_json() for r in results],
+               "skipped": [{"operation": op, "reason": why} for op, why in skipped]}
+        print(json.dumps(jsonable(doc), indent=2))
+        return code
+    print(render_table(results))
+    for op, why in skipped:
+        print(f"{op}: skipped: {why}")
+    for r in results:
+        if r.message:
+            print(f"{r.operation}: {r.message}")
+    verdict = {0: "PASS: every measured rate meets the level minimum",
+               1: "ERROR: a decoder run failed during the measurement",
+               3: "FAIL: below the level's minimum rate (speed requirement only)"}[code]
+    print(f"result: {verdict}")
+    return code
+
+
+def render_table(results) -> str:
+    """Plain-text table: operation, per-frame ms, start-up, measured/required fps, ratio, verdict,
+    provenance (provisional limits marked with ``*``)."""
+    header = ["operation", "claim", "per-frame ms", "startup s", "measured fps", "required fps", "ratio",
+              "verdict", "provenance"]
+    rows = []
+    for r in results:
+        ratio = (r.rate_fps / r.required_fps) if r.required_fps and r.required_fps > 0 else math.inf
+        prov = r.provenance + (" *" if r.provenance == "provisional" else "")
+        rows.append([r.operation, r.claim, _num(r.per_frame_s * 1000, 3), _num(r.startup_s, 3),
+                     _num(r.rate_fps, 1), _num(r.required_fps, 1), _num(ratio, 2),
+                     "PASS" if r.passed else "FAIL", prov])
+    widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(header)]
+    right = {2, 3, 4, 5, 6}
+
+    def line(cells):
+        return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+    out = [line(header), line(["-" * w for w in widths])] + [line(r) for r in rows]
+    if any(r.provenance == "provisional" for r in results):
+        out.append("* provisional level limit (profiles/data/profiles.toml): not from the ISO text")
+    return "\n".join(s.rstrip() for s in out)
+
+
+def _num(v: float, digits: int) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "-"
+    if math.isinf(v):
+        return "inf"
+    return f"{v:.{digits}f}"

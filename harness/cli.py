@@ -1,0 +1,158 @@
+"""The harness verbs, each registered here: ``fbaconf run``, ``fbaconf certify`` (+ ``certify
+verify``, ``certify keygen``) and ``fbaconf bench`` (:mod:`.bench`).
+
+Exit codes (architecture): 0 every required case passes (and the speed requirements when
+measured); 1 some required case fails (a new failure, when ``--baseline`` is given);
+2 usage or setup error; 3 only speed requirements missed.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from . import bench
+from .selection import select_cases
+from .session import RunOptions, UsageError, check_suites, execute, preflight, resolve_claim, use_color, write_reports
+
+
+def register(sub) -> None:
+    r = sub.add_parser("run", help="run conformance suites against a decoder",
+                       description="Run the conformance suites against a decoder (a manifest .toml or a bundled "
+                                   "adapter name: reference, reference-inprocess, dummy) and report per case.")
+    _common(r)
+    r.add_argument("--suite", action="append", default=[], help="only this suite (repeatable)")
+    r.add_argument("--case", action="append", default=[], help="only cases whose id matches this glob (repeatable)")
+    r.add_argument("--only-required", action="store_true",
+                   help="skip cases outside the claim instead of reporting them NotSupported")
+    r.add_argument("-o", "--output", type=Path, default=None, help="run folder (default fbaconf-run/<decoder>)")
+    r.add_argument("--resume", action="store_true", help="continue an interrupted run in the same folder")
+    r.add_argument("--baseline", type=Path, help="known failures/flakes (case,Outcome[,signature] lines): only "
+                   "new failures, and fixed cases, fail the run")
+    r.add_argument("--flakes", type=Path, help="file of regular expressions (one per line) of case ids whose "
+                   "failures are accepted as flaky")
+    r.add_argument("--retries", type=int, default=0, help="re-run failing cases up to N times; a case that then "
+                   "passes is flaky (default 0)")
+    r.add_argument("--allow-fixed", action="store_true",
+                   help="do not fail the run when a case the baseline lists as failing now passes")
+    r.add_argument("--write-baseline", type=Path, help="write the failing cases of this run as a baseline file")
+    r.add_argument("--junit", type=Path, help="write JUnit XML here")
+    r.add_argument("--json", type=Path, help="write the JSON report here")
+    r.add_argument("--html", type=Path, help="write the HTML report into this folder")
+    r.add_argument("--speed", action="store_true", help="also measure decode/render speed against the level")
+    r.set_defaults(func=cmd_run)
+
+    c = sub.add_parser("certify", help="certify a decoder for a claim (or verify a certificate, make a key)",
+                       description="`fbaconf certify --decoder D --claim P@L -o DIR [--key K]` runs exactly the "
+                                   "cases the claim requires plus the speed measurement and writes a certification "
+                                   "package (sha256 digests of every file, signed with an Ed25519 key when --key is "
+                                   "given). `fbaconf certify verify DIR [--pubkey P]` re-checks a package. "
+                                   "`fbaconf certify keygen -o DIR` makes a key pair.")
+    c.add_argument("action", nargs="?", choices=("verify", "keygen"), help="verify a package / make a key pair")
+    c.add_argument("package", nargs="?", type=Path, help="(verify) the package folder")
+    c.add_argument("--key", type=Path, help="sign the package with this Ed25519 private key (PEM)")
+    c.add_argument("--pubkey", type=Path, help="(verify) check the package's signature with this public key")
+    c.add_argument("--force", action="store_true", help="replace an existing certification package in -o")
+    c.add_argument("--allow-unisolated", action="store_true",
+                   help="certify even without the bubblewrap sandbox (the statement says so)")
+    c.add_argument("--decoder", help="decoder manifest .toml or bundled adapter name")
+    c.add_argument("--claim", help="profile@level to certify (default: the decoder's highest claim)")
+    c.add_argument("-o", "--output", type=Path, help="package folder to write")
+    c.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
+    c.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
+                   help="run the cases as tasks on a Dask cluster instead of the local pool")
+    c.add_argument("--no-speed", action="store_true", help="skip the speed measurement (certificate says so)")
+    c.set_defaults(func=cmd_certify)
+
+    bench.register(sub)
+
+
+def _common(p) -> None:
+    p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
+    p.add_argument("--claim", help="profile@level under test (default: the decoder's highest claim)")
+    p.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
+    p.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
+                   help="run the cases as tasks on a Dask cluster instead of the local pool")
+    p.add_argument("--keep-workdirs", action="store_true", help="keep each case's working folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+# ------------------------------------------------------------------ run
+
+
+def cmd_run(args) -> int:
+    from fbaconf.conformance.suite import load_suites
+    from . import baseline as bl
+    from . import reports
+    from .adapters import resolve
+    adapter = resolve(args.decoder)
+    claim = resolve_claim(args.claim, adapter)
+    suites = load_suites()
+    check_suites(suites, args.suite)
+    if args.retries < 0:
+        raise UsageError("--retries must be >= 0")
+    cases = select_cases(suites, claim, args.suite, args.case, args.only_required, adapter)
+    if not cases:
+        raise UsageError("no case selected (check --case and --only-required)")
+    preflight(adapter)
+    out_dir = (args.output or Path("fbaconf-run") / adapter.name).resolve()
+    options = RunOptions(jobs=args.jobs, cluster=args.cluster, resume=args.resume, keep_workdirs=args.keep_workdirs,
+                         progress=False if args.no_progress else None, baseline=args.baseline, flakes=args.flakes,
+                         retries=args.retries, allow_fixed=args.allow_fixed, speed=args.speed)
+    record = execute(adapter, claim, cases, suites, out_dir, options)
+    paths = write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
+    if args.write_baseline:
+        n = bl.write(record.results, args.write_baseline)
+        print(f"wrote baseline with {n} known failure(s) to {args.write_baseline}")
+    print(reports.terminal_summary(record, color=use_color(sys.stdout)))
+    if record.baseline_summary:
+        print(f"baseline: {record.baseline_summary}")
+    if record.missing:
+        print(f"claim {claim} not met: the decoder could not take every case it requires:")
+        for m in record.missing:
+            print(f"  {m}")
+        if adapter.is_player:
+            print("  (a .fap player cannot hold an MPEG-4 profile claim; see docs/harness.md, \"Players\")")
+    print(f"reports: {paths['html']}  {paths['json']}  {paths['junit']}")
+    return record.exit_code
+
+
+# ------------------------------------------------------------------ certify
+
+
+def cmd_certify(args) -> int:
+    from . import certify
+    if args.action == "keygen":
+        if not args.output:
+            raise UsageError("certify keygen needs -o DIR")
+        key, pub = certify.keygen(args.output)
+        print(f"wrote {key} (private: keep it secret) and {pub} (public: give it to whoever verifies)")
+        return 0
+    if args.action == "verify":
+        if args.package is None:
+            raise UsageError("certify verify: give the package folder")
+        problems, state = certify.verify(args.package, args.pubkey)
+        for p in problems:
+            print(f"certify verify: {p}", file=sys.stderr)
+        if problems:
+            print(f"certify verify: FAILED ({len(problems)} problem(s); {state})")
+            return 1
+        info = json.loads(certify.read_regular(args.package / certify.CERTIFICATE, 1 << 20))
+        print(f"certify verify: OK ({state}) — {info.get('decoder')} {info.get('claim')}: {info.get('verdict')}")
+        return 0
+    if not args.decoder or not args.output:
+        raise UsageError("--decoder and -o/--output are required")
+    return certify.certify(args.decoder, args.claim, args.output.resolve(), jobs=args.jobs, speed=not args.no_speed,
+                           key=args.key, force=args.force, allow_unisolated=args.allow_unisolated,
+                           cluster=args.cluster)
+
+
+# ------------------------------------------------------------------ bench
+# Verb ``fbaconf bench``: a decoder's decode/render speed against the claimed level's minimums.
+# 
+# ``fbaconf bench --decoder D [--claim P@L] [--repeats N] [--operation decode|render] [--json]``
+# 
+# Per-frame cost is measured free of process start-up (``harness/speed.py``: the same content
+# at several lengths, ``time = startup + frames x per_frame`` fitted per repeat, medians).
+# Exit codes: 0 every measured rate meets its minimum; 1 a decoder run failed (exit code,
+# crash, timeout, missing output); 2 usage or setup error; 3 a speed requirement is missed.

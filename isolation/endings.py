@@ -1,0 +1,183 @@
+"""How a decoder process ended: one classifier for ``run``, ``certify`` and ``fuzz``.
+
+Every finished invocation of a decoder under test becomes one :class:`Ending`:
+
+=================  ====================================================================
+``kind``           meaning
+=================  ====================================================================
+``setup``          the harness or the decoder's set-up failed, not the decoding: the
+                   launcher could not start, the program cannot be executed (126/127),
+                   or the decoder could not open a file the harness gave it (ENOENT).
+                   Never a Pass, never the decoder's verdict on the stream.
+``timeout``        killed at the wall-clock or CPU-time limit.
+``memory``         over the memory limit.
+``output-limit``   wrote more than the output limit.
+``crash``          a signal, or a crash report on stderr whatever the exit code:
+                   sanitizers (ASan/UBSan/MSan/TSan/LSan), Rust and Go panics, uncaught
+                   Java/Python/.NET exceptions; ``report`` names the kind.
+``not-supported``  exit 69.
+``decoded``        exit 0 with no crash report.
+``reject``         one of the decoder's documented reject exit codes
+                   (manifest ``reject_exit_codes``, default 1 and 2).
+``unexpected``     any other exit code.
+=================  ====================================================================
+
+The run maps kinds to outcomes (``harness/compare/ladder.py``: ``outcome_for``), the fuzzer to
+findings; both call :func:`classify`, so the same process ending is judged the same way everywhere.
+"""
+from __future__ import annotations
+
+import hashlib
+import re
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+
+EXIT_NOT_SUPPORTED = 69
+DEFAULT_REJECT_EXIT_CODES = frozenset({1, 2})
+
+_ASAN_FRAME = re.compile(r"^\s*#\d+ 0x[0-9a-f]+ in (\S+)", re.M)
+_SANITIZER = re.compile(r"ERROR: (\w+Sanitizer): ([\w-]+)")
+_UBSAN = re.compile(r"\S+:\d+:\d+: runtime error: ([^\n]+)")  # file:line:col: runtime error: …
+_PY_FRAME = re.compile(r'^\s*File "([^"]+)", line (\d+), in (\S+)', re.M)
+_GO_FRAME = re.compile(r"^(\S+\.\S+)\(.*\)$", re.M)
+_GO_PANIC = re.compile(r"^(?:panic: |fatal error: )([^\n]*)", re.M)
+_RUST_PANIC = re.compile(r"thread '[^']*' panicked at (?:'[^']*', )?([^\n:]+:\d+)")
+_JAVA_EXC = re.compile(r"Exception in thread \"[^\"]*\" ([\w.$]+)")
+_JAVA_FRAME = re.compile(r"^\s+at (\S+)\(", re.M)
+_DOTNET_EXC = re.compile(r"Unhandled exception\. ([\w.]+)")
+_BWRAP = re.compile(r"^bwrap: ([^\n]*)", re.M)
+_ENOENT = re.compile(r"No such file or directory|\bENOENT\b|FileNotFoundError|NoSuchFileException|"
+                     r"FileNotFoundException|cannot find the (?:file|path) specified")
+
+
+@dataclass(frozen=True)
+class CrashReport:
+    """A crash report found on stderr: ``kind`` in words a vendor knows, ``signature`` a short
+    hash of the top frames (deduplicates fuzz findings)."""
+    kind: str
+    signature: str
+
+
+def _h(items) -> str:
+    return hashlib.sha256("\n".join(items).encode()).hexdigest()[:10]
+
+
+def crash_report(text: str) -> CrashReport | None:
+    """The crash report a process printed: sanitizer, Python traceback, Go/Rust panic, uncaught
+    Java or .NET exception — or None."""
+    m = _SANITIZER.search(text)
+    if m or "UndefinedBehaviorSanitizer" in text or _UBSAN.search(text):
+        frames = _ASAN_FRAME.findall(text)[:5]
+        if m:
+            kind = f"{m.group(1)} {m.group(2)}"
+        else:
+            u = _UBSAN.search(text)
+            kind = f"UndefinedBehaviorSanitizer: {u.group(1)[:80]}" if u else "UndefinedBehaviorSanitizer"
+        return CrashReport(kind, _h(frames or [kind]))
+    m = _RUST_PANIC.search(text)
+    if m:
+        return CrashReport("Rust panic", _h([m.group(1)]))
+    m = _GO_PANIC.search(text)
+    if m and "goroutine" in text:
+        return CrashReport("Go panic", _h(_GO_FRAME.findall(text)[:5] or [m.group(1)]))
+    m = _JAVA_EXC.search(text)
+    if m:
+        return CrashReport(f"uncaught Java exception {m.group(1)}", _h(_JAVA_FRAME.findall(text)[:5] or [m.group(1)]))
+    m = _DOTNET_EXC.search(text)
+    if m:
+        return CrashReport(f"unhandled .NET exception {m.group(1)}", _h([m.group(1)]))
+    if "Traceback (most recent call last)" in text:
+        frames = [f"{Path(f).name}:{ln}:{fn}" for f, ln, fn in _PY_FRAME.findall(text)][-5:]
+        last = [ln for ln in text.strip().splitlines() if ln.strip()][-1:] or ["?"]
+        exc = last[0].split(":")[0].strip()
+        return CrashReport(f"uncaught Python exception {exc}", _h(frames + [exc]))
+    return None
+
+
+class EndingKind(StrEnum):
+    """The fixed vocabulary of process endings (the table above)."""
+    SETUP = "setup"
+    TIMEOUT = "timeout"
+    MEMORY = "memory"
+    OUTPUT_LIMIT = "output-limit"
+    CRASH = "crash"
+    NOT_SUPPORTED = "not-supported"
+    DECODED = "decoded"
+    REJECT = "reject"
+    UNEXPECTED = "unexpected"
+
+
+@dataclass(frozen=True)
+class Ending:
+    kind: EndingKind
+    message: str
+    report: CrashReport | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", EndingKind(self.kind))  # a misspelt kind fails here
+
+    @property
+    def signature(self) -> str:
+        """What identifies this ending for deduplication (fuzz findings)."""
+        return f"{self.kind}:{self.report.kind}:{self.report.signature}" if self.report else self.kind
+
+
+def _last_line(text: str) -> str:
+    lines = [ln for ln in text.strip().splitlines() if ln.strip()]
+    return f"; stderr: {lines[-1][:300]}" if lines else ""
+
+
+def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending:
+    """One :class:`Ending` for a finished :class:`~fbaconf.isolation.sandbox.ProcResult`."""
+    cmd = Path(res.argv[0]).name if res.argv else "decoder"
+    err = res.stderr_tail or ""
+    rc = res.returncode
+    if "harness-start-failed" in res.notes:
+        return Ending(EndingKind.SETUP, f"harness could not start the launcher: {err.strip()[:300]}")
+    if rc == 127 and err.startswith("fbaconf-limit:"):
+        return Ending(EndingKind.SETUP, err.strip()[:300])
+    if res.timed_out:
+        why = "CPU-time limit" if "cpu-limit" in res.notes else f"timeout of {limits.timeout_s:g} s"
+        return Ending(EndingKind.TIMEOUT, f"{cmd} did not finish within the {why} (killed after {res.elapsed_s:.2f} s)")
+    if res.memory_limit_hit and (rc != 0 or "tree-memory-limit" in res.notes):
+        how = f"killed by {res.signal}" if res.signal else f"exit code {rc}"
+        kind = ("whole-process-tree" if "tree-memory-limit" in res.notes else
+                "resident-set" if limits.memory_kind == "rss" else "address-space")
+        return Ending(EndingKind.MEMORY, f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; "
+                                f"peak RSS {res.maxrss_mb:.0f} MB)")
+    if "supervisor-lost" in res.notes:
+        return Ending(EndingKind.UNEXPECTED, f"the fork server running {cmd} died during this input (the decoder killed "
+                                    f"its parent process, or a process-tree limit did): its ending is unknown — "
+                                    f"a decoder must not signal processes it did not start{_last_line(err)}")
+    if res.output_limit_hit:
+        return Ending(EndingKind.OUTPUT_LIMIT, f"{cmd} wrote more than the {limits.output_mb} MB output limit "
+                                      f"({res.output_bytes / 2**20:.0f} MB seen" +
+                                      (f", killed by {res.signal})" if res.signal else ")"))
+    report = crash_report(err)
+    if res.signal:
+        what = f" ({report.kind})" if report else ""
+        return Ending(EndingKind.CRASH, f"{cmd} crashed: killed by {res.signal}{what}{_last_line(err)}", report)
+    m = _BWRAP.search(err)
+    if m and rc == 1:
+        what = m.group(1)
+        if what.startswith("execvp "):
+            prog, _, why = what[len("execvp "):].partition(": ")
+            return Ending(EndingKind.SETUP, f"sandbox: cannot execute {prog!r}: {why}")
+        return Ending(EndingKind.SETUP, f"the sandbox (bubblewrap) could not start the decoder: {what}")
+    if rc in (126, 127):
+        return Ending(EndingKind.SETUP, f"{cmd} could not be executed (exit code {rc}){_last_line(err)}")
+    if rc != 0 and _ENOENT.search(err):
+        return Ending(EndingKind.SETUP, f"{cmd} could not open a file it was given (exit code {rc}): a set-up failure, "
+                               f"not a verdict on the stream{_last_line(err)}")
+    if report is not None:
+        return Ending(EndingKind.CRASH, f"{cmd} crashed: {report.kind} (exit code {rc}){_last_line(err)}", report)
+    if rc == EXIT_NOT_SUPPORTED:
+        return Ending(EndingKind.NOT_SUPPORTED, f"{cmd} exited with code 69 (not supported){_last_line(err)}")
+    if rc == 0:
+        return Ending(EndingKind.DECODED, f"{cmd} exited 0")
+    if rc in reject_exit_codes:
+        return Ending(EndingKind.REJECT, f"{cmd} exited with code {rc}, a reject{_last_line(err)}")
+    codes = ", ".join(map(str, sorted(reject_exit_codes)))
+    return Ending(EndingKind.UNEXPECTED, f"{cmd} exited with code {rc}, not a documented reject code ({codes})"
+                                f"{_last_line(err)}")

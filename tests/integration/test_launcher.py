@@ -1,0 +1,78 @@
+"""The per-case launcher (isolation/sandbox.py): prlimit applies the limits; with cgroups, a
+shell holds the launch until the harness has moved it into them."""
+from __future__ import annotations
+
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from fbaconf.isolation import sandbox
+
+needs_prlimit = pytest.mark.skipif(shutil.which("prlimit") is None, reason="util-linux prlimit not installed")
+
+
+@needs_prlimit
+def test_limits_reach_the_program():
+    argv, held = sandbox.launch_argv(512 * 2**20, 3 * 2**20, 7, [], ["/bin/sh", "-c", "ulimit -v; ulimit -f; ulimit -t; ulimit -c"])
+    assert not held
+    out = subprocess.run(argv, capture_output=True, text=True, check=True).stdout.split()
+    # ulimit -v in KiB, -f in 512-byte blocks (dash), -t in seconds, -c core blocks
+    assert out == [str(512 * 1024), str(3 * 2**20 // 512), "7", "0"], out
+
+
+@needs_prlimit
+def test_a_limit_of_zero_is_not_set():
+    argv, _ = sandbox.launch_argv(0, 0, 0, [], ["/bin/true"])
+    assert not any(a.startswith(("--as", "--fsize", "--cpu")) for a in argv)
+
+
+@needs_prlimit
+def test_held_launch_waits_for_the_cgroup_move(tmp_path: Path):
+    """The program must not start before every cgroup has its pid: a fake cgroup folder
+    records what the harness wrote, and the program writes a file only after the go."""
+    cg = tmp_path / "cg"
+    cg.mkdir()
+    (cg / "cgroup.procs").write_text("")
+    marker = tmp_path / "started"
+    argv, held = sandbox.launch_argv(0, 0, 0, [cg], ["/bin/sh", "-c", f"echo $$ > {marker}"])
+    assert held and argv[0] == "/bin/sh"
+    proc = subprocess.Popen(argv, stdin=subprocess.PIPE, start_new_session=True)
+    time.sleep(0.3)
+    assert not marker.exists(), "the program ran before the harness let it go"
+    assert sandbox._release(proc, [cg]) is None
+    assert proc.wait(5) == 0
+    assert (cg / "cgroup.procs").read_text() == str(proc.pid)
+    assert marker.read_text().strip() == str(proc.pid)  # exec chain: the same process
+
+
+@needs_prlimit
+def test_a_cgroup_that_cannot_be_joined_stops_the_launch(tmp_path: Path):
+    marker = tmp_path / "started"
+    gone = tmp_path / "no-such-cgroup"
+    argv, held = sandbox.launch_argv(0, 0, 0, [gone], ["/bin/sh", "-c", f"touch {marker}"])
+    proc = subprocess.Popen(argv, stdin=subprocess.PIPE, start_new_session=True)
+    why = sandbox._release(proc, [gone])
+    assert why is not None and why.startswith("fbaconf-limit: cannot join cgroup") and str(gone) in why
+    assert proc.poll() is not None and not marker.exists()
+
+
+def test_without_prlimit_the_python_launcher_joins_and_limits(monkeypatch, tmp_path: Path):
+    monkeypatch.setattr(sandbox.shutil, "which", lambda name: None)
+    argv, held = sandbox.launch_argv(1 << 30, 0, 5, [tmp_path], ["/bin/true"])
+    assert not held and argv[3] == str(sandbox.LIMIT_LAUNCHER)
+    assert argv[4:10] == [str(1 << 30), "0", "5", "--cgroup", str(tmp_path), "--"]
+
+
+@needs_prlimit
+def test_a_lower_hard_limit_caps_the_value():
+    """Under a hard CPU limit of 20 s (not root's to raise), asking for 50 gives 20, not an error."""
+    import sys
+    code = ("import subprocess; from fbaconf.isolation import sandbox; "
+            "a, _ = sandbox.launch_argv(0, 0, 50, [], ['/bin/sh', '-c', 'ulimit -t; ulimit -H -t']); "
+            "print(subprocess.run(a, capture_output=True, text=True, check=True).stdout)")
+    out = subprocess.run(["prlimit", "--cpu=20:20", "--", sys.executable, "-c", code],
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["20", "20"], out

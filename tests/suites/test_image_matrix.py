@@ -1,0 +1,57 @@
+"""The image stage against renderers it has never seen (issue 21): every faithful renderer —
+whatever its sampler — passes every image case without a QualityWarning, and every wrong
+renderer (a realistic player bug each) fails at least one case, so it cannot certify.
+
+The renderers are the reference rasteriser with one thing changed (tests/suites/image_variants.py);
+the OpenGL ones are in tests/suites/test_glrender.py."""
+from __future__ import annotations
+
+import pytest
+
+from fbaconf.harness.results import Outcome
+
+from image_variants import FAITHFUL, WRONG, image_cases, run_variant
+
+
+@pytest.fixture(scope="module")
+def cases():
+    cs = image_cases()
+    assert len(cs) >= 39  # 13 Calibration/Predictable cases x 3 scenarios
+    return cs
+
+
+@pytest.fixture(scope="module")
+def states():
+    return {}
+
+
+def test_every_calibration_and_predictable_case_compares_images_under_three_scenarios(cases):
+    from fbaconf.conformance.suite import load_suites
+    decode = [c for s in load_suites() if s.claim.split("@")[0] in ("calibration", "predictable")
+              for c in s.cases if c.kind == "decode" and "faps" in c.stages]
+    assert decode and all("images" in c.stages for c in decode)
+    ids = {(c.suite, c.id) for c in cases}
+    for c in decode:
+        assert {(c.suite, c.id), (c.suite, f"{c.id}-three-quarter"), (c.suite, f"{c.id}-flat-culled")} <= ids
+        assert len(c.goldens["images"]) >= 3  # first, middle, last (+ the extreme frame)
+
+
+@pytest.mark.parametrize("variant", FAITHFUL)
+def test_faithful_renderers_pass_every_image_case(variant, cases, states, tmp_path):
+    bad = {}
+    for c in cases:
+        r = run_variant(c, variant, tmp_path / c.suite / c.id, states)
+        if r.outcome is not Outcome.PASS:
+            bad[c.full_id] = r.message
+    assert not bad, bad
+
+
+@pytest.mark.parametrize("variant", WRONG)
+def test_wrong_renderers_fail(variant, cases, states, tmp_path):
+    # the textured cases first: texture bugs show only there
+    order = sorted(cases, key=lambda c: "limits" not in c.id)
+    for c in order:
+        r = run_variant(c, variant, tmp_path / c.suite / c.id, states)
+        if r.outcome is Outcome.FAIL:
+            return
+    pytest.fail(f"{variant} passes every image case")

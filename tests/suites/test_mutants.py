@@ -1,0 +1,70 @@
+"""Mutant decoders: every mutation applies to the current reference source; the reference passes
+every required case and a handful of mutants are each killed by a case (the full score is
+`fbaconf suites mutants`, or benchmarks/bench_mutants.py)."""
+from __future__ import annotations
+
+import pytest
+
+from fbaconf.conformance.suite import load_suites
+from fbaconf.mutation import measure
+from fbaconf.mutation.core import Mutant, snippet_count
+
+
+def test_at_least_30_mutants_each_naming_its_place():
+    assert len(measure.MUTANTS) >= 30
+    for m in measure.MUTANTS.values():
+        assert m.description and ":" in m.where
+        assert (m.patch is None) == bool(m.old), m.name
+
+
+@pytest.mark.parametrize("name", [m.name for m in measure.MUTANTS_LIST if m.patch is None])
+def test_source_snippet_occurs_once(name):
+    """A refactoring of the reference must not silently turn a mutant into the reference."""
+    assert snippet_count(measure.MUTANTS[name]) == 1
+
+
+def test_snippet_count_sees_a_missing_and_a_repeated_snippet():
+    where = "fbaconf.bitstreams.decoder:_Decoder.plane"
+    assert snippet_count(Mutant("x", where, "", old="no such text in the source", new="")) == 0
+    assert snippet_count(Mutant("x", where, "", old="self", new="")) > 1
+
+
+def test_independent_set_is_large_named_and_tagged():
+    """Issue 15: 100+ mutants written from the spec notes alone, each naming the rule it breaks."""
+    ind = [m for m in measure.MUTANTS_LIST if m.family == "independent"]
+    assert len(ind) >= 100
+    assert len(set(m.name for m in measure.MUTANTS_LIST)) == len(measure.MUTANTS_LIST)
+    for m in ind:
+        assert m.name.startswith("ind-") and m.rule and m.description, m.name
+    assert {m.family for m in measure.MUTANTS_LIST} == set(measure.FAMILIES)
+
+
+def test_score_leaves_equivalent_mutants_out():
+    ind = [m for m in measure.MUTANTS_LIST if m.family == "independent"]
+    eq = [m.name for m in ind if m.equivalent]
+    rows = [{"mutant": m.name, "killed": not m.equivalent} for m in ind]
+    assert measure.score(rows, "independent") == (len(ind) - len(eq), len(ind) - len(eq), len(eq))
+    rows[0]["killed"] = False
+    assert measure.score(rows, "independent")[0] == len(ind) - len(eq) - (0 if ind[0].equivalent else 1)
+
+
+def test_reference_passes_and_mutants_are_killed():
+    """Three mutants are killed; the unmutated reference, run the way the mutants run (its own
+    process, both output formats), passes one case of every suite — every case of every suite
+    is run through the harness by tests/integration/test_harness.py."""
+    res = measure.run_all(["prediction-sign", "ignore-retained", "fit-parent-order"], jobs=2)
+    assert all(r["killed"] for r in res), res
+    picked = [s.cases[0] for s in load_suites()]
+    out = measure.run_mutant(None, stop_at_first=False, cases=picked)  # None: the reference, unmutated
+    assert not out["killed"] and out["ran"] == out["total"] >= len(picked), out
+
+
+def test_mutant_adapter_manifest(tmp_path):
+    from fbaconf.harness.adapters import resolve
+    a = resolve("mutant")
+    assert a.mutant in measure.MUTANTS and a.claims == ["predictable@2"]
+    bad = tmp_path / "m.toml"
+    bad.write_text((measure.__file__ and open(a.manifest_path).read()).replace('mutant = "prediction-sign"',
+                                                                                'mutant = "no-such"'))
+    with pytest.raises(Exception):
+        resolve(bad)

@@ -1,0 +1,270 @@
+"""The layout rules of the code base (issue 13), checked on the source tree:
+
+* no import cycle between modules, and none between stages once the command-line glue
+  (``*.cli`` modules, which compose stages by design) is left out;
+* no hand-written module over the size limit;
+* every rule id a typed error is raised with is registered in ``fbaconf/rules.py``;
+* no document or module names a repository file that does not exist.
+"""
+from __future__ import annotations
+
+import ast
+import re
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+MAX_LINES = 700
+
+
+NOT_INSTALLED = {"tests", "benchmarks", "examples", "docs", "build", "dist"}
+HARNESS_MAX_LINES = 6000
+
+
+def _package_dirs() -> dict[str, Path]:
+    """Import name -> folder of every package of the distribution, found by walking the tree
+    (a top-level folder with an ``__init__.py`` is ``fbaconf.<folder>``, its sub-folders with
+    one its sub-packages): nothing is hand-listed."""
+    out: dict[str, Path] = {}
+    for top in sorted(ROOT.iterdir()):
+        if not top.is_dir() or top.name.startswith((".", "_")) or top.name in NOT_INSTALLED \
+                or not (top / "__init__.py").is_file():
+            continue
+        name = "fbaconf" if top.name == "fbaconf" else f"fbaconf.{top.name}"
+        for init in sorted(top.rglob("__init__.py")):
+            if "__pycache__" in init.parts:
+                continue
+            rel = init.parent.relative_to(top)
+            out[".".join([name, *rel.parts])] = init.parent
+    return out
+
+
+def _modules() -> dict[str, Path]:
+    """Import name -> file, for every module of the distribution."""
+    out: dict[str, Path] = {}
+    for pkg, d in _package_dirs().items():
+        for p in sorted(d.glob("*.py")):
+            name = pkg if p.name == "__init__.py" else f"{pkg}.{p.stem}"
+            out[name] = p
+    return out
+
+
+def _setup_discovery() -> dict[str, str]:
+    """What setup.py installs (its package map), read without building anything."""
+    import setuptools
+    src = (ROOT / "setup.py").read_text("utf-8")
+    ns: dict = {"__file__": str(ROOT / "setup.py"), "__name__": "fbaconf_setup"}
+    real = setuptools.setup
+    setuptools.setup = lambda **kw: ns.setdefault("_kw", kw)
+    try:
+        exec(compile(src, "setup.py", "exec"), ns)
+    finally:
+        setuptools.setup = real
+    return ns["_kw"]
+
+
+def test_the_wheel_installs_every_package_and_its_data():
+    kw = _setup_discovery()
+    assert {k: str(ROOT / v) for k, v in kw["package_dir"].items()} == {k: str(v) for k, v in _package_dirs().items()}
+    assert sorted(kw["packages"]) == sorted(_package_dirs())
+    # every non-Python file under a package travels with it (data folders are never forgotten)
+    for pkg, d in _package_dirs().items():
+        data = set(kw["package_data"].get(pkg, []))
+        for f in d.iterdir():
+            if f.is_file() and f.suffix not in (".py", ".pyc", ".so", ".o"):
+                assert f.name in data, (pkg, f.name)
+    # the folders the last wheel forgot (issue 30)
+    assert "data/text/comments-crlf.fap" in kw["package_data"]["fbaconf.conformance"]
+    assert "fbaconf.mutation.independent" in kw["packages"]
+
+
+def test_no_python_folder_hides_outside_a_package():
+    """A folder of modules without ``__init__.py`` would be left out of the wheel."""
+    stray = []
+    for pkg, d in _package_dirs().items():
+        for sub in d.iterdir():
+            if sub.is_dir() and sub.name != "__pycache__" and any(sub.glob("*.py")) \
+                    and not (sub / "__init__.py").is_file():
+                stray.append(str(sub.relative_to(ROOT)))
+    assert stray == []
+
+
+def test_harness_stays_a_stage_not_a_catch_all():
+    n = sum(len(p.read_text("utf-8").splitlines()) for name, p in _modules().items()
+            if name.startswith("fbaconf.harness"))
+    assert n < HARNESS_MAX_LINES, n
+
+
+def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    tree = ast.parse(path.read_text("utf-8"))
+    is_pkg = path.name == "__init__.py"
+    out = set()
+    for node in ast.walk(tree):
+        targets = []
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = name.split(".")
+                keep = len(parts) - node.level + (1 if is_pkg else 0)
+                base = ".".join(parts[:keep] + ([base] if base else []))
+            targets = [f"{base}.{a.name}" for a in node.names] + ([base] if node.module else [])
+        for t in targets:
+            while t and t not in modules:
+                t = t.rpartition(".")[0]
+            if t and t != name:
+                out.add(t)
+    return out
+
+
+def _graph() -> dict[str, set[str]]:
+    mods = _modules()
+    return {n: _imports(n, p, mods) for n, p in mods.items()}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one node (iterative Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    on, stack, out = set(), [], []
+    counter = 0
+    for root in graph:
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = counter
+        counter += 1
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, it = work[-1]
+            w = next(it, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = counter
+                    counter += 1
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(graph.get(w, ())))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    x = stack.pop()
+                    on.discard(x)
+                    comp.append(x)
+                    if x == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def _stage(module: str) -> str:
+    parts = module.split(".")
+    return ".".join(parts[:2])
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_cycle_between_modules():
+    assert _cycles(_graph()) == []
+
+
+def test_no_import_cycle_between_stages():
+    """Stages form layers; only the command-line glue (``*.cli``) may reach across."""
+    stages: dict[str, set[str]] = defaultdict(set)
+    for mod, deps in _graph().items():
+        if mod.endswith(".cli") or mod in ("fbaconf.cli", "fbaconf.__main__"):
+            continue
+        for d in deps:
+            if _stage(d) != _stage(mod):
+                stages[_stage(mod)].add(_stage(d))
+    assert _cycles(dict(stages)) == []
+
+
+def test_no_module_over_the_size_limit():
+    big = {str(p.relative_to(ROOT)): n for p in _modules().values()
+           if (n := len(p.read_text("utf-8").splitlines())) > MAX_LINES}
+    assert big == {}
+
+
+# ------------------------------------------------------------------ rule ids
+_RULE_ID = re.compile(r"[a-z][a-z0-9]*(-[a-z0-9]+)*")
+
+
+def _raised_rule_ids() -> dict[str, str]:
+    """Rule ids in the source: ``rule="…"`` keywords and the rule argument of the readers'
+    ``err``/``error``/``warn`` helpers (second or third positional argument)."""
+    found: dict[str, str] = {}
+    for path in _modules().values():
+        for node in ast.walk(ast.parse(path.read_text("utf-8"))):
+            if not isinstance(node, ast.Call):
+                continue
+            f = node.func
+            fname = f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+            cands = [kw.value for kw in node.keywords if kw.arg == "rule"]
+            if fname in ("err", "error", "warn", "_err", "fail", "bad"):
+                cands += node.args[1:3]
+            for c in cands:
+                if isinstance(c, ast.Constant) and isinstance(c.value, str) and _RULE_ID.fullmatch(c.value):
+                    found.setdefault(c.value, f"{path.relative_to(ROOT)}:{node.lineno}")
+                    break
+    return found
+
+
+def test_every_raised_rule_id_is_registered():
+    from fbaconf.rules import RULES
+    raised = _raised_rule_ids()
+    assert len(raised) > 100  # the scan itself works
+    missing = {r: where for r, where in raised.items() if r not in RULES}
+    assert missing == {}
+
+
+def test_rule_registry_codes_exist():
+    from fbaconf.rules import CODES, RULES
+    assert all(r.code is None or r.code in CODES for r in RULES.values())
+
+
+# ------------------------------------------------------------------ references to files
+_TOP = ("bitstreams", "profiles", "animation", "scenes", "rendering", "harness", "conformance", "fuzz", "fbaconf",
+        "generators", "golden", "docs", "tests", "benchmarks", "examples")
+# Files fbaconf writes (not in the tree) and the shared folder beside the checkout.
+_PRODUCED = {"statement.md"}
+_SHARED = ROOT.parent / "shared"
+_SHARED_NAMES = {p.name for p in _SHARED.rglob("*.md")} if _SHARED.is_dir() else set()
+_BARE_MD = re.compile(r"(?<![\w./-])([\w-]+\.md)\b")
+_PATH = re.compile(r"(?<![\w./-])((?:%s)/[\w./-]*\w\.(?:py|md|toml|csv|json|c|h|css|txt))\b" % "|".join(_TOP))
+
+
+def _texts():
+    for p in sorted(ROOT.glob("*.md")):
+        yield p
+    for d in ("docs", "examples", "benchmarks", *(str(p.relative_to(ROOT)) for p in _package_dirs().values())):
+        base = ROOT / d
+        if base.is_dir():
+            for p in sorted(base.rglob("*")):
+                if p.suffix in (".md", ".py", ".toml", ".c") and p.is_file() and "__pycache__" not in p.parts:
+                    yield p
+
+
+@pytest.mark.parametrize("doc", [pytest.param(p, id=str(p.relative_to(ROOT))) for p in _texts()])
+def test_no_reference_to_a_missing_file(doc: Path):
+    text = doc.read_text("utf-8", errors="replace")
+    missing = {m for m in _PATH.findall(text)
+               if "*" not in m and not (ROOT / m).exists() and not (doc.parent / m).exists()}
+    missing |= {m for m in _BARE_MD.findall(text)
+                if m not in _PRODUCED and m not in _SHARED_NAMES
+                and not any((d / m).exists() for d in (ROOT, ROOT / "docs", doc.parent))}
+    assert sorted(missing) == []
