@@ -116,6 +116,13 @@ def regenerate(suites: list[Suite], root: Path | None = None, log=print) -> dict
     return manifest
 
 
+def _not_a_golden(rel: str) -> bool:
+    """Files under the golden folder that are not goldens: the manifest, hidden files, and the
+    package marker that installs the folder as ``fbaconf.golden`` (with its bytecode)."""
+    parts = Path(rel).parts
+    return rel in (MANIFEST, "__init__.py") or parts[0] == "__pycache__" or Path(rel).name.startswith(".")
+
+
 def verify(root: Path | None = None, *, regenerate_check: bool = True, log=print) -> list[str]:
     """Problems found (empty list = goldens verified)."""
     root = root or golden_root()
@@ -129,7 +136,7 @@ def verify(root: Path | None = None, *, regenerate_check: bool = True, log=print
     problems: list[str] = []
     files = manifest.get("files", {})
     missing, modified, extra = digest_problems(
-        root, files, ignore=lambda rel: rel == MANIFEST or Path(rel).name.startswith("."))
+        root, files, ignore=_not_a_golden)
     problems += [f"missing golden file {rel}" for rel in missing]
     problems += [f"golden file {rel} does not match its sha256" for rel in modified]
     problems += [f"golden file {rel} is not in the manifest" for rel in extra]

@@ -343,10 +343,10 @@ def test_the_c_server_under_address_and_undefined_behaviour_sanitizers(tmp_path,
     py = os.path.realpath(sys.executable)
     with ForkServer(root, default_view([py], root / "case"), lim) as fs:
         assert fs.native == exe
-        endings = [(["/bin/sh", "-c", "exit 3"], "unexpected"), (["/bin/sh", "-c", "kill -SEGV $$"], "crash"),
+        expected = [(["/bin/sh", "-c", "exit 3"], "unexpected"), (["/bin/sh", "-c", "kill -SEGV $$"], "crash"),
                    (["/nonexistent/decoder"], "setup"), (["/bin/sh", "-c", "sleep 5"], "timeout"),
                    ([py, "-c", "x = [bytearray(8 << 20) for _ in range(60)]"], "memory")]
-        for argv, kind in endings * 2:
+        for argv, kind in expected * 2:
             assert endings.classify(fs.run(argv, root / "case"), lim, {1}).kind == kind, argv
         for i in range(100):
             r = fs.run(["/bin/sh", "-c", f"echo {i}; exit {i % 5}"], root / "case")
