@@ -29,16 +29,19 @@ Method (fbaconf's choice; the standard leaves the adaptation to the decoder):
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from .compiled import CompiledFace, neutral_world
 from fbaconf.errors import SceneError
+
+from .compiled import CompiledFace, neutral_world
 from .faceparams import NUM_FEATURE_POINTS, fapu_from_feature_points
 
 
 def rbf_warp(src: np.ndarray, dst: np.ndarray):
     """A function R^3 -> R^3 displacement, interpolating dst - src at src (exactly)."""
-    from scipy.interpolate import RBFInterpolator
+    from scipy.interpolate import RBFInterpolator  # noqa: PLC0415 (scipy loads in ~0.3 s; only calibration needs it)
     src = np.asarray(src, dtype=np.float64)
     dst = np.asarray(dst, dtype=np.float64)
     d = dst - src
@@ -73,7 +76,7 @@ def rbf_warp(src: np.ndarray, dst: np.ndarray):
 
 
 def _uv_map(proj_fp: np.ndarray, uv_fp: np.ndarray):
-    from scipy.interpolate import RBFInterpolator
+    from scipy.interpolate import RBFInterpolator  # noqa: PLC0415 (scipy loads in ~0.3 s; only calibration needs it)
     n = len(proj_fp)
     rank = np.linalg.matrix_rank(np.c_[proj_fp, np.ones(n)], tol=1e-9)
     scale = float(np.ptp(proj_fp, axis=0).max()) or 1.0
@@ -114,7 +117,7 @@ def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None 
     for p in model.parts:
         for i, k in enumerate(p.chain):
             parent[k] = p.chain[i - 1] if i else None
-    for k, tr in model.transforms.items():
+    for _k, tr in model.transforms.items():
         if tr["rotation"][3] != 0 or tuple(tr["scale"]) != (1.0, 1.0, 1.0):
             raise SceneError(f"calibration supports translation-only Transforms ({tr['name']} rotates or scales)",
                              rule="calibration-transform")
@@ -165,7 +168,6 @@ def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None 
         uvmap = _uv_map(_project(fps[sent], ortho, centre), tc[sent])
         fp_parts = {pi for pi, _ in (model.fp_vertices or [])} or {0}
         new_world = neutral_world(out)
-        from dataclasses import replace
         for pi in sorted(fp_parts):
             uv = np.clip(uvmap(_project(new_world[pi], ortho, centre)), 0.0, 1.0)
             parts[pi] = replace(parts[pi], texcoords=uv, texture=texture or parts[pi].texture)

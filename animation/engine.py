@@ -33,16 +33,17 @@ import numpy as np
 
 from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.bitstreams.tables import NUM_FAPS
-
-from fbaconf.scenes import bt
-from .compiled import CompiledFace, PartInstance, local_matrices, neutral_world
 from fbaconf.errors import SceneError
+from fbaconf.scenes import bifs, bt
+
+from .bundled import default_head_feature_vertices, default_head_scene
+from .calibrate import calibrate
+from .compiled import CompiledFace, PartInstance, local_matrices, neutral_world
 from .facedef import MeshTable, TransformTable, transform_fields
 from .faceparams import FEATURE_POINTS, NUM_FEATURE_POINTS, UNSENT, fapu_from_feature_points, fdp_point_rows
 from .facestate import FaceState, MeshPart
 from .highlevel import apply_high_level, high_level_weights
 from .interp import FitGraph, lr_fill
-
 
 
 # ---------------------------------------------------------------------------------- compile
@@ -118,7 +119,6 @@ def compile_scene(scene: bt.Scene | None) -> CompiledFace:
                              rule="facedef-without-model", node_path=f"{fdp_path}.faceDefTables")
         model = _compiled_default()
         if np.isfinite(fps).all(axis=1).any():
-            from .calibrate import calibrate
             tex = scene.resolve(fdp.get("textureCoord"))
             tc = None if tex is None else np.asarray(tex.get("point"), dtype=np.float64)
             model = calibrate(model, fps, texture_coords=tc, ortho=bool(fdp.get("useOrthoTexture")),
@@ -138,7 +138,7 @@ def _first_texture(scene: bt.Scene) -> str | None:
     return None
 
 
-def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:
+def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:  # noqa: C901
     points: dict[int, np.ndarray] = {}
     names: dict[int, str] = {}
     transforms: dict[int, dict] = {}
@@ -283,7 +283,6 @@ _DEFAULT: CompiledFace | None = None
 def _compiled_default() -> CompiledFace:
     """A fresh copy of the compiled bundled default head (callers may modify it)."""
     global _DEFAULT
-    from .bundled import default_head_feature_vertices, default_head_scene
     if _DEFAULT is None:
         d = compile_scene(default_head_scene())
         # the data file says which vertex carries each feature point (coinciding points such as
@@ -375,7 +374,6 @@ def load_scene(scene) -> bt.Scene | None:
     p = Path(scene)
     if not p.is_file():
         raise SceneError(f"scene file not found: {p}", rule="scene-missing", node_path=None)
-    from fbaconf.scenes import bifs
     return bifs.load_scene(p)
 
 

@@ -16,7 +16,6 @@ from typing import Mapping
 import numpy as np
 
 from fbaconf.bitstreams.tables import NUM_FAPS, fap_table, fapu_table
-
 from fbaconf.errors import SceneError
 
 FEATURE_POINT_GROUPS: dict[int, int] = {2: 14, 3: 14, 4: 6, 5: 4, 6: 4, 7: 1, 8: 10, 9: 15, 10: 10, 11: 6}

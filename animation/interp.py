@@ -29,7 +29,7 @@ fields:
   -- a reading [?] of a field the public sources do not describe.
   All lists are consumed sequentially; a count mismatch is a SceneError.
   ``denominatorTerms = 0`` means denominator 1.
-* FAP 1 / FAP 2 may appear in parent nodes; their value is viseme_blend / 
+* FAP 1 / FAP 2 may appear in parent nodes; their value is viseme_blend /
   expression_intensity1 (available when FAP 1 / 2 is not FREE). They cannot be children.
 * Evaluation: child nodes in topological order of the graph (a cycle is a SceneError).
   A child node is interpolated in the frames where one of its FAPs is FREE, from the first
@@ -46,7 +46,6 @@ import numpy as np
 
 from fbaconf.bitstreams.frames import DERIVED, FREE
 from fbaconf.bitstreams.tables import NUM_FAPS, left_right_pairs
-
 from fbaconf.errors import SceneError
 
 
@@ -112,7 +111,7 @@ class FitGraph:
     order: list[int] = field(default_factory=list)  # child nodes in topological order
 
     @classmethod
-    def from_fields(cls, faps, graph, numerator_exp=(), denominator_exp=(), numerator_impulse=(),
+    def from_fields(cls, faps, graph, numerator_exp=(), denominator_exp=(), numerator_impulse=(),  # noqa: C901, PLR0913
                     numerator_terms=(), denominator_terms=(), numerator_coefs=(), denominator_coefs=(),
                     *, node_path: str | None = None) -> "FitGraph":
         p = (node_path + ".") if node_path else ""

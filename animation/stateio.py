@@ -11,6 +11,8 @@ import io
 
 import numpy as np
 
+from fbaconf._atomic import atomic_write_bytes
+
 from .facestate import FaceState, MeshPart
 
 FORMAT = "fbaconf.FaceState/1"
@@ -35,7 +37,6 @@ def to_npz_bytes(state: FaceState) -> bytes:
 
 
 def save_npz(state: FaceState, path) -> None:
-    from fbaconf._atomic import atomic_write_bytes
     atomic_write_bytes(path, to_npz_bytes(state))
 
 

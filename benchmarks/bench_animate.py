@@ -11,9 +11,9 @@ import time
 import numpy as np
 
 from fbaconf.animation import engine
-from fbaconf.generators import models
 from fbaconf.bitstreams.frames import SET, FapFrames
 from fbaconf.bitstreams.tables import fap_table
+from fbaconf.generators import models
 
 
 def sequence(seconds: float = 30.0, rate: float = 30.0) -> FapFrames:

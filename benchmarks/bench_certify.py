@@ -14,6 +14,8 @@ import sys
 import tempfile
 import time
 
+from fbaconf.mutation.measure import run_mutant
+
 
 def main() -> None:
     ap = argparse.ArgumentParser()
@@ -27,7 +29,6 @@ def main() -> None:
         dt = time.perf_counter() - t0
         print(p.stdout.strip().splitlines()[-1] if p.stdout.strip() else p.stderr[-500:])
         print(f"certify predictable@2 ({'with' if a.speed else 'without'} speed): {dt:.1f} s wall, exit {p.returncode}")
-    from fbaconf.mutation.measure import run_mutant
     t0 = time.perf_counter()
     r = run_mutant(None, "predictable@2", stop_at_first=False)
     print(f"same {r['total']} cases, only the compared outputs produced: {time.perf_counter() - t0:.1f} s wall "

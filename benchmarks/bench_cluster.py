@@ -11,6 +11,7 @@ user knows what a cluster must win back by adding machines.
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import subprocess
 import sys
@@ -19,7 +20,6 @@ import time
 from pathlib import Path
 
 from _skipchain import build
-
 
 
 def fbaconf(*args: str) -> tuple[float, str]:
@@ -50,7 +50,6 @@ def main() -> int:
         m = build(cc, tmp)
         rates = []
         for label, extra in (("fuzz -j 1", []), ("fuzz --cluster local:2", ["--cluster", "local:2"])):
-            import json
             out = tmp / label.replace(" ", "_")
             fbaconf("fuzz", "--decoder", str(m), "--seconds", str(args.seconds), "-o", str(out), "--no-progress",
                     "--minimise-seconds", "2", *extra)

@@ -24,9 +24,9 @@ import numpy as np
 from fbaconf.bitstreams import arith
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.errors import FbaconfInputError
 from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.synth import synthetic_sequence
+from fbaconf.errors import FbaconfInputError
 
 REPO = Path(__file__).resolve().parents[1]
 QUANTS = (1, 2, 4, 8, 16, 31)

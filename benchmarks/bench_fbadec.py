@@ -18,6 +18,12 @@ import sys
 import tempfile
 from pathlib import Path
 
+from fbaconf.fuzz.corpus import default_seeds
+from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
+from fbaconf.fuzz.targets import DecoderTarget
+from fbaconf.harness import speed
+from fbaconf.harness.adapters import resolve
+
 SRC = Path(__file__).resolve().parent.parent / "examples" / "fbadec"
 
 
@@ -29,11 +35,6 @@ def main() -> int:
     if cc is None:
         print("bench_fbadec: no C compiler; nothing measured")
         return 0
-    from fbaconf.fuzz.corpus import default_seeds
-    from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
-    from fbaconf.fuzz.targets import DecoderTarget
-    from fbaconf.harness import speed
-    from fbaconf.harness.adapters import resolve
     tmp = Path(tempfile.mkdtemp(prefix="bench-fbadec-"))
     try:
         subprocess.run([cc, "-O2", "-std=c11", "-I", str(SRC), "-o", str(tmp / "fbadec"), str(SRC / "fbadec.c"),

@@ -34,6 +34,12 @@ from pathlib import Path
 
 from _skipchain import build
 
+from fbaconf.conformance.suite import load_suites
+from fbaconf.fuzz.corpus import default_seeds
+from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
+from fbaconf.fuzz.targets import DecoderTarget
+from fbaconf.harness.adapters import load_manifest
+from fbaconf.isolation import forkserver_build
 
 
 def bare_spawn(exe: Path, stream: Path, seconds: float) -> float:
@@ -70,14 +76,9 @@ def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
 
 def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False,
               c_server: bool = True) -> tuple[float, str, int]:
-    from fbaconf.fuzz.corpus import default_seeds
-    from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
-    from fbaconf.fuzz.targets import DecoderTarget
-    from fbaconf.isolation import forkserver_build
-    from fbaconf.harness.adapters import load_manifest
     os.environ["FBACONF_FORKSERVER"] = "c" if c_server else "python"
     target = DecoderTarget(load_manifest(manifest), work, timeout_s=1.0, fork_server=not spawn, persistent=not spawn)
-    mode = ("persistent" if target.persistent else f"fork server in {forkserver_build.server_kind()}" if target.fork_server
+    mode = ("persistent" if target.persistent else f"fork server in {forkserver_build.server_kind()}" if target.fork_server  # noqa: E501
             else "spawn")
     fz = Fuzzer(target, default_seeds(),
                 FuzzConfig(seed=7, seconds=seconds, progress=False, coverage_every=8, minimise_seconds=2,
@@ -94,7 +95,6 @@ def main() -> int:
     if cc is None:
         print("bench_fuzz: no C compiler; nothing measured")
         return 0
-    from fbaconf.conformance.suite import load_suites
     tmp = Path(tempfile.mkdtemp(prefix="bench-fuzz-"))
     try:
         spawn = build(cc, tmp)

@@ -33,6 +33,7 @@ import numpy as np
 
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.frames import SET, first_difference
 
 MSE_FLOOR = 1.0 / 12.0
@@ -136,7 +137,6 @@ def print_table(name: str, c) -> None:
 
 
 def main(argv: list[str]) -> int:
-    from fbaconf.bitstreams.faptext import read_fap_file
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("data", nargs="?", default=str(Path(__file__).resolve().parents[2] / "shared" / "data" / "fap"))
     ap.add_argument("--files", default="xface/anger.fap,xface/joy.fap,xface/test.fap,vreng/jag.fap",

@@ -17,10 +17,12 @@ encode, read back), both on the one core this benchmark is pinned to, and the ra
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -89,10 +91,10 @@ def bundled_states(n_frames: int) -> dict[str, FaceState]:
     that stage exists (neutral frames: the renderer's cost does not depend on the FAPs)."""
     out = {}
     try:
-        from fbaconf.animation.engine import animate
-        from fbaconf.bitstreams.frames import FapFrames
+        from fbaconf.animation.engine import animate  # noqa: PLC0415 (the stage is optional here)
+        from fbaconf.bitstreams.frames import FapFrames  # noqa: PLC0415 (optional, as above)
         out["default head"] = animate(FapFrames.empty(n_frames), scene=None)
-        from fbaconf.generators.models import level_limit_scene
+        from fbaconf.generators.models import level_limit_scene  # noqa: PLC0415 (optional, as above)
         out["level-limit head"] = animate(FapFrames.empty(n_frames), scene=level_limit_scene())
     except Exception as e:  # the animation stage is optional for this benchmark
         print(f"(bundled heads unavailable: {type(e).__name__}: {e})")
@@ -130,8 +132,6 @@ def main(argv=None) -> int:
 
 def side_by_side(states: dict, n_frames: int, repeat: int) -> None:
     """The reference against llvmpipe (examples/glrender) at 3 x 3 supersampling, same frames."""
-    import importlib
-    from pathlib import Path
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "examples" / "glrender"))
     try:
         glrender = importlib.import_module("glrender")

@@ -23,6 +23,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from fbaconf.conformance.suite import load_suites
+from fbaconf.isolation import sandbox
+
 SRC = Path(__file__).resolve().parent.parent / "examples" / "fbadec"
 
 
@@ -35,7 +38,6 @@ def bare(exe: Path, stream: Path, out: Path, n: int) -> float:
 
 
 def harness(exe: Path, stream: Path, work: Path, n: int) -> float:
-    from fbaconf.isolation import sandbox
     limits = sandbox.Limits(timeout_s=10, memory_mb=256, output_mb=64)
     t0 = time.perf_counter()
     for i in range(n):
@@ -63,8 +65,6 @@ def main() -> int:
     if not (shutil.which("cc") and shutil.which("make")):
         print("bench_run: no C compiler or make; nothing measured")
         return 0
-    from fbaconf.conformance.suite import load_suites
-    from fbaconf.isolation import sandbox
     tmp = Path(tempfile.mkdtemp(prefix="bench-run-"))
     try:
         build = tmp / "fbadec"

@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf.bitstreams import dct
-from fbaconf.bitstreams.prepare import _derive_group_types
+from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.frames import SET
+from fbaconf.bitstreams.prepare import _derive_group_types
 
 MAX_LEN = int(os.environ.get("DCT_VLC_MAX_LEN", "14"))
 
@@ -82,7 +83,6 @@ def huffman_lengths(weights: dict) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    from fbaconf.bitstreams.faptext import read_fap_file
     root = Path(argv[0]) if argv else Path(__file__).resolve().parents[2] / "shared" / "data" / "fap"
     t = dct.dct_tables()
     ac_w: Counter = Counter()

@@ -7,7 +7,7 @@ inserts and removals clamp their offset to the stream.
 """
 from __future__ import annotations
 
-from fbaconf.bitstreams.bitio import BitWriter, VISUAL_OBJECT_SEQUENCE_END_CODE
+from fbaconf.bitstreams.bitio import VISUAL_OBJECT_SEQUENCE_END_CODE, BitWriter
 
 
 def to_bits(data: bytes) -> str:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import re
 
+import numpy as np
+
 from fbaconf.errors import BitstreamError
 
 _NOT_FF = re.compile(rb"[^\xff]")
@@ -121,7 +123,6 @@ class BitReader:
     def bits(self) -> bytes:
         """The stream as one byte (0 or 1) per bit, for the arithmetic decoder's inner loop."""
         if self._bits is None:
-            import numpy as np
             self._bits = np.unpackbits(np.frombuffer(self.data, dtype=np.uint8)).tobytes()
         return self._bits
 

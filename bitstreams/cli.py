@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
-
 from fbaconf.errors import FbaconfInputError
+
 from .frames import FapFrames
 
 

@@ -32,11 +32,18 @@ from importlib import resources
 
 import numpy as np
 
-from . import tables
 from fbaconf.errors import EncodeError
+
+from . import tables
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET
-from .syntax import (CODING_DCT, DEFAULT_FRAME_RATE, EXPRESSION_SELECT_MAX, INTENSITY_MAX, MASK_INTERPOLATE,
-                     VISEME_SELECT_MAX)
+from .syntax import (
+    CODING_DCT,
+    DEFAULT_FRAME_RATE,
+    EXPRESSION_SELECT_MAX,
+    INTENSITY_MAX,
+    MASK_INTERPOLATE,
+    VISEME_SELECT_MAX,
+)
 from .tables import NUM_FAPS
 
 DATA_FILE = "dct_provisional.toml"

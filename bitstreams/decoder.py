@@ -17,16 +17,34 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import arith, dct, tables
-from .arith import (MSG_ARITH_STATE, MSG_STUFFING, MSG_TRUNCATED, ArithDecoder, NativeSegment, UniformModel,
-                    make_model)
-from .bitio import (FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, START_CODE_NAMES,
-                    VISUAL_OBJECT_SEQUENCE_END_CODE, BitReader)
 from fbaconf.errors import BitstreamError
+
+from . import arith, dct, tables
+from .arith import MSG_ARITH_STATE, MSG_STUFFING, MSG_TRUNCATED, ArithDecoder, NativeSegment, UniformModel, make_model
+from .bitio import (
+    FACE_OBJECT_PLANE_START_CODE,
+    FACE_OBJECT_START_CODE,
+    START_CODE_NAMES,
+    VISUAL_OBJECT_SEQUENCE_END_CODE,
+    BitReader,
+)
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
-from .syntax import (CODING_DCT, DEFAULT_FRAME_RATE, EXPRESSION_SELECT_MAX, FAPS_MASK, LIST_ORDER,
-                     MASK_ALL, MASK_INTERPOLATE, VISEME_SELECT_MAX, FrameRateCode, PlaneInfo, alphabet,
-                     intensity_bound, intensity_step, low_level_step)
+from .syntax import (
+    CODING_DCT,
+    DEFAULT_FRAME_RATE,
+    EXPRESSION_SELECT_MAX,
+    FAPS_MASK,
+    LIST_ORDER,
+    MASK_ALL,
+    MASK_INTERPOLATE,
+    VISEME_SELECT_MAX,
+    FrameRateCode,
+    PlaneInfo,
+    alphabet,
+    intensity_bound,
+    intensity_step,
+    low_level_step,
+)
 from .tables import NUM_FAPS, RANGE_DELTA
 
 INT32_MAX = 2**31 - 1
@@ -434,7 +452,7 @@ def decode(data: bytes, *, file: str | None = None) -> DecodeResult:
             e.partial = d._frames()
         raise
     except (ValueError, IndexError, OverflowError, MemoryError, RecursionError) as e:  # defensive: never escape
-        raise d.err(f"internal decoder failure on malformed input: {type(e).__name__}: {e}", "internal")
+        raise d.err(f"internal decoder failure on malformed input: {type(e).__name__}: {e}", "internal") from None
 
 
 def decode_frames(data: bytes, *, file: str | None = None) -> FapFrames:

@@ -18,6 +18,10 @@ decodes; it is nonetheless not conformant.
 """
 from __future__ import annotations
 
+from fbaconf.errors import FbaconfInputError
+
+from .decoder import decode
+
 PREFIX = b"\x00\x00\x01"
 
 
@@ -27,8 +31,6 @@ def legitimate_start_codes(data: bytes, result=None) -> tuple[set[int], int]:
     the decoder refuses, only the object start code is known and the scan covers everything."""
     legit = {0}
     if result is None:
-        from fbaconf.errors import FbaconfInputError
-        from .decoder import decode
         try:
             result = decode(data)
         except FbaconfInputError:

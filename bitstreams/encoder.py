@@ -14,20 +14,41 @@ was set before, 00 when nothing is coded, else 01.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from fractions import Fraction
 
 import numpy as np
 
-from . import tables
-from .arith import ArithEncoder, NativeSegment, UniformModel, append_bits, make_model, native_encoder
-from .bitio import FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE, BitWriter
 from fbaconf.errors import EncodeError
+
+from . import dct, tables
+from .arith import ArithEncoder, UniformModel, make_model, native_encoder
+from .bitio import FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE, BitWriter
+from .emulation import find_emulations
+from .encode_native import write_payload_native
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
-from .syntax import (EXPRESSION_SELECT_MAX, FAPS_MASK, INTENSITY_MAX, LIST_ORDER, MASK_ALL, MASK_INTERPOLATE,
-                     MASK_NONE, MASK_RETAIN, VISEME_SELECT_MAX, FrameRateCode, _tdiv, frame_rate_code,
-                     intensity_bound, intensity_step, low_level_step, quant_div, quantise, skip_chunks)
 from .prepare import _check_input, _derive_group_types, resample
+from .syntax import (
+    EXPRESSION_SELECT_MAX,
+    FAPS_MASK,
+    INTENSITY_MAX,
+    LIST_ORDER,
+    MASK_ALL,
+    MASK_INTERPOLATE,
+    MASK_NONE,
+    MASK_RETAIN,
+    VISEME_SELECT_MAX,
+    FrameRateCode,
+    _tdiv,
+    alphabet,
+    frame_rate_code,
+    intensity_bound,
+    intensity_step,
+    low_level_step,
+    quant_div,
+    quantise,
+    skip_chunks,
+)
 from .tables import MAX_RANGE, MAX_RANGE_CODE, NUM_FAPS, RANGE_DELTA
 
 PLANE_START_CODE_MODES = ("none", "intra", "all")
@@ -215,8 +236,6 @@ def encode(frames: FapFrames, options: EncoderOptions | None = None) -> EncodeRe
     complete a byte-aligned 0x000001, a plane start code is written before it (or before the
     plane preceding it), which ends the zero run and moves the plane's alignment; where that
     is not enough, the plane is coded as an intra plane. (The DCT mode has its own stuffing.)"""
-    from dataclasses import replace
-    from .emulation import find_emulations
     opts = options or EncoderOptions()
     sc, intra, wide = frozenset(opts.start_codes_before), frozenset(opts.intra_at), frozenset(opts.widen_at)
     tried: set = set()
@@ -464,7 +483,7 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
             p_models = {}
         status_rows[k] = tmpl
         if nat is not None:
-            _write_payload_native(nat, w, plan, k, intra, q, c, bounds, p_models)
+            write_payload_native(nat, w, plan, k, intra, q, c, bounds, p_models)
         else:
             _write_payload(w, plan, k, intra, q, c, bounds, p_models)
     if own and opts.end_code:
@@ -501,7 +520,6 @@ def _encode_sections(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, 
     """DCT mode, or a stream that switches mode: one section per run of frames with the same
     coding type, each starting with an intra plane. Values not coded in a section carry over
     from the previous one (as the decoder keeps them)."""
-    from . import dct
 
     n = len(src)
     modes = _coding_modes(opts, n)
@@ -598,7 +616,6 @@ def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, p
 
 
 def _write_payload(w: BitWriter, plan: _Plan, k: int, intra: bool, q: int, c, bounds, p_models: dict) -> None:
-    from .syntax import alphabet
     hs = plan.hsym[k]
     src_high = plan.rhigh[k]
     ib = intensity_bound(q)
@@ -645,43 +662,3 @@ def _write_payload(w: BitWriter, plan: _Plan, k: int, intra: bool, q: int, c, bo
                 m = p_models[f] = make_model(hi - lo + 1)
             enc.encode(m, int(sym[f - 1]) - lo)
     enc.flush()
-
-
-def _block_native(nat, w: BitWriter, spec: np.ndarray, pool, values: np.ndarray) -> None:
-    """Code one block with the C extension and append it (same bits as ArithEncoder)."""
-    if len(values) and np.abs(values).max() >= 2**30:  # cannot happen: symbols were range-checked
-        raise ValueError(f"symbol value {int(values[np.abs(values).argmax()])} outside any alphabet")
-    st, a, b = nat.encode_block(spec, pool, values.astype(np.int32))
-    if st:
-        raise ValueError(f"symbol index {b} outside alphabet of {int(spec[a, 0])}")
-    append_bits(w, a, b)
-
-
-def _write_payload_native(nat, w: BitWriter, plan: _Plan, k: int, intra: bool, q: int, c, bounds,
-                          p_models: dict) -> None:
-    """_write_payload through the native block coder; p_models holds the segment's NativeSegment."""
-    seg = p_models.get(None)
-    if seg is None:  # first plane of the segment (p_models is reset at every intra plane)
-        seg = p_models[None] = NativeSegment([int(f) for f in np.nonzero(c[2:])[0] + 3], bounds, q)
-    if not intra and seg.low_p is None:
-        seg.build_p()
-    hs = plan.hsym[k]
-    src_high = plan.rhigh[k]
-    if c[0]:
-        if intra:
-            _block_native(nat, w, seg.vis_i, None, hs[0:3])
-        else:
-            _block_native(nat, w, seg.vis_p, seg.vis_pool, hs[0:3])
-        w.bit(int(src_high[3]))
-    if c[1]:
-        if intra:
-            _block_native(nat, w, seg.exp_i, None, hs[4:8])
-        else:
-            _block_native(nat, w, seg.exp_p, seg.exp_pool, hs[4:8])
-        w.bit(int(src_high[8]))
-        w.bit(int(src_high[9]))
-    values = plan.sym[k][seg.idx]
-    if intra:
-        _block_native(nat, w, seg.low_i, None, values)
-    else:
-        _block_native(nat, w, seg.low_p, seg.low_pool, values)

@@ -35,6 +35,8 @@ import numpy as np
 
 from fbaconf import rules as _registry
 from fbaconf.errors import EncodeError, TextFormatError
+
+from .._atomic import atomic_write_text
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .tables import NUM_FAPS
 
@@ -163,7 +165,7 @@ def _parse_header(lines: list[str], rep: _Reporter) -> tuple[int, FapFileHeader,
                     "no header line: the file holds no tokens outside comments")
 
 
-def read_fap_text(text: str, *, file: str | None = None,
+def read_fap_text(text: str, *, file: str | None = None,  # noqa: C901
                   strict: bool = False) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:
     """Read the text of a .fap file. Returns (frames, header, warnings); raises
     TextFormatError for unreadable input (and for any warning when ``strict``)."""
@@ -369,5 +371,4 @@ def write_fap(frames: FapFrames, *, name: str = "fbaconf", version: str = "2.1")
 
 def write_fap_file(path, frames: FapFrames, *, name: str = "fbaconf", version: str = "2.1") -> None:
     """Write ``write_fap(frames)`` to ``path`` atomically."""
-    from .._atomic import atomic_write_text
     atomic_write_text(path, write_fap(frames, name=name, version=version))

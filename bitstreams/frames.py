@@ -22,6 +22,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from .._atomic import atomic_write_bytes
 from .tables import NUM_FAPS
 
 FREE = 0
@@ -114,7 +115,6 @@ class FapFrames:
         return buf.getvalue()
 
     def save_npz(self, path) -> None:
-        from .._atomic import atomic_write_bytes
         atomic_write_bytes(path, self.to_npz_bytes())
 
     @classmethod

@@ -8,8 +8,15 @@ from fbaconf.errors import EncodeError
 
 from . import tables
 from .frames import FREE, HIGH_LEVEL_FIELDS, SET, FapFrames
-from .syntax import (EXPRESSION_SELECT_MAX, INTENSITY_MAX, MASK_ALL, MASK_INTERPOLATE, MASK_NONE, MASK_RETAIN,
-                     VISEME_SELECT_MAX)
+from .syntax import (
+    EXPRESSION_SELECT_MAX,
+    INTENSITY_MAX,
+    MASK_ALL,
+    MASK_INTERPOLATE,
+    MASK_NONE,
+    MASK_RETAIN,
+    VISEME_SELECT_MAX,
+)
 from .tables import NUM_FAPS
 
 

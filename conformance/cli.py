@@ -50,7 +50,7 @@ def register(sub) -> None:
     mu.set_defaults(func=cmd_mutants)
     g = sub.add_parser("golden", help="regenerate or verify the golden outputs",
                        description="Goldens come only from the reference pipeline: `regenerate` writes them and "
-                                   "golden/MANIFEST.json; `verify` checks digests and that regeneration is bit-identical.")
+                                   "golden/MANIFEST.json; `verify` checks digests and that regeneration is bit-identical.")  # noqa: E501
     gs = g.add_subparsers(dest="golden_cmd", metavar="CMD", required=True)
     r = gs.add_parser("regenerate", help="write goldens from the reference")
     r.set_defaults(func=cmd_regenerate)

@@ -21,7 +21,22 @@ from pathlib import Path
 
 import numpy as np
 
-from .suite import CaseKind
+from fbaconf.animation.engine import compile_scene, effective_faps
+from fbaconf.animation.faceparams import NUM_FEATURE_POINTS, fdp_point_rows
+from fbaconf.animation.interp import FitGraph, lr_fill
+from fbaconf.bitstreams import decoder as dec
+from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.arith import MAX_FREQUENCY, ZERO_RUN_LIMIT
+from fbaconf.bitstreams.faptext import read_fap_file, read_fap_text
+from fbaconf.bitstreams.frames import DERIVED, FREE, RETAINED, SET
+from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER, alphabet
+from fbaconf.bitstreams.tables import RANGE_DELTA
+from fbaconf.errors import BitstreamError, FbaconfInputError
+from fbaconf.profiles.checker import ARITH_BLOCKS, analyse, lookahead_stuffing
+from fbaconf.profiles.model import load_profiles
+from fbaconf.scenes import bt
+
+from .suite import CaseKind, load_suites
 
 FORMAT = "fbaconf.coverage/1"
 BITRATE_BAND = 0.10  # "at the limit" for the (continuous) bitrate: within the top 10 % below it
@@ -44,7 +59,6 @@ def _values(spec) -> list:
 
 
 def _names() -> dict[str, dict]:
-    from fbaconf.bitstreams import tables
     return {"fap": {str(f.number): f.name for f in tables.fap_table()},
             "viseme": {str(n): p for n, p, _ in tables.visemes()},
             "expression": {str(n): name for n, name in tables.expressions()}}
@@ -58,7 +72,6 @@ def load_model(path: Path | None = None) -> list[Point]:
     if d.get("format") != FORMAT:
         raise ValueError(f"coverage model: format must be {FORMAT}")
     names = _names()
-    from fbaconf.bitstreams import tables
     bidir = {f.number for f in tables.fap_table() if f.direction != "U"}
     items = [("point", p) for p in d.get("point", [])] + [("family", f) for f in d.get("family", [])]
     # keep file order: tomllib groups arrays by key, so order by the position of each id in the text
@@ -86,8 +99,6 @@ def load_model(path: Path | None = None) -> list[Point]:
 
 def _decode_any(data: bytes):
     """(planes, frames, error) of the reference decoder, also for invalid streams."""
-    from fbaconf.bitstreams import decoder as dec
-    from fbaconf.errors import BitstreamError
     d = dec._Decoder(data, None)
     try:
         res = d.run()
@@ -96,13 +107,8 @@ def _decode_any(data: bytes):
         return list(d.planes), d._frames() if d.rows_values else None, e, None
 
 
-def stream_points(data: bytes) -> set[str]:
+def stream_points(data: bytes) -> set[str]:  # noqa: C901
     """Points hit by decoding one valid face object stream."""
-    from fbaconf.bitstreams import tables
-    from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER, alphabet
-    from fbaconf.bitstreams.tables import RANGE_DELTA
-    from fbaconf.bitstreams.arith import MAX_FREQUENCY
-    from fbaconf.profiles.checker import ARITH_BLOCKS, lookahead_stuffing
     hits: set[str] = set()
     planes, frames, err, res = _decode_any(data)
     if err is not None or frames is None:
@@ -116,7 +122,6 @@ def stream_points(data: bytes) -> set[str]:
     default = tables.default_bounds()
     bounds = default.copy()
     seen_p = False
-    plane_quant: list[int | None] = []
     pred_count: dict[int, int] = {}  # predicted symbols per FAP model since the segment's intra plane
     quants, prev_coded, prev_rate = set(), None, None
     any_rate = False
@@ -245,7 +250,6 @@ def stream_points(data: bytes) -> set[str]:
 def _retained_across_quant(planes, frames) -> set[str]:
     """``retained.quant-change``: a FAP holds (RETAINED) in a plane of another fap_quant than the
     plane that last set it — the held value is the dequantised one, not re-scaled (notes §3.3)."""
-    from fbaconf.bitstreams.frames import RETAINED, SET
     if frames is None or len(frames) != len(planes):
         return set()
     quant, last = None, {}
@@ -263,7 +267,6 @@ def _retained_across_quant(planes, frames) -> set[str]:
 
 def text_points(text: str) -> set[str]:
     """The forms of a raw .fap text (players): what real tools write (docs/fap-text.md)."""
-    import re
     hits: set[str] = set()
     if "\r\n" in text:
         hits.add("text.crlf")
@@ -292,8 +295,6 @@ def text_points(text: str) -> set[str]:
 def raw_text_points(path: Path) -> set[str]:
     """:func:`text_points` of a raw .fap file, plus what its reading shows: frame numbers past
     the header's count, gaps (frames held), values wrapped over several lines."""
-    from fbaconf.bitstreams.faptext import read_fap_text
-    from fbaconf.errors import FbaconfInputError
     text = Path(path).read_bytes().decode("utf-8", errors="replace")
     hits = text_points(text)
     try:
@@ -312,7 +313,6 @@ def raw_text_points(path: Path) -> set[str]:
 
 
 def _has_stuffing(data: bytes, start: int, length: int) -> bool:
-    from fbaconf.bitstreams.arith import ZERO_RUN_LIMIT
     bits = np.unpackbits(np.frombuffer(data, dtype=np.uint8))
     seg = bits[start:start + length]
     zeros = 0
@@ -330,7 +330,6 @@ def _has_stuffing(data: bytes, start: int, length: int) -> bool:
 
 def frames_points(frames) -> set[str]:
     """Points of decoded FapFrames: FAPs set, negatives, statuses, visemes/expressions."""
-    from fbaconf.bitstreams.frames import FREE, RETAINED, SET
     hits: set[str] = set()
     st = frames.status
     if st.size == 0:
@@ -378,13 +377,8 @@ def frames_points(frames) -> set[str]:
 # ------------------------------------------------------------------ scene extractors
 
 
-def scene_points(scene_path: Path | None, frames) -> set[str]:
+def scene_points(scene_path: Path | None, frames) -> set[str]:  # noqa: C901
     """Points of a case's scene, with the case's decoded frames (for value-dependent points)."""
-    from fbaconf.scenes import bt
-    from fbaconf.animation.engine import compile_scene, effective_faps
-    from fbaconf.animation.faceparams import NUM_FEATURE_POINTS, fdp_point_rows
-    from fbaconf.animation.interp import lr_fill
-    from fbaconf.bitstreams.frames import DERIVED, FREE
     hits: set[str] = set()
     if frames is not None and len(frames):
         v, s = lr_fill(frames.values.astype(np.float64), frames.status)
@@ -491,7 +485,6 @@ def _transform_depth(scene, graph) -> int:
 
 
 def _fit_points(fit) -> set[str]:
-    from fbaconf.animation.interp import FitGraph
     g = FitGraph.from_fields(fit.get("FAPs"), fit.get("Graph"), fit.get("numeratorExp"), fit.get("denominatorExp"),
                              fit.get("numeratorImpulse"), fit.get("numeratorTerms"), fit.get("denominatorTerms"),
                              fit.get("numeratorCoefs"), fit.get("denominatorCoefs"))
@@ -527,8 +520,6 @@ def _fit_points(fit) -> set[str]:
 
 def claim_points(data: bytes | None, scene_path: Path | None, faces: int = 1, face_streams=None) -> tuple[set, dict]:
     """Smallest-claim and level-limit points from the checker; returns (hits, measures)."""
-    from fbaconf.profiles.checker import analyse
-    from fbaconf.profiles.model import load_profiles
     ps = load_profiles()
     hits: set[str] = set()
     streams = face_streams or [data]
@@ -567,7 +558,6 @@ def claim_points(data: bytes | None, scene_path: Path | None, faces: int = 1, fa
 
 def diagnostic_points(data: bytes, scene_path: Path | None, error_case: bool) -> tuple[set, set]:
     """(points, codes): checker codes of a stream -> diag.* (valid streams) or error.* points."""
-    from fbaconf.profiles.checker import analyse
     rep = analyse(data, scene=None)
     codes = {d.code for d in rep.diagnostics}
     prefix = "error." if error_case else "diag."
@@ -593,8 +583,6 @@ def case_points(case) -> CaseCoverage:
     hits = cc.points
     try:
         if case.kind == CaseKind.ERROR and case.input_path("fba") is None and case.input_path("fap") is not None:
-            from fbaconf.bitstreams.faptext import read_fap_file
-            from fbaconf.errors import FbaconfInputError
             hits.add("text.fap")  # an invalid .fap text (players): the rule its reading breaks
             hits |= raw_text_points(case.input_path("fap"))
             try:
@@ -636,7 +624,6 @@ def case_points(case) -> CaseCoverage:
             hits |= h
             _, frames, _, _ = _decode_any(data)
         elif case.input_path("fap") is not None:
-            from fbaconf.bitstreams.faptext import read_fap_file
             frames = read_fap_file(case.input_path("fap"))[0]
             hits |= frames_points(frames)
         if "vertices" in case.stages or "images" in case.stages or scene is not None:
@@ -648,7 +635,6 @@ def case_points(case) -> CaseCoverage:
 
 def compute(suites=None, model: list[Point] | None = None) -> dict:
     """{"points": [...], "cases": [...], "covered": K, "total": N, "unknown": {...}}."""
-    from .suite import load_suites
     suites = suites if suites is not None else load_suites()
     model = model or load_model()
     ids = {p.id for p in model}

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
+from fbaconf.pipeline import multi_outputs, reference_outputs
 
 from .suite import CaseKind, Suite, SuiteError, digest_problems, golden_root, load_suites, sha256_file
 
@@ -63,7 +64,6 @@ def canonical_npz(path: Path, keep: list[str] | None = None) -> None:
 
 def generate_case(case, out: Path) -> list[Path]:
     """Write one case's goldens into ``out``; returns the files written."""
-    from fbaconf.pipeline import multi_outputs, reference_outputs
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     if case.kind == CaseKind.ERROR:

@@ -61,6 +61,7 @@ def state_of(frames):
     """What a player holds in each frame: every FAP with a value (SET, RETAINED or DERIVED)
     as SET, FREE ones as they are."""
     import numpy as np
+
     from fbaconf.bitstreams.frames import DERIVED, RETAINED, SET
     out = frames.copy()
     out.status = np.where(np.isin(out.status, (RETAINED, DERIVED)), SET, out.status).astype(out.status.dtype)

@@ -13,6 +13,7 @@ their folder.
 from __future__ import annotations
 
 import os
+import re
 import stat
 from pathlib import Path
 
@@ -203,7 +204,6 @@ def confined(base: Path | str, rel: str, *, what: str = "path") -> Path:
 def safe_name(name: str, *, what: str = "name") -> str:
     """A single path component made of letters, digits, ``.``, ``_``, ``-`` and ``@``
     (not starting with a dot): safe as a folder or file name."""
-    import re
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_@+-][A-Za-z0-9._@+-]{0,127}", name):
         raise PathEscapeError(f"{what} {name!r} must be 1-128 letters, digits, '.', '_', '-', '+' or '@' "
                               f"(not starting with '.')")

@@ -14,13 +14,21 @@ and a shard is a pure function of its seed, so the rerun finds what the lost one
 from __future__ import annotations
 
 import hashlib
+import shutil
 import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
+from fbaconf.harness.adapters import resolve
+
+from .corpus import default_seeds
+from .engine import FuzzConfig, Fuzzer
+from .findings import Finding, write_finding
 from .inputs import Entry
+from .minimise import MinimiseStats, minimise
+from .targets import DecoderTarget, Verdict
 
 ROUND_S = 30.0  # a shard's length: corpus merged between rounds
 MAX_MERGED = 2000
@@ -38,8 +46,6 @@ class ShardSpec:
 
 
 def _target(spec: ShardSpec, work: Path):
-    from fbaconf.harness.adapters import resolve
-    from .targets import DecoderTarget
     return DecoderTarget(resolve(spec.manifest), work, kind=spec.kind, timeout_s=spec.timeout_s,
                          expected_exit=spec.expected_exit, oracle=spec.oracle,
                          fork_server=not spec.spawn, persistent=not spec.spawn)
@@ -47,9 +53,6 @@ def _target(spec: ShardSpec, work: Path):
 
 def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -> dict:
     """One shard, in a worker: fuzz for ``seconds`` and report (no minimisation, no files)."""
-    import shutil
-    from .corpus import default_seeds
-    from .engine import FuzzConfig, Fuzzer
     work = Path(tempfile.mkdtemp(prefix="fbaconf-shard-"))
     try:
         target = _target(spec, work)
@@ -74,8 +77,6 @@ def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -
 
 def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: float, tests: int) -> dict:
     """Minimise one finding in a worker: the smallest input with the same class and signature."""
-    import shutil
-    from .minimise import minimise
     work = Path(tempfile.mkdtemp(prefix="fbaconf-min-"))
     target = _target(spec, work)
     last = {}
@@ -131,11 +132,11 @@ class Campaign:
         return new
 
 
-def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int, out: Path,
+def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int, out: Path,  # noqa: PLR0913
                  minimise_seconds: float, progress=print, round_s: float = ROUND_S) -> tuple[Campaign, list]:
     """Rounds of one shard per worker until ``seconds`` have passed; then each distinct finding
     minimised once and written to ``out/findings``. Returns the campaign and its Findings."""
-    from distributed import as_completed
+    from distributed import as_completed  # noqa: PLC0415 (Dask: optional (the cluster extra))
     camp = Campaign()
     t0 = time.perf_counter()
     rnd = 0
@@ -165,9 +166,6 @@ def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int,
 
 
 def _write(camp: Campaign, mins: dict, spec: ShardSpec, out: Path) -> list:
-    from .findings import Finding, write_finding
-    from .minimise import MinimiseStats
-    from .targets import Verdict
     out.mkdir(parents=True, exist_ok=True)
     local = _target(spec, Path(tempfile.mkdtemp(prefix="fbaconf-campaign-", dir=out)))
     info = {"name": local.adapter.name, "manifest": str(local.adapter.manifest_path or spec.manifest),
@@ -190,7 +188,6 @@ def _write(camp: Campaign, mins: dict, spec: ShardSpec, out: Path) -> list:
             write_finding(out, fd, SimpleNamespace(target=local, decoder_info=info, seed=f["seed"]))
             written.append(fd)
     finally:
-        import shutil
         local.close()
         shutil.rmtree(local.work_root, ignore_errors=True)
     return written

@@ -4,7 +4,6 @@ from __future__ import annotations
 import random
 
 
-
 class Chooser:
     """Source of choices: :class:`RandomChooser` (the fuzz loop) or :class:`DrawChooser` (hypothesis)."""
 
@@ -31,7 +30,7 @@ class RandomChooser(Chooser):
 
 class DrawChooser(Chooser):
     def __init__(self, draw) -> None:
-        from hypothesis import strategies as st
+        from hypothesis import strategies as st  # noqa: PLC0415 (test-only dependency)
         self.draw, self.st = draw, st
 
     def int(self, lo: int, hi: int) -> int:

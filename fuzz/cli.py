@@ -123,6 +123,7 @@ def cmd_fuzz(args) -> int:
 def _campaign(args, expected: set[int] | None) -> int:
     from fbaconf.harness import cluster
     from fbaconf.harness.adapters import resolve
+
     from .campaign import ShardSpec, run_campaign
     adapter = resolve(args.decoder)  # a bad manifest fails here, not in every worker
     manifest = str(Path(args.decoder).resolve()) if Path(args.decoder).is_file() else args.decoder
@@ -208,8 +209,9 @@ def _print_replay(v, args) -> int:
 
 
 def _decoder(args, expected: set[int]) -> int:
-    from fbaconf.isolation import forkserver_build
     from fbaconf.harness.adapters import resolve
+    from fbaconf.isolation import forkserver_build
+
     from .corpus import default_seeds
     from .engine import FuzzConfig, Fuzzer
     from .findings import replay
@@ -236,7 +238,7 @@ def _decoder(args, expected: set[int]) -> int:
             return _print_replay(v, args)
         info = {"name": adapter.name, "manifest": str(adapter.manifest_path) if adapter.manifest_path else None,
                 "mode": "persistent" if target.persistent else "fork-server" if target.fork_server else "spawn",
-                **({"fork_server": forkserver_build.server_kind()} if target.fork_server and not target.persistent else {}),
+                **({"fork_server": forkserver_build.server_kind()} if target.fork_server and not target.persistent else {}),  # noqa: E501
                 "manifest_sha256": adapter.digest(),
                 "limits": {"timeout_s": target.limits.timeout_s, "memory_mb": target.limits.memory_mb,
                            "memory_kind": target.limits.memory_kind, "output_mb": target.limits.output_mb}}

@@ -4,6 +4,11 @@ from __future__ import annotations
 import random
 from pathlib import Path
 
+from fbaconf.bitstreams.bitedit import end_stream
+from fbaconf.conformance.suite import suites_root
+from fbaconf.generators.suite_scenes import make_scene
+from fbaconf.scenes import bt
+
 from .choosers import RandomChooser
 from .inputs import Entry, gen_valid
 from .scenes import gen_scene
@@ -12,7 +17,6 @@ from .scenes import gen_scene
 def suite_files(suffix: str, kind: str, root: Path | None = None, max_bytes: int | None = None) -> list[Entry]:
     """The built suites' ``*/*.<suffix>`` files (up to ``max_bytes`` each) as seeds of ``kind``;
     empty when no suites are built."""
-    from fbaconf.conformance.suite import suites_root
     root = Path(root) if root else suites_root()
     out = []
     if root.is_dir():
@@ -31,8 +35,6 @@ def scene_seeds(root: Path | None = None, max_bytes: int = 8000) -> list[Entry]:
     """Small BT scenes of the suites plus generated Face-family scenes."""
     out = suite_files("bt", "scene", root, max_bytes)
     try:
-        from fbaconf.scenes import bt
-        from fbaconf.generators.suite_scenes import make_scene
         for name in ("fit:chain", "calibration:all"):
             out.append(Entry(bt.write(make_scene(name)).encode(), kind="scene", origin=f"seed:make_scene({name})"))
     except Exception:  # noqa: BLE001 - optional seeds
@@ -44,7 +46,6 @@ def scene_seeds(root: Path | None = None, max_bytes: int = 8000) -> list[Entry]:
 
 def short_prefixes(entries: list[Entry], max_planes: int = 3) -> list[Entry]:
     """Valid short streams: the first 1..max_planes planes of each entry, then the end code."""
-    from fbaconf.bitstreams.bitedit import end_stream
     out = []
     for e in entries:
         m = e.get_model()

@@ -1,4 +1,4 @@
-"""The fuzzing loop: batches of reproducible inputs, the corpus grown by new syntax features, findings deduplicated and minimised."""
+"""The fuzzing loop: batches of reproducible inputs, the corpus grown by new syntax features, findings deduplicated and minimised."""  # noqa: E501
 from __future__ import annotations
 
 import collections
@@ -12,6 +12,8 @@ from pathlib import Path
 from typing import Callable
 
 from fbaconf.errors import FbaconfInputError
+from fbaconf.scenes import bifs, bt
+
 from .choosers import RandomChooser
 from .corpus import scene_seeds
 from .findings import Finding, write_finding
@@ -20,8 +22,8 @@ from .minimise import minimise
 from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
-from .text import mutate_text, text_seeds
 from .targets import ExecResult, FuzzSetupError, Run, SelfTarget, Verdict
+from .text import mutate_text, text_seeds
 
 
 @dataclass
@@ -377,7 +379,6 @@ class Fuzzer:
 
 
 def _scene_feats_of(inp: Entry) -> set[str]:
-    from fbaconf.scenes import bt
     text = inp.data.decode("utf-8", "replace")
     try:
         scene = bt.parse(text)
@@ -387,11 +388,6 @@ def _scene_feats_of(inp: Entry) -> set[str]:
 
 
 def _bifs_seeds(scenes: list[Entry]) -> list[Entry]:
-    try:
-        from fbaconf.scenes import bt
-        from fbaconf.scenes import bifs
-    except ImportError:  # pragma: no cover
-        return []
     out = []
     for e in scenes:
         try:

@@ -124,7 +124,7 @@ afl-fuzz -i corpus -o findings -x fba.dict -- ./your_decoder @@ /dev/null
 
 A crash found this way can be classified, minimised and promoted to a regression case with
 `fbaconf fuzz --decoder D.toml --replay FILE` and `fbaconf fuzz --promote`.
-"""
+"""  # noqa: E501
 
 
 def export(out: Path, n_valid: int = 64, seed: int = 0) -> dict:

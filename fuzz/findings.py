@@ -8,6 +8,9 @@ import shlex
 from dataclasses import dataclass
 from pathlib import Path
 
+from fbaconf._atomic import atomic_write_bytes, atomic_write_text
+from fbaconf.harness.adapters import Job
+
 from .inputs import Entry
 from .minimise import MinimiseStats
 from .targets import DecoderTarget, FuzzSetupError, SelfTarget, Verdict
@@ -28,7 +31,6 @@ class Finding:
 
 
 def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzzer that found it
-    from fbaconf._atomic import atomic_write_bytes, atomic_write_text
     d = Path(out_dir) / "findings" / f.id
     d.mkdir(parents=True, exist_ok=True)
     ext = {"scene": "bt", "bifs": "bifs", "text": "fap"}.get(f.original.kind, "fba")
@@ -44,7 +46,6 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
     replay += ["--replay", str((d / f"minimal.{ext}").resolve())]
     command = None
     if isinstance(target, DecoderTarget) and target.is_command:
-        from fbaconf.harness.adapters import Job
         wd = "/tmp/fbaconf-repro"
         values = {"input": str((d / f"minimal.{ext}").resolve()), "fba": str((d / f"minimal.{ext}").resolve()),
                   "faps_out": f"{wd}/faps.{'fap' if target.adapter.faps_format == 'fap' else 'npz'}",
@@ -73,7 +74,7 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
     doc = {
         "format": "fbaconf.fuzz-finding/1", "id": f.id, "class": f.verdict.cls, "signature": f.verdict.signature,
         "message": f.verdict.message, "minimal_message": mv.message, "target": getattr(target, "name", "?"),
-        "input_kind": f.original.kind, "decoder": info, "seed": fz.seed, "input_index": f.index, "corpus_size": f.original.corpus_size,
+        "input_kind": f.original.kind, "decoder": info, "seed": fz.seed, "input_index": f.index, "corpus_size": f.original.corpus_size,  # noqa: E501
         "origin": f.original.origin, "input_valid": bool(f.original.valid),
         "found_at_s": round(f.found_at_s, 2), "hits": f.hits,
         "original": {"file": f"original.{ext}", "bytes": len(f.original.data),
@@ -91,7 +92,6 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
 
 
 def write_summary(out_dir: Path, fz) -> dict:
-    from fbaconf._atomic import atomic_write_text
     doc = fz.summary()
     Path(out_dir).mkdir(parents=True, exist_ok=True)
     atomic_write_text(Path(out_dir) / "fuzz.json", json.dumps(doc, indent=1) + "\n")

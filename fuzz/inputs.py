@@ -6,10 +6,15 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
+import numpy as np
+
+from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.frames import FREE
+from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.errors import FbaconfInputError
+
 from .choosers import Chooser
 from .model import StreamModel, stream_model
-
 
 RATES = (25.0, 30.0, 15.0, 12.5, 10.0, 60.0, 7.5, 24.0, 30000 / 1001, 50.0)
 
@@ -45,10 +50,6 @@ class Entry:
 
 def gen_valid(ch: Chooser) -> Entry:
     """A valid stream from random procedural content and random encoder options."""
-    import numpy as np
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.frames import FREE
-    from fbaconf.bitstreams.synth import synthetic_sequence
     n = ch.choice((1, 2, 3, 4, 6, 8, 12)) if ch.bool(0.9) else ch.int(16, 40)
     rate = ch.choice(RATES)
     if ch.bool(0.3):

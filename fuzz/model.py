@@ -1,13 +1,14 @@
-"""The syntax model of a face-object stream for fuzzing: start codes and header fields found in the bytes, the features a run reports as its coverage."""
+"""The syntax model of a face-object stream for fuzzing: start codes and header fields found in the bytes, the features a run reports as its coverage."""  # noqa: E501
 from __future__ import annotations
 
 import collections
 import threading
-
 from dataclasses import dataclass
 
+from fbaconf.bitstreams import decoder as dec
+from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.bitio import BitReader
 from fbaconf.errors import BitstreamError
-
 
 START_CODES = {"face_object": 0x000001BA, "plane": 0x000001BB, "end": 0x000001B1}
 SKIP_CHUNK_FIELDS = 64  # header_fields: chunks of a skip chain listed one by one (the rest as one field)
@@ -110,7 +111,6 @@ def reference_parse(data: bytes):
         if hit is not None:
             _PARSES.move_to_end(data)
             return hit
-    from fbaconf.bitstreams import decoder as dec
     d = dec._Decoder(data, None)
     rule, end_code, end_offset, frames = None, None, 0, None
     try:
@@ -156,8 +156,6 @@ def features_of(data: bytes) -> set[str]:
 
 def header_fields(data: bytes, planes) -> list[Field]:
     """Every header field of every (completely decoded) plane: name, bit offset, width."""
-    from fbaconf.bitstreams import tables
-    from fbaconf.bitstreams.bitio import BitReader
     r = BitReader(data)
     out: list[Field] = []
     groups = tables.groups()

@@ -5,6 +5,7 @@ import random
 from typing import Callable
 
 from fbaconf.bitstreams.bitedit import bit_range, insert_bits, join_bits, remove_bits, set_bits, truncate_bits
+
 from .inputs import Entry
 from .model import DICTIONARY, Field
 

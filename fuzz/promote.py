@@ -2,14 +2,19 @@
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 from typing import Callable
 
+from fbaconf._atomic import atomic_write_bytes, atomic_write_text
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.conformance.suite import package_root
 from fbaconf.errors import FbaconfInputError
+from fbaconf.profiles.checker import check_stream
 from fbaconf.safefs import confined, read_regular, safe_name
+
 from .findings import load_findings
 from .targets import FuzzSetupError
-
 
 REGRESSION_SUITE = "simple-l1-regression"
 REGRESSION_HEADER = f"""# fbaconf regression suite: fuzz findings promoted by `fbaconf fuzz --promote DIR`.
@@ -39,12 +44,7 @@ def promote(fuzz_dir: Path, data_dir: Path | None = None, *, log: Callable[[str]
     """Copy each stream finding's minimal input to ``data_dir/regression/<id>.fba`` and append a
     ``[[case]]`` to ``data_dir/regression.toml`` (created with its ``[[suite]]`` table). Returns
     the cases added (ids already present are skipped)."""
-    import tomllib
-    from fbaconf._atomic import atomic_write_bytes, atomic_write_text
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.profiles.checker import check_stream
     if data_dir is None:
-        from fbaconf.conformance.suite import package_root
         data_dir = package_root() / "data"
     data_dir = Path(data_dir)
     reg = data_dir / "regression.toml"

@@ -4,10 +4,11 @@ from __future__ import annotations
 import random
 import re
 
+from fbaconf.scenes.bt import node_specs
+
 from .choosers import Chooser
 from .inputs import Entry
 from .mutators import BYTE_MUTATORS, _pick
-
 
 _BT_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|#[^\n]*|[\[\]{}]|[^\s\[\]{}"#,]+|\s+|.', re.S)
 BT_DICTIONARY = ("Face", "FDP", "FIT", "FAP", "Viseme", "Expression", "FaceDefTables", "FaceDefMesh",
@@ -58,7 +59,6 @@ def _bt_value(ch: Chooser, ftype: str, allowed, depth: int, defs: list[str]) -> 
 
 
 def _bt_node(ch: Chooser, ntype: str, depth: int, defs: list[str]) -> str:
-    from fbaconf.scenes.bt import node_specs
     specs = node_specs().get(ntype, {})
     names = list(specs)
     if ntype == "FAP" and names:
@@ -75,7 +75,6 @@ def _bt_node(ch: Chooser, ntype: str, depth: int, defs: list[str]) -> str:
 
 def gen_scene(ch: Chooser) -> Entry:
     """A BT scene from the node tables: a Face (FDP, FIT, FAP, FaceDefTables...) and/or geometry."""
-    from fbaconf.scenes.bt import node_specs
     top = ch.choice(("Face", "Face", "Face", "Group", "Transform", "Shape"))
     if top not in node_specs():
         top = "Face"

@@ -11,7 +11,7 @@ from .scenes import gen_scene, mutate_scene
 
 def valid_entries():
     """Hypothesis strategy: valid stream :class:`Entry` objects (with the encoder's reconstruction)."""
-    from hypothesis import strategies as st
+    from hypothesis import strategies as st  # noqa: PLC0415 (test-only dependency)
     return st.composite(lambda draw: gen_valid(DrawChooser(draw)))()
 
 
@@ -22,7 +22,7 @@ def valid_streams():
 
 def near_valid_streams(seeds: list[bytes] | None = None):
     """Hypothesis strategy: a valid stream (generated, or one of ``seeds``) with 1-3 mutations."""
-    from hypothesis import strategies as st
+    from hypothesis import strategies as st  # noqa: PLC0415 (test-only dependency)
 
     @st.composite
     def strat(draw):
@@ -40,7 +40,7 @@ def near_valid_streams(seeds: list[bytes] | None = None):
 
 def bt_scenes(mutated: bool = False):
     """Hypothesis strategy: BT scene text from the node tables (``mutated``: plus token mutations)."""
-    from hypothesis import strategies as st
+    from hypothesis import strategies as st  # noqa: PLC0415 (test-only dependency)
 
     @st.composite
     def strat(draw):

@@ -1,6 +1,5 @@
-"""Targets and verdicts: the decoder under test (through the harness's sandbox and its one classifier of process endings) and fbaconf itself (--self)."""
+"""Targets and verdicts: the decoder under test (through the harness's sandbox and its one classifier of process endings) and fbaconf itself (--self)."""  # noqa: E501
 from __future__ import annotations
-
 
 import os
 import re
@@ -12,8 +11,28 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable
 
+import numpy as np
+
+from fbaconf import rules as R
+from fbaconf.animation.engine import animate
+from fbaconf.bitstreams import decoder
+from fbaconf.bitstreams.faptext import read_fap_text
+from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.errors import FbaconfInputError
+from fbaconf.harness import compare as cmp
+from fbaconf.harness.adapters import CommandAdapter, Job, NotSupportedError
+from fbaconf.harness.compare import compare_faps
+from fbaconf.harness.runner import hidden_from_decoders
+from fbaconf.isolation import endings, sandbox
+from fbaconf.isolation.endings import crash_report
+from fbaconf.isolation.forkclient import ForkServer
+from fbaconf.isolation.persistent import PersistentDecoder
+from fbaconf.isolation.sandbox import Limits
+from fbaconf.profiles import checker
+from fbaconf.profiles.checker import check_stream
 from fbaconf.safefs import empty_dir, remove_tree
+from fbaconf.scenes import bifs, bt
+
 from .inputs import Entry
 from .model import reference_parse, stream_features
 from .scenes import scene_features
@@ -39,7 +58,6 @@ class FuzzSetupError(FbaconfInputError):
 def stack_hash(text: str) -> tuple[str, str] | None:
     """(kind, short hash) of the crash report a decoder printed — the harness's one crash
     classifier (:func:`fbaconf.isolation.endings.crash_report`)."""
-    from fbaconf.isolation.endings import crash_report
     r = crash_report(text)
     return (r.kind, r.signature) if r else None
 
@@ -99,11 +117,9 @@ class DecoderTarget:
     """A decoder adapter under its limits (command manifests through the sandbox; in-process
     Python adapters called directly)."""
 
-    def __init__(self, adapter, work_root: Path, *, kind: str = "stream", timeout_s: float | None = None,
+    def __init__(self, adapter, work_root: Path, *, kind: str = "stream", timeout_s: float | None = None,  # noqa: PLR0913
                  expected_exit: Iterable[int] | None = None, oracle: bool = True,
                  scene_stream: bytes | None = None, fork_server: bool = True, persistent: bool = True) -> None:
-        from fbaconf.harness.adapters import CommandAdapter
-        from fbaconf.isolation.sandbox import Limits
         self.adapter = adapter
         self.kind = kind
         self.work_root = Path(work_root).resolve()  # decoders run in their own folders: absolute paths
@@ -154,7 +170,6 @@ class DecoderTarget:
         """The decoder's files for one input in ``workdir``: ``in/`` (the input, rewritten in
         place: a reused worker folder keeps the folder the sandbox binds read-only) and an
         empty ``out/``."""
-        from fbaconf.harness.adapters import Job
         ind, outd = workdir / "in", workdir / "out"
         ind.mkdir(parents=True, exist_ok=True)
         for p in workdir.iterdir():  # what the previous input left behind
@@ -217,7 +232,6 @@ class DecoderTarget:
 
     def _view(self, w: "_Worker", argv: list[str]):
         """The sandbox view of a worker: the decoder's own view of case folder 0, plus the others."""
-        from fbaconf.harness.runner import hidden_from_decoders
         view = self.adapter.sandbox_view(argv, w.slots[0].job.workdir, hidden=hidden_from_decoders())
         for slot in w.slots[1:]:
             view.writable.append(slot.job.workdir)
@@ -258,12 +272,10 @@ class DecoderTarget:
             slot = w.slots[k]
             job = self._reuse(slot, inp.data, write_input=not self.persistent)  # persistent: on stdin
             if w.server is None and self.persistent:
-                from fbaconf.isolation.persistent import PersistentDecoder
                 w.argv = [self.adapter.argv("serve", slot.job)]
                 w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),
                                              self.limits, env=self.adapter.env)
             elif w.server is None:
-                from fbaconf.isolation.forkclient import ForkServer
                 w.argv = [self.argv_for(s.job) for s in w.slots]  # a slot's paths never change
                 w.server = ForkServer(w.root, self._view(w, w.argv[0]), self.limits, env=self.adapter.env,
                                       sum_outputs_every=16, slots=len(w.slots))
@@ -276,8 +288,6 @@ class DecoderTarget:
         try:
             job = self._job(inp.data, workdir)
             if self.is_command:
-                from fbaconf.isolation import sandbox
-                from fbaconf.harness.runner import hidden_from_decoders
                 argv = self.argv_for(job)
                 view = self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders())
                 out = ExecResult(self._judge(inp, job, sandbox.run(argv, job.workdir, self.limits,
@@ -293,7 +303,6 @@ class DecoderTarget:
 
     def _judge(self, inp: Entry, job, res) -> Verdict | None:
         """The finding (or None) for one finished decoder process."""
-        from fbaconf.isolation import endings
         ending = endings.classify(res, self.limits, self.reject_exit_codes)
         if ending.kind == "setup":
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
@@ -325,7 +334,6 @@ class DecoderTarget:
         return self._oracle(inp, job, rc, detail)
 
     def _run_python(self, inp: Entry, job) -> Verdict | None:
-        from fbaconf.harness.adapters import NotSupportedError
         t0 = time.perf_counter()
         try:
             self.adapter.run(job)
@@ -370,7 +378,6 @@ class DecoderTarget:
         """The finding (or None) of a decoder's ending and FAP output on an oracle input."""
         if rc != 0:
             return Verdict("wrong-output", "rejected-valid", f"rejected a valid stream (exit code {rc})", detail)
-        from fbaconf.harness import compare as cmp
         path = job.path("faps_out")
         if path is None or not path.is_file():
             return Verdict("wrong-output", "no-output", "exit code 0 but no FAP output for a valid stream", detail)
@@ -390,7 +397,6 @@ def reference_text(inp: Entry):
     """What a player must make of ``inp`` (.fap text): the frames fbaconf's reader reads from
     it without any warning, or None when the text is invalid or relies on a lenient reading
     (then only crashes, hangs and blow-ups are findings)."""
-    from fbaconf.bitstreams.faptext import read_fap_text
     try:
         frames, _header, warnings = read_fap_text(inp.data.decode("utf-8"), strict=True)
     except (FbaconfInputError, UnicodeDecodeError):
@@ -426,7 +432,6 @@ def decision_free(inp: Entry) -> bool:
     no decision-dependent (FAP-DECISION-*) diagnostic from the checker."""
     if inp.valid:
         return True
-    from fbaconf.profiles.checker import check_stream
     return not any(d.severity == "error" or d.code.startswith("FAP-DECISION") for d in check_stream(inp.data))
 
 
@@ -437,14 +442,7 @@ class SelfTarget:
     name = "self"
 
     def __init__(self, *, checker_every: int = 4, slow_s: float = 5.0, scene_stream: bytes | None = None) -> None:
-        from fbaconf.scenes import bt
-        from fbaconf.bitstreams import decoder
-        from fbaconf.profiles import checker
         self.bt, self.decoder, self.checker = bt, decoder, checker
-        try:
-            from fbaconf.scenes import bifs
-        except ImportError:  # pragma: no cover - optional stage
-            bifs = None
         self.bifs = bifs
         self.checker_every = max(1, checker_every)
         self.slow_s = slow_s
@@ -474,7 +472,6 @@ class SelfTarget:
         return ExecResult(v, feats)
 
     def _stream(self, inp: Entry, feats: set[str]) -> Verdict | None:
-        import numpy as np
         data = inp.data
         try:
             res = self.decoder.decode(data)
@@ -492,7 +489,6 @@ class SelfTarget:
                 return Verdict("bad-output", "decoder:frames", "decoded FapFrames malformed (dtype, non-finite "
                                "times or inconsistent lengths)")
             if inp.recon is not None:
-                from fbaconf.harness.compare import compare_faps
                 r = compare_faps(inp.recon, fr, text_output=False)
                 if not r.outcome.ok:
                     return Verdict("round-trip", f"decoder:{(r.first_difference or {}).get('what')}",
@@ -503,7 +499,6 @@ class SelfTarget:
         return None
 
     def _check(self, data: bytes, scene) -> Verdict | None:
-        from fbaconf import rules as R
         rep = self.checker.analyse(data, scene=scene, claim="simple@1" if scene is None else "predictable@2",
                                    smallest_claim=True)
         bad = [d for d in rep.diagnostics if d.code == R.CHECK_INTERNAL or d.code not in R.CODES]
@@ -538,7 +533,6 @@ class SelfTarget:
 
     def _text(self, inp: Entry, feats: set[str]) -> Verdict | None:
         """The .fap reader: any text is read or refused with a typed error."""
-        from fbaconf.bitstreams.faptext import read_fap_text
         try:
             _frames, _header, warnings = read_fap_text(inp.data.decode("utf-8", "replace"))
             feats |= {f"text-warning:{w.rule}" for w in warnings}
@@ -563,8 +557,6 @@ class SelfTarget:
         """Scene compilation and one animated frame (FDP calibration, FIT, FaceDefTables): a scene
         the reader accepts either animates or is refused with a typed error — anything else
         escapes to execute() and is the finding."""
-        from fbaconf.animation.engine import animate
-        from fbaconf.bitstreams.frames import FapFrames
         try:
             animate(FapFrames.empty(1), scene)
             feats.add("compile:ok")

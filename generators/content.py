@@ -5,13 +5,14 @@ from fractions import Fraction
 
 import numpy as np
 
-
+from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.encoder import EncoderOptions
+from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS
+from fbaconf.bitstreams.synth import synthetic_sequence
 
 
 def make_content(c: dict):
     """Procedural FapFrames for a case's ``content`` table."""
-    from fbaconf.bitstreams.frames import FREE
-    from fbaconf.bitstreams.synth import synthetic_sequence
     frames = synthetic_sequence(int(c.get("frames", 30)), float(c.get("rate", 25.0)),
                                 visemes=bool(c.get("visemes", True)), expressions=bool(c.get("expressions", True)),
                                 faps=c.get("faps"), seed=int(c.get("seed", 0)))
@@ -19,12 +20,10 @@ def make_content(c: dict):
     if scale != 1.0:
         frames.values[:] = np.round(frames.values * scale).astype(np.int32)
     if c.get("negate"):
-        from fbaconf.bitstreams import tables
         qs = tables.quant_steps()
         for fap in c["negate"]:  # strictly negative: -(|v| + 40 steps), beyond any quantiser's dead zone
             j = int(fap) - 1
             frames.values[:, j] = -(np.abs(frames.values[:, j]) + 40 * int(qs[j]))
-    from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS
     for name, v in c.get("set_high", {}).items():
         col = HIGH_LEVEL_FIELDS.index(name)
         frames.high[:, col] = np.resize(np.asarray(v, dtype=np.int32), len(frames))
@@ -50,7 +49,6 @@ def make_content(c: dict):
         frames.status[~keep, j] = FREE
     ext = [int(f) for f in c.get("extremes", [])]
     if ext:  # values at the ends of the widest range (+-1860 steps): 0, +M, 0, -M ... (alternating phase)
-        from fbaconf.bitstreams import tables
         qs = tables.quant_steps()
         pat = np.array([1, 0, -1, 0])
         for i, f in enumerate(ext):
@@ -67,7 +65,6 @@ def make_content(c: dict):
 
 
 def encoder_options(o: dict, n_frames: int):
-    from fbaconf.bitstreams.encoder import EncoderOptions
     o = dict(o)
     cpf = o.pop("coding_per_frame", None)
     if isinstance(cpf, str) and cpf.startswith("alternate:"):
@@ -84,7 +81,6 @@ def encoder_options(o: dict, n_frames: int):
         o["fap_quant_per_frame"] = np.array((q * n_frames)[:n_frames])
     b = o.get("bounds")
     if isinstance(b, str):  # "wide": every list value 31 (+-1860), "wide:<fap>,<fap>": only those FAPs
-        from fbaconf.bitstreams import tables
         arr = tables.default_bounds().copy()
         faps = range(3, 69) if b == "wide" else [int(x) for x in b.split(":", 1)[1].split(",")]
         for f in faps:

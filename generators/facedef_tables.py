@@ -1,4 +1,4 @@
-"""Generated FaceDefTables for the default head: FaceDefMesh (4-5 intervals per FAP) and FaceDefTransform (eyeballs, pupils, head rotation) for all 66 low-level FAPs."""
+"""Generated FaceDefTables for the default head: FaceDefMesh (4-5 intervals per FAP) and FaceDefTransform (eyeballs, pupils, head rotation) for all 66 low-level FAPs."""  # noqa: E501
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -7,7 +7,7 @@ import numpy as np
 
 from fbaconf.bitstreams.tables import fap_table
 
-from .head import EYE_Y, HeadModel, IRIS_R, MOUTH_Y, eye_open
+from .head import EYE_Y, IRIS_R, MOUTH_Y, HeadModel, eye_open
 
 
 @dataclass
@@ -159,7 +159,7 @@ def head_tables(m: HeadModel, fapu) -> dict[int, list]:
     add_lin(18, "Skin", side_l * np.exp(-((x / 18.0) ** 2 + ((y + 72.0) / 10.0) ** 2)) * fr, (0, 1, 0))
     # --- group 3: eyelids (follow the eyeball), eyeballs and pupils (Transforms)
     shell = tags["eye_shell"]
-    for side, s, (ft, fb) in (("l", 1, (19, 21)), ("r", -1, (20, 22))):
+    for side, _s, (ft, fb) in (("l", 1, (19, 21)), ("r", -1, (20, 22))):
         info = tags["eye_info"][side]
         up_c = np.zeros(len(V), bool)
         lo_c = np.zeros(len(V), bool)
@@ -192,7 +192,7 @@ def head_tables(m: HeadModel, fapu) -> dict[int, list]:
             spec = mesh_from_function("Skin", idx, lid, fap_borders(fap), u)
             if spec is not None:
                 T.setdefault(fap, []).append(spec)
-    for side, s, (fy, fp_, ft, fd) in (("Left", 1, (23, 25, 27, 29)), ("Right", -1, (24, 26, 28, 30))):
+    for side, _s, (fy, fp_, ft, fd) in (("Left", 1, (23, 25, 27, 29)), ("Right", -1, (24, 26, 28, 30))):
         T[fy] = [TransformSpec(f"{side}Eye", 1, rotation=(0.0, 1.0, 0.0, 1.0))]
         T[fp_] = [TransformSpec(f"{side}Eye", 1, rotation=(1.0, 0.0, 0.0, 1.0))]
         T[ft] = [TransformSpec(f"{side}Eye", 3, translation=(0.0, 0.0, 1.0))]

@@ -1,13 +1,11 @@
-"""The generated default head: skull, skin with nose, lips and eye openings, eyeballs, eyebrows, teeth, tongue, mouth cavity, ears and neck, and its 84 feature points on real vertices (deterministic: no randomness, no files read)."""
+"""The generated default head: skull, skin with nose, lips and eye openings, eyeballs, eyebrows, teeth, tongue, mouth cavity, ears and neck, and its 84 feature points on real vertices (deterministic: no randomness, no files read)."""  # noqa: E501
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-
 from fbaconf.animation.faceparams import FEATURE_POINTS
-
 
 PREDICTABLE_L1_MAX_VERTICES = 5000  # profiles-and-levels.md, Predictable L1 (provisional)
 
@@ -152,7 +150,7 @@ def _build_skin(n_lon: int, density: float):
         eye_info[side]["irisd0"] = float(hu_c + hl_c)  # eyelid distance at the pupil = iris diameter
     # open the eyes: move rows above/below the eye line apart (monotonic, no folds)
     dY = np.zeros_like(Y)
-    for side, info in eye_info.items():
+    for _side, info in eye_info.items():
         xrel = (X - info["mid"]) / info["half"]
         inside = (np.abs(xrel) < 1.0) & (Zb > 0)
         hu, hl = eye_open(xrel)
@@ -171,7 +169,7 @@ def _build_skin(n_lon: int, density: float):
         d2 = (x - info["xc"]) ** 2 + (y - EYE_Y) ** 2
         return eye_z + np.sqrt(np.clip((EYE_R + 0.7) ** 2 - d2, 0.0, None))
 
-    for side, info in eye_info.items():
+    for _side, info in eye_info.items():
         w = np.exp(-((((X - info["xc"]) / 15.5) ** 2 + ((Y2 - EYE_Y) / 10.5) ** 2) ** 2)) * (Zb > 0)
         Z = (1 - w) * Z + w * np.maximum(eye_shell(X, Y2, info), Z - 6.0)
     P = np.stack([X, Y2, Z], axis=-1)
@@ -228,7 +226,7 @@ def _build_skin(n_lon: int, density: float):
                                                          dtype=int)], [0.0, 0.0]])
     u = (phis / (2 * np.pi) + 0.5) % 1.0
     v = (V[:, 1] - V[:, 1].min()) / np.ptp(V[:, 1])
-    tags = dict(slit=slit, eye_info=eye_info, eye_shell=eye_shell, mouth_row_y=MOUTH_Y, upper_copy=is_upper, lower_copy=is_lower,
+    tags = dict(slit=slit, eye_info=eye_info, eye_shell=eye_shell, mouth_row_y=MOUTH_Y, upper_copy=is_upper, lower_copy=is_lower,  # noqa: E501
                 front=np.cos(phis), corner_x=float(xcm), grid=(idx, upper, r_m, r_e, mouth_cols))
     return V, np.array(tris, dtype=np.int64), np.stack([u, v], axis=1), tags, eye_z, eye_shell
 

@@ -10,11 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
+from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.conformance.suite import SuiteError
+from fbaconf.profiles.sample_streams import stuffing_positions
 
 
 def _encode(frames, **options) -> bytes:
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
     return encode(frames, EncoderOptions(**options)).data
 
 
@@ -27,9 +32,6 @@ def mask_00_after_set() -> bytes:
     """Group 2 (FAPs 3-18) and the visemes set, then a segment (frames 10-19) where group 2 has
     mask type 00 and FAP 1 mask type 01: their FAPs are RETAINED (D3: uncoded after being set),
     viseme values held; coded again from frame 20."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.frames import RETAINED
-    from fbaconf.bitstreams.synth import synthetic_sequence
     n = 30
     fr = synthetic_sequence(n, 25.0, seed=4, visemes=True, expressions=True)
     fr.status[10:20, 2:18] = RETAINED
@@ -47,10 +49,6 @@ def mask_00_after_set() -> bytes:
 def extreme_steps() -> bytes:
     """Every low-level FAP jumps between 0 and its largest value (1860 x its quantiser step) at
     fap_quant 3: the arithmetic output has long zero runs, stuffing bits close together."""
-    from fbaconf.bitstreams import tables
-    from fbaconf.bitstreams.frames import SET, FapFrames
-    from fbaconf.profiles.sample_streams import stuffing_positions
-    from fbaconf.bitstreams.decoder import decode
     qp = tables.quant_steps()
     fr = FapFrames.empty(40, 25.0)
     for f in range(3, 69):
@@ -65,7 +63,6 @@ def extreme_steps() -> bytes:
 def high_level_only() -> bytes:
     """Visemes and expressions only, no low-level FAP coded: the low-level block is empty but
     still there (its flush bits), 60 frames at fap_quant 2."""
-    from fbaconf.bitstreams.synth import synthetic_sequence
     fr = synthetic_sequence(60, 25.0, seed=14, faps=[])
     _need(not fr.status[:, 2:].any(), "high-level-only", "no low-level FAP")
     return _encode(fr, fap_quant=2, intra_period=25)
@@ -74,8 +71,6 @@ def high_level_only() -> bytes:
 def skips_14_15() -> bytes:
     """Skips of exactly 14, 15, 29 and 30 frames: chunk values 14 (ends a chain) and 15
     (continues it), and chains of two chunks."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.synth import synthetic_sequence
     fr = synthetic_sequence(5, 25.0, seed=13)
     fr.frame_number = np.array([0, 15, 31, 61, 92])
     fr.time_ms = fr.frame_number * 40.0
@@ -88,7 +83,6 @@ def lists_persist_unmasked() -> bytes:
     """Range lists persist for FAPs a later list does not carry (D4): FAP 18 gets a list in
     segment 1, is not coded in segment 2 (which sends a list for FAP 4 only), and is coded
     again without a list in segment 3, still under its segment-1 range."""
-    from fbaconf.bitstreams.frames import RETAINED, SET, FapFrames
     fr = FapFrames.empty(15, 25.0)
     fr.status[:, 3] = SET
     fr.values[:, 3] = 20
@@ -104,7 +98,6 @@ def lists_persist_unmasked() -> bytes:
 def dct_stuffing() -> bytes:
     """DCT mode, FAPs 66-68 at -524,284: DC codes with long zero runs, so the payload has
     stuffing bits and ends in 20+ zeros (the end stuffing, D9)."""
-    from fbaconf.bitstreams.frames import SET, FapFrames
     fr = FapFrames.empty(20, 25.0)
     for f in (66, 67, 68):
         fr.status[:, f - 1] = SET
@@ -116,7 +109,6 @@ def dct_stuffing() -> bytes:
 def dct_header_zeros() -> bytes:
     """DCT mode: a predicted plane group after a 15-frame skip (header zeros) whose DC
     difference code starts with 14 zeros: the zero run counts across header and payload (D9)."""
-    from fbaconf.bitstreams.frames import SET, FapFrames
     fr = FapFrames.empty(7, 25.0)
     fr.frame_number = np.array([0, 1, 2, 3, 19, 35, 36])
     fr.time_ms = fr.frame_number * 40.0
@@ -128,10 +120,6 @@ def dct_header_zeros() -> bytes:
 def block_end_stuffing() -> bytes:
     """A low-level block whose last bit completes a run of 22 zeros: the stuffing bit after
     it belongs to the block (D7), not to the next field. Symbol values found by search."""
-    from fbaconf.bitstreams import tables
-    from fbaconf.bitstreams.frames import SET, FapFrames
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.profiles.sample_streams import stuffing_positions
     seq = [(15, 901), (16, 694), (24, 1440), (30, 1679), (2, 119), (5, 396), (26, 2269)]
     qp = tables.quant_steps()
     fr = FapFrames.empty(3, 25.0)
@@ -154,8 +142,6 @@ def halving_random() -> bytes:
     FAP 4's predicted alphabet has 31 symbols (a small model), FAP 6's 311 (a large one), so
     both kinds of model reach the total 16,383 and are halved (spec notes 3.2), then code a few
     hundred symbols more with the halved frequencies."""
-    from fbaconf.bitstreams import tables
-    from fbaconf.bitstreams.frames import SET, FapFrames
     rng = np.random.default_rng(7)
     n, q = 16500, 12
     qp = tables.quant_steps()
@@ -171,9 +157,6 @@ def halving_random() -> bytes:
 def high_level_held() -> bytes:
     """FAPs 1 and 2 coded with viseme_def and init_face set in frames 0-5, then RETAINED under
     mask type 01 through later intra planes: every field of both is held (D3), the flags too."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS, RETAINED
-    from fbaconf.bitstreams.synth import synthetic_sequence
     fr = synthetic_sequence(16, 25.0, seed=54, visemes=True, expressions=True, faps=[3, 4])
     for name in ("viseme_def", "init_face"):
         fr.high[:, HIGH_LEVEL_FIELDS.index(name)] = 1
@@ -187,9 +170,6 @@ def high_level_held() -> bytes:
 def blend_64() -> bytes:
     """viseme_blend and both intensities at 63, fap_quant 2, with D5's whole alphabet: the intra
     level 32 dequantises to 64 (D5 allows it), which a decoder outputs as is, never clamped."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS
-    from fbaconf.bitstreams.synth import synthetic_sequence
     fr = synthetic_sequence(6, 25.0, seed=56, visemes=True, expressions=True, faps=[3, 4])
     for name in ("viseme_blend", "expression_intensity1", "expression_intensity2"):
         fr.high[:, HIGH_LEVEL_FIELDS.index(name)] = 63

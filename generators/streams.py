@@ -5,15 +5,21 @@ import random
 
 import numpy as np
 
-
+from fbaconf.bitstreams import bitedit
+from fbaconf.bitstreams.bitedit import end_stream, splice
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.frames import SET, FapFrames
+from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.conformance.suite import SuiteError
-from fbaconf.profiles.sample_streams import value_overflow_stream
+from fbaconf.errors import BitstreamError
+from fbaconf.profiles.sample_streams import stuffing_positions, value_overflow_stream, zero_heavy_plane
+
 from .content import make_content
+from .recipes import RECIPES
 
 
 def _hl_stream(n: int, fap: int, fields: dict[int, list[int]]) -> bytes:
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.frames import SET, FapFrames
     f = FapFrames.empty(n, 30.0)
     f.status[:, fap - 1] = SET
     for col, vals in fields.items():
@@ -23,8 +29,6 @@ def _hl_stream(n: int, fap: int, fields: dict[int, list[int]]) -> bytes:
 
 def _intra_then_p(a: bytes, b: bytes) -> bytes:
     """A's intra plane followed by B's first predicted plane (same masks and quantiser)."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.bitedit import end_stream, splice
     pa, pb = decode(a).planes, decode(b).planes
     joined = splice((a, 0, pa[0].end_offset), (b, pb[1].bit_offset, pb[1].end_offset))
     return end_stream(joined, pa[0].end_offset + pb[1].end_offset - pb[1].bit_offset)
@@ -32,10 +36,6 @@ def _intra_then_p(a: bytes, b: bytes) -> bytes:
 
 def mutate(data: bytes, mutation: str, seed: int) -> bytes:
     """An invalid stream from a valid one (``data``), or built from scratch, for an error case."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.errors import BitstreamError
-    from fbaconf.bitstreams import bitedit
-    from fbaconf.profiles.sample_streams import stuffing_positions, zero_heavy_plane
     planes = decode(data).planes
     hdr = planes[0].header_offset
     if mutation == "truncate:plane1-middle":
@@ -81,7 +81,7 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
         return bitedit.flip_bit(w, stuffing_positions(w, start, length)[0])
     if mutation == "dct-vlc":
         p = planes[0]
-        for name, start, length in p.blocks:
+        for _name, start, length in p.blocks:
             for b in range(start, start + length):
                 bad = bitedit.flip_bit(data, b)
                 try:
@@ -104,10 +104,6 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
 def first_predicted_decodable() -> bytes:
     """The face object start code, then two predicted planes that code nothing (an intra plane
     coding nothing would make them decodable), then the end code: only D2 makes it invalid."""
-    from fbaconf.bitstreams.bitedit import end_stream, splice
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.frames import FapFrames
     data = encode(FapFrames.empty(3, 25.0), EncoderOptions(plane_start_codes="none")).data
     p = decode(data).planes
     assert p[0].is_intra and not p[1].is_intra and p[0].bit_offset == 32
@@ -118,9 +114,6 @@ def first_predicted_decodable() -> bytes:
 def trailing_zero_byte() -> bytes:
     """A stream without an end code whose last plane ends on a byte boundary, and one more
     0x00 byte: the byte is neither a plane (fba_object_mask 00) nor next_start_code()."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.synth import synthetic_sequence
     for n in range(2, 60):
         data = encode(synthetic_sequence(n, 25.0, seed=3), EncoderOptions(fap_quant=2, end_code=False)).data
         if decode(data).planes[-1].end_offset == len(data) * 8:
@@ -131,8 +124,6 @@ def trailing_zero_byte() -> bytes:
 def edit_valid(data: bytes, edit: str) -> bytes:
     """Bit edits that keep a stream decodable (warnings only): ``no-frame-rate``,
     ``frame-rate-first-only``, ``trailing``, ``time-backwards``, ``quant-no-lists``."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams import bitedit
     planes = decode(data).planes
     if edit in ("no-frame-rate", "frame-rate-first-only"):  # every intra plane, or all but the first
         intra = [p for p in planes if p.is_intra and p.frame_rate is not None]
@@ -166,10 +157,6 @@ def special_stream(name: str) -> bytes:
     """Streams that need hand-made frames: ``lookahead`` (a stuffing position in the 14-bit look-ahead
     after the viseme block, FAP-DECISION-005), ``splice-rates`` (the frame rate changes at an intra
     plane: 25 Hz then 12.5 Hz)."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.frames import SET, FapFrames
-    from fbaconf.bitstreams.bitedit import end_stream, splice
     if name == "lookahead":
         b = np.zeros((68, 4), dtype=np.int64)
         b[:] = (1860, -1860, 1860, -1860)
@@ -186,7 +173,6 @@ def special_stream(name: str) -> bytes:
         pa, pb = decode(a.data).planes, decode(b.data).planes
         joined = splice((a.data, 0, pa[-1].end_offset), (b.data, pb[0].bit_offset, pb[-1].end_offset))
         return end_stream(joined, pa[-1].end_offset + pb[-1].end_offset - pb[0].bit_offset)
-    from .recipes import RECIPES
     if name in RECIPES:
         return RECIPES[name]()
     raise SuiteError(f"unknown special stream {name!r}", rule="suite-spec")

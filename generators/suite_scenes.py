@@ -1,18 +1,23 @@
-"""Scenes of the suites: the bundled models, calibration subsets, FIT graphs and FaceDefTable interval grids (written at a fixed precision)."""
+"""Scenes of the suites: the bundled models, calibration subsets, FIT graphs and FaceDefTable interval grids (written at a fixed precision)."""  # noqa: E501
 from __future__ import annotations
 
+import struct
+import zlib
 
 import numpy as np
 
-
+from fbaconf.animation.bundled import default_head_scene
+from fbaconf.animation.faceparams import FEATURE_POINTS, UNSENT, fapu_from_feature_points
+from fbaconf.bitstreams.synth import _amplitude
 from fbaconf.conformance.suite import SuiteError
+from fbaconf.generators import models
+from fbaconf.profiles.model import Claim, load_profiles
+from fbaconf.scenes import bt
 
 
 def make_scene(name: str):
     """A scene model for a case's ``scene`` key; returns (scene, extra files {name: bytes},
     text substitutions applied to the BT text)."""
-    from fbaconf.animation.bundled import default_head_scene
-    from fbaconf.generators import models
     if name == "default_head":
         return default_head_scene(), {}  # the committed data, as the animation stage loads it
     if name.startswith("head:"):
@@ -40,9 +45,6 @@ CALIBRATION_SUBSETS = {
 
 
 def _calibration_scene(subset: str):
-    from fbaconf.scenes import bt
-    from fbaconf.generators import models
-    from fbaconf.animation.faceparams import FEATURE_POINTS, UNSENT
     texture = subset.endswith("+texture")
     subset = subset.removesuffix("+texture")
     head = models.default_head()
@@ -69,7 +71,6 @@ def _calibration_scene(subset: str):
 
 
 def _fit_scene(which: str):
-    from fbaconf.scenes import bt
     if which == "chain":
         # FAP 4 (lower_t_midlip) drives FAP 51 (lower_t_midlip_o) as 2*x, and FAP 19 drives
         # FAP 21 through (x + x^2/200) / 1 — a link with a quadratic numerator.
@@ -99,7 +100,6 @@ def _fit_scene(which: str):
             denominatorCoefs [1 0.00025 1 1 1 1 1] } }""")
     if which.startswith("limit:"):
         level = int(which.split(":")[1])
-        from fbaconf.profiles.model import Claim, load_profiles
         ps = load_profiles()
         lim = {x.id: int(x.value(level)) for x in ps.limits_for(Claim.parse(f"calibration@{level}", ps))}
         n, links, terms = lim["fit_nodes"], lim["fit_links"], lim["fit_terms"]
@@ -154,8 +154,6 @@ def _pattern_png(width: int, height: int) -> bytes:
     where the scene says repeat (the grid's s runs over [0, 2]) loses the second red wave. Nothing
     in it is sharper than a few texels, so minified, mipmapped or multisampled reads of it (one
     texture sample per pixel) agree with the golden's supersampled one. Rows use PNG filter 1 (Sub)."""
-    import struct
-    import zlib
     u = (np.arange(width) + 0.5) / width
     red = np.round(60 + 160 * (1.0 - np.abs(2.0 * u - 1.0))).astype(np.int64)
     raw = bytearray()
@@ -180,10 +178,6 @@ def _grid_scene(kind: str):
     for the coverage model. ``intervals``: every interval layout and every FaceDefTransform field,
     viseme/expression tables; ``limit:<level>``: the Predictable level limits exactly (mesh vertices,
     FaceDefTables entries, intervals per FaceDefMesh, texture size) with DEF/USE to stay small."""
-    from fbaconf.scenes import bt
-    from fbaconf.generators import models
-    from fbaconf.animation.faceparams import fapu_from_feature_points
-    from fbaconf.bitstreams.synth import _amplitude
     nx, ny = 20, 10
     xs, ys = np.meshgrid(np.arange(nx, dtype=np.float64) * 4.0 - 38.0, np.arange(ny, dtype=np.float64) * 8.0 - 36.0)
     V = np.stack([xs.ravel(), ys.ravel(), np.zeros(nx * ny)], 1)
@@ -203,7 +197,6 @@ def _grid_scene(kind: str):
     level = int(kind.split(":")[1]) if kind.startswith("limit:") else None
     lim = {}
     if level is not None:
-        from fbaconf.profiles.model import Claim, load_profiles
         ps = load_profiles()
         lim = {x.id: int(x.value(level)) for x in ps.limits_for(Claim.parse(f"predictable@{level}", ps))}
         tex = f"texture{lim['texture_width']}.png"
@@ -296,7 +289,7 @@ def _grid_scene(kind: str):
         faps = [f for f in range(3, 69) if f != 4]
         shared = {}
         per = -(-entries // len(faps))
-        for k, f in enumerate(faps):
+        for _k, f in enumerate(faps):
             n_here = min(per, entries - sum(len(t.get("faceDefMesh")) for t in tables[1:]))
             if n_here <= 0:
                 break

@@ -10,25 +10,32 @@ and the goldens made from them (``fbaconf golden regenerate``) can be verified b
 Each case folder-less: a suite folder holds ``suite.json`` and the case files named
 ``<case>.fba``, ``<case>.fap``, ``<case>.bt``, ``<case>.bifs`` (when the BIFS codec is
 available), ``scenario.toml`` (shared by the suite's image cases), ``<case>-face<i>.fba``.
-"""
+"""  # noqa: E501
 from __future__ import annotations
 
 import json
 import shutil
+import tempfile
 import tomllib
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
-
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.faptext import read_fap_file, write_fap
+from fbaconf.bitstreams.frames import RETAINED, SET
+from fbaconf.conformance.golden import regenerate
 from fbaconf.conformance.suite import SUITE_FORMAT, Case, Suite, SuiteError, sha256_file, suites_root
+from fbaconf.errors import FbaconfInputError
+from fbaconf.rendering.scenario import Scenario
+from fbaconf.scenes import bifs, bt
+
 from .content import encoder_options, make_content
 from .streams import edit_valid, mutate, special_stream
 from .suite_scenes import make_scene
-
 
 # Generated geometry is written at this many decimals: the files do not change with a
 # numpy/libm build's last digit (0.000001 mm-like units: far below every tolerance).
@@ -69,7 +76,6 @@ def compared_frames(frames, rule: str) -> list[int]:
 
 
 def _scenario_toml(sc_spec: dict, name: str, frames) -> str:
-    from fbaconf.rendering.scenario import Scenario
     path = resources.files("fbaconf.conformance").joinpath("data", "scenarios", f"{name}.toml")
     if not path.is_file():
         raise SuiteError(f"[scenario] names scenario {name!r}: no conformance/data/scenarios/{name}.toml",
@@ -123,7 +129,6 @@ def _write(dirpath: Path, name: str, data: bytes | str, case: Case, key: str | N
 
 def _write_scene(d: Path, case: Case, spec: str) -> None:
     """The case's scene as BT and binary BIFS, and the files it names (textures)."""
-    from fbaconf.scenes import bifs, bt
     scene, files = make_scene(spec)
     for name, blob in sorted(files.items()):
         if not (d / name).is_file():
@@ -150,7 +155,6 @@ def sparse_text(frames):
     everywhere else, as the format allows. A player's output is its state — every FAP that
     holds a value, in every frame — so the input is never the expected output: a program that
     copies its input fails every case with a held value."""
-    from fbaconf.bitstreams.frames import RETAINED, SET
     out = frames.copy()
     st = out.status
     for k in range(1, len(out)):
@@ -171,12 +175,9 @@ def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> list[Case]:
 
 
 def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> Case:
-    from fbaconf.bitstreams.encoder import encode
-    from fbaconf.bitstreams.faptext import write_fap
-    from fbaconf.scenes import bt
     gen = c.get("generator", "stream")
     case = Case(id=c["id"], suite=suite["name"], claim=c.get("claim", suite["claim"]), group=suite["group"],
-                kind={"stream": "decode", "multi": "multi", "error": "error", "file": "decode", "special": "decode"}[gen],
+                kind={"stream": "decode", "multi": "multi", "error": "error", "file": "decode", "special": "decode"}[gen],  # noqa: E501
                 description=c.get("description", ""), tools=list(c.get("tools", [])), covers=list(c.get("covers", [])),
                 suite_dir=d)
     if gen == "file":
@@ -233,7 +234,6 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
     data = special_stream(c["special"]) if c.get("special") else res.data
     if c.get("edit"):
         data = edit_valid(data, c["edit"])
-    from fbaconf.bitstreams.decoder import decode
     decoded = decode(data).frames
     _write(d, f"{case.id}.fba", data, case, "fba")
     if c.get("text", True):  # the players' input: the decoded frames as sparse text (see sparse_text)
@@ -306,10 +306,6 @@ def build_external(src: Path, out: Path | None = None, log=print) -> Suite | Non
     with goldens, under ``out`` (default: a new
     temporary folder). Never written into the repository. Returns None when ``src`` holds no
     .fap file. Run it with ``FBACONF_SUITES=<out>/suites FBACONF_GOLDEN=<out>/golden fbaconf run``."""
-    import tempfile
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.errors import FbaconfInputError
-    from fbaconf.bitstreams.faptext import read_fap_file, write_fap
     src = Path(src)
     files = sorted(p for p in src.rglob("*.fap") if p.is_file()) if src.is_dir() else []
     if not files:
@@ -356,7 +352,6 @@ def build_external(src: Path, out: Path | None = None, log=print) -> Suite | Non
     suite = Suite(EXTERNAL_SUITE, f"EXTERNAL: the real .fap files of {src} (not committed)", "simple@2", "real",
                   spec()["version"], cases, d)
     atomic_write_text(d / "suite.json", json.dumps(suite.to_json(), indent=1) + "\n")
-    from fbaconf.conformance.golden import regenerate
     regenerate([suite], out / "golden", log=lambda *_: None)
     log(f"built external suite {EXTERNAL_SUITE}: {len(cases)} case(s) from {len(files)} file(s) in {out}")
     return suite

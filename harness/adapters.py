@@ -36,18 +36,20 @@ must write every output whose placeholder it names.
 """
 from __future__ import annotations
 
+import difflib
 import hashlib
 import importlib
 import re
+import shutil
 import sys
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
-
 from fbaconf.isolation.endings import DEFAULT_REJECT_EXIT_CODES
-from fbaconf.isolation.sandbox import Limits
+from fbaconf.isolation.sandbox import Limits, default_view, python_view
+from fbaconf.profiles.model import Claim, load_profiles
 
 INPUT_KINDS = ("fba", "fap", "scene", "bifs")
 OUTPUT_KINDS = ("faps", "vertices", "images")
@@ -174,7 +176,6 @@ class CommandAdapter(Adapter):
         manifest's ``[sandbox] read_only`` paths read-only, its case folder (inputs read-only),
         and — when started through ``{python}`` — the Python installation and the fbaconf
         package read-only with ``hidden`` (goldens, suites, the run folder) emptied."""
-        from fbaconf.isolation.sandbox import default_view, python_view
         v = default_view(argv, workdir)
         if self.manifest_path is not None:
             v.read_only.append(Path(self.manifest_path).resolve().parent)
@@ -187,14 +188,12 @@ class CommandAdapter(Adapter):
     def program(self) -> str | None:
         """The decode command's program as an absolute path ({manifest_dir} expanded, PATH
         searched for a bare name), or None when it does not exist."""
-        import shutil
         first = self.commands["decode"][0]
         if isinstance(first, list):
             return None
         if "{manifest_dir}" in first and self.manifest_path is not None:
             first = first.replace("{manifest_dir}", str(Path(self.manifest_path).resolve().parent))
         if "{python}" in first:
-            import sys
             first = first.replace("{python}", sys.executable)
         if "/" not in first:
             return shutil.which(first)
@@ -241,7 +240,7 @@ def expand(template: list, job: Job, manifest_path: Path | None) -> list[str]:
     return out
 
 
-def _check_manifest(data: dict, path: Path | None) -> None:
+def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
     where = str(path) if path else "<manifest>"
 
     def bad(msg: str, rule: str) -> ManifestError:
@@ -276,7 +275,6 @@ def _check_manifest(data: dict, path: Path | None) -> None:
     if not isinstance(data["name"], str) or not re.fullmatch(r"[A-Za-z0-9_@+-][A-Za-z0-9._@+-]{0,63}", data["name"]):
         raise bad("name must be 1-64 letters, digits, '.', '_', '-', '+' or '@', not starting with '.' "
                   "(it names the run folder)", "manifest-name")
-    from fbaconf.profiles.model import Claim
     if not isinstance(data["claims"], list) or not data["claims"]:
         raise bad("claims must be a non-empty list like [\"simple@1\"]", "manifest-claims")
     for c in data["claims"]:
@@ -293,7 +291,6 @@ def _check_manifest(data: dict, path: Path | None) -> None:
     if data.get("faps_format", "fap") not in FAPS_FORMATS:
         raise bad(f"faps_format must be one of {FAPS_FORMATS}", "manifest-faps-format")
     if "tools" in data:
-        from fbaconf.profiles.model import load_profiles
         known = load_profiles().tools
         unknown = [t for t in data["tools"] if t not in known]
         if unknown:
@@ -313,11 +310,11 @@ def _check_manifest(data: dict, path: Path | None) -> None:
             parts = item if isinstance(item, list) else [item]
             for s in parts:
                 if not isinstance(s, str):
-                    raise bad(f"[commands] {cname}: argv items must be strings or lists of strings", "manifest-commands")
+                    raise bad(f"[commands] {cname}: argv items must be strings or lists of strings", "manifest-commands")  # noqa: E501
                 for n in _PH.findall(s):
                     if cname == "serve" and n not in SERVE_PLACEHOLDERS:
                         raise bad(f"[commands] serve: {{{n}}} has no value for a persistent decoder, which gets "
-                                  f"each input on stdin (usable: {', '.join('{' + p + '}' for p in SERVE_PLACEHOLDERS)})",
+                                  f"each input on stdin (usable: {', '.join('{' + p + '}' for p in SERVE_PLACEHOLDERS)})",  # noqa: E501
                                   "manifest-placeholder")
                     if n not in PLACEHOLDERS:
                         raise bad(f"[commands] {cname}: unknown placeholder {{{n}}} (known: "
@@ -336,7 +333,6 @@ SANDBOX_KEYS = ("read_only",)
 
 
 def _did_you_mean(word: str, choices) -> str:
-    import difflib
     close = difflib.get_close_matches(word, choices, n=1)
     return f" (did you mean {close[0]!r}?)" if close else f" (known: {', '.join(choices)})"
 
@@ -395,7 +391,6 @@ def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
 
 def highest_claim(adapter: Adapter) -> str:
     """The adapter's highest claim (profile rank, then level)."""
-    from fbaconf.profiles.model import Claim
     return str(max(Claim.parse(c) for c in adapter.claims))
 
 

@@ -5,33 +5,11 @@ from __future__ import annotations
 import json
 import math
 import sys
-from pathlib import Path
 
 from .adapters import resolve
 from .reports.jsonreport import jsonable
 from .session import preflight, resolve_claim
 from .speed import OPERATIONS, SpeedError, SpeedRunError, failed_result, measure, skip_reason
-
-
-def register(sub) -> None:
-    p = sub.add_parser("bench", help="measure decode/render speed against the level minimums",
-                       description="Measure a decoder's per-frame decode and render cost (free of process "
-                                   "start-up: several content lengths, a linear fit, median over repeats) and "
-                                   "compare the rates with the claimed level's minimums. Exit 0 all pass, "
-                                   "1 a decoder run failed, 2 setup error, 3 too slow.")
-    p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
-    p.add_argument("--claim", help="profile@level (default: the decoder's highest claim)")
-    p.add_argument("--repeats", type=int, default=3, help="repeats of the length series (default 3; median)")
-    p.add_argument("--operation", choices=("decode", "render"), action="append",
-                   help="only this operation (repeatable; default both, render when the decoder outputs images)")
-    p.add_argument("--lengths", help="fixed content lengths in frames, comma-separated (default: adaptive)")
-    p.add_argument("--target-seconds", type=float, default=0.5,
-                   help="adaptive lengths: frame-dependent time of the longest run (default 0.5; at least "
-                        "the start-up time)")
-    p.add_argument("--render-size", default="64x64", help="image size of the render measurement (default 64x64)")
-    p.add_argument("--work-dir", type=Path, help="keep the generated content here (default: a temporary folder)")
-    p.add_argument("--json", action="store_true", help="print the results as JSON")
-    p.set_defaults(func=cmd_bench)
 
 
 def _parse_size(text: str) -> tuple[int, int]:
@@ -49,7 +27,9 @@ def _usage(msg: str) -> int:
     return 2
 
 
-def cmd_bench(args) -> int:
+def run(args) -> int:
+    """``fbaconf bench``: exit 0 every measured rate meets its minimum; 1 a decoder run failed (exit
+    code, crash, timeout, missing output); 2 usage or setup error; 3 a speed requirement is missed."""
     adapter = resolve(args.decoder)  # ManifestError -> exit 2 (cli.main)
     claim = resolve_claim(args.claim, adapter)
     preflight(adapter)

@@ -16,6 +16,7 @@ byte of any file makes verification fail.
 """
 from __future__ import annotations
 
+import base64
 import hashlib
 import json
 import os
@@ -26,24 +27,26 @@ import time
 from pathlib import Path
 
 from fbaconf._atomic import atomic_write_text
-from fbaconf.conformance.suite import sha256_file
+from fbaconf.conformance.coverage import case_points
+from fbaconf.conformance.golden import MANIFEST
+from fbaconf.conformance.suite import golden_root, load_suites, sha256_file
 from fbaconf.errors import FbaconfInputError
-
+from fbaconf.isolation import sandbox
+from fbaconf.profiles.model import Claim, load_profiles
 from fbaconf.safefs import confined, read_regular, remove_tree
+
+from . import reports
+from .adapters import CommandAdapter, resolve
+from .selection import claim_covers, select_cases
+from .session import RunOptions, UsageError, execute, preflight, resolve_claim, write_reports
 
 CERTIFICATE = "certificate.json"
 SUMS = "SHA256SUMS"
 FORMAT = "fbaconf.certificate/1"
 
 
-def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: bool = True, key: Path | None = None,
+def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: bool = True, key: Path | None = None,  # noqa: PLR0913
             force: bool = False, allow_unisolated: bool = False, cluster: str | None = None) -> int:
-    from fbaconf.conformance.golden import MANIFEST
-    from fbaconf.conformance.suite import golden_root, load_suites
-    from . import reports
-    from .adapters import resolve
-    from .selection import select_cases
-    from .session import RunOptions, execute, preflight, resolve_claim, write_reports
     t0 = time.perf_counter()
     adapter = resolve(decoder)
     claim = resolve_claim(claim, adapter)
@@ -58,8 +61,6 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
               f"requires decoding the binary face-object stream (inputs must include \"fba\"). Test a player "
               f"with `fbaconf run` (docs/harness.md, \"Players\").", file=sys.stderr)
         return 2
-    from fbaconf.isolation import sandbox
-    from .adapters import CommandAdapter
     isolated = sandbox.isolation() != "none" or not isinstance(adapter, CommandAdapter)
     if not isolated and not allow_unisolated:
         print("fbaconf certify: error: bubblewrap (bwrap) is not available, so the decoder would run unisolated "
@@ -118,7 +119,6 @@ def certify(decoder: str, claim: str | None, out: Path, *, jobs=None, speed: boo
 
 
 def _covers(claimed: str, claim: str) -> bool:
-    from .selection import claim_covers
     return claim_covers(claimed, claim)
 
 
@@ -126,8 +126,6 @@ def claim_basis(record, cases, claim: str) -> dict:
     """What a verdict rests on: the tools the claim needs, the coverage points exercised by the
     cases that passed (of those the claim's cases exercise), and the required cases the decoder
     could not take."""
-    from fbaconf.conformance.coverage import case_points
-    from fbaconf.profiles.model import Claim, load_profiles
     ps = load_profiles()
     c = Claim.parse(claim, ps)
     ok = {r.case_id for r in record.results if r.outcome.ok}
@@ -191,8 +189,8 @@ class SignatureError(FbaconfInputError):
 def keygen(out_dir: Path) -> tuple[Path, Path]:
     """A new Ed25519 key pair: ``fbaconf-signing.key`` (PEM, PKCS#8, mode 0600) and
     ``fbaconf-signing.pub`` (PEM) in ``out_dir``; never overwrites an existing key."""
-    from cryptography.hazmat.primitives import serialization
-    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
+    from cryptography.hazmat.primitives import serialization  # noqa: PLC0415 (signing only)
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey  # noqa: PLC0415 (signing only)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     key_path, pub_path = out_dir / KEY_FILE, out_dir / PUB_FILE
@@ -210,8 +208,8 @@ def keygen(out_dir: Path) -> tuple[Path, Path]:
 
 
 def _load_key(path: Path, private: bool):
-    from cryptography.hazmat.primitives import serialization
-    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
+    from cryptography.hazmat.primitives import serialization  # noqa: PLC0415 (signing only)
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey  # noqa: PLC0415 (signing only)
     try:
         data = read_regular(path, 64 * 1024)
         key = (serialization.load_pem_private_key(data, password=None) if private
@@ -227,7 +225,6 @@ def _load_key(path: Path, private: bool):
 def sign_package(pkg: Path, key_path: Path) -> None:
     """Sign the certificate (which pins SHA256SUMS, which pins every file): ``SIGNATURE``
     holds the base64 Ed25519 signature of ``certificate.json``'s bytes."""
-    import base64
     key = _load_key(Path(key_path), private=True)
     sig = key.sign((Path(pkg) / CERTIFICATE).read_bytes())
     atomic_write_text(Path(pkg) / SIGNATURE, base64.b64encode(sig).decode("ascii") + "\n")
@@ -235,8 +232,7 @@ def sign_package(pkg: Path, key_path: Path) -> None:
 
 def _check_signature(pkg: Path, pubkey: Path | None) -> tuple[str, list[str]]:
     """("signed", []) / ("unsigned", []) / ("signature not checked", []) or problems."""
-    import base64
-    from cryptography.exceptions import InvalidSignature
+    from cryptography.exceptions import InvalidSignature  # noqa: PLC0415 (signing only)
     sig_path = pkg / SIGNATURE
     if not sig_path.exists() and not sig_path.is_symlink():
         return "unsigned", ([f"no {SIGNATURE}: the package is unsigned"] if pubkey is not None else [])
@@ -255,7 +251,6 @@ def _check_signature(pkg: Path, pubkey: Path | None) -> tuple[str, list[str]]:
 def prepare_output(out: Path, force: bool) -> None:
     """``certify -o``: an absent or empty folder, or — with ``force`` — an fbaconf package to
     replace. Anything else of the user's is left alone (exit 2)."""
-    from .session import UsageError
     if out.is_symlink() or (out.exists() and not out.is_dir()):
         raise UsageError(f"-o {out}: exists and is not a folder")
     if not out.exists() or not any(out.iterdir()):

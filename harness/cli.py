@@ -11,10 +11,6 @@ import json
 import sys
 from pathlib import Path
 
-from . import bench
-from .selection import select_cases
-from .session import RunOptions, UsageError, check_suites, execute, preflight, resolve_claim, use_color, write_reports
-
 
 def register(sub) -> None:
     r = sub.add_parser("run", help="run conformance suites against a decoder",
@@ -64,7 +60,7 @@ def register(sub) -> None:
     c.add_argument("--no-speed", action="store_true", help="skip the speed measurement (certificate says so)")
     c.set_defaults(func=cmd_certify)
 
-    bench.register(sub)
+    _register_bench(sub)
 
 
 def _common(p) -> None:
@@ -82,9 +78,21 @@ def _common(p) -> None:
 
 def cmd_run(args) -> int:
     from fbaconf.conformance.suite import load_suites
+
     from . import baseline as bl
     from . import reports
     from .adapters import resolve
+    from .selection import select_cases
+    from .session import (
+        RunOptions,
+        UsageError,
+        check_suites,
+        execute,
+        preflight,
+        resolve_claim,
+        use_color,
+        write_reports,
+    )
     adapter = resolve(args.decoder)
     claim = resolve_claim(args.claim, adapter)
     suites = load_suites()
@@ -122,6 +130,7 @@ def cmd_run(args) -> int:
 
 def cmd_certify(args) -> int:
     from . import certify
+    from .session import UsageError
     if args.action == "keygen":
         if not args.output:
             raise UsageError("certify keygen needs -o DIR")
@@ -148,11 +157,29 @@ def cmd_certify(args) -> int:
 
 
 # ------------------------------------------------------------------ bench
-# Verb ``fbaconf bench``: a decoder's decode/render speed against the claimed level's minimums.
-# 
-# ``fbaconf bench --decoder D [--claim P@L] [--repeats N] [--operation decode|render] [--json]``
-# 
-# Per-frame cost is measured free of process start-up (``harness/speed.py``: the same content
-# at several lengths, ``time = startup + frames x per_frame`` fitted per repeat, medians).
-# Exit codes: 0 every measured rate meets its minimum; 1 a decoder run failed (exit code,
-# crash, timeout, missing output); 2 usage or setup error; 3 a speed requirement is missed.
+
+
+def _register_bench(sub) -> None:
+    p = sub.add_parser("bench", help="measure decode/render speed against the level minimums",
+                       description="Measure a decoder's per-frame decode and render cost (free of process "
+                                   "start-up: several content lengths, a linear fit, median over repeats) and "
+                                   "compare the rates with the claimed level's minimums. Exit 0 all pass, "
+                                   "1 a decoder run failed, 2 setup error, 3 too slow.")
+    p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
+    p.add_argument("--claim", help="profile@level (default: the decoder's highest claim)")
+    p.add_argument("--repeats", type=int, default=3, help="repeats of the length series (default 3; median)")
+    p.add_argument("--operation", choices=("decode", "render"), action="append",
+                   help="only this operation (repeatable; default both, render when the decoder outputs images)")
+    p.add_argument("--lengths", help="fixed content lengths in frames, comma-separated (default: adaptive)")
+    p.add_argument("--target-seconds", type=float, default=0.5,
+                   help="adaptive lengths: frame-dependent time of the longest run (default 0.5; at least "
+                        "the start-up time)")
+    p.add_argument("--render-size", default="64x64", help="image size of the render measurement (default 64x64)")
+    p.add_argument("--work-dir", type=Path, help="keep the generated content here (default: a temporary folder)")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.set_defaults(func=cmd_bench)
+
+
+def cmd_bench(args) -> int:
+    from . import bench
+    return bench.run(args)

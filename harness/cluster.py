@@ -44,7 +44,7 @@ def client(spec: str) -> Iterator:
     """A connected ``distributed.Client`` for ``spec`` (closed, and a local cluster shut down, after)."""
     kind, arg = parse(spec)
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client, LocalCluster  # noqa: PLC0415 (Dask: optional (the cluster extra))
     except ImportError:
         raise ClusterError("--cluster needs Dask: pip install 'dask[distributed]'") from None
     if kind == "local":
@@ -71,7 +71,7 @@ def run_on_cluster(c, run_case: Callable, ctx, cases, on_result: Callable, stopp
     """Submit ``run_case(ctx, case)`` for every case as a task and hand each result to
     ``on_result`` as it arrives. Tasks of a lost worker are rerun by Dask; a task that raises
     is retried twice."""
-    from distributed import as_completed
+    from distributed import as_completed  # noqa: PLC0415 (Dask: optional (the cluster extra))
     futures = [c.submit(run_case, ctx, case, key=f"fbaconf-case-{i}-{case.full_id}", pure=False, retries=2)
                for i, case in enumerate(cases)]
     ac = as_completed(futures, with_results=True)

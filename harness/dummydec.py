@@ -18,6 +18,10 @@ import sys
 import time
 from pathlib import Path
 
+from fbaconf.bitstreams.cli import save_faps
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.frames import FREE
+
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="dummydec")
@@ -62,13 +66,10 @@ def main(argv=None) -> int:
         return 0
     if m == "startup":
         time.sleep(a.startup)
-    from fbaconf.bitstreams.cli import save_faps
-    from fbaconf.bitstreams.decoder import decode
     frames = decode(a.input.read_bytes(), file=str(a.input)).frames
     if m == "startup":
         time.sleep(a.per_frame * len(frames))
     if m == "wrong":
-        from fbaconf.bitstreams.frames import FREE
         f = min(a.frame, len(frames) - 1)
         if frames.status[f, a.fap - 1] == FREE:
             frames.status[f, a.fap - 1] = 1

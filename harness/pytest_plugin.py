@@ -26,6 +26,15 @@ from pathlib import Path
 
 import pytest
 
+from fbaconf.conformance.suite import load_suites
+
+from .adapters import resolve
+from .baseline import load
+from .results import Outcome
+from .runner import RunContext, run_case
+from .selection import required_for
+from .session import resolve_claim
+
 PREFIX = "fbaconf::"
 
 
@@ -48,9 +57,6 @@ class FbaconfCaseFailure(Exception):
 
 class _State:
     def __init__(self, config) -> None:
-        from fbaconf.conformance.suite import load_suites
-        from .adapters import resolve
-        from .session import resolve_claim
         self.adapter = resolve(config.getoption("fbaconf_decoder"))
         self.claim = resolve_claim(config.getoption("fbaconf_claim"), self.adapter)
         names = config.getoption("fbaconf_suite") or None
@@ -59,7 +65,6 @@ class _State:
         self.out = Path(out).resolve() if out else Path(tempfile.mkdtemp(prefix="fbaconf-pytest-"))
         self.baseline = {}
         if config.getoption("fbaconf_baseline"):
-            from .baseline import load
             self.baseline = load(Path(config.getoption("fbaconf_baseline")))
 
 
@@ -71,9 +76,6 @@ class FbaconfItem(pytest.Item):
         self.add_marker(pytest.mark.fbaconf)
 
     def runtest(self) -> None:
-        from .results import Outcome
-        from .runner import RunContext, run_case
-        from .selection import required_for
         st = self.state
         if not required_for(st.claim, self.case, st.adapter):
             pytest.skip(f"outside the claim {st.claim} (case requires {self.case.claim})")
@@ -84,7 +86,7 @@ class FbaconfItem(pytest.Item):
         if r.outcome == Outcome.NOT_SUPPORTED:
             raise FbaconfCaseFailure(r)  # required (checked above): the claim needs it
         if r.outcome == Outcome.QUALITY_WARNING:
-            warnings.warn(FbaconfCaseWarning(f"{r.case_id}: {r.message}"))
+            warnings.warn(FbaconfCaseWarning(f"{r.case_id}: {r.message}"), stacklevel=1)
             return
         if r.outcome.failing:
             if listed == "Flake" or listed == r.outcome.value:

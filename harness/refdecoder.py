@@ -18,7 +18,6 @@ import sys
 from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
-
 from fbaconf.pipeline import multi_outputs, reference_outputs
 
 from .adapters import Job, PythonAdapter

@@ -180,7 +180,7 @@ class RunRecord:
                    speed=[SpeedResult.from_json(s) for s in d.get("speed", [])],
                    started=d.get("started", ""), finished=d.get("finished", ""),
                    duration_s=d.get("duration_s", 0.0), provisional=d.get("provisional", []),
-                   missing=d.get("missing", []), baseline_summary=d.get("baseline_summary", ""), exit_code=d.get("exit_code", 0))
+                   missing=d.get("missing", []), baseline_summary=d.get("baseline_summary", ""), exit_code=d.get("exit_code", 0))  # noqa: E501
 
 
 class ResultLog:

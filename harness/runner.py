@@ -29,11 +29,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from fbaconf.conformance.suite import Case, CaseKind, golden_root
+import fbaconf
+from fbaconf.conformance.suite import Case, CaseKind, golden_root, suites_root
 from fbaconf.errors import FbaconfInputError
-
 from fbaconf.isolation import endings, sandbox
 from fbaconf.safefs import remove_tree
+
+from . import cluster as cl
 from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
 from .compare.base import worst
 from .compare.ladder import compare_outputs, outcome_for
@@ -176,8 +178,6 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
 def hidden_from_decoders(ctx: RunContext | None = None) -> list[Path]:
     """What a sandboxed decoder must never see even where fbaconf's own files are visible:
     the goldens, the suites, the run folder (results, other cases, reports), the git tree."""
-    from fbaconf.conformance.suite import suites_root
-    import fbaconf
     root = Path(fbaconf.__file__).resolve().parent.parent
     out = [Path(golden_root()).resolve(), Path(suites_root()).resolve(), root / ".git"]
     if ctx is not None:
@@ -210,7 +210,7 @@ def _run_python(a: PythonAdapter, job: Job):
                             endings.crash_report(traceback.format_exc())), proc
     dt = time.perf_counter() - t0
     if dt > a.limits.timeout_s:
-        return endings.Ending(endings.EndingKind.TIMEOUT, f"in-process decoder took {dt:.1f} s, over the {a.limits.timeout_s:g} s "
+        return endings.Ending(endings.EndingKind.TIMEOUT, f"in-process decoder took {dt:.1f} s, over the {a.limits.timeout_s:g} s "  # noqa: E501
                                        f"limit"), proc
     proc["exit_code"] = 0
     return endings.Ending(endings.EndingKind.DECODED, "in-process decoder returned"), proc
@@ -257,7 +257,7 @@ class Progress:
             sys.stderr.flush()
 
 
-def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir: Path, jobs: int | None = None,
+def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir: Path, jobs: int | None = None,  # noqa: PLR0913
               resume: bool = False, keep_workdirs: bool = False, progress: bool | None = None,
               golden: Path | None = None, on_result: Callable[[CaseResult], None] | None = None,
               cluster: str | None = None) -> list[CaseResult]:
@@ -292,7 +292,6 @@ def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir
         return r
 
     if cluster:
-        from . import cluster as cl
 
         def record(r: CaseResult) -> None:
             if sandbox.stopping():

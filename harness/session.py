@@ -5,22 +5,34 @@ Used by ``fbaconf run`` and ``fbaconf certify`` alike (:mod:`.verbs`, :mod:`.cer
 from __future__ import annotations
 
 import datetime as _dt
+import difflib
 import os
+import signal
+import sys
+import threading
 import time
 import tomllib
-from importlib import resources
+from collections import Counter
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
+from fbaconf.isolation import sandbox
+from fbaconf.profiles.model import Claim, load_profiles
 
-from .adapters import highest_claim
+from . import baseline as bl
+from . import reports
+from .adapters import CommandAdapter, highest_claim
+from .results import RunRecord
+from .runner import run_cases
+from .speed import measure_claim
+from .sysinfo import system_info
 
 
 def provisional_statements(claim: str | None) -> list[str]:
     """What a verdict rests on that the public sources leave open (data: harness/data/provisional.toml
     and the provenance of each level limit)."""
-    from fbaconf.profiles.model import Claim, load_profiles
     data = tomllib.loads(resources.files("fbaconf.harness").joinpath("data/provisional.toml").read_text("utf-8"))
     out = [f"{r['id']}: {r['text']} ({r['where']})" for r in data["rule"]]
     ps = load_profiles()
@@ -61,8 +73,6 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
     counting only new failures (and fixed cases, unless ``allow_fixed``) when a baseline or
     flakes file is given; 3 only when every required case passed and only speed was missed;
     else 0."""
-    from . import baseline as bl
-    from .runner import run_cases
     o = options or RunOptions()
     jobs, baseline, flakes, retries, speed = o.jobs, o.baseline, o.flakes, o.retries, o.speed
     t0 = time.perf_counter()
@@ -79,7 +89,6 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
                           bl.load_flakes(flakes) if flakes is not None else None)
     speed_results = []
     if speed:
-        from .speed import measure_claim
         speed_results = [s for s in measure_claim(adapter, claim) if s is not None]
     record = _record(adapter, claim, suites, cases, results, started, t0)
     record.speed = speed_results
@@ -97,7 +106,6 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
 def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) -> None:
     """Re-run each failing required case up to ``retries`` times; one that passes on a re-run
     is a flake (its first result is kept, annotated ``flake``)."""
-    from .runner import run_cases
     by_id = {c.full_id: c for c in cases}
     todo = [r for r in results if r.required and r.outcome.failing]
     for attempt in range(1, retries + 1):
@@ -114,7 +122,6 @@ def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) ->
 
 
 def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None) -> dict[str, Path]:
-    from . import reports
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": json_path or out_dir / "report.json", "junit": junit_path or out_dir / "junit.xml",
              "html": (html_dir or out_dir) / "index.html"}
@@ -127,7 +134,6 @@ def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, htm
 def missing_summary(results) -> list[str]:
     """What the decoder could not take among the required cases, grouped by reason
     (tools, inputs, outputs, claims): one line per reason with its count."""
-    from collections import Counter
     reasons = Counter(r.message for r in results if r.required and r.outcome.value == "NotSupported")
     return [f"{n} required case(s): {why}" for why, n in reasons.most_common()]
 
@@ -143,7 +149,6 @@ def use_color(stream) -> bool:
 
 
 def resolve_claim(text: str | None, adapter) -> str:
-    from fbaconf.profiles.model import Claim
     try:
         return str(Claim.parse(text or highest_claim(adapter)))
     except ValueError as e:
@@ -152,7 +157,6 @@ def resolve_claim(text: str | None, adapter) -> str:
 
 def check_suites(suites, names: list[str]) -> None:
     """Unknown ``--suite`` names are a usage error, with the nearest name."""
-    import difflib
     known = [s.name for s in suites]
     for n in names:
         if n not in known:
@@ -164,9 +168,6 @@ def check_suites(suites, names: list[str]) -> None:
 def preflight(adapter) -> None:
     """Before any case: a command decoder's program must exist and be executable; one loud
     warning when no sandbox can isolate it."""
-    import sys
-    from fbaconf.isolation import sandbox
-    from .adapters import CommandAdapter
     if not isinstance(adapter, CommandAdapter):
         return
     if sandbox.isolation() == "none":
@@ -191,9 +192,6 @@ class interruptible:
     cut short are not recorded, so ``--resume`` runs exactly them and those never started."""
 
     def __enter__(self) -> _Stop:
-        import signal
-        import threading
-        from fbaconf.isolation import sandbox
         self.stop = _Stop()
         self.old = {}
         sandbox.reset_stop()
@@ -206,8 +204,6 @@ class interruptible:
         return self.stop
 
     def __exit__(self, *exc) -> None:
-        import signal
-        from fbaconf.isolation import sandbox
         for sig, h in self.old.items():
             signal.signal(sig, h)
         sandbox.reset_stop()
@@ -215,8 +211,6 @@ class interruptible:
 
 def _record(adapter, claim, suites, cases, results, started, t0):
     """The RunRecord of a session: decoder, claim, the suites that ran, system, results."""
-    from .results import RunRecord
-    from .sysinfo import system_info
     ran = {c.suite for c in cases}
     return RunRecord(
         decoder=adapter.describe(), claim=claim,

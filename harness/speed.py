@@ -58,11 +58,24 @@ from typing import Callable
 
 import numpy as np
 
+from fbaconf.animation.bundled import default_head_scene
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.faptext import write_fap
+from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.errors import FbaconfInputError
+from fbaconf.isolation import endings, sandbox
+from fbaconf.isolation.persistent import PersistentDecoder
+from fbaconf.profiles.model import Claim, load_profiles
+from fbaconf.rendering.scenario import Scenario
+from fbaconf.safefs import remove_tree
+from fbaconf.scenes import bifs, bt
 
 from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim
+from .compare.ladder import outcome_for
+from .compare.loaders import OutputError, check_output_file, load_output_faps
 from .results import Outcome, SpeedResult
-from fbaconf.safefs import remove_tree
+from .runner import hidden_from_decoders
 
 OPERATIONS = ("decode", "render")
 LIMIT_FOR = {"decode": "decode_rate", "render": "render_rate"}
@@ -108,8 +121,6 @@ class _Content:
 
     def _encoded(self, n: int) -> bytes:
         if n not in self._enc:
-            from fbaconf.bitstreams.encoder import EncoderOptions, encode
-            from fbaconf.bitstreams.synth import synthetic_sequence
             self._enc[n] = encode(synthetic_sequence(n, CONTENT_RATE),
                                   EncoderOptions(fap_quant=CONTENT_QUANT)).data
         return self._enc[n]
@@ -141,8 +152,6 @@ class _Content:
 
     def fap(self, n: int) -> Path:
         if n not in self._fap:
-            from fbaconf.bitstreams.decoder import decode
-            from fbaconf.bitstreams.faptext import write_fap
             frames = decode(self.stream_bytes(n)).frames
             p = self.root / f"content-{n}.fap"
             p.write_text(write_fap(frames), encoding="utf-8")
@@ -152,8 +161,6 @@ class _Content:
     def scene(self, kind: str) -> Path:
         """The bundled default head as a ``bt`` (text) or ``bifs`` (binary) scene file."""
         if kind not in self._scene:
-            from fbaconf.animation.bundled import default_head_scene
-            from fbaconf.scenes import bifs, bt
             p = self.root / f"default-head.{kind}"
             if kind == "bifs":
                 p.write_bytes(bifs.encode(default_head_scene()))
@@ -163,7 +170,6 @@ class _Content:
         return self._scene[kind]
 
     def scenario(self, name: str, **changes) -> Path:
-        from fbaconf.rendering.scenario import Scenario
         p = self.root / f"{name}.toml"
         if not p.exists():
             p.write_text(Scenario.default().with_(**changes).to_toml(), encoding="utf-8")
@@ -311,9 +317,7 @@ class _Runner:
             return Job(workdir=workdir, values=self._values(n, workdir), frames=n)
 
         if isinstance(a, CommandAdapter):
-            from fbaconf.isolation import sandbox
             argv, job = self._argv(job_for)
-            from .runner import hidden_from_decoders
             view = a.sandbox_view(argv, workdir, hidden=hidden_from_decoders())
             view.read_only.append(self.content.root)  # the generated content the decoder reads
             res = sandbox.run(argv, workdir, a.limits, env=a.env or None, view=view)
@@ -344,8 +348,6 @@ class _Runner:
 
     def _run_persistent(self, n: int) -> float:
         """One input to the persistent decoder: the time from sending it to its answer."""
-        from fbaconf.isolation.persistent import PersistentDecoder
-        from .runner import hidden_from_decoders
         a = self.adapter
         root = self.runs_dir / "serve"
         workdir = root / "case"
@@ -370,15 +372,12 @@ class _Runner:
 
     def _judge(self, res, n: int, argv) -> None:
         """A run that did not decode (exit code, crash, timeout...) fails the measurement."""
-        from fbaconf.isolation import endings
-        from .compare.ladder import outcome_for
         a = self.adapter
         verdict = outcome_for(endings.classify(res, a.limits, a.reject_exit_codes))
         if verdict is not None:
             raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
 
     def _check_output(self, job: Job, n: int, argv) -> None:
-        from .compare.loaders import OutputError, check_output_file
         key = "images_dir" if self.operation == "render" else next(
             k for k in ("faps_out", "vertices_out", "images_dir") if k in job.values)
         p = job.path(key)
@@ -410,7 +409,6 @@ def output_frames(path: Path) -> int:
     """How many frames a decoder's FAP output holds, cheaply (speed runs reach 100,000 frames):
     an ``.npz``'s frame arrays; a ``.fap`` file's header count, provided at least that many
     lines follow it (a header alone does not count). Raises OutputError when unreadable."""
-    from .compare.loaders import OutputError, load_output_faps
     if path.suffix != ".fap":
         return len(load_output_faps(path).frame_number)
     lines = [ln for ln in path.read_bytes().splitlines() if ln.strip() and not ln.lstrip().startswith(b"#")]
@@ -477,7 +475,6 @@ def _series(n: int) -> list[int]:
 def required_rate(claim: str, operation: str) -> tuple[float, str, str]:
     """(minimum rate in frames/s, provenance, limit description) for ``claim`` and ``operation``;
     the rate is 0 when the limit does not apply to the claimed profile."""
-    from fbaconf.profiles.model import Claim, load_profiles
     ps = load_profiles()
     try:
         c = Claim.parse(claim, ps)
@@ -489,7 +486,7 @@ def required_rate(claim: str, operation: str) -> tuple[float, str, str]:
     return float(lim.value(c.level)), lim.provenance, lim.description
 
 
-def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] | None = None,
+def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] | None = None,  # noqa: PLR0913
             repeats: int = 3, work_dir: Path | None = None, target_s: float = 0.5,
             max_frames: int = 100_000, max_run_s: float | None = None,
             render_size: tuple[int, int] = DEFAULT_RENDER_SIZE, persistent: bool = True) -> SpeedResult | None:

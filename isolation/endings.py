@@ -147,7 +147,7 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
         return Ending(EndingKind.MEMORY, f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; "
                                 f"peak RSS {res.maxrss_mb:.0f} MB)")
     if "supervisor-lost" in res.notes:
-        return Ending(EndingKind.UNEXPECTED, f"the fork server running {cmd} died during this input (the decoder killed "
+        return Ending(EndingKind.UNEXPECTED, f"the fork server running {cmd} died during this input (the decoder killed "  # noqa: E501
                                     f"its parent process, or a process-tree limit did): its ending is unknown — "
                                     f"a decoder must not signal processes it did not start{_last_line(err)}")
     if res.output_limit_hit:

@@ -28,7 +28,7 @@ import sys
 import time
 from pathlib import Path
 
-from . import sandbox
+from . import forkserver_build, sandbox
 from .sandbox import Limits, ProcResult, View
 
 SERVER_SCRIPT = Path(__file__).with_name("forkserver.py")
@@ -62,8 +62,7 @@ class ForkServer:
         self._files: list[tuple] = []
         self._queue: collections.deque[Pending] = collections.deque()
         # The server in C when it can be built (isolation/forkserver_build.py), else the Python one.
-        from .forkserver_build import forkserver_binary
-        self.native = forkserver_binary()
+        self.native = forkserver_build.forkserver_binary()
         self.io = self.root / ".io"  # the decoder's stdout/stderr files: outside its view
         self.srv = self.root / ".srv"  # the server script, read-only in the sandbox
 
@@ -184,7 +183,7 @@ class ForkServer:
         the event counters, read through descriptors kept open (no open per input)."""
         if self._events is None:
             self._events = []
-            for kind, d in self.cg.dirs:
+            for _kind, d in self.cg.dirs:
                 for name in ("memory.events", "memory.oom_control", "memory.failcnt", "pids.events"):
                     try:
                         self._events.append((name, os.open(d / name, os.O_RDONLY)))

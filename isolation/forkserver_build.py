@@ -7,7 +7,7 @@ harness process with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or 
 into a private temporary folder, removed at exit. Without a compiler, or with
 ``FBACONF_PURE_PYTHON=1`` or ``FBACONF_FORKSERVER=python``, the harness uses ``forkserver.py``, which speaks the same protocol
 and behaves the same (``tests/integration/test_spawner.py`` runs its cases through both).
-"""
+"""  # noqa: E501
 from __future__ import annotations
 
 import atexit

@@ -57,4 +57,5 @@ def main():
         os._exit(127)
 
 
-main()
+if __name__ == "__main__":
+    main()

@@ -32,8 +32,8 @@ import time
 from pathlib import Path
 
 from . import sandbox
-from .sandbox import Limits, ProcResult, View
 from .forkclient import ForkServerError
+from .sandbox import Limits, ProcResult, View
 
 
 class PersistentDecoder:

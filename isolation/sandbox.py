@@ -44,11 +44,13 @@ import signal
 import stat
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import fbaconf
 from fbaconf.safefs import tree_size
 
 from .cgroups import Cgroups
@@ -210,7 +212,6 @@ def default_view(argv: list[str], workdir: Path) -> View:
 def python_view() -> list[Path]:
     """What a decoder started through ``{python}`` needs read-only: the Python installation,
     the venv and the fbaconf package (the caller hides the goldens, suites and run folder)."""
-    import fbaconf
     pkg_root = Path(fbaconf.__file__).resolve().parent.parent
     return [Path(sys.base_prefix).resolve(), Path(sys.prefix).resolve(), Path(sys.prefix), pkg_root]
 
@@ -237,7 +238,7 @@ _HOLD = 'read -r _ || exit 126; exec "$@" </dev/null'
 def _rlimit_arg(which: int, value: int) -> str:
     """prlimit's SOFT:HARD for ``value`` as ``launcher._set`` sets it: capped by the current
     hard limit, which it lowers to the value only when it was unlimited."""
-    import resource
+    import resource  # noqa: PLC0415 (POSIX only)
     _soft, hard = resource.getrlimit(which)
     if hard == resource.RLIM_INFINITY:
         return f"{value}:{value}"
@@ -247,7 +248,7 @@ def _rlimit_arg(which: int, value: int) -> str:
 def launch_argv(as_bytes: int, fsize: int, cpu: int, cgroups: list[Path], inner: list[str]) -> tuple[list[str], bool]:
     """The launcher command that applies the limits and execs ``inner``, and whether it waits
     for the harness to move it into ``cgroups`` (then write a line to its stdin)."""
-    import resource
+    import resource  # noqa: PLC0415 (POSIX only)
     # FBACONF_LAUNCHER=python: always the Python launcher (benchmarks/bench_run.py compares the two)
     prlimit = None if os.environ.get("FBACONF_LAUNCHER", "").lower() == "python" else shutil.which("prlimit")
     if prlimit is None:
@@ -336,7 +337,7 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
     return res
 
 
-def result(argv: list[str], limits: Limits, status: int, rusage, elapsed: float, *, timed_out: bool,
+def result(argv: list[str], limits: Limits, status: int, rusage, elapsed: float, *, timed_out: bool,  # noqa: PLR0913
            mem_hit: bool, oom: bool, pids_hit: bool, bwrap_status: bool, stdout_tail: str, stderr_tail: str,
            measure_dirs: list[Path]) -> ProcResult:
     """The :class:`ProcResult` of one finished decoder process (its raw wait status and
@@ -382,7 +383,7 @@ def result(argv: list[str], limits: Limits, status: int, rusage, elapsed: float,
 
 
 def launch_server(inner: list[str], limits: Limits, *, cwd: Path, env: dict[str, str], stderr=None,
-                  pass_fds: tuple[int, ...] = (), as_bytes: int = 0, fsize: int = 0) -> tuple[subprocess.Popen, "Cgroups"]:
+                  pass_fds: tuple[int, ...] = (), as_bytes: int = 0, fsize: int = 0) -> tuple[subprocess.Popen, "Cgroups"]:  # noqa: E501
     """Start a long-lived process (a fork server, a persistent decoder) through the limit
     launcher, in its own cgroups and session, with stdin/stdout as pipes; registered so
     :func:`stop_all` kills it. ``as_bytes``/``fsize``: rlimits for the whole process (0 = none;
@@ -429,7 +430,6 @@ def stop_server(proc: subprocess.Popen | None, cg: "Cgroups | None", *, grace_s:
 
 
 def tempfile_dir() -> str:
-    import tempfile
     return tempfile.mkdtemp(prefix="fbaconf-io-")
 
 

@@ -15,6 +15,8 @@ import textwrap
 from dataclasses import dataclass
 from typing import Callable
 
+from fbaconf.bitstreams import arith
+
 
 @dataclass(frozen=True)
 class Mutant:
@@ -72,7 +74,6 @@ def source_patch(where: str, old: str, new: str) -> None:
 
 def pure_decoder() -> None:
     """Switch the C arithmetic decoder off for this process."""
-    from fbaconf.bitstreams import arith
     arith.native_decoder = lambda: None
 
 

@@ -29,20 +29,29 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from fbaconf.conformance.suite import CaseKind
+import numpy as np
+
+from fbaconf import pipeline
+from fbaconf.animation import engine
+from fbaconf.bitstreams import arith, decoder, syntax, tables
+from fbaconf.conformance.suite import CaseKind, golden_root, load_suites
+from fbaconf.harness import refdecoder
+from fbaconf.harness.adapters import ManifestError, PythonAdapter, resolve
+from fbaconf.harness.runner import RunContext, run_case
+from fbaconf.harness.selection import claim_covers
 from fbaconf.mutation.core import Mutant, apply_mutant
 from fbaconf.mutation.independent import MUTANTS_LIST as INDEPENDENT
-
+from fbaconf.rendering import raster, render
 
 # ------------------------------------------------------------------ custom patches
 
 
 def _floor_alphabet() -> None:
-    from fbaconf.bitstreams import decoder, syntax
 
     def alphabet(lo, hi, q):  # floor division instead of D4's truncation toward zero
         d = syntax.quant_div(q)
@@ -51,18 +60,14 @@ def _floor_alphabet() -> None:
 
 
 def _non_adaptive() -> None:
-    from fbaconf.bitstreams import arith, decoder
     decoder.make_model = lambda n, adaptive=True: arith.make_model(n, adaptive=False)
 
 
 def _no_lr_fill() -> None:
-    import numpy as np
-    from fbaconf.animation import engine
     engine.lr_fill = lambda values, status: (np.array(values, dtype=np.float64), np.array(status, dtype=np.uint8))
 
 
 def _camera_shift() -> None:
-    from fbaconf.rendering import raster
     orig = raster.project
 
     def project(vertices, camera, width, height):
@@ -70,13 +75,11 @@ def _camera_shift() -> None:
         p.sx = p.sx + 1.0  # the image centre one pixel off
         return p
     raster.project = project
-    from fbaconf.rendering import render
     if hasattr(render, "project"):
         render.project = project
 
 
 def _retained_rescaled() -> None:
-    from fbaconf.bitstreams import decoder
     orig = decoder._Decoder.intra_header
 
     def intra_header(self, info):  # held values re-scaled to a new fap_quant
@@ -89,7 +92,6 @@ def _retained_rescaled() -> None:
 
 
 def _late_group_defaults() -> None:
-    from fbaconf.bitstreams import tables
     orig = tables.default_bounds
 
     def default_bounds():  # the default-range table copied wrong for FAPs 40-50 (half their ranges)
@@ -100,9 +102,6 @@ def _late_group_defaults() -> None:
 
 
 def _faces_share_lists() -> None:
-    from fbaconf import pipeline
-    from fbaconf.bitstreams import decoder
-    from fbaconf.harness import refdecoder
     orig = pipeline.multi_outputs
 
     def multi_outputs(streams, out_dir, fmt="npz"):  # one range-list table for every face decoded at once
@@ -300,12 +299,6 @@ def run_mutant(name: str | None, claim: str = "predictable@2", *, stop_at_first:
     both, and a decoder's .fap reader is code a mutant can break), once with each FAP output
     format in ``formats`` (the second format only for the cases that compare FAPs, only while
     the mutant lives). Returns {mutant, killed, killed_by, failing, ran, total, seconds}."""
-    import tempfile
-    from fbaconf.conformance.suite import load_suites
-    from fbaconf.harness.adapters import resolve
-    from fbaconf.harness.runner import RunContext, run_case
-    from fbaconf.harness.selection import claim_covers
-    from fbaconf.conformance.suite import golden_root
     t0 = time.perf_counter()
     if name is not None:
         apply(name)
@@ -333,7 +326,7 @@ def run_mutant(name: str | None, claim: str = "predictable@2", *, stop_at_first:
                                 "outcome": r.outcome.value, "message": r.message[:300]})
                 if stop_at_first:
                     break
-    return {"mutant": name or "reference", "killed": bool(failing), "killed_by": failing[0]["case"] if failing else None,
+    return {"mutant": name or "reference", "killed": bool(failing), "killed_by": failing[0]["case"] if failing else None,  # noqa: E501
             "failing": failing, "ran": ran, "total": len(plan), "seconds": round(time.perf_counter() - t0, 2)}
 
 
@@ -397,7 +390,6 @@ class MutantAdapter:
     patches never touch the harness process (thread-safe with ``-j``)."""
 
     def __new__(cls, mutant: str = "", **kw):
-        from fbaconf.harness.adapters import PythonAdapter
 
         class _MutantAdapter(PythonAdapter):
             supports_multi = True
@@ -406,7 +398,6 @@ class MutantAdapter:
             def __init__(self, mutant: str) -> None:
                 super().__init__()
                 if mutant not in MUTANTS:
-                    from fbaconf.harness.adapters import ManifestError
                     raise ManifestError(f"[options] mutant = {mutant!r}: unknown (known: {', '.join(MUTANTS)})",
                                         rule="manifest-options")
                 self.mutant = mutant
@@ -460,7 +451,6 @@ def main(argv: list[str] | None = None) -> int:
     if a.cmd == "decode":
         if a.name != "reference":
             apply(a.name)
-        from fbaconf.harness import refdecoder
         return refdecoder.main(a.rest)
     res = run_mutant(None if a.name == "reference" else a.name, a.claim, stop_at_first=not a.all_cases)
     print(json.dumps(res))

@@ -11,13 +11,15 @@ import sys
 from pathlib import Path
 
 from fbaconf.rules import CODES, RULES
+
+from .checker import LIMIT_CODES
 from .model import load_profiles
 
 FAMILIES = (
     ("FAP-INPUT", "Input"),
     ("FAP-SYNTAX", "Syntax"),
     ("FAP-SEM", "Semantics"),
-    ("FAP-DECISION", "Decision dependence (warnings: the stream relies on an fbaconf reading where another is plausible)"),
+    ("FAP-DECISION", "Decision dependence (warnings: the stream relies on an fbaconf reading where another is plausible)"),  # noqa: E501
     ("FAP-PROFILE", "Profile"),
     ("FAP-LEVEL", "Level"),
     ("FAP-CLAIM", "Claim"),
@@ -69,9 +71,8 @@ def generate() -> str:
     lines.append("")
     ps = load_profiles()
     lines += ["## Level limits checked (from profiles/data/profiles.toml)", "",
-              "| limit | unit | " + " | ".join(f"L{lv}" for lv in ps.levels) + " | from profile | provenance | checked |",
+              "| limit | unit | " + " | ".join(f"L{lv}" for lv in ps.levels) + " | from profile | provenance | checked |",  # noqa: E501
               "|---|---|" + "---|" * len(ps.levels) + "---|---|---|"]
-    from .checker import LIMIT_CODES
     for lim in ps.limits.values():
         vals = " | ".join(f"{lim.values[lv]:g}" for lv in ps.levels)
         checked = f"`{LIMIT_CODES[lim.id]}`" if lim.id in LIMIT_CODES else "decoder requirement (harness)"

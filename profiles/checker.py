@@ -15,6 +15,7 @@ signalled ranges (the alphabet is built from the ranges, so no symbol can leave 
 """
 from __future__ import annotations
 
+import importlib
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,15 +23,28 @@ from typing import Any
 
 import numpy as np
 
-from fbaconf.bitstreams import tables
-from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE
-from fbaconf.errors import BitstreamError
-from fbaconf.bitstreams.syntax import (CODING_DCT, INTENSITY_MAX, LIST_ORDER, MASK_INTERPOLATE, _tdiv, alphabet,
-                                       intensity_bound, intensity_step, quant_div)
-from fbaconf.bitstreams.tables import NUM_FAPS, RANGE_DELTA
-
-
 from fbaconf import rules as R
+from fbaconf.animation.facedef import validate_borders
+from fbaconf.animation.faceparams import NUM_FEATURE_POINTS, fdp_point_rows
+from fbaconf.bitstreams import decoder as dec
+from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.arith import LOOKAHEAD, ZERO_RUN_LIMIT
+from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE
+from fbaconf.bitstreams.emulation import find_emulations
+from fbaconf.bitstreams.syntax import (
+    CODING_DCT,
+    INTENSITY_MAX,
+    LIST_ORDER,
+    MASK_INTERPOLATE,
+    _tdiv,
+    alphabet,
+    intensity_bound,
+    intensity_step,
+    quant_div,
+)
+from fbaconf.bitstreams.tables import NUM_FAPS, RANGE_DELTA
+from fbaconf.errors import BitstreamError, SceneError
+
 from .diagnostics import Diagnostic, diag
 from .model import Claim, ProfileSet, load_profiles
 
@@ -88,7 +102,7 @@ def image_size(path: Path) -> tuple[int, int] | None:
     if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
         return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
     try:
-        import OpenImageIO as oiio
+        import OpenImageIO as oiio  # noqa: PLC0415 (image I/O loads on first use)
         inp = oiio.ImageInput.open(str(path))
         if not inp:
             return None
@@ -122,7 +136,6 @@ def summarize_scene(scene: Any, base_dir: Path | None = None) -> SceneSummary:
             fpc = resolve(n.get("featurePointsCoord"))
             if fpc is not None:
                 s.tools.setdefault("fdp_feature_points", f"{path}.featurePointsCoord")
-                from fbaconf.animation.faceparams import NUM_FEATURE_POINTS, fdp_point_rows
                 rows, sent = fdp_point_rows(fpc.get("point") if fpc.type == "Coordinate" else [])
                 if len(rows) != NUM_FEATURE_POINTS:
                     raise SceneStructureError(
@@ -144,8 +157,6 @@ def summarize_scene(scene: Any, base_dir: Path | None = None) -> SceneSummary:
         elif n.type == "FaceDefMesh":
             nb = len(n.get("intervalBorders"))
             s.measure("intervals_per_facedefmesh", max(nb - 1, 0), f"{path}.intervalBorders")
-            from fbaconf.animation.facedef import validate_borders
-            from fbaconf.errors import SceneError
             try:  # the rules the engine applies: >= 2 borders, finite, strictly increasing, a 0
                 validate_borders(n.get("intervalBorders"), node_path=f"{path}.intervalBorders")
             except SceneError as e:
@@ -195,7 +206,6 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
         return scene
     if isinstance(scene, (str, Path)):
         try:
-            import importlib
             importlib.import_module("fbaconf.scenes.bt")  # optional: the scene readers (BT, and BIFS on it)
             bifs = importlib.import_module("fbaconf.scenes.bifs")
         except Exception as e:  # ImportError, or a reader that fails to import
@@ -289,7 +299,6 @@ class _Stream:
     """What was parsed: plane records, decoded frames, the error that stopped parsing."""
 
     def __init__(self, data: bytes, file: str | None) -> None:
-        from fbaconf.bitstreams import decoder as dec
         self.data = data
         self.error: BitstreamError | None = None
         self.result = None
@@ -394,7 +403,6 @@ def _syntax(st: _Stream, out: list[Diagnostic]) -> None:
         return
     res = st.result
     nbits = len(st.data) * 8
-    from fbaconf.bitstreams.emulation import find_emulations
     for byte in find_emulations(st.data, res):
         plane = next((p.index for p in reversed(res.planes) if p.bit_offset <= byte * 8), None)
         out.append(diag(R.SYNTAX_EMULATION, f"start-code emulation: a byte-aligned 0x000001 at byte {byte} that is "
@@ -493,7 +501,6 @@ def lookahead_stuffing(data: bytes, start: int, length: int) -> int | None:
     block [start, start+length), or None. There the D7 reading (next field right after the
     block) and a plain 14-bit rewind (S1) disagree: the decoder removed (or, for a '0',
     rejected) a stuffing bit among the look-ahead bits that belong to the next field."""
-    from fbaconf.bitstreams.arith import LOOKAHEAD, ZERO_RUN_LIMIT
     end = start + length
     n = min(length, ZERO_RUN_LIMIT)
     tail = _bits(data, end - n, n) if n else 0
@@ -559,7 +566,7 @@ def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
                                         f"(bounds {int(bounds[f - 1, il])}..{int(bounds[f - 1, ih])}, fap_quant {q})",
                                         fap=f, **loc))
                     for li in (ih, il):
-                        if not replaced[f - 1, li] and _tdiv(int(raw[f - 1, li]), d) != _tdiv(int(bounds[f - 1, li]), d):
+                        if not replaced[f - 1, li] and _tdiv(int(raw[f - 1, li]), d) != _tdiv(int(bounds[f - 1, li]), d):  # noqa: E501
                             out.append(diag(R.DECISION_DEFAULT_ROUNDING,
                                             f"FAP {f} uses the default {LIST_ORDER[li]} bound {int(raw[f - 1, li])}, "
                                             f"rounded to {int(bounds[f - 1, li])} by D4 (alphabet differs)",

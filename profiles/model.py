@@ -12,6 +12,7 @@ in that order is the unique smallest one (``--smallest-claim``).
 """
 from __future__ import annotations
 
+import difflib
 import tomllib
 from dataclasses import dataclass, field
 from functools import lru_cache, total_ordering
@@ -120,7 +121,6 @@ class Claim:
         try:
             prof = ps.profile(pname)
         except KeyError:
-            import difflib
             close = difflib.get_close_matches(pname.strip().lower(), list(ps.profiles), n=1)
             hint = f"did you mean {close[0]}@{lv.strip() or 1}? " if close else ""
             raise ValueError(f"unknown profile {pname!r} ({hint}known: {', '.join(ps.profiles)})") from None
@@ -142,7 +142,7 @@ def _err(src: str, msg: str) -> ProfileDataError:
     return ProfileDataError(f"{src}: {msg}")
 
 
-def parse_profiles(text: str, source: str = "<profiles>") -> ProfileSet:
+def parse_profiles(text: str, source: str = "<profiles>") -> ProfileSet:  # noqa: C901
     """Parse and validate profile data (TOML text)."""
     try:
         raw = tomllib.loads(text)

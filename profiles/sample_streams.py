@@ -9,6 +9,10 @@ from __future__ import annotations
 import numpy as np
 
 from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.arith import ZERO_RUN_LIMIT, ArithEncoder, make_model
+from fbaconf.bitstreams.bitedit import end_stream, get_bits, splice
+from fbaconf.bitstreams.bitio import BitWriter
+from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.bitstreams.frames import SET, FapFrames
 
@@ -47,8 +51,6 @@ def zero_heavy_plane(faps=range(3, 20)) -> bytes:
 def stuffing_positions(data: bytes, start: int, length: int) -> list[int]:
     """Stream offsets of the stuffing bits inside an arithmetic block (after each zero run of
     ZERO_RUN_LIMIT), found independently of the decoder by scanning the bits."""
-    from fbaconf.bitstreams.arith import ZERO_RUN_LIMIT
-    from fbaconf.bitstreams.bitedit import get_bits
     out, zeros, pos = [], 0, start
     while pos < start + length:
         b = get_bits(data, pos, 1)
@@ -77,10 +79,6 @@ def value_overflow_stream(planes: int = 2260) -> bytes:
     with the codec's own arithmetic encoder, as an encoder would) until the value passes
     2^31 - 1: the value-overflow rule. The encoder itself refuses values beyond +-1860 steps,
     so the predicted planes are written here."""
-    from fbaconf.bitstreams.arith import ArithEncoder, make_model
-    from fbaconf.bitstreams.bitedit import end_stream, splice
-    from fbaconf.bitstreams.bitio import BitWriter
-    from fbaconf.bitstreams.decoder import decode
     fap = 47
     bnd = np.zeros((68, 4), dtype=np.int64)
     bnd[fap - 1] = (1860, 0, 1860, 0)

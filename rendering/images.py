@@ -24,7 +24,7 @@ from .errors import ImageIOError, TextureError
 
 def openimageio():
     """The OpenImageIO module (imported on first use)."""
-    import OpenImageIO
+    import OpenImageIO  # noqa: PLC0415 (image I/O loads on first use)
     return OpenImageIO
 
 
@@ -32,7 +32,7 @@ def colour_science():
     """The colour-science module (imported on first use, its import warnings silenced)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        import colour
+        import colour  # noqa: PLC0415 (colour-science loads in ~1 s)
     return colour
 
 

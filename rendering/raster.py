@@ -49,6 +49,7 @@ Conventions (all normative for fbaconf's golden images)
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -239,7 +240,6 @@ except ImportError:  # not built (no compiler): the numpy path is used
 def native():
     """The C scan converter (rendering/_fastraster.c), or None when it was not built or
     FBACONF_PURE_PYTHON is set: the numpy path below is the reference either way."""
-    import os
     if _native_module is None or os.environ.get(PURE_PYTHON_ENV, "").strip() not in ("", "0"):
         return None
     return _native_module

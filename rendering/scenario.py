@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fbaconf._atomic import atomic_write_text
 from fbaconf.errors import TextFormatError
 
 from .errors import ScenarioError
@@ -241,7 +242,6 @@ class Scenario:
         return "\n".join(out) + "\n"
 
     def save(self, path) -> None:
-        from fbaconf._atomic import atomic_write_text
         atomic_write_text(path, self.to_toml())
 
     def with_(self, **changes) -> "Scenario":

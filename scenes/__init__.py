@@ -1,1 +1,1 @@
-"""Scenes: the BT text reader/writer (:mod:`.bt`) and the binary BIFS coder (:mod:`.bifs`), with their node tables in ``data/``."""
+"""Scenes: the BT text reader/writer (:mod:`.bt`) and the binary BIFS coder (:mod:`.bifs`), with their node tables in ``data/``."""  # noqa: E501

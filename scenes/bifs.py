@@ -39,20 +39,25 @@ below), the CLI glue of ``fbaconf encode|decode`` for scenes, and scene comparis
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
+from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 from fbaconf.errors import FbaconfInputError
 from fbaconf.scenes import bt
+
 from .bifs_decoder import TraceEntry, decode, format_trace, is_bifs_path, load_scene, read
 from .bifs_encoder import BifsWriter, encode
 from .bifs_tables import BIFS_SUFFIXES, MAX_DEPTH, MF_VEC, SF_VEC, BifsEncodeError, BifsError, tables
 
+__all__ = ["BIFS_SUFFIXES", "MAX_DEPTH", "MF_VEC", "SF_VEC", "BifsEncodeError", "BifsError", "BifsWriter",
+           "TraceEntry", "decode", "encode", "format_trace", "is_bifs_path", "load_scene", "read", "tables"]
+
 
 def cmd_encode_scene(args) -> int:
     """``fbaconf encode S.bt -o S.bifs``."""
-    from fbaconf._atomic import atomic_write_bytes
     src, out = Path(args.input), Path(args.output)
     if not is_bifs_path(out):
         raise FbaconfInputError(f"a BT scene encodes to a .bifs file, not {out.name}", rule="io", file=str(out))
@@ -66,7 +71,6 @@ def cmd_encode_scene(args) -> int:
         raise
     atomic_write_bytes(out, data)
     if getattr(args, "json", False):
-        import json
         print(json.dumps({"input": str(src), "output": str(out), "bt_bytes": src.stat().st_size,
                           "bifs_bytes": len(data)}))
     else:
@@ -76,7 +80,6 @@ def cmd_encode_scene(args) -> int:
 
 def cmd_decode_scene(args) -> int:
     """``fbaconf decode S.bifs [-o S.bt] [--trace]``."""
-    from fbaconf._atomic import atomic_write_text
     src = Path(args.input)
     out = Path(args.output) if args.output else None
     trace = bool(getattr(args, "trace", False))

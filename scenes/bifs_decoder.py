@@ -1,4 +1,4 @@
-"""Binary BIFS decoder: a BIFSConfig plus ReplaceScene access unit to a BT scene, with a per-field bit trace; reading .bifs files."""
+"""Binary BIFS decoder: a BIFSConfig plus ReplaceScene access unit to a BT scene, with a per-field bit trace; reading .bifs files."""  # noqa: E501
 from __future__ import annotations
 
 import math
@@ -11,8 +11,20 @@ import numpy as np
 
 from fbaconf.errors import BitstreamError, FbaconfInputError
 from fbaconf.scenes import bt
+
 from .bifs_encoder import node_path
-from .bifs_tables import BIFS_SUFFIXES, BifsError, BifsField, MAX_DEPTH, MAX_NAME_BYTES, ITEM_BITS, MF_VEC, NAME_RE, SF_VEC, tables
+from .bifs_tables import (
+    BIFS_SUFFIXES,
+    ITEM_BITS,
+    MAX_DEPTH,
+    MAX_NAME_BYTES,
+    MF_VEC,
+    NAME_RE,
+    SF_VEC,
+    BifsError,
+    BifsField,
+    tables,
+)
 
 
 @dataclass

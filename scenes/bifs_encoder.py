@@ -9,7 +9,8 @@ import numpy as np
 
 from fbaconf.bitstreams.bitio import BitWriter
 from fbaconf.scenes import bt
-from .bifs_tables import BifsEncodeError, BifsField, MAX_NAME_BYTES, F32_MAX, MF_VEC, SF_VEC, tables
+
+from .bifs_tables import F32_MAX, MAX_NAME_BYTES, MF_VEC, SF_VEC, BifsEncodeError, BifsField, tables
 
 
 class BifsWriter(BitWriter):

@@ -1,4 +1,4 @@
-"""Binary BIFS: constants, typed errors and the node/field tables of scenes/data/bifs_nodes.toml (checked against the BT field tables)."""
+"""Binary BIFS: constants, typed errors and the node/field tables of scenes/data/bifs_nodes.toml (checked against the BT field tables)."""  # noqa: E501
 from __future__ import annotations
 
 import math
@@ -12,7 +12,6 @@ import numpy as np
 
 from fbaconf.errors import BitstreamError, SceneError
 from fbaconf.scenes import bt
-
 
 BIFS_SUFFIXES = (".bifs", ".bif")
 MAX_DEPTH = bt.MAX_DEPTH

@@ -21,7 +21,7 @@ shortest round-trip repr).
 Errors raise :class:`TextFormatError` with line:column and the node path, e.g.
 ``Face.fdp.FDP.faceDefTables[2].faceDefMesh[0].coordIndex`` (an SFNode field adds
 ``.field.Type``, an MFNode field ``.field[i]``).
-"""
+"""  # noqa: E501
 from __future__ import annotations
 
 import bisect
@@ -30,12 +30,13 @@ import tomllib
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
+from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
 
-from fbaconf.errors import TextFormatError
 from fbaconf.bitstreams.tables import fap_table
+from fbaconf.errors import TextFormatError
 
 FAP_NOT_SET = -2147483648  # FAP node field default 0x80000000
 MAX_DEPTH = 100  # node nesting limit of the reader (a deeper file is rejected, never a RecursionError)
@@ -439,7 +440,6 @@ def parse(text: str, file: str | None = None) -> Scene:
 
 
 def read(path) -> Scene:
-    from pathlib import Path
     p = Path(path)
     try:
         text = p.read_text("utf-8")

@@ -22,6 +22,8 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
+from fbaconf.harness import certify
+
 # ci: deterministic (derandomised) so a CI run is reproducible; dev: random exploration.
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True,
                           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -69,7 +71,6 @@ def _certify(out: Path, *extra: str) -> subprocess.CompletedProcess:
 def _packages(tmp_path_factory):
     """``certify --decoder reference-inprocess --claim simple@1 --no-speed``, made once per session
     (per worker under xdist): unsigned, and signed with a fresh key."""
-    from fbaconf.harness import certify
     root = tmp_path_factory.mktemp("packages")
     unsigned = _certify(root / "unsigned")
     certify.keygen(root / "keys")
@@ -88,7 +89,6 @@ def certified_package(_packages, tmp_path) -> Path:
 @pytest.fixture
 def signed_package(_packages, tmp_path) -> tuple[Path, Path]:
     """A fresh copy of the session's signed simple@1 package and the public key that checks it."""
-    from fbaconf.harness import certify
     root, _, run = _packages
     assert run.returncode == 0, run.stdout + run.stderr
     pkg = Path(shutil.copytree(root / "signed", tmp_path / "package", symlinks=True))

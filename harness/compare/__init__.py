@@ -28,7 +28,7 @@ header is checked (dtype, shape, size against the byte cap) before any data is r
 zip bomb or a header claiming a huge array cannot exhaust memory. Unreadable images are a
 ``Fail`` of the images stage, not an exception.
 """
-from .base import (DEFAULT_MAX_BYTES, DEFAULT_MAX_PIXELS, PSNR_CAP, OutputError, ToleranceError, worst)
+from .base import DEFAULT_MAX_BYTES, DEFAULT_MAX_PIXELS, PSNR_CAP, OutputError, ToleranceError, worst
 from .faps import compare_faps
 from .images import compare_images
 from .loaders import check_output_file, load_output_faps, load_output_vertices, open_npz

@@ -3,11 +3,8 @@ from __future__ import annotations
 
 from typing import Iterable
 
-
 from fbaconf.errors import FbaconfInputError
-
 from fbaconf.harness.results import OUTCOME_ORDER, Outcome
-
 
 DEFAULT_MAX_BYTES = 256 * 1024 * 1024  # cap of one output file, and of the decompressed arrays read from it
 MAX_NPZ_MEMBERS = 64

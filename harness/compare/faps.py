@@ -1,4 +1,4 @@
-"""The FAP stage: exact, normative comparison of decoded FAP frames (values, statuses, frame numbers, times, the .fap header rate)."""
+"""The FAP stage: exact, normative comparison of decoded FAP frames (values, statuses, frame numbers, times, the .fap header rate)."""  # noqa: E501
 from __future__ import annotations
 
 from typing import Any
@@ -7,8 +7,8 @@ import numpy as np
 
 from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS, SET, STATUS_NAMES, VISEME_FIELDS, FapFrames
 from fbaconf.bitstreams.tables import fap_table
-
 from fbaconf.harness.results import Outcome, StageResult
+
 from .tolerances import load_tolerances
 
 

@@ -1,4 +1,4 @@
-"""The image stage: a contrast-aware per-pixel rule and CIEDE2000 against converged golden images, heat-map artefacts."""
+"""The image stage: a contrast-aware per-pixel rule and CIEDE2000 against converged golden images, heat-map artefacts."""  # noqa: E501
 from __future__ import annotations
 
 import math
@@ -10,10 +10,10 @@ from typing import Sequence
 
 import numpy as np
 
-from fbaconf.rendering.images import colour_science, openimageio
-
 from fbaconf.harness.results import Outcome, StageResult
-from .base import DEFAULT_MAX_BYTES, DEFAULT_MAX_PIXELS, OutputError, PSNR_CAP, worst
+from fbaconf.rendering.images import colour_science, openimageio, srgb_to_linear, write_png
+
+from .base import DEFAULT_MAX_BYTES, DEFAULT_MAX_PIXELS, PSNR_CAP, OutputError, worst
 from .loaders import check_output_file
 from .tolerances import ImageTolerances
 
@@ -97,7 +97,6 @@ def heat_map(values: np.ndarray, scale: float) -> np.ndarray:
 
 
 def _write_display_png(path: Path, encoded_rgb: np.ndarray) -> None:
-    from fbaconf.rendering.images import srgb_to_linear, write_png
     write_png(path, srgb_to_linear(np.clip(encoded_rgb, 0.0, 1.0)))
 
 
@@ -171,7 +170,7 @@ def _box3(px: np.ndarray) -> np.ndarray:
     return acc / 9.0
 
 
-def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTolerances, artefact_dir: Path, *,
+def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTolerances, artefact_dir: Path, *,  # noqa: PLR0913
                    frames: Sequence[int] | None = None, relative_to: Path | None = None,
                    max_artefact_frames: int = 10, max_bytes: int = DEFAULT_MAX_BYTES,
                    max_pixels: int = DEFAULT_MAX_PIXELS) -> StageResult:

@@ -31,6 +31,7 @@ from .loaders import check_output_file, load_output_faps, load_output_vertices, 
 from .tolerances import ImageTolerances, VertexTolerances
 from .vertices import compare_vertices, part_namer
 
+
 def outcome_for(ending: Ending, *, invalid_stream: bool = False, conceal_allowed: bool = False):
     """The case outcome of an ending, or None when the outputs decide (a valid stream decoded).
 
@@ -86,7 +87,7 @@ def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], o
         if stage == "faps":
             gp = gdir / case.goldens["faps"]
             if not gp.is_file():
-                stages.append(StageResult("faps", Outcome.ERROR, f"golden missing: {gp} (run fbaconf golden regenerate)"))
+                stages.append(StageResult("faps", Outcome.ERROR, f"golden missing: {gp} (run fbaconf golden regenerate)"))  # noqa: E501
                 continue
             text_in = job.values.get("input", "").lower().endswith(".fap")
             stages.append(_faps_stage(FapFrames.load_npz(gp), job.path("faps_out"), "faps", text_in))
@@ -169,7 +170,7 @@ def _effective_faps_stage(golden: Path, got_path: Path, tol: dict) -> StageResul
     series = {"max |effective FAP error|": [float(x) for x in np.minimum(per_frame, 1e30)]}
     bad = np.argwhere(diff > atol)
     if len(bad) == 0:
-        return StageResult(name, Outcome.PASS, "effective FAPs match", metrics={"max_abs_diff": float(diff.max(initial=0))},
+        return StageResult(name, Outcome.PASS, "effective FAPs match", metrics={"max_abs_diff": float(diff.max(initial=0))},  # noqa: E501
                            series=series)
     f, j = (int(x) for x in bad[0])
     fd = {"frame": f, "fap": j + 1, "name": fap_table()[j].name, "expected": float(exp[f, j]), "got": float(got[f, j])}

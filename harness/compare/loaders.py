@@ -1,4 +1,4 @@
-"""Reading a decoder's output files defensively: regular files only, capped sizes, .npz without pickles or zip bombs, .fap text."""
+"""Reading a decoder's output files defensively: regular files only, capped sizes, .npz without pickles or zip bombs, .fap text."""  # noqa: E501
 from __future__ import annotations
 
 import math
@@ -11,11 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from fbaconf.errors import FbaconfInputError
+from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS, STATUS_NAMES, FapFrames
 from fbaconf.bitstreams.tables import NUM_FAPS
+from fbaconf.errors import FbaconfInputError
 
-from .base import DEFAULT_MAX_BYTES, FAPFRAMES_FORMAT, MAX_NPZ_MEMBERS, OutputError, _INT32
+from .base import _INT32, DEFAULT_MAX_BYTES, FAPFRAMES_FORMAT, MAX_NPZ_MEMBERS, OutputError
 
 
 def check_output_file(path: Path, max_bytes: int) -> None:
@@ -204,7 +205,6 @@ def load_output_faps(path, *, max_bytes: int = DEFAULT_MAX_BYTES) -> FapFrames:
         check_output_file(path, max_bytes)
         if _is_zip(path) or path.suffix.lower() == ".npz":
             return _load_fapframes_npz(path, max_bytes)
-        from fbaconf.bitstreams.faptext import read_fap_file
         frames, header, _warnings = read_fap_file(path)
         if header.declared_frames != len(frames):
             raise OutputError(f"unusable FAP output: the header says {header.declared_frames} frame(s), the file holds "

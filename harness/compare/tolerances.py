@@ -1,4 +1,4 @@
-"""Tolerances of the comparison ladder: harness/data/tolerances.toml (every number with its reason) and a case's overrides."""
+"""Tolerances of the comparison ladder: harness/data/tolerances.toml (every number with its reason) and a case's overrides."""  # noqa: E501
 from __future__ import annotations
 
 import math
@@ -7,8 +7,6 @@ from dataclasses import asdict, dataclass, fields
 from functools import lru_cache
 from importlib import resources
 from typing import Any, Mapping
-
-
 
 from .base import ToleranceError
 

@@ -1,11 +1,10 @@
-"""The vertex stage: per-frame maximum and RMS euclidean error of the animated mesh, the first vertex named with its mesh part."""
+"""The vertex stage: per-frame maximum and RMS euclidean error of the animated mesh, the first vertex named with its mesh part."""  # noqa: E501
 from __future__ import annotations
 
 import bisect
 from typing import Callable, Sequence
 
 import numpy as np
-
 
 from fbaconf.harness.results import Outcome, StageResult
 

@@ -1,12 +1,12 @@
-"""What every report format shares: text cleaning of untrusted strings, verdicts, difference formatting, the cases that need attention."""
+"""What every report format shares: text cleaning of untrusted strings, verdicts, difference formatting, the cases that need attention."""  # noqa: E501
 from __future__ import annotations
 
 import math
 import re
 from typing import Any
 
+from fbaconf.harness.baseline import signature
 from fbaconf.harness.results import OUTCOME_ORDER, CaseResult, Outcome, RunRecord, SpeedResult
-
 
 # Column order of the outcome tables (as the Outcome enum: Pass first, then the bad ones).
 COLUMNS = tuple(Outcome)
@@ -141,7 +141,6 @@ def _normalised(message: str) -> str:
 def failure_groups(record: RunRecord) -> list[tuple[str, list[CaseResult]]]:
     """The cases worth a look, identical failures grouped (same outcome, same failure
     signature, same message up to paths and numbers), worst and largest groups first."""
-    from fbaconf.harness.baseline import signature
     groups: dict[tuple, list[CaseResult]] = {}
     for r in _problem_cases(record):
         key = (r.outcome.value, signature(r), r.crash_kind or "", _normalised(r.message), r.baseline or "")

@@ -1,20 +1,34 @@
 """One self-contained HTML page (CSS from harness/data/report.css inlined, SVG plots, no script)."""
 from __future__ import annotations
 
-from importlib import resources
-
 import hashlib
 import html
 import math
 import os
 import re
 import shlex
+from importlib import resources
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
+from fbaconf import __version__
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
-from .common import failure_groups, COLUMNS, _by, _fmt_value, _speed_rows, _speed_summary, _suite_names, _summary_counts, clean_text, profile_of, verdict
+
+from .common import (
+    COLUMNS,
+    _by,
+    _fmt_value,
+    _speed_rows,
+    _speed_summary,
+    _suite_names,
+    _summary_counts,
+    clean_text,
+    failure_groups,
+    profile_of,
+    verdict,
+)
 
 
 def _e(value: Any) -> str:
@@ -122,7 +136,6 @@ def svg_plot(name: str, values: list[float], *, width: int = 380, height: int = 
 
 
 def _rel_href(path: Path, out_dir: Path) -> str:
-    from urllib.parse import quote
     rel = os.path.relpath(path, out_dir)
     return quote(Path(rel).as_posix())
 
@@ -275,7 +288,7 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
     base_dir = Path(base_dir) if base_dir is not None else out_dir
     dec = record.decoder or {}
     v = verdict(record)
-    title = f"fbaconf run: {clean_text(dec.get('name', '?'))}" + (f" ({clean_text(record.claim)})" if record.claim else "")
+    title = f"fbaconf run: {clean_text(dec.get('name', '?'))}" + (f" ({clean_text(record.claim)})" if record.claim else "")  # noqa: E501
     h = ["<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>",
          "<meta name='viewport' content='width=device-width, initial-scale=1'>",
          "<meta http-equiv='Content-Security-Policy' content=\"default-src 'none'; style-src 'unsafe-inline'; "
@@ -314,7 +327,7 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
             cls = "c-Pass" if s.passed else "c-Fail"
             h.append(f"<tr><td>{_e(row[0])}</td><td>{_e(row[1])}</td><td class='num'>{_e(row[2])}</td>"
                      f"<td class='num'>{_e(row[3])}</td><td class='{cls}'>{_e(row[4])}</td><td>{_e(row[5])}</td>"
-                     f"<td class='num'>{_e(_fmt_value(s.per_frame_s))}</td><td class='num'>{_e(_fmt_value(s.startup_s))}</td>"
+                     f"<td class='num'>{_e(_fmt_value(s.per_frame_s))}</td><td class='num'>{_e(_fmt_value(s.startup_s))}</td>"  # noqa: E501
                      f"<td class='num'>{_e(f'{s.fit_r2:.4f}')}</td><td>{_e(s.message)}</td></tr>")
         h.append("</table>")
     # header: decoder, run, suites, system, provisional
@@ -322,7 +335,7 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
                 "manifest sha256": dec.get("manifest_sha256"),
                 "decoder claims": ", ".join(map(str, dec.get("claims") or [])) or None,
                 "inputs / outputs": (", ".join(map(str, dec.get("inputs") or [])) + " \u2192 "
-                                     + ", ".join(map(str, dec.get("outputs") or []))) if dec.get("inputs") or dec.get("outputs") else None,
+                                     + ", ".join(map(str, dec.get("outputs") or []))) if dec.get("inputs") or dec.get("outputs") else None,  # noqa: E501
                 "claim under test": record.claim, "started": record.started, "finished": record.finished,
                 "duration": f"{record.duration_s:.1f} s" if record.duration_s else None}
     h.append("<h2>Run</h2>" + _kv_table({k: val for k, val in run_meta.items() if val not in (None, "")}))
@@ -332,7 +345,7 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
             n = s.get("cases")
             n = len(n) if isinstance(n, (list, tuple)) else n
             h.append(f"<tr><td>{_e(s.get('name'))}</td><td>{_e(s.get('version', ''))}</td>"
-                     f"<td class='mono'>{_e(s.get('sha256', ''))}</td><td class='num'>{_e('' if n is None else n)}</td></tr>")
+                     f"<td class='mono'>{_e(s.get('sha256', ''))}</td><td class='num'>{_e('' if n is None else n)}</td></tr>")  # noqa: E501
         h.append("</table>")
     if record.system:
         h.append("<details><summary>System</summary>" + _kv_table(record.system) + "</details>")
@@ -358,7 +371,6 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
                      f"</td><td>{_e(r.claim)}</td><td class='num'>{_e(f'{r.duration_s:.2f}')}</td>"
                      f"<td>{_e(note)}</td></tr>")
         h.append("</table></details>")
-    from fbaconf import __version__
     h.append(f"<footer>fbaconf {_e(__version__)} \u00b7 report format fbaconf.run/1 \u00b7 "
              f"{_e((record.system or {}).get('timestamp_utc', record.finished))}</footer>")
     h.append("</body></html>\n")

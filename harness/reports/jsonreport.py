@@ -9,6 +9,7 @@ from typing import Any
 
 from fbaconf._atomic import atomic_write_text
 from fbaconf.harness.results import RunRecord
+
 from .common import _NONFINITE
 
 
@@ -25,7 +26,7 @@ def jsonable(obj: Any) -> Any:
         return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [jsonable(v) for v in obj]
-    if hasattr(obj, "value") and isinstance(getattr(obj, "value"), str):  # Enum
+    if hasattr(obj, "value") and isinstance(obj.value, str):  # Enum
         return obj.value
     if hasattr(obj, "tolist"):  # numpy array or scalar
         return jsonable(obj.tolist())

@@ -11,6 +11,7 @@ from xml.etree import ElementTree as ET
 
 from fbaconf._atomic import atomic_write_bytes
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
+
 from .common import _fmt_value, _suite_names, clean_text, format_difference, verdict
 from .jsonreport import jsonable
 
@@ -115,7 +116,7 @@ def junit_xml(record: RunRecord) -> bytes:
                 el.text = _case_details(r)
                 c["errors"] += 1
             elif o in (Outcome.NOT_SUPPORTED, Outcome.SKIPPED):
-                el = ET.SubElement(tc, "skipped", message=_one_line(f"{o.value}: {r.message}" if r.message else o.value))
+                el = ET.SubElement(tc, "skipped", message=_one_line(f"{o.value}: {r.message}" if r.message else o.value))  # noqa: E501
                 c["skipped"] += 1
             elif o is Outcome.QUALITY_WARNING:
                 ET.SubElement(tc, "system-out").text = "QualityWarning (passes): " + _case_details(r)

@@ -2,12 +2,25 @@
 from __future__ import annotations
 
 import re
-
+import shlex
 from typing import Iterable
 
 from fbaconf.harness.results import Outcome, RunRecord
-from .common import failure_groups, provisional_line, COLUMNS, _by, _speed_rows, _speed_summary, _suite_names, _summary_counts, clean_text, format_difference, profile_of, verdict
 
+from .common import (
+    COLUMNS,
+    _by,
+    _speed_rows,
+    _speed_summary,
+    _suite_names,
+    _summary_counts,
+    clean_text,
+    failure_groups,
+    format_difference,
+    profile_of,
+    provisional_line,
+    verdict,
+)
 
 _ANSI_COLOURS = {
     Outcome.PASS: "32", Outcome.QUALITY_WARNING: "33", Outcome.NOT_SUPPORTED: "36", Outcome.SKIPPED: "2",
@@ -36,13 +49,12 @@ def _indent(text: str, prefix: str) -> list[str]:
 
 def _reproduce(r) -> str:
     """The command of a case, with the case's (deleted) work folder named for what it was."""
-    import shlex
     cmd = " ".join(shlex.quote(c) for c in r.command)
     cmd = re.sub(r"/\S*/work/case-[A-Za-z0-9_]+/", "<case folder>/", cmd)
     return clean_text(cmd) + "   (rerun with --keep-workdirs)"
 
 
-def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: int = 20) -> str:
+def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: int = 20) -> str:  # noqa: C901
     """A plain-text summary of ``record`` (ANSI colours when ``color``), ending with the verdict line
     ``result: PASS|FAIL|SPEED FAIL|SETUP ERROR (N cases: a Pass, b Fail, ...)``."""
     def paint(code: str, text: str) -> str:

@@ -8,7 +8,11 @@ spec notes and the reference source only; each is one plausible misreading.
 """
 from __future__ import annotations
 
-from fbaconf.mutation.core import Mutant
+import numpy as np
+
+from fbaconf.bitstreams import arith, decoder, tables
+from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS
+from fbaconf.mutation.core import Mutant, source_patch
 
 AD = "fbaconf.bitstreams.arith:ArithDecoder"
 MODEL = "fbaconf.bitstreams.arith:Model"
@@ -30,8 +34,6 @@ def _p(name, where, description, patch, rule, **kw) -> Mutant:
 
 def _patch_zero_run_carried() -> None:
     """One zero-run counter for the whole stream: not reset at block start, look-ahead not undone."""
-    from fbaconf.bitstreams import arith
-    from fbaconf.mutation.core import source_patch
     arith.ArithDecoder._carry = 0
     source_patch(f"{AD}.__init__", "self.zeros = 0", "self.zeros = ArithDecoder._carry")
     source_patch(f"{AD}.finish", "r.pos = end\n", "r.pos = end\n    ArithDecoder._carry = self.zeros\n")
@@ -39,7 +41,6 @@ def _patch_zero_run_carried() -> None:
 
 def _patch_first_q_alphabet() -> None:
     """S1's quirk: symbol alphabets divided by the fap_quant of the first intra plane only."""
-    from fbaconf.mutation.core import source_patch
     source_patch(f"{DEC}.intra_header", "    q = self.fap_quant\n",
                  "    q = self.__dict__.setdefault('first_q', self.fap_quant)\n")
     source_patch(f"{DEC}.payload", "lo, hi = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)",
@@ -49,7 +50,6 @@ def _patch_first_q_alphabet() -> None:
 def _patch_pred_not_from_intra() -> None:
     """Prediction state updated by P planes only: the first P plane after an intra plane
     predicts from the last P value (0 at the start), not from the intra value."""
-    from fbaconf.mutation.core import source_patch
     source_patch(f"{DEC}.payload", "v = cur[f - 1] + s * steps[f - 1]",
                  "pred = self.__dict__.setdefault('pred', {})\n"
                  "            v = pred.get(f, 0) + s * steps[f - 1]\n"
@@ -57,8 +57,6 @@ def _patch_pred_not_from_intra() -> None:
 
 
 def _default_bounds_patch(fn) -> None:
-    import numpy as np
-    from fbaconf.bitstreams import tables
     b = np.zeros((tables.NUM_FAPS, 4), dtype=np.int64)
     for f in tables.fap_table()[2:]:
         i, p = fn(f.intra_range), fn(f.pred_range)
@@ -75,8 +73,6 @@ def _patch_defaults_round_down() -> None:
 
 
 def _patch_default_p_is_i() -> None:
-    import numpy as np
-    from fbaconf.bitstreams import tables
     b = np.zeros((tables.NUM_FAPS, 4), dtype=np.int64)
     for f in tables.fap_table()[2:]:
         i = tables.round_up_range(f.intra_range)
@@ -86,10 +82,6 @@ def _patch_default_p_is_i() -> None:
 
 def _patch_shared(attr_line: str, shared_name: str, init_expr: str):
     def patch() -> None:
-        import numpy as np  # noqa: F401
-        from fbaconf.bitstreams import decoder
-        from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS  # noqa: F401
-        from fbaconf.mutation.core import source_patch
         setattr(decoder, shared_name, eval(init_expr, {"np": np, "HIGH_LEVEL_FIELDS": HIGH_LEVEL_FIELDS,
                                                         "NUM_FAPS": decoder.NUM_FAPS}))
         old = attr_line

@@ -8,6 +8,7 @@ and the reference source only; each is one plausible misreading.
 """
 from __future__ import annotations
 
+from fbaconf.bitstreams import decoder
 from fbaconf.mutation.core import Mutant
 
 DEC = "fbaconf.bitstreams.decoder:_Decoder"
@@ -20,7 +21,6 @@ def _m(name, where, description, old, new, rule, **kw) -> Mutant:
 
 def _patch_intensity_step_q0() -> None:
     """Intensities multiplied by fap_quant itself, also when fap_quant = 0 (so they decode as 0)."""
-    from fbaconf.bitstreams import decoder
     decoder.intensity_step = lambda q: q
 
 

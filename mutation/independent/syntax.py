@@ -6,7 +6,8 @@ the spec notes and the reference source only; each is one plausible misreading.
 """
 from __future__ import annotations
 
-from fbaconf.mutation.core import Mutant
+from fbaconf.bitstreams import bitio, decoder, syntax
+from fbaconf.mutation.core import Mutant, source_patch
 
 DEC = "fbaconf.bitstreams.decoder:_Decoder"
 DCT = "fbaconf.bitstreams.dct"
@@ -19,7 +20,6 @@ def _m(name, where, description, old, new, rule, **kw) -> Mutant:
 
 def _patch_floor_alphabet() -> None:
     """Symbol alphabets with Python floor division (not C truncation) of negative bounds."""
-    from fbaconf.bitstreams import decoder, syntax
 
     def alphabet(lo_bound: int, hi_bound: int, q: int) -> tuple[int, int]:
         d = syntax.quant_div(q)
@@ -31,7 +31,6 @@ def _patch_floor_alphabet() -> None:
 
 def _patch_skip_chain_14() -> None:
     """Chunks of 14 and 15 both continue the skip chain."""
-    from fbaconf.bitstreams import bitio
 
     def skip_chain(self, what: str = "number_of_frames_to_skip") -> int:
         total = 0
@@ -46,7 +45,6 @@ def _patch_skip_chain_14() -> None:
 
 def _patch_list_marker_global() -> None:
     """Range-list marker bits counted over the whole list (every 4th FAP of 3..68), not per group."""
-    from fbaconf.mutation.core import source_patch
     source_patch(f"{DEC}.intra_header", """        values: dict[int, int] = {}
         for g in tables.groups()[1:]:
             for j, fap in enumerate(g.faps):

@@ -6,6 +6,12 @@ frame counts and numbers, holding of unsent FAPs, times.
 """
 from __future__ import annotations
 
+import re
+
+import numpy as np
+
+from fbaconf.bitstreams import faptext
+from fbaconf.bitstreams.frames import FREE, RETAINED, FapFrames
 from fbaconf.mutation.core import Mutant
 
 _R = "fbaconf.bitstreams.faptext:read_fap_text"
@@ -22,25 +28,18 @@ def _src(name, where, description, old, new, rule=_S7, **kw):
 def _patch_crlf():
     """A reader that splits lines on LF only and splits tokens on space/tab/LF: the CR of a
     CRLF line end stays glued to the last token of every line."""
-    import re
-    from fbaconf.bitstreams import faptext
     faptext._LINE_BREAK = re.compile(r"\n")
     faptext._TOKEN = re.compile(r"[^ \t\f\v\n]+")
 
 
 def _patch_cr_only():
     """Line breaks are LF and CRLF only; a lone CR (classic Mac) does not end a line."""
-    import re
-    from fbaconf.bitstreams import faptext
     faptext._LINE_BREAK = re.compile(r"\r?\n")
 
 
 def _patch_gap_fill():
     """A player that 'holds' over gaps in the frame numbers by inserting the missing frames
     (copies of the previous frame, every FAP held) instead of keeping the gap."""
-    import numpy as np
-    from fbaconf.bitstreams import faptext
-    from fbaconf.bitstreams.frames import FREE, RETAINED, FapFrames
     orig = faptext.read_fap_text
 
     def read_fap_text(text, **kw):

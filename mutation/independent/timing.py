@@ -7,6 +7,7 @@ spec notes and the reference source only; each is one plausible misreading.
 """
 from __future__ import annotations
 
+from fbaconf.bitstreams import dct, decoder, syntax
 from fbaconf.mutation.core import Mutant
 
 DEC = "fbaconf.bitstreams.decoder:_Decoder"
@@ -25,7 +26,6 @@ def _p(name, where, description, patch, rule, **kw) -> Mutant:
 
 # ---------------------------------------------------------------------------- frame rate patches
 def _set_rate(fn) -> None:
-    from fbaconf.bitstreams import syntax
     syntax.FrameRateCode.rate = property(fn)
 
 
@@ -59,7 +59,6 @@ def _patch_rate_seconds_tenths() -> None:
 
 def _patch_default_rate_30() -> None:
     """S1 decoder's default: 30 Hz when no frame rate was ever signalled (D6 says 25)."""
-    from fbaconf.bitstreams import dct, decoder
     decoder.DEFAULT_FRAME_RATE = 30.0
     dct.DEFAULT_FRAME_RATE = 30.0
 

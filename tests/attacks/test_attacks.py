@@ -20,11 +20,12 @@ from pathlib import Path
 import pytest
 
 import fbaconf
-from fbaconf.conformance.suite import golden_root, load_suites
+from fbaconf.conformance.suite import Suite, SuiteError, golden_root, load_suites
+from fbaconf.fuzz.promote import promote
 from fbaconf.harness import adapters, certify
-from fbaconf.isolation import cgroups, sandbox
 from fbaconf.harness.results import Outcome, ResultLog
 from fbaconf.harness.runner import run_cases
+from fbaconf.isolation import cgroups, sandbox
 
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
 VALID = ["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/dct-q4"]
@@ -401,7 +402,6 @@ def test_interruption_kills_running_decoders_and_resume_is_exact(tmp_path):
     '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [3]}',
     '{"format": "fbaconf.suite/1", "name": "s", "claim": 1, "cases": {}}'])
 def test_malformed_or_escaping_suite_manifests_are_one_clear_error(tmp_path, manifest):
-    from fbaconf.conformance.suite import Suite, SuiteError
     d = tmp_path / "s"
     d.mkdir()
     (d / "suite.json").write_text(manifest)
@@ -410,7 +410,6 @@ def test_malformed_or_escaping_suite_manifests_are_one_clear_error(tmp_path, man
 
 
 def test_promote_confines_what_a_finding_names(tmp_path):
-    from fbaconf.fuzz.promote import promote
     fz = tmp_path / "fz" / "findings"
     for fid, minimal in (("../../escape", "min.fba"), ("ok1", "/etc/passwd"), ("ok2", "../../../../etc/hostname")):
         d = fz / f"f-{abs(hash(fid))}"

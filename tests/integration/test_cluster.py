@@ -2,13 +2,18 @@
 mid-run loses no case."""
 from __future__ import annotations
 
+import json
 import os
+import shutil
 import signal
+import subprocess
+import threading
 from pathlib import Path
 
 import pytest
 
 from fbaconf.conformance.suite import load_suites
+from fbaconf.fuzz.campaign import ShardSpec, run_campaign
 from fbaconf.harness import adapters, cluster
 from fbaconf.harness.results import ResultLog
 from fbaconf.harness.runner import run_cases
@@ -85,11 +90,7 @@ def test_cluster_verdicts_equal_the_pool_and_a_lost_worker_loses_nothing(tmp_pat
 def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(tmp_path):
     """fuzz --cluster local:2: shards on two workers, one worker killed mid-round; the planted
     skip-chain crash is found, reported once (hits merged across shards), minimised once."""
-    import json
-    import shutil
-    import subprocess
-    import threading
-    from fbaconf.fuzz.campaign import ShardSpec, run_campaign
+
     if shutil.which("gcc") is None:
         pytest.skip("gcc not available")
     here = Path(__file__).resolve().parents[1] / "fuzz_decoders"

@@ -11,6 +11,7 @@ report (ASan + UBSan) on any suite stream or mutation of one.
 from __future__ import annotations
 
 import random
+import runpy
 import shutil
 import statistics
 import subprocess
@@ -18,8 +19,12 @@ from pathlib import Path
 
 import pytest
 
+from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.conformance.suite import load_suites
-from fbaconf.harness import adapters
+from fbaconf.fuzz.corpus import default_seeds
+from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
+from fbaconf.fuzz.targets import DecoderTarget
+from fbaconf.harness import adapters, speed
 from fbaconf.harness.results import Outcome
 from fbaconf.harness.runner import run_cases
 from fbaconf.harness.selection import required_for
@@ -90,9 +95,6 @@ def test_no_sanitizer_report_on_any_suite_stream_or_mutation(fbadec, tmp_path):
 def test_differential_fuzz_short(fbadec, tmp_path):
     """A short differential run in CI (the long one: `fbaconf fuzz --decoder
     examples/fbadec/fbadec.toml --seconds 600`): no divergence from the reference."""
-    from fbaconf.fuzz.corpus import default_seeds
-    from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
-    from fbaconf.fuzz.targets import DecoderTarget
     d, _ = fbadec
     target = DecoderTarget(adapters.resolve(str(d / "fbadec.toml")), tmp_path / "work", timeout_s=5.0)
     fz = Fuzzer(target, default_seeds(),
@@ -106,8 +108,7 @@ def test_differential_fuzz_short(fbadec, tmp_path):
 def test_hand_vectors(fbadec, tmp_path):
     """The hand-annotated vectors (tests/vectors): the independent decoder gives the frames
     worked out by hand from the spec notes, and rejects the invalid ones."""
-    import runpy
-    from fbaconf.bitstreams.frames import FapFrames
+
     d, _ = fbadec
     vec = runpy.run_path(str(Path(__file__).parents[1] / "unit" / "test_vectors.py"))
 
@@ -128,7 +129,6 @@ def test_speed_through_the_persistent_protocol_agrees_with_spawning(fbadec, tmp_
     """fbadec serves the persistent protocol: its decode speed is measured through one process
     (no process start per sample) and agrees with the spawned measurement's fitted slope,
     while the fitted start-up falls from a process start (milliseconds) to a pipe round trip."""
-    from fbaconf.harness import speed
     d, _ = fbadec
     a = adapters.resolve(str(d / "fbadec.toml"))
     lengths = [2000, 10000, 20000]

@@ -14,6 +14,7 @@ import json
 import random
 import shutil
 import subprocess
+import textwrap
 import tomllib
 from pathlib import Path
 
@@ -21,10 +22,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fbaconf.scenes import bt
+from fbaconf.bitstreams import bitedit
 from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.synth import synthetic_sequence
+from fbaconf.cli import main
+from fbaconf.conformance.suite import Case
 from fbaconf.errors import BitstreamError, FbaconfInputError
 from fbaconf.fuzz import strategies
+from fbaconf.fuzz.atheris_entry import fuzz_one_input
 from fbaconf.fuzz.corpus import default_seeds, short_prefixes
 from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
 from fbaconf.fuzz.findings import replay, write_summary
@@ -35,7 +41,11 @@ from fbaconf.fuzz.mutators import FIELD_MUTATORS, m_skip_chain, m_zero_frame_rat
 from fbaconf.fuzz.promote import REGRESSION_SUITE, promote
 from fbaconf.fuzz.targets import DecoderTarget, SelfTarget, stack_hash
 from fbaconf.harness.adapters import load_manifest, resolve
-from fbaconf.bitstreams import bitedit
+from fbaconf.harness.compare import compare_faps
+from fbaconf.harness.results import Outcome
+from fbaconf.harness.runner import run_cases
+from fbaconf.profiles.checker import check_stream
+from fbaconf.scenes import bt
 
 HERE = Path(__file__).resolve().parents[1] / "fuzz_decoders"
 SET = settings(max_examples=8, deadline=None, suppress_health_check=list(HealthCheck))
@@ -72,8 +82,6 @@ def test_bit_helpers_match_a_text_oracle(data, at, n, value):
 
 
 def test_syntax_model_locates_header_fields():
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.synth import synthetic_sequence
     fr = synthetic_sequence(4, 25.0, faps=[3, 4, 19])
     fr.frame_number[:] = [0, 1, 40, 41]  # a skip chain of 38 frames before the third plane
     data = encode(fr, EncoderOptions(time_codes=True, plane_start_codes="all")).data
@@ -114,7 +122,6 @@ def test_every_mutator_yields_typed_errors_only(seeds):
 @SET
 @given(strategies.valid_entries())
 def test_generated_streams_are_valid_and_round_trip(e):
-    from fbaconf.harness.compare import compare_faps
     got = decode(e.data).frames
     assert compare_faps(e.recon, got, text_output=False).outcome.ok
 
@@ -124,7 +131,6 @@ def test_generated_streams_are_valid_and_round_trip(e):
 def test_valid_streams_pass_the_checker(data):
     """The public bytes strategy: every stream starts with the face object start code (spec
     notes: 0x000001BA) and the checker finds no error in it."""
-    from fbaconf.profiles.checker import check_stream
     assert data[:4] == bytes.fromhex("000001BA")
     assert [d.code for d in check_stream(data) if d.severity == "error"] == []
 
@@ -179,7 +185,6 @@ def test_self_fuzz_no_findings_and_entry(tmp_path, seeds):
     assert st_.execs == 400 and not fz.findings, [f.verdict.message for f in fz.findings.values()]
     doc = write_summary(tmp_path, fz)
     assert doc["syntax_coverage"]["covered"] > 30
-    from fbaconf.fuzz.atheris_entry import fuzz_one_input
     rng = random.Random(1)
     for sel in range(8):
         fuzz_one_input(bytes([sel]) + bytes(rng.randrange(256) for _ in range(40)))
@@ -298,9 +303,6 @@ def _check_planted(fz, target, out: Path, cls: str, sig: str):
 
 
 def test_promoted_finding_fails_buggy_decoder_passes_reference(skipchain_run, tmp_path):
-    from fbaconf.conformance.suite import Case
-    from fbaconf.harness.results import Outcome
-    from fbaconf.harness.runner import run_cases
     fz, target, out, tmp = skipchain_run
     data_dir = tmp_path / "data"
     added = promote(out, data_dir, log=lambda s: None)
@@ -325,7 +327,6 @@ def test_promoted_finding_fails_buggy_decoder_passes_reference(skipchain_run, tm
 
 
 def test_cli(tmp_path):
-    from fbaconf.cli import main
     assert main(["fuzz", "--self", "--seconds", "30", "--max-execs", "60", "-o", str(tmp_path / "s"),
                  "--no-progress"]) == 0
     doc = json.loads((tmp_path / "s" / "fuzz.json").read_text())
@@ -345,7 +346,6 @@ def test_relative_work_folder_gives_no_bogus_finding(tmp_path, monkeypatch, seed
 def test_text_fuzzing_finds_a_players_crash_and_a_copier(tmp_path):
     """Players (decoders that read only .fap text) are fuzzed with .fap text: a player that
     dies on a comment line is a crash finding; one that copies its input is wrong output."""
-    import textwrap
     crashy = tmp_path / "crashy.py"
     crashy.write_text(textwrap.dedent("""\
         import sys
@@ -369,4 +369,4 @@ def test_text_fuzzing_finds_a_players_crash_and_a_copier(tmp_path):
                                out_dir=tmp_path / f"o-{name}", minimise_seconds=2),
                     stop_on=lambda f: True)
         fz.run()
-        assert any(f.verdict.cls == cls for f in fz.findings.values()), (name, [f.verdict.cls for f in fz.findings.values()])
+        assert any(f.verdict.cls == cls for f in fz.findings.values()), (name, [f.verdict.cls for f in fz.findings.values()])  # noqa: E501

@@ -64,7 +64,7 @@ def test_seed_corpus_is_valid_or_a_suite_case(exported):
 
 
 def test_cli_export(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "fuzz", "export", str(tmp_path / "x"), "--valid", "2"], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "fbaconf", "fuzz", "export", str(tmp_path / "x"), "--valid", "2"], capture_output=True,  # noqa: E501
                        text=True)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "x" / "oss-fuzz" / "build.sh").read_text().startswith("#!/bin/bash")

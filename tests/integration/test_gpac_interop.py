@@ -17,6 +17,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fbaconf.scenes import bifs, bt
@@ -65,7 +66,6 @@ def test_gpac_bifs_decodes_to_its_scene(e):
 
 def _perturbed(scene: bt.Scene) -> bool:
     """Change the first plain value of the scene (walk order) by one unit."""
-    import numpy as np
     for node, _path in scene.walk():
         for f, v in node.fields.items():
             if isinstance(v, bool):

@@ -9,6 +9,7 @@ thing (SIGSEGV, an endless loop, 1 GiB of output...).
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -18,13 +19,13 @@ import pytest
 
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness import adapters, baseline
-from fbaconf.isolation import endings
-from fbaconf.isolation import sandbox
+from fbaconf.harness import adapters as ad
 from fbaconf.harness.certify import verify_package
-from fbaconf.harness.results import Outcome, ResultLog
 from fbaconf.harness.compare.ladder import outcome_for
+from fbaconf.harness.results import Outcome, ResultLog
 from fbaconf.harness.runner import run_cases
 from fbaconf.harness.selection import capability, claim_covers
+from fbaconf.isolation import endings, sandbox
 
 
 def all_cases():
@@ -330,7 +331,6 @@ def test_pytest_plugin_gives_one_item_per_case(tmp_path):
 
 
 def test_worked_c_example_passes_the_simple_text_cases(tmp_path):
-    import shutil
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None:
         pytest.skip("no C compiler")
@@ -356,9 +356,6 @@ def test_outputs_a_case_does_not_compare_are_not_requested():
 def test_image_reports_name_the_sequence_frame(tmp_path):
     """A renderer wrong in the last listed frame (sequence frame 19) is reported as frame 19,
     with artefacts frame19_*, not as the third image ("frame 2")."""
-    from fbaconf.conformance.suite import load_suites
-    from fbaconf.harness import adapters as ad
-    from fbaconf.harness.runner import run_cases
     script = tmp_path / "badlast.py"
     script.write_text(
         "import sys, numpy as np, OpenImageIO as oiio\n"
@@ -370,7 +367,7 @@ def test_image_reports_name_the_sequence_frame(tmp_path):
         "p = str(Path(a['--images']) / 'frame_00019.png')\n"
         "img = oiio.ImageBuf(p); px = img.get_pixels(oiio.UINT8)\n"
         "px[:, :, :3] = 255 - px[:, :, :3]\n"
-        "out = oiio.ImageOutput.create(p); out.open(p, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], oiio.UINT8))\n"
+        "out = oiio.ImageOutput.create(p); out.open(p, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], oiio.UINT8))\n"  # noqa: E501
         "out.write_image(px); out.close()\n")
     m = tmp_path / "badlast.toml"
     m.write_text('name = "badlast"\nclaims = ["predictable@1"]\ninputs = ["fba", "scene"]\noutputs = ["images"]\n'

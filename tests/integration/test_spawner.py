@@ -13,12 +13,11 @@ from pathlib import Path
 import pytest
 
 from fbaconf.fuzz.inputs import Entry
-from fbaconf.fuzz.targets import DecoderTarget
+from fbaconf.fuzz.targets import DecoderTarget, FuzzSetupError
 from fbaconf.harness import adapters
-from fbaconf.isolation import endings
-from fbaconf.isolation import forkserver_build
-from fbaconf.isolation.sandbox import Limits, default_view
+from fbaconf.isolation import endings, forkclient, forkserver_build, sandbox
 from fbaconf.isolation.forkclient import ForkServer
+from fbaconf.isolation.sandbox import Limits, default_view
 
 STREAM = b"\x00\x00\x01\xba" + bytes(40)
 
@@ -128,7 +127,6 @@ CASES = [  # argv (after the interpreter, or a program), the ending's kind
 def test_fork_server_judges_like_a_fresh_sandbox(tmp_path, server):
     """The limits a one-shot launch sets hold in each forked decoder (time, address space,
     file size, exec failure, signals), and :mod:`exits` judges the two paths alike."""
-    from fbaconf.isolation import sandbox
     root = tmp_path / "w"
     (root / "case" / "in").mkdir(parents=True)
     lim = Limits(timeout_s=1.0, memory_mb=300, output_mb=4)
@@ -160,7 +158,7 @@ def test_fork_server_environment_path_search_and_resident_memory(tmp_path, serve
     case = os.path.realpath(root / "case")
     with ForkServer(root, view, Limits(timeout_s=5.0, memory_mb=300, output_mb=4)) as fs:
         _check_server(fs, server)
-        r = fs.run([py, "-c", "import os; print(os.environ['HOME'], os.environ['TMPDIR'], os.getcwd(), sorted(os.environ))"],
+        r = fs.run([py, "-c", "import os; print(os.environ['HOME'], os.environ['TMPDIR'], os.getcwd(), sorted(os.environ))"],  # noqa: E501
                    root / "case")
         home, tmp, cwd, names = r.stdout_tail.split(" ", 3)
         assert (r.returncode, home, tmp, cwd) == (0, case, os.path.join(case, "tmp"), case)
@@ -193,7 +191,6 @@ if b'KILL' in data:
         pass
 sys.exit(69)
 """
-    from fbaconf.isolation import sandbox
     if "-1" in how and sandbox.isolation() != "bwrap":
         pytest.skip("kill(-1) outside a PID namespace would signal every process of this user")
     t = _target(tmp_path, _manifest(tmp_path, body))
@@ -212,8 +209,6 @@ sys.exit(69)
 
 def test_a_fork_server_that_cannot_start_is_a_set_up_failure(tmp_path, monkeypatch):
     """The other side of the hello: a server that dies before saying it is a set-up failure."""
-    from fbaconf.fuzz.targets import FuzzSetupError
-    from fbaconf.isolation import forkclient
     monkeypatch.setattr(forkserver_build, "forkserver_binary", lambda: None)
     broken = tmp_path / "broken_server.py"
     broken.write_text("import sys\nsys.exit(3)\n")
@@ -333,7 +328,7 @@ def test_the_c_server_under_address_and_undefined_behaviour_sanitizers(tmp_path,
     cc = forkserver_build.compiler()
     exe = tmp_path / "fbaconf-forkserver"
     if cc is None or subprocess.run([cc, "-O1", "-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=all",
-                                     "-o", str(exe), str(forkserver_build.SOURCE)], capture_output=True).returncode != 0:
+                                     "-o", str(exe), str(forkserver_build.SOURCE)], capture_output=True).returncode != 0:  # noqa: E501
         pytest.skip("no compiler with AddressSanitizer and UndefinedBehaviorSanitizer here")
     monkeypatch.setattr(forkserver_build, "forkserver_binary", lambda: exe)
     monkeypatch.setenv("ASAN_OPTIONS", "detect_leaks=0")

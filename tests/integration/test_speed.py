@@ -9,15 +9,19 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.frames import FapFrames
+from fbaconf.cli import main
 from fbaconf.harness import speed
 from fbaconf.harness.adapters import PythonAdapter, load_manifest
-from fbaconf.cli import main
 
 # A decoder whose cost is known: sleeps STARTUP, then PER_FRAME x frames (the frame count comes
 # from the {frames} placeholder, so counting frames costs nothing), then writes its output.
@@ -150,7 +154,6 @@ class _SleepyRenderer(PythonAdapter):
             for i in range(n):  # an image per frame (the speed check counts them)
                 (d / f"{i:06d}.png").write_bytes(b"x")
         if "faps_out" in job.values:  # the frames it was given (the speed check counts them)
-            from fbaconf.bitstreams.frames import FapFrames
             FapFrames.empty(n).save_npz(job.path("faps_out"))
 
 
@@ -177,7 +180,6 @@ def test_skip_render_without_images(tmp_path):
 
 
 def test_content_streams_decode_to_n_frames():
-    from fbaconf.bitstreams.decoder import decode
     block = decode(speed.content_stream(speed.BLOCK_FRAMES)).frames
     for n in (1, 7, speed.BLOCK_FRAMES, 250):
         f = decode(speed.content_stream(n)).frames
@@ -202,8 +204,6 @@ def test_fit_line_and_claims():
 def test_sandboxed_command_decoder_reads_the_generated_content(tmp_path):
     """The speed phase's content lives outside the case folder: the sandbox must show it
     (the subprocess reference could not open it: every speed run was a set-up Error)."""
-    import subprocess
-    import sys
     r = subprocess.run([sys.executable, "-m", "fbaconf", "bench", "--decoder", "reference", "--operation", "decode",
                         "--repeats", "1", "--lengths", "4,16", "--json"], capture_output=True, text=True, timeout=300,
                        cwd=tmp_path)

@@ -4,11 +4,17 @@ Lazy and broken decoders, written here as tiny programs, must not certify; every
 ending on the error suite gets the outcome the harness guide's table gives it."""
 from __future__ import annotations
 
+import subprocess
+import sys as _sys
 from pathlib import Path
 
 import pytest
 
+from fbaconf.bitstreams.faptext import read_fap_file
+from fbaconf.bitstreams.frames import FREE, RETAINED, FapFrames
 from fbaconf.conformance.suite import load_suites
+from fbaconf.fuzz.inputs import Entry
+from fbaconf.fuzz.targets import DecoderTarget, FuzzSetupError
 from fbaconf.harness import adapters, certify
 from fbaconf.harness.results import Outcome
 from fbaconf.harness.runner import run_cases
@@ -201,8 +207,6 @@ while True:
 
 def _fuzz_class(m: Path, tmp_path: Path, **kw) -> str:
     """How the fuzzer classifies the same decoder on the same invalid stream."""
-    from fbaconf.fuzz.inputs import Entry
-    from fbaconf.fuzz.targets import DecoderTarget, FuzzSetupError
     target = DecoderTarget(adapters.resolve(m), tmp_path / "fz", **kw)
     data = case(ERROR_CASE).input_path("fba").read_bytes()
     try:
@@ -250,7 +254,7 @@ open(sys.argv[2], "w").write(chr(10).join(lines) + chr(10))
 
 
 def _junit_failures(path: Path) -> int:
-    import junitparser
+    import junitparser  # noqa: PLC0415 (test-only dependency)
     xml = junitparser.JUnitXml.fromfile(str(path))
     return sum(s.failures + s.errors for s in xml)
 
@@ -258,8 +262,6 @@ def _junit_failures(path: Path) -> int:
 def test_baseline_scenario(tmp_path):
     """One known bug -> exit 0, JUnit without failures, '0 new, 1 known'; the bug fixed ->
     '1 fixed', exit 1; a second bug in a known-failing case -> exit 1."""
-    import subprocess
-    import sys as _sys
 
     def run(bug: str, *extra):
         m = pydec(tmp_path, f"dec{bug or 'ok'}", BUGGY, extra=f'[env]\nBUG = "{bug}"\n')
@@ -285,8 +287,6 @@ def test_baseline_scenario(tmp_path):
 
 def test_a_copying_player_fails_every_case_with_a_held_value(tmp_path):
     """Players get sparse .fap text and must write their state: copying the input is no play."""
-    from fbaconf.bitstreams.faptext import read_fap_file
-    from fbaconf.bitstreams.frames import FREE, RETAINED, FapFrames
     m = manifest(tmp_path, "copier", ["/bin/cp", "{input}", "{faps_out}"], inputs=("fap",))
     (s,) = load_suites(names=["simple-l1-core"])
     rs = run_cases(adapters.resolve(m), s.cases, claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)

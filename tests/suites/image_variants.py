@@ -20,10 +20,21 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import re
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from fbaconf.animation.engine import animate
+from fbaconf.conformance.suite import load_suites
+from fbaconf.harness.compare import ImageTolerances, compare_images
+from fbaconf.pipeline import load_stream
+from fbaconf.rendering import raster
+from fbaconf.rendering.images import encode_srgb8, openimageio
+from fbaconf.rendering.render import Renderer
+from fbaconf.rendering.scenario import Scenario
 
 # 4x rotated grid (RGSS) and D3D's standard 8x sample positions, in pixel units from the corner
 RGSS4 = [(0.375, 0.125), (0.875, 0.375), (0.125, 0.625), (0.625, 0.875)]
@@ -39,7 +50,6 @@ WRONG = ("lights-mirrored", "light-missing", "specular-off", "fov-wrong", "camer
 @contextlib.contextmanager
 def _screen_offset(dx: float, dy: float):
     """Every projected point moved by (dx, dy) pixels of the supersampled grid."""
-    from fbaconf.rendering import raster
     orig = raster.project
 
     def project(vertices, camera, width, height):
@@ -54,7 +64,6 @@ def _screen_offset(dx: float, dy: float):
 
 @contextlib.contextmanager
 def _texture_sampler(kind: str):
-    from fbaconf.rendering import raster
     orig = raster.sample_bilinear_repeat
 
     def flipped(tex, uv):
@@ -77,7 +86,6 @@ def _render(state, sc, k, scene_dir):
     """Frame k of ``state`` under ``sc``; one Renderer per (state, scenario, folder), so a
     sampling pattern's images share the scene's loaded textures (the state is kept with it, so
     its id is never reused while cached)."""
-    from fbaconf.rendering.render import Renderer
     key = (id(state), repr(sc), str(scene_dir))
     if key not in _RENDERERS:
         _RENDERERS[key] = (state, Renderer(state, sc, scene_dir=scene_dir))
@@ -97,7 +105,6 @@ def _pattern(state, sc, k, scene_dir, samples):
 def _displaced(state, sc, k, scene_dir):
     """The lowest tenth of the face's vertices (chin, jaw, lower lip on a head) moved sideways by
     1.5 px on screen in frame k."""
-    from fbaconf.rendering.render import Renderer
     cam = Renderer(state, sc, scene_dir=scene_dir).camera
     V = state.vertices.copy()
     y = V[k, :, 1]
@@ -149,7 +156,6 @@ def render_variant(state, sc, k: int, variant: str, scene_dir=None) -> np.ndarra
 
 def encoded(linear: np.ndarray, variant: str) -> np.ndarray:
     """8-bit encoded pixels as the variant writes them."""
-    from fbaconf.rendering.images import encode_srgb8
     x = np.clip(linear, 0.0, 1.0)
     if variant == "gamma22":
         return np.floor(x ** (1.0 / 2.2) * 255.0 + 0.5).astype(np.uint8)
@@ -160,19 +166,12 @@ def encoded(linear: np.ndarray, variant: str) -> np.ndarray:
 
 
 def image_cases():
-    from fbaconf.conformance.suite import load_suites
     return [c for s in load_suites() for c in s.cases if "images" in c.stages]
 
 
 def run_variant(case, variant: str, out: Path, state_cache: dict | None = None):
     """The image stage's result for ``variant`` rendering ``case``'s compared frames."""
-    import re
 
-    from fbaconf.animation.engine import animate
-    from fbaconf.harness.compare import ImageTolerances, compare_images
-    from fbaconf.pipeline import load_stream
-    from fbaconf.rendering.images import openimageio
-    from fbaconf.rendering.scenario import Scenario
     scene = case.input_path("scene")
     key = (case.suite, str(scene), str(case.input_path("fba")))
     cache = state_cache if state_cache is not None else {}
@@ -198,7 +197,6 @@ def run_variant(case, variant: str, out: Path, state_cache: dict | None = None):
 
 
 def main(argv: list[str]) -> int:
-    import tempfile
     variants = argv or list(FAITHFUL + WRONG)
     cases = image_cases()
     cache: dict = {}

@@ -4,6 +4,7 @@ from __future__ import annotations
 import pytest
 
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.cli import main
 from fbaconf.conformance import coverage
 from fbaconf.generators.content import make_content
 
@@ -56,7 +57,6 @@ def test_committed_suites_cover_every_point(report):
 
 def test_coverage_verb(capsys, monkeypatch, report):
     """The verb prints the table of what ``coverage.compute`` found (computed once here)."""
-    from fbaconf.cli import main
     monkeypatch.setattr(coverage, "compute", lambda *a, **k: report)
     assert main(["suites", "coverage"]) == 0
     out = capsys.readouterr().out

@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fbaconf.rendering.scenario import Scenario
+
 GLDIR = Path(__file__).resolve().parents[2] / "examples" / "glrender"
 
 moderngl = pytest.importorskip("moderngl", reason="moderngl is not installed (pip install moderngl)")
@@ -58,7 +60,6 @@ def _faithful_params():
 
 def test_camera_fit_is_the_documented_one(ctx, cases, states):
     """glrender fits the camera itself (docs/rendering.md); it must agree with the scenario's rule."""
-    from fbaconf.rendering.scenario import Scenario
     for c in cases[::3]:
         st = matrix.case_state(c, states)
         sc = Scenario.load(c.input_path("scenario"))

@@ -7,10 +7,10 @@ the OpenGL ones are in tests/suites/test_glrender.py."""
 from __future__ import annotations
 
 import pytest
-
-from fbaconf.harness.results import Outcome
-
 from image_variants import FAITHFUL, WRONG, image_cases, run_variant
+
+from fbaconf.conformance.suite import load_suites
+from fbaconf.harness.results import Outcome
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +26,6 @@ def states():
 
 
 def test_every_calibration_and_predictable_case_compares_images_under_three_scenarios(cases):
-    from fbaconf.conformance.suite import load_suites
     decode = [c for s in load_suites() if s.claim.split("@")[0] in ("calibration", "predictable")
               for c in s.cases if c.kind == "decode" and "faps" in c.stages]
     assert decode and all("images" in c.stages for c in decode)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from fbaconf.conformance.suite import load_suites
+from fbaconf.harness.adapters import ManifestError, resolve
 from fbaconf.mutation import measure
 from fbaconf.mutation.core import Mutant, snippet_count
 
@@ -60,11 +61,10 @@ def test_reference_passes_and_mutants_are_killed():
 
 
 def test_mutant_adapter_manifest(tmp_path):
-    from fbaconf.harness.adapters import resolve
     a = resolve("mutant")
     assert a.mutant in measure.MUTANTS and a.claims == ["predictable@2"]
     bad = tmp_path / "m.toml"
     bad.write_text((measure.__file__ and open(a.manifest_path).read()).replace('mutant = "prediction-sign"',
                                                                                 'mutant = "no-such"'))
-    with pytest.raises(Exception):
+    with pytest.raises(ManifestError):
         resolve(bad)

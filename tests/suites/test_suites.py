@@ -7,11 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from fbaconf.errors import FbaconfInputError
-
+from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.conformance import suite as suite_module
-from fbaconf.generators import suites as build
+from fbaconf.conformance.golden import verify
 from fbaconf.conformance.suite import load_suites
+from fbaconf.errors import FbaconfInputError
+from fbaconf.generators import suites as build
 from fbaconf.profiles.checker import analyse
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "fap"
@@ -36,7 +37,6 @@ def test_error_cases_carry_the_checker_codes():
             if c.kind != "error":
                 continue
             if c.input_path("fba") is None:  # an invalid .fap text (players): the reader's rule
-                from fbaconf.bitstreams.faptext import read_fap_file
                 with pytest.raises(FbaconfInputError) as ei:
                     read_fap_file(c.input_path("fap"))
                 assert c.expect["diagnostics"] == [ei.value.rule], c.full_id
@@ -120,5 +120,4 @@ def test_every_suite_rebuilds_byte_for_byte(tmp_path):
 
 
 def test_goldens_regenerate_byte_for_byte():
-    from fbaconf.conformance.golden import verify
     assert verify(log=lambda *_: None) == []

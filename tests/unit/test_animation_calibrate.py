@@ -4,13 +4,14 @@ import sys
 import numpy as np
 import pytest
 
-from fbaconf.scenes import bt
 from fbaconf.animation import engine
 from fbaconf.animation.calibrate import calibrate
-from fbaconf.errors import SceneError
 from fbaconf.animation.faceparams import fapu_from_feature_points, fp_index
 from fbaconf.animation.stateio import load_npz
+from fbaconf.bitstreams.faptext import write_fap_file
 from fbaconf.bitstreams.frames import SET, FapFrames
+from fbaconf.errors import SceneError
+from fbaconf.scenes import bt
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +106,6 @@ def test_cli_animate(tmp_path):
     assert st.vertices.shape[0] == 3 and "fap_values" in st.extras
     ref = engine.animate(fr)
     assert np.array_equal(st.vertices, ref.vertices)
-    from fbaconf.bitstreams.faptext import write_fap_file
     write_fap_file(tmp_path / "f.fap", fr)
     r = subprocess.run([sys.executable, "-m", "fbaconf", "animate", "--faps", str(tmp_path / "f.fap"), "-o",
                         str(tmp_path / "o3.npz")], capture_output=True, text=True, timeout=60)
@@ -122,7 +122,7 @@ def test_cli_animate(tmp_path):
 
 def test_a_singular_warp_is_a_typed_error(monkeypatch):
     """Whatever makes scipy's RBF system singular becomes one clear SceneError, not a LinAlgError."""
-    import scipy.interpolate
+    import scipy.interpolate  # noqa: PLC0415 (scipy loads in ~0.3 s; only calibration needs it)
 
     class Singular:
         def __init__(self, *a, **k):

@@ -1,13 +1,18 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from fbaconf.scenes import bt
 from fbaconf.animation import engine
-from fbaconf.generators import head, models
-from fbaconf.errors import SceneError
+from fbaconf.animation.bundled import default_head_feature_vertices, default_head_scene
 from fbaconf.animation.faceparams import fapu_from_feature_points, fp_index
+from fbaconf.animation.highlevel import default_tables
 from fbaconf.bitstreams.frames import DERIVED, FREE, SET, FapFrames
 from fbaconf.bitstreams.tables import fap_by_name
+from fbaconf.errors import FbaconfInputError, SceneError
+from fbaconf.generators import head, models
+from fbaconf.generators.models import MODEL_DATA, model_data_files
+from fbaconf.scenes import bt
 
 
 def frames(n):
@@ -123,7 +128,6 @@ def test_neutral_and_deterministic(neutral):
     fr.high[2, 4:8] = (1, 63, 0, 0)
     a, b = engine.animate(fr), engine.animate(fr)
     assert np.array_equal(a.vertices, b.vertices)
-    from fbaconf.animation.bundled import default_head_scene
     scene2 = bt.parse(bt.write(default_head_scene()))
     c = engine.animate(fr, scene2)
     assert np.array_equal(a.vertices, c.vertices)
@@ -143,7 +147,6 @@ def test_expressions_only_free_faps(neutral):
     assert status[1, n] == SET and vals[1, n] == -200
     assert fp(st, "2.4", 0)[1] > fp(neutral, "2.4")[1] + 2  # smile: corner up
     assert fp(st, "2.4", 1)[1] < fp(st, "2.4", 0)[1] - 2  # the SET value wins over the expression
-    from fbaconf.animation.highlevel import default_tables
     _, exp = default_tables()
     np.testing.assert_allclose(vals[2, n], exp[1, n] + exp[2, n])
 
@@ -232,7 +235,6 @@ FUZZ_BASE = small_scene("""FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { f
     "Face {", "Face { fit FIT { FAPs [4 -1 51] Graph [0 1] numeratorTerms [1] denominatorTerms [1] "
     "numeratorCoefs [2.0] numeratorExp [1] denominatorCoefs [1] denominatorExp [1] }", 1)
 
-from hypothesis import given, settings, strategies as st  # noqa: E402
 
 
 @settings(max_examples=80, deadline=None)
@@ -240,7 +242,6 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
     ["0", "-1", "1e30", "99", "-0", "3.4e38", "2147483647", "0.0", "7", "-1000", "1000", "5", "[", "}", "USE M",
      "USE T", "TRUE"])), min_size=1, max_size=2))
 def test_mutated_scenes_give_typed_errors_only(edits):
-    from fbaconf.errors import FbaconfInputError
     words = FUZZ_BASE.split(" ")
     for pos, tok in edits:
         words[pos % len(words)] = tok
@@ -260,13 +261,11 @@ def test_mutated_scenes_give_typed_errors_only(edits):
 def test_committed_model_data_is_what_the_generator_makes():
     """The default head is loaded from committed data (animation/data/models); regenerating it
     on this machine gives the same bytes (fixed precision: no last-digit drift)."""
-    from fbaconf.generators.models import MODEL_DATA, model_data_files
     for name, text in model_data_files().items():
         assert (MODEL_DATA / name).read_text("utf-8") == text, name
 
 
 def test_the_runtime_head_is_the_generated_one_at_fixed_precision():
-    from fbaconf.animation.bundled import default_head_feature_vertices, default_head_scene
     assert default_head_scene() == bt.rounded(models.default_head_scene(), 6)
     head = models.default_head()
     assert default_head_feature_vertices() == {k: tuple(v) for k, v in head.feature_points.items()}

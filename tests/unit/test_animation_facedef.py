@@ -1,9 +1,11 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from fbaconf.errors import SceneError
 from fbaconf.animation.facedef import MeshTable, TransformTable, interval_weights, transform_fields
 from fbaconf.animation.faceparams import FEATURE_POINTS, fapu_from_feature_points, fp_index
+from fbaconf.errors import SceneError
 
 BORDERS = [-1000, 0, 500, 1000]
 D50 = [[1, 0, 0], [0.9, 0, 0], [1.5, 0, 4]]
@@ -150,7 +152,6 @@ def naive_seed_formula(I, D, fap):
     return out
 
 
-from hypothesis import given, settings, strategies as st  # noqa: E402
 
 
 @settings(max_examples=150, deadline=None)

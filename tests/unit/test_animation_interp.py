@@ -1,11 +1,13 @@
 import numpy as np
 import pytest
 
-from fbaconf.errors import SceneError
+from fbaconf.animation import engine
 from fbaconf.animation.highlevel import apply_high_level, default_tables, high_level_weights
 from fbaconf.animation.interp import FitGraph, lr_fill
-from fbaconf.bitstreams.frames import DERIVED, FREE, RETAINED, SET
+from fbaconf.bitstreams.frames import DERIVED, FREE, RETAINED, SET, FapFrames
 from fbaconf.bitstreams.tables import fap_by_name, left_right_pairs
+from fbaconf.errors import SceneError
+from fbaconf.scenes import bt
 
 
 def blank(n=1):
@@ -151,9 +153,6 @@ def test_fit_errors():
 
 
 def test_fit_from_scene_in_engine():
-    from fbaconf.scenes import bt
-    from fbaconf.animation import engine
-    from fbaconf.bitstreams.frames import FapFrames
     s = bt.parse("""Face { fit FIT { FAPs [4 -1 51] Graph [0 1] numeratorTerms [1] denominatorTerms [0]
                         numeratorCoefs [2.0] numeratorExp [1] } }""")
     model = engine.compile_scene(s)

@@ -7,9 +7,21 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fbaconf.bitstreams.arith import (LOOKAHEAD, MAX_FREQUENCY, ZERO_RUN_LIMIT, ArithDecoder, ArithEncoder, FastModel,
-                                      Model, UniformModel, make_model)
+from fbaconf.bitstreams import arith
+from fbaconf.bitstreams.arith import (
+    LOOKAHEAD,
+    MAX_FREQUENCY,
+    ZERO_RUN_LIMIT,
+    ArithDecoder,
+    ArithEncoder,
+    FastModel,
+    Model,
+    UniformModel,
+    make_model,
+)
 from fbaconf.bitstreams.bitio import BitReader, BitWriter
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.conformance.suite import load_suites
 from fbaconf.errors import BitstreamError
 
 
@@ -225,9 +237,6 @@ def test_a_predicted_model_is_halved_at_16383_in_the_suite():
     P alphabet at fap_quant 2 is [-180, 180] (D4: the default P range +-360, truncating
     division), so its table starts at the total 361 and reaches 16,383 after 16,022 updates;
     the 16,023rd update halves it first, and 476 more symbols decode with the halved table."""
-    from fbaconf.bitstreams import arith
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.conformance.suite import load_suites
     (s,) = load_suites(names=["simple-l1-stress"])
     case = next(c for c in s.cases if c.id == "arith-model-rescale")
     seen = {"updates": 0, "halved_at": [], "sizes": set()}

@@ -10,13 +10,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fbaconf.scenes import bt
-from fbaconf.generators import models
-from fbaconf.scenes import bifs
-from fbaconf.scenes.bifs import BifsEncodeError, BifsError, BifsWriter
-from fbaconf.errors import BitstreamError, FbaconfInputError
 from fbaconf.bitstreams.tables import fap_table
 from fbaconf.cli import main
+from fbaconf.errors import BitstreamError, FbaconfInputError
+from fbaconf.generators import models
+from fbaconf.profiles.checker import _load_scene, check_stream
+from fbaconf.profiles.sample_streams import make_stream
+from fbaconf.scenes import bifs, bt
+from fbaconf.scenes.bifs import BifsEncodeError, BifsError, BifsWriter
 
 REPO = Path(__file__).resolve().parents[2]
 PROVENANCE = {"spec-notes", "iso-via-implementation", "provisional"}
@@ -518,8 +519,6 @@ def test_cli_encode_decode_trace(tmp_path, capsys):
 
 
 def test_check_reads_bifs_scenes_like_bt(tmp_path):
-    from fbaconf.profiles.checker import _load_scene, check_stream
-    from fbaconf.profiles.sample_streams import make_stream
     scene = models.logo_scene()
     (tmp_path / "s.bt").write_text(bt.write(scene))
     (tmp_path / "s.bifs").write_bytes(bifs.encode(scene))
@@ -585,7 +584,6 @@ def test_float_decoding_ignores_numpy_print_mode():
     """colour-science switches numpy to its 1.13 print mode on import, which formats float32 with
     6 digits; BIFS float fields must still decode to the shortest decimal of the float32
     (105.6582, not 105.658) whatever the process imported before (found by the GPAC test)."""
-    import numpy as np
     pts = ", ".join(["0 -8.5 105.6582"] * 40)  # enough points for the vector form of an MF field
     scene = bt.parse(f"Face {{ fdp FDP {{ featurePointsCoord Coordinate {{ point [{pts}] }} }} }}")
     blob = bifs.encode(scene)

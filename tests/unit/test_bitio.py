@@ -1,7 +1,8 @@
 """BitReader's run readers against reading bit by bit / chunk by chunk (property tests)."""
 from __future__ import annotations
 
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fbaconf.bitstreams.bitio import BitReader
 from fbaconf.errors import BitstreamError

@@ -3,14 +3,18 @@ the same stream exceeding exactly one limit (bitrate, frame rate, a tool outside
 profile, a scene size) gives exactly the expected code."""
 from __future__ import annotations
 
+import struct
+import zlib
+
 import numpy as np
 import pytest
 
-
 from fbaconf import rules as R
-from fbaconf.profiles.checker import SceneSummary, analyse, check_stream, summarize_scene
+from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.profiles.checker import LIMIT_CODES, SceneSummary, analyse, check_stream, summarize_scene
 from fbaconf.profiles.model import Claim, load_profiles
-from fbaconf.profiles.sample_streams import make_stream
+from fbaconf.profiles.sample_streams import make_stream, smooth_frames
+from fbaconf.scenes import bt
 
 # stream parameters per level: clean, over the bitrate limit only, over the frame-rate limit only
 STREAMS = {
@@ -68,7 +72,6 @@ def test_one_stream_limit_exceeded_gives_exactly_its_code(claim, kind, code):
 
 @pytest.mark.parametrize("claim", CLAIMS)
 def test_one_scene_limit_exceeded_gives_exactly_its_code(claim):
-    from fbaconf.profiles.checker import LIMIT_CODES
     c = Claim.parse(claim)
     ps = load_profiles()
     base = scene_for(c)
@@ -127,8 +130,6 @@ def test_claim_ordering_and_parsing():
 def test_bitrate_window_is_sliding():
     """A burst of intra planes inside one second of an otherwise cheap stream: the window that
     holds the burst, not the average, decides."""
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.profiles.sample_streams import smooth_frames
     f = smooth_frames(150, 30.0, range(3, 69))
     data_avg = encode(f, EncoderOptions()).data
     burst = encode(f, EncoderOptions(fap_quant_per_frame=np.array(
@@ -139,7 +140,6 @@ def test_bitrate_window_is_sliding():
 
 
 def test_real_scene_file_through_the_bt_reader(tmp_path):
-    from fbaconf.scenes import bt
     # 84 points in label order, 3 of them sent (the rest 3.4e38: not sent)
     pts = " ".join("0 0 0" if k < 3 else "3.4e38 3.4e38 3.4e38" for k in range(84))
     text = ("Face {\n  fdp FDP {\n    featurePointsCoord Coordinate { point [ " + pts + " ] }\n  }\n"
@@ -173,8 +173,6 @@ def test_malformed_scene_file(tmp_path):
 
 
 def _png(path, width: int, height: int) -> None:
-    import struct
-    import zlib
 
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))

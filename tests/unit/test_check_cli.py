@@ -9,12 +9,12 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from fbaconf.cli import main
-from fbaconf.profiles import catalogue
 from fbaconf import rules as R
 from fbaconf.bitstreams.bitedit import flip_bit
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.cli import main
+from fbaconf.profiles import catalogue
 from fbaconf.profiles.sample_streams import make_stream, smooth_frames
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -6,25 +6,35 @@ a code has no case, so a new code cannot land untested.
 """
 from __future__ import annotations
 
+import json
+import re
 import sys
+from importlib import resources
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from fbaconf import rules as R
 from fbaconf.bitstreams import arith
 from fbaconf.bitstreams import decoder as decmod
+from fbaconf.bitstreams.bitedit import end_stream, flip_bit, get_bits, remove_bits, set_bits, splice, truncate_bits
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.errors import BitstreamError
 from fbaconf.bitstreams.frames import FREE, SET, FapFrames
+from fbaconf.cli import main
+from fbaconf.errors import BitstreamError
 from fbaconf.profiles import checker
 from fbaconf.profiles import diagnostics as D
-from fbaconf import rules as R
-from fbaconf.bitstreams.bitedit import (end_stream, flip_bit, get_bits, remove_bits, set_bits, splice,
-                                      truncate_bits)
 from fbaconf.profiles.checker import SceneSummary, analyse, check_stream, lookahead_stuffing
 from fbaconf.profiles.model import load_profiles, parse_profiles
-from fbaconf.profiles.sample_streams import make_stream, smooth_frames, stuffing_positions, zero_heavy_plane
+from fbaconf.profiles.sample_streams import (
+    make_stream,
+    smooth_frames,
+    stuffing_positions,
+    value_overflow_stream,
+    zero_heavy_plane,
+)
 
 FEW = range(3, 40)  # no FAP 63 (its default range is not a multiple of 60: FAP-DECISION-003)
 
@@ -122,7 +132,7 @@ def case_other(monkeypatch, **_):
 def case_dct_syntax(**_):
     data = make_stream(n=16, faps=range(3, 12), coding="dct", plane_start_codes="none")
     p = decode(data).planes[0]
-    for name, start, length in p.blocks:
+    for _name, start, length in p.blocks:
         for b in range(start, start + length):
             bad = flip_bit(data, b)
             try:
@@ -190,7 +200,6 @@ def case_intensity(**_):
 
 
 def case_value_overflow(**_):
-    from fbaconf.profiles.sample_streams import value_overflow_stream
     return value_overflow_stream(), {}
 
 
@@ -356,7 +365,6 @@ def case_internal(monkeypatch, **_):
 def case_emulation(**_):
     # fbaconf's encoding of VREng's eyes.fap at fap_quant 1 written without the encoder's D9
     # prevention: a byte-aligned 0x000001 at byte 132 (tests/data/emulation/PROVENANCE.md)
-    from pathlib import Path
     return (Path(__file__).parents[1] / "data" / "emulation" / "emulating.fba").read_bytes(), {}
 
 
@@ -421,8 +429,7 @@ def test_case_triggers_exactly_its_code(code, monkeypatch, tmp_path):
 
 
 def test_input_unreadable_via_cli(tmp_path, capsys):
-    from fbaconf.cli import main
-    import json
+
     rc = main(["check", str(tmp_path / "missing.fba"), "--json"])
     doc = json.loads(capsys.readouterr().out)
     assert rc == 2 and doc["status"] == "unreadable"
@@ -473,7 +480,6 @@ def test_default_rounding_only_for_fap_63():
 def test_profile_tool_from_a_narrower_profile_data_file():
     """A stream tool outside the claimed profile (high-level FAPs) with profile data that
     leaves them out of Simple: the tool check is data-driven."""
-    from importlib import resources
     text = resources.files("fbaconf.profiles").joinpath("data", "profiles.toml").read_text("utf-8")
     narrow = parse_profiles(text.replace('tools = ["arithmetic", "dct", "high_level_faps"]',
                                          'tools = ["arithmetic", "dct"]'), "narrow")
@@ -526,7 +532,6 @@ def test_select_only_ignore_prefix():
 
 
 def test_registry_codes_are_well_formed():
-    import re
     for c, info in R.CODES.items():
         assert re.fullmatch(r"FAP-[A-Z]+-\d{3}", c) and info.description and info.clause
     load_profiles()  # data file valid

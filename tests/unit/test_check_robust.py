@@ -11,12 +11,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-
 from fbaconf import rules as R
 from fbaconf.bitstreams.bitedit import flip_bit, splice, truncate_bits
+from fbaconf.generators.suite_scenes import make_scene
 from fbaconf.profiles.checker import SceneSummary, analyse
 from fbaconf.profiles.cli import build_report
 from fbaconf.profiles.sample_streams import make_stream
+from fbaconf.scenes import bt
 
 SEEDS = [
     make_stream(n=12, faps=range(3, 30), time_codes=True, intra_period=4),
@@ -92,8 +93,6 @@ def test_non_bytes_input():
 def test_scene_interval_borders_are_checked(tmp_path, borders, why):
     """The checker applies the engine's FaceDefMesh border rules (found by the independent mutant
     ind-anim-borders-equal-accepted: the checker passed a scene the engine refuses)."""
-    from fbaconf.generators.suite_scenes import make_scene
-    from fbaconf.scenes import bt
     scene, _files = make_scene("grid:equal-borders")
     want = f"intervalBorders [{', '.join(map(str, borders))}]"
     text = bt.write(scene).replace("intervalBorders [-100, 0, 0, 100]", want)

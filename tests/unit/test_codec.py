@@ -10,10 +10,10 @@ from fbaconf.bitstreams import tables
 from fbaconf.bitstreams.bitio import BitReader, BitWriter
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.errors import BitstreamError, EncodeError
-from fbaconf.bitstreams.frames import FREE, RETAINED, SET, FapFrames, first_difference
-from fbaconf.bitstreams.synth import synthetic_sequence
+from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames, first_difference
 from fbaconf.bitstreams.syntax import frame_rate_code, quantise
+from fbaconf.bitstreams.synth import synthetic_sequence
+from fbaconf.errors import BitstreamError, EncodeError
 
 GROUPS = tables.groups()
 QP = tables.quant_steps()
@@ -284,10 +284,6 @@ def test_full_intensity_alphabet_reaches_d5_end(q, v):
     """D5: blend/intensity levels 0..floor((63 + floor(q/2)) / q), times q. With the whole
     alphabet the reconstruction is the nearest multiple of q (it may pass 63: 64 at q = 2);
     without it, the largest multiple of q <= 63 when the nearest would pass 63."""
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.bitstreams.encoder import EncoderOptions, encode
-    from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS
-    from fbaconf.bitstreams.synth import synthetic_sequence
     fr = synthetic_sequence(2, 25.0, seed=1, visemes=True, expressions=False, faps=[3])
     col = HIGH_LEVEL_FIELDS.index("viseme_blend")
     fr.high[:, col] = v

@@ -12,14 +12,30 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fbaconf.animation.engine import animate
+from fbaconf.animation.stateio import save_npz
 from fbaconf.bitstreams.faptext import write_fap_file
 from fbaconf.bitstreams.frames import DERIVED, FREE, RETAINED, SET, FapFrames, first_difference
 from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.bitstreams.tables import fap_table
-from fbaconf.harness.compare import (ImageTolerances, OutputError, ToleranceError, VertexTolerances, compare_faps,
-                                     compare_images, compare_vertices, load_output_faps, load_output_vertices,
-                                     load_tolerances, part_namer, worst)
+from fbaconf.harness.compare import (
+    ImageTolerances,
+    OutputError,
+    ToleranceError,
+    VertexTolerances,
+    compare_faps,
+    compare_images,
+    compare_vertices,
+    load_output_faps,
+    load_output_vertices,
+    load_tolerances,
+    part_namer,
+    worst,
+)
 from fbaconf.harness.results import OUTCOME_ORDER, Outcome
+from fbaconf.rendering.images import encode_srgb8, read_linear_rgb, write_exr
+from fbaconf.rendering.render import render_frames
+from fbaconf.rendering.scenario import Scenario
 
 FAST = settings(max_examples=40, deadline=None)
 
@@ -362,8 +378,6 @@ def test_vertex_rms_and_shape_and_nonfinite():
 
 
 def test_load_output_vertices(tmp_path):
-    from fbaconf.animation.engine import animate
-    from fbaconf.animation.stateio import save_npz
     state = animate(synthetic_sequence(2, faps=[3, 19]))
     save_npz(state, tmp_path / "state.npz")
     v = load_output_vertices(tmp_path / "state.npz")
@@ -400,22 +414,19 @@ def test_garbage_vertex_outputs_raise_output_error(tmp_path, arrays, match):
 # ----------------------------------------------------------------------------- images
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory) -> list[Path]:
-    from fbaconf.animation.engine import animate
-    from fbaconf.rendering.render import render_frames
-    from fbaconf.rendering.scenario import Scenario
     out = tmp_path_factory.mktemp("golden")
     state = animate(synthetic_sequence(2, faps=[3, 4, 5, 19, 20, 31, 32]))
     return render_frames(state, Scenario.default().with_(width=64, height=64), out)
 
 
 def _read8(path: Path) -> np.ndarray:
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # noqa: PLC0415 (image I/O loads on first use)
     buf = oiio.ImageBuf(str(path))
     return np.asarray(buf.get_pixels(oiio.UINT8))
 
 
 def _write8(path: Path, px: np.ndarray) -> Path:
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # noqa: PLC0415 (image I/O loads on first use)
     out = oiio.ImageOutput.create(str(path))
     h, w, c = px.shape
     out.open(str(path), oiio.ImageSpec(w, h, c, oiio.UINT8))
@@ -510,7 +521,6 @@ def _disc(cx: float, cy: float, radius: float, size: int = 48, n: int = 16) -> n
     inside = ((X - cx) ** 2 + (Y - cy) ** 2 <= radius ** 2).astype(np.float64)
     cov = inside.reshape(size, n, size, n).mean(axis=(1, 3))
     lin = 0.02 + cov[:, :, None] * np.array([0.8, 0.55, 0.4])
-    from fbaconf.rendering.images import encode_srgb8
     return encode_srgb8(lin)
 
 
@@ -533,7 +543,6 @@ def test_silhouettes_any_sampler_passes_and_a_one_pixel_shift_fails(tmp_path_fac
 
 
 def test_float_exr_output_matching_the_png_passes(rendered, tmp_path):
-    from fbaconf.rendering.images import read_linear_rgb, write_exr
     got = [write_exr(tmp_path / f"f{i}.exr", read_linear_rgb(p)) for i, p in enumerate(rendered)]
     assert compare_images(rendered, got, TOL, tmp_path / "art").outcome is Outcome.PASS
 
@@ -565,7 +574,7 @@ def test_image_size_mismatch_missing_and_garbage_fail(rendered, tmp_path):
 
 # ----------------------------------------------------------------------------- report contract
 def test_stage_results_fit_the_run_report_schema(rendered, tmp_path):
-    import jsonschema
+    import jsonschema  # noqa: PLC0415 (test-only dependency)
     schema_path = Path(__file__).resolve().parents[2] / "harness" / "data" / "run-report.schema.json"
     schema = json.loads(schema_path.read_text("utf-8"))
     stage_schema = {"$defs": schema["$defs"], "$ref": "#/$defs/stage"}
@@ -591,8 +600,6 @@ def test_stage_results_fit_the_run_report_schema(rendered, tmp_path):
 
 
 def test_plane_times_are_compared_for_npz_output_only():
-    from fbaconf.bitstreams.synth import synthetic_sequence
-    from fbaconf.harness.compare import compare_faps
     exp = synthetic_sequence(12, 25.0, visemes=False, expressions=False)
     got = exp.copy()
     got.time_ms = got.time_ms.copy()
@@ -609,7 +616,6 @@ def test_plane_times_are_compared_for_npz_output_only():
 def _player_golden():
     """Three frames at 30 Hz (times 0, 33.33, 66.67 ms): FAP 3 sent in frame 0 and held; FAP 4
     first sent in frame 1 (no value in frame 0); FAP 5 never sent."""
-    from fbaconf.bitstreams.frames import FREE, RETAINED, SET, FapFrames
     e = FapFrames.empty(3, 30.0)
     e.status[:, 2] = [SET, RETAINED, RETAINED]
     e.values[:, 2] = 100
@@ -620,15 +626,12 @@ def _player_golden():
 
 def _player_state(e):
     """What a player writes as .npz: its state, SET wherever a value is held."""
-    from fbaconf.bitstreams.frames import FREE, SET
     g = e.copy()
     g.status[e.status != FREE] = SET
     return g
 
 
 def test_player_npz_state_times_and_presence_are_compared():
-    from fbaconf.bitstreams.frames import FREE, SET
-    from fbaconf.harness.compare import compare_faps
     e = _player_golden()
     assert compare_faps(e, _player_state(e), text_output=False, player=True).outcome.value == "Pass"
     late = _player_state(e)
@@ -650,7 +653,6 @@ def test_player_npz_state_times_and_presence_are_compared():
 @pytest.mark.parametrize("declared, ok", [(2, True), (3, False), (0, False)])
 def test_fap_output_header_count_must_match(tmp_path, declared, ok):
     """A decoder's .fap output must declare the frames it holds (readers size by it)."""
-    from fbaconf.harness.compare import OutputError, load_output_faps
     m = " ".join(["0", "0", "1"] + ["0"] * 65)
     p = tmp_path / "out.fap"
     p.write_text(f"2.1 out 25 {declared}\n{m}\n0 10\n{m}\n1 20\n")

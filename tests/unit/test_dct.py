@@ -14,8 +14,9 @@ from fbaconf.bitstreams import dct, tables
 from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, BitReader, BitWriter
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.errors import BitstreamError, EncodeError
+from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames, first_difference
+from fbaconf.errors import BitstreamError, EncodeError
 
 T = dct.dct_tables()
 QP = tables.quant_steps()
@@ -463,7 +464,6 @@ def test_mutated_and_truncated_streams_only_raise_bitstream_errors():
 # ---------------------------------------------------------------------------- real files
 
 def _read(path):
-    from fbaconf.bitstreams.faptext import read_fap_file
     return read_fap_file(path)[0]
 
 

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.emulation import find_emulations
 from fbaconf.bitstreams.encoder import EncoderOptions, _encode_once, encode
+from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.frames import SET, FapFrames
 from fbaconf.conformance.suite import load_suites
 from fbaconf.errors import FbaconfInputError
@@ -60,7 +61,6 @@ def test_no_emulation_in_any_encoding(frames, q, coding, psc):
 def test_prevention_is_what_removed_the_emulation():
     """The committed emulating stream is the prevention-free encoding; encode() of the same
     content adds plane start codes and decodes to the same frames."""
-    from fbaconf.bitstreams.faptext import read_fap_file
     path = REAL / "vreng" / "eyes.fap"
     if not path.is_file():
         pytest.skip(f"{path} not present (../shared/data)")
@@ -75,7 +75,6 @@ def test_prevention_is_what_removed_the_emulation():
 
 @pytest.mark.external
 def test_no_emulation_in_any_encoding_of_the_real_files():
-    from fbaconf.bitstreams.faptext import read_fap_file
     files = sorted(REAL.glob("*/*.fap"))
     if not files:
         pytest.skip(f"no real .fap files under {REAL}")

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from fbaconf.rules import CODES, RULES
+
 ROOT = Path(__file__).resolve().parents[2]
 MAX_LINES = 700
 
@@ -53,7 +55,7 @@ def _modules() -> dict[str, Path]:
 
 def _setup_discovery() -> dict[str, str]:
     """What setup.py installs (its package map), read without building anything."""
-    import setuptools
+    import setuptools  # noqa: PLC0415 (build-time tool)
     src = (ROOT / "setup.py").read_text("utf-8")
     ns: dict = {"__file__": str(ROOT / "setup.py"), "__name__": "fbaconf_setup"}
     real = setuptools.setup
@@ -83,7 +85,7 @@ def test_the_wheel_installs_every_package_and_its_data():
 def test_no_python_folder_hides_outside_a_package():
     """A folder of modules without ``__init__.py`` would be left out of the wheel."""
     stray = []
-    for pkg, d in _package_dirs().items():
+    for _pkg, d in _package_dirs().items():
         for sub in d.iterdir():
             if sub.is_dir() and sub.name != "__pycache__" and any(sub.glob("*.py")) \
                     and not (sub / "__init__.py").is_file():
@@ -225,7 +227,6 @@ def _raised_rule_ids() -> dict[str, str]:
 
 
 def test_every_raised_rule_id_is_registered():
-    from fbaconf.rules import RULES
     raised = _raised_rule_ids()
     assert len(raised) > 100  # the scan itself works
     missing = {r: where for r, where in raised.items() if r not in RULES}
@@ -233,7 +234,6 @@ def test_every_raised_rule_id_is_registered():
 
 
 def test_rule_registry_codes_exist():
-    from fbaconf.rules import CODES, RULES
     assert all(r.code is None or r.code in CODES for r in RULES.values())
 
 

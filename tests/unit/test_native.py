@@ -12,8 +12,6 @@ import os
 import random
 
 import numpy as np
-
-from fbaconf.profiles.sample_streams import value_overflow_stream
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -23,9 +21,11 @@ from fbaconf.bitstreams.arith import PURE_PYTHON_ENV, ArithDecoder, ArithEncoder
 from fbaconf.bitstreams.bitio import BitReader, BitWriter
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.errors import BitstreamError
 from fbaconf.bitstreams.frames import FREE, SET, FapFrames
 from fbaconf.bitstreams.synth import synthetic_sequence
+from fbaconf.errors import BitstreamError
+from fbaconf.profiles.checker import analyse
+from fbaconf.profiles.sample_streams import value_overflow_stream
 
 pytestmark = pytest.mark.skipif(not arith.native_available(),
                                 reason="native extension fbaconf.bitstreams._fastarith not built (no C compiler?)")
@@ -393,7 +393,6 @@ def test_env_var_and_patched_classes_select_the_pure_path(monkeypatch):
 
 
 def test_checker_reports_identically():
-    from fbaconf.profiles.checker import analyse
     for data in (_wide_range_stream(), value_overflow_stream(), _wide_range_stream()[:-9],
                  encode(synthetic_sequence(60, 30.0), EncoderOptions(fap_quant=1, intra_period=20)).data):
         with fast_path():

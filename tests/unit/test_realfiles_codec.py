@@ -3,15 +3,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import real_fap_files
 
 from fbaconf.bitstreams import tables
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.errors import EncodeError
 from fbaconf.bitstreams.faptext import read_fap_file
 from fbaconf.bitstreams.frames import SET, first_difference
-
-from conftest import real_fap_files
+from fbaconf.errors import EncodeError
 
 QP = tables.quant_steps()
 FILES = real_fap_files()

@@ -13,16 +13,23 @@ import types
 from pathlib import Path
 
 import numpy as np
+import OpenImageIO as oiio
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-import OpenImageIO as oiio
-
+from fbaconf.animation import engine
+from fbaconf.animation.engine import animate, load_scene
 from fbaconf.animation.facestate import FaceState, MeshPart
+from fbaconf.bitstreams import faptext
+from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.frames import FapFrames
+from fbaconf.cli import main
+from fbaconf.conformance.suite import load_suites
 from fbaconf.errors import FbaconfInputError, TextFormatError
-from fbaconf.rendering import raster
-from fbaconf.rendering.errors import GeometryError, ScenarioError, TextureError
+from fbaconf.pipeline import load_stream
+from fbaconf.rendering import images, raster
+from fbaconf.rendering.errors import GeometryError, ImageIOError, ScenarioError, TextureError
 from fbaconf.rendering.images import encode_srgb8, read_image, srgb_to_linear, write_exr, write_png
 from fbaconf.rendering.render import Renderer, render_frame, render_frames
 from fbaconf.rendering.scenario import CameraSpec, DirectionalLight, FrameRange, Scenario
@@ -357,7 +364,7 @@ def test_exr_and_png_round_trip_through_oiio(tmp_path):
 
 
 def test_srgb_encoding_matches_colour_science_and_the_formula():
-    import colour
+    import colour  # noqa: PLC0415 (colour-science loads in ~1 s)
     vals = np.array([0.0, 0.001, 0.0031308, 0.01, 0.18, 0.5, 0.9, 1.0, 1.7, -0.2])
     clipped = np.clip(vals, 0, 1)
     formula = np.where(clipped <= 0.0031308, 12.92 * clipped, 1.055 * clipped ** (1 / 2.4) - 0.055)
@@ -556,8 +563,6 @@ def _fake_engine(monkeypatch, state):
 
 
 def test_cli_render_verb(tmp_path, monkeypatch, capsys):
-    from fbaconf.bitstreams.frames import FapFrames
-    from fbaconf.cli import main
     v, t = uv_sphere()
     state = state_of(("ball", v, t, {"color": (0.8, 0.7, 0.6)}),
                      frames=np.stack([v, v * 1.1]))
@@ -582,8 +587,6 @@ def test_cli_render_verb(tmp_path, monkeypatch, capsys):
 
 
 def test_cli_reports_missing_animation_stage(tmp_path, monkeypatch, capsys):
-    from fbaconf.bitstreams.frames import FapFrames
-    from fbaconf.cli import main
     monkeypatch.setitem(sys.modules, "fbaconf.animation.engine", None)  # import -> ImportError
     faps = tmp_path / "f.npz"
     FapFrames.empty(1).save_npz(faps)
@@ -605,10 +608,6 @@ def test_chunked_rasterisation_gives_the_same_coverage(monkeypatch):
 
 def test_cli_end_to_end_with_the_animation_stage(tmp_path):
     """The real default head (when the animation stage is present): npz and .fap inputs."""
-    from fbaconf.animation import engine
-    from fbaconf.bitstreams import faptext
-    from fbaconf.bitstreams.frames import FapFrames
-    from fbaconf.cli import main
     assert hasattr(engine, "animate")
     frames = FapFrames.empty(2)
     frames.save_npz(tmp_path / "f.npz")
@@ -628,8 +627,6 @@ def test_cli_end_to_end_with_the_animation_stage(tmp_path):
 
 
 def test_failed_image_write_leaves_no_file(tmp_path, monkeypatch):
-    from fbaconf.rendering import images
-    from fbaconf.rendering.errors import ImageIOError
 
     class FailingOutput:
         def open(self, path, spec):
@@ -658,11 +655,6 @@ def test_every_image_case_keeps_clear_of_the_near_plane():
     whole (raster.py, "Clipping"); the two agree only while no vertex of a rendered frame is
     nearer than the near plane. Every frame of every committed image case is checked (the
     scenario's fitted camera, the animated vertices), so the difference is never exercised."""
-    from fbaconf.animation.engine import animate, load_scene
-    from fbaconf.bitstreams.decoder import decode
-    from fbaconf.conformance.suite import load_suites
-    from fbaconf.rendering.render import Renderer
-    from fbaconf.rendering.scenario import Scenario
     checked = 0
     for s in load_suites():
         for c in s.cases:
@@ -724,11 +716,8 @@ def test_native_scan_conversion_equals_the_numpy_reference(seed, n_tri, cull, si
 def test_native_images_equal_the_numpy_reference(monkeypatch, shading, texture):
     """Whole frames (scan conversion, Gouraud interpolation, box filter) byte for byte: the
     goldens do not depend on whether the extension was built."""
-    from fbaconf.conformance.suite import load_suites
     case = next(c for s in load_suites() for c in s.cases
                 if c.id == ("grid-limits-l1" if texture else "default-head"))
-    from fbaconf.animation.engine import animate
-    from fbaconf.pipeline import load_stream
     state = animate(load_stream(case.input_path("fba")), scene=case.input_path("scene"))
     sc = Scenario.load(case.input_path("scenario")).with_(shading=shading, supersample=3)
     scene_dir = case.input_path("scene").parent

@@ -15,6 +15,7 @@ from importlib import resources
 from pathlib import Path
 
 import jsonschema
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -22,7 +23,7 @@ from junitparser import Error as JError
 from junitparser import Failure, JUnitXml, Skipped
 
 from fbaconf.harness import reports
-from fbaconf.harness.reports import (read_json, terminal_summary, write_html, write_json, write_junit)
+from fbaconf.harness.reports import read_json, terminal_summary, write_html, write_json, write_junit
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord, SpeedResult, StageResult
 from fbaconf.harness.sysinfo import system_info
 
@@ -206,7 +207,6 @@ def test_json_schema_strict_and_round_trip(tmp_path, schema):
 
 
 def test_json_handles_numpy_values(tmp_path, schema):
-    import numpy as np
     rec = make_record()
     rec.results[2].stages[0].first_difference = {"frame": np.int64(3), "vertex": np.int32(7),
                                                  "expected": np.array([1.0, 2.0]), "got": np.float32(0.5)}
@@ -297,7 +297,7 @@ def test_html_report(tmp_path):
     p.feed(text)
     tags = p.tags
     # no external resources at all
-    for tag, attrs in tags:
+    for _tag, attrs in tags:
         for a in ("src", "href"):
             v = attrs.get(a)
             if v:
@@ -395,7 +395,7 @@ def test_property_json_round_trip_and_junit_parses(tmp_path, validator, rec):
         assert s.failures == sum(not ex and (fx or r.outcome in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH) or
                                              (r.outcome is Outcome.NOT_SUPPORTED and r.required))
                                  for r, ex, fx in zip(mine, excused, fixed))
-        assert s.errors == sum(not ex and not fx and r.outcome is Outcome.ERROR for r, ex, fx in zip(mine, excused, fixed))
+        assert s.errors == sum(not ex and not fx and r.outcome is Outcome.ERROR for r, ex, fx in zip(mine, excused, fixed))  # noqa: E501
         assert s.skipped == sum(ex or (not fx and (r.outcome is Outcome.SKIPPED or
                                                    (r.outcome is Outcome.NOT_SUPPORTED and not r.required)))
                                 for r, ex, fx in zip(mine, excused, fixed))

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.errors import BitstreamError
 from fbaconf.bitstreams.synth import synthetic_sequence
+from fbaconf.errors import BitstreamError
 
 N_INPUTS = 10_500
 

@@ -3,8 +3,8 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from fbaconf.scenes import bt
 from fbaconf.errors import TextFormatError
+from fbaconf.scenes import bt
 
 NODE_TYPES = sorted(bt.node_specs())
 finite = st.floats(allow_nan=False, allow_infinity=False)
@@ -106,7 +106,7 @@ def test_sample_and_defaults():
 
 
 @pytest.mark.parametrize("text, where, rule", [
-    ("Face { fdp FDP { faceDefTables [ FaceDefTables { } FaceDefTables { faceDefMesh [ FaceDefMesh { coordIndex [1 2.5] } ] } ] } }",
+    ("Face { fdp FDP { faceDefTables [ FaceDefTables { } FaceDefTables { faceDefMesh [ FaceDefMesh { coordIndex [1 2.5] } ] } ] } }",  # noqa: E501
      "Face.fdp.FDP.faceDefTables[1].faceDefMesh[0].coordIndex", "bt-number"),
     ("Face {\n  fap FAP { open_jawx 3 } }", "Face.fap.FAP", "bt-unknown-field"),
     ("Group { children [ Foo { } ] }", "Group.children[0]", "bt-unknown-node"),

@@ -2,8 +2,12 @@
 hand from the spec notes, run against the reference decoder — independent of its goldens."""
 from __future__ import annotations
 
+import json
 import re
+import subprocess
+import sys
 import tomllib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -118,10 +122,6 @@ KILLED = ["dequant-step-index", "dequant-quant-plus-one", "prediction-sign", "in
 def test_each_vector_fails_when_its_rule_is_broken():
     """Every listed mutant of the reference (one rule broken, in a process of its own) fails
     at least one vector; the unmutated reference fails none."""
-    import json
-    import subprocess
-    import sys
-    from concurrent.futures import ThreadPoolExecutor
     assert failing() == []
     code = ("import json, runpy, sys\nfrom fbaconf.mutation.measure import apply\napply(sys.argv[1])\n"
             f"ns = runpy.run_path({str(Path(__file__).resolve())!r})\nprint(json.dumps(ns['failing']()))\n")

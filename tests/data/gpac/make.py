@@ -23,6 +23,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from fbaconf.scenes import bifs, bt
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
 DUMP_MAX = 100_000
@@ -107,7 +109,6 @@ def main() -> int:
     ap.add_argument("--gpac-commit", default="d34570e3d994ede1f7fa84075fea793f8939308e")
     a = ap.parse_args()
     sys.path.insert(0, str(ROOT))
-    from fbaconf.scenes import bifs, bt
     version = subprocess.run([a.mp4box, "-version"], capture_output=True, text=True)
     (HERE / "streams").mkdir(exist_ok=True)
     (HERE / "dumps").mkdir(exist_ok=True)
