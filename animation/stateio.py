@@ -1,4 +1,4 @@
-"""FaceState <-> .npz (the ``fbaconf animate`` output; "vertices .npz" of the architecture).
+"""FaceState <-> .npz (the ``fbaconf animate`` output; the "vertices" output of docs/harness.md).
 
 Arrays: ``format`` = "fbaconf.FaceState/1", ``vertices`` float64[F, N, 3], ``time_ms``
 float64[F], ``part_names`` str[P], ``part_first`` / ``part_count`` int64[P],

@@ -1,6 +1,7 @@
 """``fbaconf golden regenerate|verify``: golden outputs of the reference, with sha256 digests.
 
-Goldens are written only here, from the reference pipeline (``harness.refdecoder``):
+Goldens are written only here, from the reference pipeline (``fbaconf.pipeline``, the same code
+the bundled reference decoder ``harness/refdecoder.py`` runs):
 ``golden/<suite>/<case>/faps.npz`` (decoded FapFrames), ``vertices.npz`` (FaceState),
 ``frame_NNNNN.png`` (images), ``face<i>.npz`` (multi-face cases). ``golden/MANIFEST.json``
 lists every file with its sha256 and the digest of the suite manifest it was made from.

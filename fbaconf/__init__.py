@@ -1,8 +1,10 @@
 """fbaconf — conformance and profile test suite for MPEG-4 Face Animation decoders.
 
-The project's stage folders (``bitstreams/``, ``profiles/``, ``animation/``,
-``rendering/``, ``harness/``, ``conformance/``) are installed as sub-packages of this
-namespace (``fbaconf.bitstreams`` …) so that their import names never collide with
-other distributions.
+Every top-level stage folder of the repository (``bitstreams/``, ``scenes/``, ``animation/``,
+``rendering/``, ``profiles/``, ``conformance/``, ``golden/``, ``isolation/``, ``harness/``,
+``mutation/``, ``fuzz/``, ``generators/``) is installed as a sub-package of this namespace
+(``fbaconf.bitstreams`` …), so their import names never collide with other distributions;
+``setup.py`` discovers them. This folder itself holds the small core: the error types, the
+rule registry, the reference pipeline and the command line (docs/architecture.md).
 """
 __version__ = "0.1.0"

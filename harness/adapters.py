@@ -1,6 +1,6 @@
 """Decoder adapters: a TOML manifest for command-line decoders (any language) or a Python class.
 
-Manifest (``architecture.md``)::
+Manifest (docs/harness.md, "Write a manifest")::
 
     name = "example"
     description = "..."

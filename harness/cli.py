@@ -1,7 +1,7 @@
 """The harness verbs, each registered here: ``fbaconf run``, ``fbaconf certify`` (+ ``certify
 verify``, ``certify keygen``) and ``fbaconf bench`` (:mod:`.bench`).
 
-Exit codes (architecture): 0 every required case passes (and the speed requirements when
+Exit codes (docs/harness.md): 0 every required case passes (and the speed requirements when
 measured); 1 some required case fails (a new failure, when ``--baseline`` is given);
 2 usage or setup error; 3 only speed requirements missed.
 """
