@@ -18,6 +18,17 @@ static int line_no = 1;
 static char pushed[2][256];
 static int pushed_line[2], npushed = 0;  /* tokens given back (a stack) and their lines */
 
+/* next character, with every line end read as '\n': LF, CRLF and a lone CR (old Mac files) */
+static int nextc(void) {
+    int c = fgetc(in);
+    if (c == '\r') {
+        int d = fgetc(in);
+        if (d != '\n' && d != EOF) ungetc(d, in);
+        return '\n';
+    }
+    return c;
+}
+
 /* next whitespace-separated token and the line it starts on, skipping '#' comments;
  * returns 0 at end of file */
 static int token(char *buf, size_t n, int *at) {
@@ -30,11 +41,11 @@ static int token(char *buf, size_t n, int *at) {
         return 1;
     }
     for (;;) {
-        c = fgetc(in);
+        c = nextc();
         if (c == EOF) return 0;
         if (c == '\n') line_no++;
         if (c == '#') {
-            while ((c = fgetc(in)) != EOF && c != '\n') {}
+            while ((c = nextc()) != EOF && c != '\n') {}
             if (c == '\n') line_no++;
             continue;
         }
@@ -43,7 +54,7 @@ static int token(char *buf, size_t n, int *at) {
     if (at) *at = line_no;
     do {
         if (k + 1 < n) buf[k++] = (char)c;
-        c = fgetc(in);
+        c = nextc();
     } while (c != EOF && !isspace(c) && c != '#');
     if (c == '\n') line_no++;
     if (c == '#') ungetc(c, in);
