@@ -40,8 +40,8 @@ from .._atomic import atomic_write_text
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .tables import NUM_FAPS
 
-__all__ = ["RULES", "KNOWN_VERSIONS", "FapFileHeader", "TextWarning", "read_fap", "read_fap_text",
-           "read_fap_file", "write_fap", "write_fap_file"]
+__all__ = ["RULES", "KNOWN_VERSIONS", "FapFileHeader", "TextWarning", "check_fap_text", "read_fap",
+           "read_fap_text", "read_fap_file", "write_fap", "write_fap_file"]
 
 #: Every rule id the reader can report, with its registry entry (fbaconf/rules.py): warning rules
 #: are recoverable (TextWarning, or TextFormatError under strict=True); error rules always raise
@@ -92,15 +92,27 @@ class TextWarning:
 
 
 class _Reporter:
-    def __init__(self, file: str | None, strict: bool) -> None:
+    """Collects warnings; raises errors. With ``recover`` (the checker's pass) an error inside a
+    frame (a bad mask entry, integer or range) is collected too and reading goes on."""
+
+    def __init__(self, file: str | None, strict: bool, recover: bool = False) -> None:
         self.file = file
         self.strict = strict
+        self.recover = recover
+        self.errors: list[TextWarning] = []
         self.warnings: list[TextWarning] = []
         self._count: dict[str, int] = {}
         self._first_suppressed: dict[str, tuple[int, int]] = {}
 
     def error(self, rule: str, line: int, column: int, message: str) -> TextFormatError:
         return TextFormatError(message, line=line, column=column, rule=rule, file=self.file)
+
+    def fail(self, rule: str, line: int, column: int, message: str) -> None:
+        """A recoverable error: raised, or (``recover``) kept and reading goes on."""
+        if not self.recover:
+            raise self.error(rule, line, column, message)
+        if len(self.errors) < MAX_WARNINGS_PER_RULE * len(RULES):
+            self.errors.append(TextWarning(rule, line, column, message, self.file))
 
     def warn(self, rule: str, line: int, column: int, message: str) -> None:
         if self.strict:
@@ -165,13 +177,36 @@ def _parse_header(lines: list[str], rep: _Reporter) -> tuple[int, FapFileHeader,
                     "no header line: the file holds no tokens outside comments")
 
 
-def read_fap_text(text: str, *, file: str | None = None,  # noqa: C901
+def read_fap_text(text: str, *, file: str | None = None,
                   strict: bool = False) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:
     """Read the text of a .fap file. Returns (frames, header, warnings); raises
     TextFormatError for unreadable input (and for any warning when ``strict``)."""
     if not isinstance(text, str):
         raise TypeError("read_fap_text expects str; use read_fap_file for paths/bytes")
-    rep = _Reporter(file, strict)
+    return _read(text, _Reporter(file, strict))
+
+
+def check_fap_text(text: str, *, file: str | None = None
+                   ) -> tuple[list[TextWarning], FapFrames | None, FapFileHeader | None]:
+    """Every rule the text of a .fap file breaks, in file order (line, column): the reader's
+    warnings and its errors, with the frames read (complete ones) and the header (None when the
+    header is broken). Reading goes on after an error inside a frame (the bad token keeps its
+    place: a bad mask entry counts as 0, a bad value as 0); a broken header or the end of the
+    file inside a frame ends it. The severity of each finding is its rule's
+    (``RULES[rule].severity``). Never raises for any text."""
+    if not isinstance(text, str):
+        raise TypeError("check_fap_text expects str")
+    rep = _Reporter(file, strict=False, recover=True)
+    frames = header = None
+    try:
+        frames, header, _ = _read(text, rep)
+    except TextFormatError as e:
+        rep.errors.append(TextWarning(e.rule, e.line or 1, e.column or 1, e.message, file))
+    found = rep.errors + rep.finish()
+    return sorted(found, key=lambda w: (w.line, w.column)), frames, header
+
+
+def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:  # noqa: C901
     if text.startswith("\ufeff"):  # byte order mark: read as whitespace (keeps columns)
         text = " " + text[1:]
     lines = _LINE_BREAK.split(text)
@@ -200,25 +235,32 @@ def read_fap_text(text: str, *, file: str | None = None,  # noqa: C901
         eof_loc = (len(lines), len(lines[-1]) + 1)
 
     pos = 0
+    truncated = False  # (recover) the file ended inside the frame being read: it is dropped
 
     def take_int(what: str, frame_start: tuple[int, int], lo: int | None,
                  hi: int | None) -> tuple[int | None, int, int]:
-        nonlocal pos
+        nonlocal pos, truncated
         if pos >= ntok:
-            raise rep.error("fap-text-truncated", *eof_loc,
-                            f"truncated: end of file where {what} was expected (frame starting at "
-                            f"{frame_start[0]}:{frame_start[1]})")
+            if not truncated:
+                rep.fail("fap-text-truncated", *eof_loc,
+                         f"truncated: end of file where {what} was expected (frame starting at "
+                         f"{frame_start[0]}:{frame_start[1]})")
+            truncated = True
+            return (0 if lo is not None else None), *eof_loc
         tok, line, col = tt[pos], tl[pos], tc[pos]
         pos += 1
         if not _INT.fullmatch(tok):
-            raise rep.error("fap-text-integer", line, col, f"{what}: {_clip(tok)} is not an integer")
+            rep.fail("fap-text-integer", line, col, f"{what}: {_clip(tok)} is not an integer")
+            return (0 if lo is not None else None), line, col
         if len(tok) > _MAX_INT_CHARS:
             if lo is None:
                 return None, line, col
-            raise rep.error("fap-text-value-range", line, col, f"{what}: {_clip(tok)} is out of range")
+            rep.fail("fap-text-value-range", line, col, f"{what}: {_clip(tok)} is out of range")
+            return 0, line, col
         v = int(tok)
         if lo is not None and not lo <= v <= hi:
-            raise rep.error("fap-text-value-range", line, col, f"{what}: {v} is outside {lo}..{hi}")
+            rep.fail("fap-text-value-range", line, col, f"{what}: {v} is outside {lo}..{hi}")
+            return 0, line, col
         return v, line, col
 
     rows_values: list[np.ndarray] = []
@@ -250,12 +292,14 @@ def read_fap_text(text: str, *, file: str | None = None,  # noqa: C901
             for k in range(width):
                 what = f"mask entry {k + 1}" + (f" (FAP{k + 1})" if k < NUM_FAPS else " (extra)")
                 v, line, col = take_int(what, start, None, None)
-                if v not in (0, 1):
-                    raise rep.error("fap-text-mask-value", line, col,
-                                    f"{what} is {_clip(tt[pos - 1])}; mask entries must be 0 or 1")
+                if v not in (0, 1) and not truncated and (v is not None or _INT.fullmatch(tt[pos - 1])):
+                    rep.fail("fap-text-mask-value", line, col,
+                             f"{what} is {_clip(tt[pos - 1])}; mask entries must be 0 or 1")
                 if k < NUM_FAPS:
                     mask[k] = v == 1
         fn, fline, fcol = take_int("frame number", start, 0, _FRAME_MAX)
+        if truncated:
+            break
         if fn in seen:
             rep.warn("fap-text-frame-duplicate", fline, fcol, f"frame number {fn} already used by an earlier frame")
         elif prev_fn is not None and fn < prev_fn:
@@ -279,6 +323,8 @@ def read_fap_text(text: str, *, file: str | None = None,  # noqa: C901
         values = last_values.copy()
         for fap in np.nonzero(mask[2:])[0] + 2:
             values[fap] = take_int(f"FAP{fap + 1} value", start, _INT32_MIN, _INT32_MAX)[0]
+        if truncated:
+            break
         ever_set |= mask
         status = np.where(mask, SET, np.where(ever_set, RETAINED, FREE)).astype(np.uint8)
         rows_values.append(values)

@@ -22,6 +22,7 @@ Code families:
   FAP-LEVEL-*     a limit of the claimed level exceeded
   FAP-CLAIM-*     claim-level results (--smallest-claim)
   FAP-SCENE-*     the optional scene file
+  FAP-TEXT-*      an ASCII .fap file (``fbaconf check F.fap``: the text rules of its reader)
   FAP-CHECK-*     limits of the checker itself (a part it could not check, an internal failure)
 """
 from __future__ import annotations
@@ -193,6 +194,48 @@ LEVEL_INTERVALS = _define(
 CLAIM_NONE = _define(
     "FAP-CLAIM-001", "error", "profiles-and-levels.md: Conformance claim",
     "No profile@level defined by the suite admits the stream (--smallest-claim).")
+
+# ---------------------------------------------------------------------------- .fap text
+TEXT_CLAUSE = "spec notes §7 (ASCII .fap files); readings: docs/fap-text.md"
+TEXT_HEADER = _define(
+    "FAP-TEXT-001", "error", TEXT_CLAUSE,
+    "The header line is missing or malformed: it needs 'version name frame_rate count', frame_rate a positive finite number, count a non-negative integer.")
+TEXT_VERSION = _define(
+    "FAP-TEXT-002", "warning", TEXT_CLAUSE,
+    "The version is not 2.0, 2.1 or 2.2; the file is read with the 2.x layout.")
+TEXT_NAME = _define(
+    "FAP-TEXT-003", "warning", TEXT_CLAUSE,
+    "The header's name field contains whitespace (as Greta writes it) or is empty.")
+TEXT_MASK_LENGTH = _define(
+    "FAP-TEXT-004", "warning", TEXT_CLAUSE,
+    "A mask line has 69 entries (Greta's form); the extra 69th entry is dropped.")
+TEXT_MASK_VALUE = _define(
+    "FAP-TEXT-005", "error", TEXT_CLAUSE,
+    "A mask entry is not 0 or 1.")
+TEXT_INTEGER = _define(
+    "FAP-TEXT-006", "error", TEXT_CLAUSE,
+    "A mask entry, frame number or value is not a decimal integer (FAP values are integers).")
+TEXT_VALUE_RANGE = _define(
+    "FAP-TEXT-007", "error", TEXT_CLAUSE,
+    "A frame number is outside 0..2^31-1 or a value outside the int32 range.")
+TEXT_HIGH_LEVEL_RANGE = _define(
+    "FAP-TEXT-008", "warning", TEXT_CLAUSE,
+    "A viseme/expression field is outside its defined range (selects 0..14 / 0..6, blend/intensities 0..63, def/init bits 0..1).")
+TEXT_TRUNCATED = _define(
+    "FAP-TEXT-009", "error", TEXT_CLAUSE,
+    "The file ends inside a frame: values are missing at the end of the file.")
+TEXT_FRAME_ORDER = _define(
+    "FAP-TEXT-010", "warning", TEXT_CLAUSE,
+    "A frame number is smaller than the previous frame's.")
+TEXT_FRAME_DUPLICATE = _define(
+    "FAP-TEXT-011", "warning", TEXT_CLAUSE,
+    "A frame number was already used by an earlier frame.")
+TEXT_FRAME_BEYOND = _define(
+    "FAP-TEXT-012", "warning", TEXT_CLAUSE,
+    "A frame number is greater than the header's declared frame count.")
+TEXT_FRAME_COUNT = _define(
+    "FAP-TEXT-013", "warning", TEXT_CLAUSE,
+    "The number of frames in the file differs from the header's frame count (reported at the count).")
 
 # ---------------------------------------------------------------------------- scene / checker
 SCENE_UNAVAILABLE = _define(
@@ -408,19 +451,19 @@ _rule("usage", "bitstreams", "--trace is for .bifs scenes")
 _rule("value-overflow", "bitstreams", "FAP … value … overflows 32 bits", code=SEM_VALUE_OVERFLOW)
 _rule("value-range", "bitstreams", "DC level … of FAP … in the segment at frame … is not codable (limit …)")
 _rule("viseme-select-range", "bitstreams", "viseme_select outside 0..14 (intra) or the predicted value leaves it (spec notes D5)", code=SEM_VISEME_SELECT)
-_rule("fap-text-header", "fap-text", "header line missing or malformed: needs 'version name frame_rate count', frame_rate a positive finite number, count a non-negative integer", severity="error")
-_rule("fap-text-version", "fap-text", "version is not 2.0, 2.1 or 2.2", severity="warning")
-_rule("fap-text-name", "fap-text", "name field contains whitespace (Greta) or is empty", severity="warning")
-_rule("fap-text-mask-length", "fap-text", "mask line with 69 entries (Greta); the extra 69th entry is dropped", severity="warning")
-_rule("fap-text-mask-value", "fap-text", "mask entry other than 0 or 1", severity="error")
-_rule("fap-text-integer", "fap-text", "mask entry, frame number or value is not a decimal integer", severity="error")
-_rule("fap-text-value-range", "fap-text", "frame number outside 0..2^31-1 or value outside the int32 range", severity="error")
-_rule("fap-text-high-level-range", "fap-text", "viseme/expression field outside its defined range (selects 0..14 / 0..6, blend/intensities 0..63, def/init bits 0..1)", severity="warning")
-_rule("fap-text-truncated", "fap-text", "the file ends inside a frame (values missing at end of file)", severity="error")
-_rule("fap-text-frame-order", "fap-text", "frame number smaller than the previous frame's", severity="warning")
-_rule("fap-text-frame-duplicate", "fap-text", "frame number already used by an earlier frame", severity="warning")
-_rule("fap-text-frame-beyond", "fap-text", "frame number greater than the header's declared frame count", severity="warning")
-_rule("fap-text-frame-count", "fap-text", "number of frames in the file differs from the header's count", severity="warning")
+_rule("fap-text-header", "fap-text", "header line missing or malformed: needs 'version name frame_rate count', frame_rate a positive finite number, count a non-negative integer", code=TEXT_HEADER, severity="error")
+_rule("fap-text-version", "fap-text", "version is not 2.0, 2.1 or 2.2", code=TEXT_VERSION, severity="warning")
+_rule("fap-text-name", "fap-text", "name field contains whitespace (Greta) or is empty", code=TEXT_NAME, severity="warning")
+_rule("fap-text-mask-length", "fap-text", "mask line with 69 entries (Greta); the extra 69th entry is dropped", code=TEXT_MASK_LENGTH, severity="warning")
+_rule("fap-text-mask-value", "fap-text", "mask entry other than 0 or 1", code=TEXT_MASK_VALUE, severity="error")
+_rule("fap-text-integer", "fap-text", "mask entry, frame number or value is not a decimal integer", code=TEXT_INTEGER, severity="error")
+_rule("fap-text-value-range", "fap-text", "frame number outside 0..2^31-1 or value outside the int32 range", code=TEXT_VALUE_RANGE, severity="error")
+_rule("fap-text-high-level-range", "fap-text", "viseme/expression field outside its defined range (selects 0..14 / 0..6, blend/intensities 0..63, def/init bits 0..1)", code=TEXT_HIGH_LEVEL_RANGE, severity="warning")
+_rule("fap-text-truncated", "fap-text", "the file ends inside a frame (values missing at end of file)", code=TEXT_TRUNCATED, severity="error")
+_rule("fap-text-frame-order", "fap-text", "frame number smaller than the previous frame's", code=TEXT_FRAME_ORDER, severity="warning")
+_rule("fap-text-frame-duplicate", "fap-text", "frame number already used by an earlier frame", code=TEXT_FRAME_DUPLICATE, severity="warning")
+_rule("fap-text-frame-beyond", "fap-text", "frame number greater than the header's declared frame count", code=TEXT_FRAME_BEYOND, severity="warning")
+_rule("fap-text-frame-count", "fap-text", "number of frames in the file differs from the header's count", code=TEXT_FRAME_COUNT, severity="warning")
 _rule("dct-unsupported", "bitstreams", "coding_type 1 (DCT segment mode) is not supported by this decoder build "
       "(the checker reports the unchecked rest; raised by decoders built without the DCT mode)", code=CHECK_DCT)
 

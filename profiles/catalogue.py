@@ -24,6 +24,7 @@ FAMILIES = (
     ("FAP-LEVEL", "Level"),
     ("FAP-CLAIM", "Claim"),
     ("FAP-SCENE", "Scene file"),
+    ("FAP-TEXT", "ASCII .fap files (`fbaconf check F.fap`: the rules of the .fap reader, each at line:column)"),
     ("FAP-CHECK", "Checker limits"),
 )
 

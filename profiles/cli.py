@@ -2,6 +2,10 @@
 
     fbaconf check IN.fba [--scene S.bt] [--claim PROFILE@LEVEL] [--json] [--max-issues N]
                   [--only CODE ...] [--ignore CODE ...] [--smallest-claim] [--locations N]
+    fbaconf check IN.fap [--json] [--max-issues N] [--only CODE ...] [--ignore CODE ...]
+
+An ASCII ``.fap`` file (by its name, or text that starts like one) is checked against the text
+rules of the .fap reader (``FAP-TEXT-*`` codes, each at line:column; profiles/textcheck.py).
 
 Exit status: 0 no errors (warnings/info allowed), 1 errors, 2 unreadable input (file
 missing, or not a face object stream at all) or a bad command line.
@@ -17,6 +21,7 @@ from fbaconf import rules as R
 from . import diagnostics as D
 from .checker import Report, analyse
 from .model import Claim, load_profiles
+from .textcheck import analyse_text, is_text_input
 
 REPORT_FORMAT = "fbaconf.check-report/1"
 
@@ -26,7 +31,7 @@ def register(subparsers) -> None:
         "check", help="check a face object stream (syntax, semantics, profile and level)",
         description="Check a face object bitstream: syntax, semantics, decision dependence, and (with --claim) "
                     "the tools and limits of a profile@level. Exit 0 clean, 1 errors, 2 unreadable input.")
-    p.add_argument("input", metavar="IN.fba", help="face object bitstream")
+    p.add_argument("input", metavar="IN.fba", help="face object bitstream, or an ASCII .fap file (its text rules)")
     p.add_argument("--scene", metavar="S.bt", help="scene file (FDP/FIT/FaceDefTables) for profile/level checks: BT "
                    "text, or binary BIFS (.bifs)")
     p.add_argument("--claim", metavar="PROFILE@LEVEL", help="check against a claim, e.g. simple@1")
@@ -74,6 +79,9 @@ def format_text(doc: dict) -> str:
     if doc["claim"]:
         head += f" (claim {doc['claim']})"
     lines.append(head)
+    if s.get("form") == "fap-text":
+        rate = f"{s['frame_rate']:g} Hz" if s.get("frame_rate") else "no readable header"
+        lines.append(f"  .fap text: {s.get('frames', 0)} frames read, {rate}")
     if "planes" in s:
         rate = f"{s['frame_rate']:g} Hz" if s.get("frame_rate") else "no frame rate"
         lines.append(f"  {s['planes']} planes ({s['intra_planes']} intra), {rate}, peak "
@@ -99,6 +107,8 @@ def format_text(doc: dict) -> str:
 
 def _loc_text(loc: dict) -> str:
     parts = []
+    if "line" in loc:
+        parts.append(f"line {loc['line']}:{loc['column']}")
     if "byte_offset" in loc:
         parts.append(f"byte {loc['byte_offset']} bit {loc['bit']}")
     for k in ("plane", "frame", "fap"):
@@ -125,8 +135,15 @@ def run(args) -> int:
         rep = Report([D.diag(R.INPUT_UNREADABLE, f"cannot read {args.input}: {e.strerror or e}")],
                      {"bytes": 0}, unreadable=True, claim=claim)
     else:
-        rep = analyse(data, scene=args.scene, claim=claim, file=str(path), profiles=ps,
-                      smallest_claim=args.smallest_claim)
+        if is_text_input(str(path), data) and not data.startswith(b"\x00\x00\x01\xba"):
+            if args.scene or claim is not None or args.smallest_claim:
+                print("fbaconf check: error: --scene, --claim and --smallest-claim are for the binary stream; "
+                      f"{args.input} is .fap text", file=sys.stderr)
+                return 2
+            rep = analyse_text(data, file=str(path))
+        else:
+            rep = analyse(data, scene=args.scene, claim=claim, file=str(path), profiles=ps,
+                          smallest_claim=args.smallest_claim)
     doc, status = build_report(rep, file=str(path), max_issues=args.max_issues, only=args.only,
                                ignore=args.ignore, locations=args.locations, smallest_claim=args.smallest_claim)
     if args.json:

@@ -19,6 +19,8 @@ class Location:
     fap: int | None = None
     node_path: str | None = None
     time_ms: float | None = None
+    line: int | None = None  # text input (.fap): 1-based line and column (characters)
+    column: int | None = None
 
     @property
     def byte_offset(self) -> int | None:
@@ -36,10 +38,15 @@ class Location:
                 d[k] = v
         if self.time_ms is not None:
             d["time_ms"] = round(float(self.time_ms), 3)
+        if self.line is not None:
+            d["line"] = self.line
+            d["column"] = self.column if self.column is not None else 1
         return d
 
     def __str__(self) -> str:
         parts = []
+        if self.line is not None:
+            parts.append(f"line {self.line}:{self.column if self.column is not None else 1}")
         if self.bit_offset is not None:
             parts.append(f"byte {self.bit_offset // 8} bit {self.bit_offset % 8}")
         if self.plane is not None:
@@ -53,7 +60,8 @@ class Location:
         return ", ".join(parts) or "stream"
 
     def sort_key(self) -> tuple:
-        return (self.bit_offset if self.bit_offset is not None else 1 << 62, self.node_path or "")
+        return (self.bit_offset if self.bit_offset is not None else 1 << 62, self.line or 0, self.column or 0,
+                self.node_path or "")
 
 
 @dataclass(frozen=True)
@@ -80,6 +88,12 @@ def diag(code: str, message: str, *, bit_offset: int | None = None, plane: int |
     return Diagnostic(code, info.severity, message, info.clause,
                       Location(None if bit_offset is None else int(bit_offset), plane, frame, fap, node_path,
                                time_ms))
+
+
+def text_diag(code: str, message: str, line: int, column: int) -> Diagnostic:
+    """A diagnostic of a text input (.fap) at line:column."""
+    info = CODES[code]
+    return Diagnostic(code, info.severity, message, info.clause, Location(line=line, column=column))
 
 
 @dataclass
@@ -133,4 +147,4 @@ def counts(diags) -> dict[str, int]:
 
 
 __all__ = ["Diagnostic", "Issue", "Location", "counts", "diag", "fold",
-           "select"]
+           "select", "text_diag"]
