@@ -14,7 +14,7 @@ from fbaconf.bitstreams import faptext
 from fbaconf.bitstreams.frames import FREE, RETAINED, FapFrames
 from fbaconf.mutation.core import Mutant
 
-_R = "fbaconf.bitstreams.faptext:read_fap_text"
+_R = "fbaconf.bitstreams.faptext:_read"
 _H = "fbaconf.bitstreams.faptext:_parse_header"
 _S7 = "spec notes §7 (.fap text)"
 
@@ -206,7 +206,7 @@ MUTANTS_LIST: list[Mutant] = [
          "mask[:] = [t == \"1\" for t in chunk[width - NUM_FAPS:]]"),
     _src("ind-txt-mask-nonbinary", _R,
          "mask entries other than 0/1 are accepted (read as unmasked) instead of rejected",
-         "if v not in (0, 1):", "if v is None or v < 0:"),
+         "if v not in (0, 1) and not truncated", "if (v is None or v < 0) and not truncated"),
     # ---------------------------------------------------------------- numbers
     _src("ind-txt-frac-round", _R,
          "fractional numbers accepted and rounded (Python round) instead of rejected",
