@@ -4,7 +4,8 @@ VRML geometry nodes a face model needs.
 Syntax handled: ``[DEF name] NodeType { field value ... }``, ``USE name``, ``NULL``,
 MF values in ``[ ... ]`` (or a single value without brackets), SFVec2f/SFVec3f/SFColor as
 2/3 numbers, SFRotation as 4, SFBool ``TRUE``/``FALSE``, strings in double quotes with
-``\\"`` and ``\\\\`` escapes, ``#`` comments to the end of the line; commas are whitespace.
+``\\"`` and ``\\\\`` escapes (an MFURL item also as MP4Box dumps it: ``od:N`` unquoted), ``#``
+comments to the end of the line; commas are whitespace.
 A file is a sequence of top-level nodes. DEF names must be unique in a file (a second
 DEF of a name is an error); ``USE`` may name a node only after its closing brace. Field tables come from ``data/bt_nodes.toml``
 (plus the FAP node's 66 SFInt32 fields from the FAP table).
@@ -196,6 +197,11 @@ _TOKEN = re.compile(r'(?P<ws>[\s,]+)|(?P<comment>#[^\n]*)|(?P<str>"(?:[^"\\]|\\.
 _INT = re.compile(r"[+-]?(?:0[xX][0-9a-fA-F]+|[0-9]+)\Z")
 _FLOAT = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\Z")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_\-.]*\Z")
+# An object-descriptor URL as GPAC's MP4Box dumps an MFURL item: unquoted ``od:N`` (``url [od:5]``;
+# the empty URL, which BIFS codes as an empty string, is dumped as ``od:0``). Fields named ``url``
+# are MFURL in BIFS (docs/bifs.md, D10).
+_OD_WORD = re.compile(r"od:([0-9]{1,10})\Z")
+URL_FIELDS = frozenset({"url"})
 
 
 TOP_GROUP = "OrderedGroup"  # the top node that carries a scene's top-level list
@@ -394,6 +400,19 @@ class _Reader:
             return re.sub(r"\\(.)", r"\1", v[1:-1], flags=re.S)
         raise AssertionError(t)
 
+    def url_item(self, path) -> str:
+        """An MFURL item: a quoted string, or MP4Box's unquoted ``od:N`` (read as the string
+        ``"od:N"``, which the BIFS coder writes as object descriptor N; ``od:0`` is the empty URL)."""
+        kind, v, off = self.peek()
+        if kind == "word":
+            m = _OD_WORD.match(v)
+            if m is None:
+                raise self.error(f"expected a quoted string or od:N, got {v!r}", off, "bt-string", path)
+            self.next(path)
+            n = int(m.group(1))
+            return f"od:{n}" if n else ""
+        return self.sf("SFString", path)
+
     def value(self, spec, path):
         t = spec.type
         if t == "SFNode":
@@ -415,7 +434,7 @@ class _Reader:
                 n = self.node_or_use(f"{path}[{len(items)}]", allow_null=False, allowed=spec.allowed)
                 items.append(n)
             elif t == "MFString":
-                items.append(self.sf("SFString", path))
+                items.append(self.url_item(path) if spec.name in URL_FIELDS else self.sf("SFString", path))
             elif t == "MFInt32":
                 items.append(self.number(path, True))
             elif t == "MFFloat":

@@ -94,6 +94,21 @@ def test_mp4box_bt_dump_reads_back(e):
     assert bifs.equivalent_scene(bt.parse(text), source(e), rel=TEXT_DIGITS)
 
 
+def test_mp4box_od_urls_read_to_the_scene_of_their_bifs():
+    """MFURL as MP4Box dumps it: object descriptor URLs unquoted (od:5, od:1023) and the empty URL as
+    od:0. The dump reads to the scene GPAC's own BIFS decodes to (URL strings, "od:N", "")."""
+    (e,) = [e for e in ENTRIES if e["name"] == "hand-od-urls"]
+    text = (DATA / e["dump"]).read_text()
+    assert 'url ["face.jpg" od:5 od:0]' in text and "url [od:1023]" in text and "url [od:0]" in text
+    from_dump, from_bifs = bt.parse(text), bifs.decode((DATA / e["bifs"]).read_bytes())
+    urls = [n.fields["url"] for n, _ in from_bifs.find("ImageTexture")]
+    assert urls == [["face.jpg", "od:5", ""], ["od:1023"], [""]]
+    assert bifs.equivalent_scene(from_dump, from_bifs, rel=TEXT_DIGITS)
+    # fbaconf writes them quoted ("od:5", the form MP4Box reads as object descriptor 5) and reads that back
+    again = bt.write(from_dump)
+    assert '["face.jpg" "od:5" ""]' in again and bifs.equivalent_scene(bt.parse(again), from_bifs)
+
+
 # ------------------------------------------------------------------ with MP4Box
 def mp4box() -> str:
     exe = os.environ.get("FBACONF_MP4BOX") or shutil.which("MP4Box")
@@ -162,6 +177,18 @@ def test_mp4box_decodes_fbaconf_bifs(rel, tmp_path):
     got, err = gpac_reads(bifs.encode(view), tmp_path)
     assert got is not None, err[-500:]
     assert bifs.equivalent_scene(bifs.interop_view(got), view, rel=TEXT_DIGITS)
+
+
+def test_mp4box_reads_fbaconfs_writing_of_its_od_url_dump(tmp_path):
+    """The writer's form stays what MP4Box reads: MP4Box's dump (od:N unquoted) read by fbaconf and
+    written back (quoted) is encoded by MP4Box to the BIFS it wrote first."""
+    exe = mp4box()
+    (e,) = [e for e in ENTRIES if e["name"] == "hand-od-urls"]
+    (tmp_path / "s.bt").write_text(bt.write(bt.read(DATA / e["dump"])))
+    r = subprocess.run([exe, "-def", "-mp4", "s.bt", "-out", "s.mp4"], cwd=tmp_path, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-500:]
+    subprocess.run([exe, "-raws", "1", "s.mp4"], cwd=tmp_path, capture_output=True, check=True)
+    assert (DATA / e["bifs"]).read_bytes().endswith((tmp_path / "s_track1_001.bifs").read_bytes())
 
 
 def test_mp4box_refuses_the_seeds_mesh_reference(tmp_path):

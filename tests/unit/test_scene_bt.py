@@ -163,3 +163,27 @@ def test_reads_booleans_as_mp4box_writes_them():
     lower = bt.parse('Face { fap FAP { viseme Viseme { viseme_def true } } }')
     assert upper == lower
     assert bt.parse('Face { fap FAP { viseme Viseme { viseme_def false } } }') != upper
+
+
+def _urls(text):
+    return [n.fields["url"] for n, _ in bt.parse(text).find("ImageTexture")]
+
+
+def test_reads_object_descriptor_urls_as_mp4box_writes_them():
+    """MP4Box dumps an MFURL's object-descriptor items unquoted (od:5) and the empty URL as od:0
+    (GPAC's scene_dump.c); the quoted forms read the same, and the writer keeps them quoted."""
+    assert _urls('ImageTexture { url ["face.jpg" od:5 od:0] }') == [["face.jpg", "od:5", ""]]
+    assert _urls('ImageTexture { url od:1023 }') == _urls('ImageTexture { url "od:1023" }') == [["od:1023"]]
+    assert 'url ["face.jpg" "od:5" ""]' in bt.write(bt.parse('ImageTexture { url ["face.jpg" od:5 od:0] }'))
+
+
+@pytest.mark.parametrize("text,bad", [
+    ('ImageTexture { url [face.jpg] }', "'face.jpg'"),
+    ('ImageTexture { url [od:] }', "'od:'"),
+    ('ImageTexture { url [od:x5] }', "'od:x5'"),
+    ('ImageTexture { url [od:12345678901] }', "'od:12345678901'"),
+])
+def test_other_unquoted_urls_are_typed_errors(text, bad):
+    with pytest.raises(TextFormatError) as e:
+        bt.parse(text)
+    assert e.value.rule == "bt-string" and bad in str(e.value) and e.value.column == text.index(bad[1:-1]) + 1

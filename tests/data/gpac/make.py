@@ -1,7 +1,10 @@
 """Make the GPAC interop evidence of issue 18: binary BIFS written by GPAC's MP4Box from every
 shipped scene and from hand-written scenes, committed as test data (tests/integration/test_gpac_interop.py).
 
-    python tests/data/gpac/make.py /path/to/MP4Box [--gpac-commit SHA]
+    python tests/data/gpac/make.py /path/to/MP4Box [--gpac-commit SHA] [--only NAME ...]
+
+``--only`` remakes the named entries (e.g. ``hand-od-urls``) and keeps the others of MANIFEST.json
+as they are (each remade entry records its own ``made`` date).
 
 MP4Box is built outside the repository (../shared/interop/README.md). For each scene the
 script writes the BT MP4Box reads (fbaconf's writer: one OrderedGroup top node), runs
@@ -107,13 +110,18 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("mp4box")
     ap.add_argument("--gpac-commit", default="d34570e3d994ede1f7fa84075fea793f8939308e")
+    ap.add_argument("--only", nargs="+", metavar="NAME", help="remake only these entries, keep the others")
     a = ap.parse_args()
+    old = json.loads((HERE / "MANIFEST.json").read_text()) if a.only else None
     sys.path.insert(0, str(ROOT))
     version = subprocess.run([a.mp4box, "-version"], capture_output=True, text=True)
     (HERE / "streams").mkdir(exist_ok=True)
     (HERE / "dumps").mkdir(exist_ok=True)
     entries = []
     for name, src in sources():
+        if a.only and name not in a.only:
+            entries.extend(e for e in old["entries"] if e["name"] == name)
+            continue
         scene = bt.read(src)
         view = bifs.interop_view(scene)
         with tempfile.TemporaryDirectory() as t:
@@ -135,11 +143,14 @@ def main() -> int:
                 subprocess.run([a.mp4box, "-bt", str(t / "s.mp4"), "-out", str(HERE / "dumps" / f"{name}.gpac.bt")],
                                capture_output=True, check=True)
                 entry["dump"] = f"dumps/{name}.gpac.bt"
+            if a.only:
+                entry["made"] = datetime.date.today().isoformat()
             entries.append(entry)
             print(f"{name}: {len(blob)} bytes")
     doc = {"format": "fbaconf.gpac-interop/1", "gpac_commit": a.gpac_commit,
            "mp4box_version": (version.stdout + version.stderr).strip().splitlines()[0],
-           "made": datetime.date.today().isoformat(), "command": "MP4Box -def -mp4 S.bt -out S.mp4; MP4Box -raws 1",
+           "made": old["made"] if old else datetime.date.today().isoformat(),
+           "command": "MP4Box -def -mp4 S.bt -out S.mp4; MP4Box -raws 1",
            "entries": entries}
     (HERE / "MANIFEST.json").write_text(json.dumps(doc, indent=1) + "\n")
     return 0
