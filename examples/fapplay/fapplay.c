@@ -7,6 +7,8 @@
  * Exit codes: 0 done, 1 unreadable input (message on stderr), 69 not supported.
  */
 #include <ctype.h>
+#include <errno.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -73,9 +75,14 @@ static long integer(const char *what, int *at) {
         fprintf(stderr, "fapplay: line %d: end of file, expected %s\n", line_no, what);
         exit(1);
     }
+    errno = 0;
     long v = strtol(buf, &end, 10);
-    if (*end) {
+    if (*end || end == buf) {
         fprintf(stderr, "fapplay: line %d: %s is not an integer: %s\n", line_no, what, buf);
+        exit(1);
+    }
+    if (errno == ERANGE || v < INT32_MIN || v > INT32_MAX) {  /* values and frame numbers are int32 */
+        fprintf(stderr, "fapplay: line %d: %s is outside the int32 range: %s\n", line_no, what, buf);
         exit(1);
     }
     return v;
