@@ -4,10 +4,23 @@
 // rewind()/getCurrentFAP()/getCurrentViseme()/getCurrentExpression()/next(), and writes
 // Xface's state per frame as fbaconf's .fap text: the header with Xface's frame rate, then every
 // FAP in every frame (Xface keeps 68 values per frame, 0 where the file set nothing) and FAP 1/2
-// with the fields Xface keeps.
+// with the fields Xface keeps. Xface holds low-level values as float: each is written as the
+// integer it holds (the .fap notes: values are integers), never in %g form (1.23457e+06, which no
+// .fap reader takes); a non-integral value (read by atof from an invalid file) is written with
+// its fraction, as Xface holds it.
+#include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <iostream>
 #include "XFace/FapFile.h"
+
+// The value Xface holds, as .fap text: its exact integer, or its decimal when it has a fraction.
+static std::string fap_value(float v) {
+    char buf[64];
+    if (std::isfinite(v) && v == std::floor(v)) snprintf(buf, sizeof buf, "%.0f", (double)v);
+    else snprintf(buf, sizeof buf, "%.9g", (double)v);
+    return buf;
+}
 
 int main(int argc, char **argv) {
     if (argc != 3) {
@@ -41,7 +54,7 @@ int main(int argc, char **argv) {
         if (vis) out << " " << v.viseme_select1 << " " << v.viseme_select2 << " " << v.viseme_blend << " " << v.viseme_def;
         if (expr) out << " " << e.expression_select1 << " " << e.expression_intensity1 << " " << e.expression_select2
                       << " " << e.expression_intensity2 << " " << e.init_face << " " << e.expression_def;
-        for (int i = 2; i < 68; ++i) out << " " << f[i];
+        for (int i = 2; i < 68; ++i) out << " " << fap_value(f[i]);
         out << "\n";
         faps.next();
     }
