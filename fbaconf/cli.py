@@ -22,6 +22,7 @@ VERB_MODULES = (
     "fbaconf.rendering.cli",
     "fbaconf.conformance.cli",
     "fbaconf.harness.cli",
+    "fbaconf.certification.cli",
     "fbaconf.fuzz.cli",
 )
 

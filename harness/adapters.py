@@ -48,8 +48,9 @@ from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation.endings import DEFAULT_REJECT_EXIT_CODES
-from fbaconf.isolation.sandbox import Limits, default_view, python_view
+from fbaconf.isolation.sandbox import Limits, default_view, python_view, view_problem
 from fbaconf.profiles.model import Claim, load_profiles
+from fbaconf.safefs import read_regular
 
 INPUT_KINDS = ("fba", "fap", "scene", "bifs")
 OUTPUT_KINDS = ("faps", "vertices", "images")
@@ -67,6 +68,11 @@ BUNDLED_DIR = Path(__file__).resolve().parent / "adapters"
 
 class ManifestError(FbaconfInputError):
     """A decoder manifest is malformed (names file, key and rule)."""
+
+
+class ViewError(FbaconfInputError):
+    """A folder the sandbox would show a decoder shows too much (set-up error, exit 2)."""
+    rule = "sandbox-view"
 
 
 @dataclass
@@ -165,21 +171,32 @@ class CommandAdapter(Adapter):
         self.env = {str(k): str(v) for k, v in data.get("env", {}).items()}
         self.limits = _limits(data.get("limits", {}), path)
         self.reject_exit_codes = frozenset(data.get("reject_exit_codes", DEFAULT_REJECT_EXIT_CODES))
-        self.sandbox = dict(data.get("sandbox", {}))
+        self.lab_read_only: list[Path] = []  # the lab's --sandbox-ro folders (never the manifest's)
         self.supports_multi = "decode_multi" in self.commands
 
     def argv(self, command: str, job: Job) -> list[str]:
         return expand(self.commands[command], job, self.manifest_path)
 
     def sandbox_view(self, argv: list[str], workdir: Path, hidden=()):
-        """What this decoder sees in the sandbox: its program's and manifest's folders and the
-        manifest's ``[sandbox] read_only`` paths read-only, its case folder (inputs read-only),
-        and — when started through ``{python}`` — the Python installation and the fbaconf
-        package read-only with ``hidden`` (goldens, suites, the run folder) emptied."""
+        """What this decoder sees in the sandbox (docs/harness.md, "What a decoder sees"): its
+        program's and manifest's folders read-only, the folders the lab gave with
+        ``--sandbox-ro`` read-only, its case folder (inputs read-only), and — when started
+        through ``{python}`` — the Python installation and the fbaconf package read-only; with
+        ``hidden`` (goldens, suites, the run folder, a signing key) emptied wherever they would
+        show. No manifest key widens it. Raises :class:`ViewError` for a folder that would
+        show too much (``/``, a top-level folder, the fbaconf project, /proc...)."""
         v = default_view(argv, workdir)
+        shown = list(v.read_only)
         if self.manifest_path is not None:
-            v.read_only.append(Path(self.manifest_path).resolve().parent)
-        v.read_only += [Path(p) for p in self.sandbox.get("read_only", [])]
+            shown.append(Path(self.manifest_path).resolve().parent)
+        shown += [Path(p) for p in self.lab_read_only]
+        for p in shown:
+            why = view_problem(p, hidden)
+            if why:
+                raise ViewError(f"the sandbox would show the decoder {p}: {why}. Put the decoder (and its manifest) "
+                                f"in a folder of its own", rule="sandbox-view",
+                                file=str(self.manifest_path or self.name))
+        v.read_only = shown
         if argv[0] == sys.executable or Path(argv[0]).resolve() == Path(sys.executable).resolve():
             v.read_only += python_view()
         v.hidden += [Path(h) for h in hidden]
@@ -249,24 +266,33 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
     for key in ("name", "claims", "inputs", "outputs"):
         if key not in data:
             raise bad(f"missing required key {key!r}", "manifest-key")
+    if "sandbox" in data:
+        raise bad("[sandbox] is not a manifest key: the lab, not the decoder, sets what a decoder sees (a folder "
+                  "the decoder's runtime needs is the lab's `--sandbox-ro PATH`, recorded in the statement)",
+                  "manifest-sandbox")
     for key in data:
         if key not in MANIFEST_KEYS:
-            raise bad(f"unknown key {key!r}{_did_you_mean(key, MANIFEST_KEYS)}", "manifest-key")
+            raise bad(f"unknown key {_quote(key)}{_did_you_mean(str(key), MANIFEST_KEYS)}", "manifest-key")
+    for key, kind, what in (("name", str, "a string"), ("description", str, "a string"),
+                            ("claims", list, "a list"), ("tools", list, "a list of tool names"),
+                            ("inputs", list, "a list"), ("outputs", list, "a list"), ("faps_format", str, "a string"),
+                            ("commands", dict, "a table"), ("limits", dict, "a table"), ("env", dict, "a table"),
+                            ("python", str, "a string"), ("options", dict, "a table"),
+                            ("reject_exit_codes", list, "a list")):
+        if key in data and not isinstance(data[key], kind):
+            raise bad(f"{key} must be {what}, not {type(data[key]).__name__}", _KEY_RULE.get(key, "manifest-key"))
+    if "tools" in data and not all(isinstance(t, str) for t in data["tools"]):
+        raise bad("tools must be a list of tool names (strings)", "manifest-tools")
     for key in data.get("limits", {}) if isinstance(data.get("limits"), dict) else ():
         if key not in LIMIT_KEYS:
             raise bad(f"[limits]: unknown key {key!r}{_did_you_mean(key, LIMIT_KEYS)}", "manifest-limits")
     env = data.get("env", {})
     if not isinstance(env, dict) or not all(isinstance(v, (str, int, float, bool)) for v in env.values()):
         raise bad("[env] must be a table of NAME = value", "manifest-env")
-    if "python" in data and (not isinstance(data["python"], str) or ":" not in data["python"]):
-        raise bad('python must be "package.module:Class"', "manifest-python")
+    if "python" in data and not _PYTHON_TARGET.fullmatch(data["python"]):
+        raise bad('python must be "package.module:Class" (dotted names)', "manifest-python")
     if "options" in data and not isinstance(data["options"], dict):
         raise bad("[options] must be a table", "manifest-options")
-    sb = data.get("sandbox", {})
-    if not isinstance(sb, dict) or any(k not in SANDBOX_KEYS for k in sb) or \
-            not all(isinstance(x, str) and x.startswith("/") for x in sb.get("read_only", [])):
-        raise bad("[sandbox] may only give read_only = [absolute paths] (extra folders the decoder needs, "
-                  "e.g. its runtime)", "manifest-sandbox")
     rc = data.get("reject_exit_codes", [1])
     if (not isinstance(rc, list) or not rc or
             any(not isinstance(c, int) or isinstance(c, bool) or not 1 <= c <= 255 or c in (69, 126, 127) for c in rc)):
@@ -285,7 +311,7 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
     for key, allowed in (("inputs", INPUT_KINDS), ("outputs", OUTPUT_KINDS)):
         vals = data[key]
         if not isinstance(vals, list) or not vals or any(v not in allowed for v in vals):
-            raise bad(f"{key} must be a non-empty list of {', '.join(allowed)}; got {vals!r}", f"manifest-{key}")
+            raise bad(f"{key} must be a non-empty list of {', '.join(allowed)}; got {_quote(vals)}", f"manifest-{key}")
     if not ({"fba", "fap"} & set(data["inputs"])):
         raise bad("inputs must include a stream form: fba and/or fap", "manifest-inputs")
     if data.get("faps_format", "fap") not in FAPS_FORMATS:
@@ -294,7 +320,7 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
         known = load_profiles().tools
         unknown = [t for t in data["tools"] if t not in known]
         if unknown:
-            raise bad(f"unknown tool(s) {unknown} (known: {', '.join(known)})", "manifest-tools")
+            raise bad(f"unknown tool(s) {_quote(unknown)} (known: {', '.join(known)})", "manifest-tools")
     if "python" in data:
         return
     cmds = data.get("commands")
@@ -303,7 +329,7 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
                   "manifest-commands")
     for cname, argv in cmds.items():
         if cname not in COMMANDS:
-            raise bad(f"[commands] {cname}: unknown command ({', '.join(COMMANDS)})", "manifest-commands")
+            raise bad(f"[commands] {_quote(cname)}: unknown command ({', '.join(COMMANDS)})", "manifest-commands")
         if not isinstance(argv, list) or not argv or not isinstance(argv[0], str):
             raise bad(f"[commands] {cname} must be an argv list starting with the program", "manifest-commands")
         for item in argv:
@@ -317,7 +343,7 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
                                   f"each input on stdin (usable: {', '.join('{' + p + '}' for p in SERVE_PLACEHOLDERS)})",  # noqa: E501
                                   "manifest-placeholder")
                     if n not in PLACEHOLDERS:
-                        raise bad(f"[commands] {cname}: unknown placeholder {{{n}}} (known: "
+                        raise bad(f"[commands] {cname}: unknown placeholder {_quote(n)} (known: "
                                   f"{', '.join('{' + p + '}' for p in PLACEHOLDERS)})", "manifest-placeholder")
     text = " ".join(str(x) for x in _flatten(cmds["decode"]))
     for out in data["outputs"]:
@@ -327,9 +353,35 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
 
 
 MANIFEST_KEYS = ("name", "description", "claims", "tools", "inputs", "outputs", "faps_format", "commands", "limits",
-                 "env", "python", "options", "reject_exit_codes", "sandbox")
+                 "env", "python", "options", "reject_exit_codes")
 LIMIT_KEYS = ("timeout_s", "memory_mb", "memory_kind", "output_mb", "processes")
-SANDBOX_KEYS = ("read_only",)
+_KEY_RULE = {"name": "manifest-name", "claims": "manifest-claims", "tools": "manifest-tools",
+             "inputs": "manifest-inputs", "outputs": "manifest-outputs", "faps_format": "manifest-faps-format",
+             "commands": "manifest-commands", "limits": "manifest-limits", "env": "manifest-env",
+             "python": "manifest-python", "options": "manifest-options", "reject_exit_codes": "manifest-reject-codes"}
+_PYTHON_TARGET = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*:[A-Za-z_][A-Za-z0-9_]*")
+MAX_MANIFEST_BYTES = 1 << 20
+MAX_MANIFEST_DEPTH = 6  # a table of commands of argv lists of optional groups: 4 levels suffice
+QUOTE_CHARS = 80
+
+
+def _quote(value) -> str:
+    """A value of the manifest as an error message quotes it: repr, at most QUOTE_CHARS."""
+    text = repr(value)
+    return text if len(text) <= QUOTE_CHARS else text[:QUOTE_CHARS] + "…"
+
+
+def _depth(value, limit: int) -> int:
+    """Nesting depth of parsed TOML (tables and arrays), counting no deeper than ``limit`` + 1."""
+    stack, deepest = [(value, 1)], 0
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, (dict, list)):
+            deepest = max(deepest, d)
+            if d > limit:
+                return d
+            stack.extend((x, d + 1) for x in (v.values() if isinstance(v, dict) else v))
+    return deepest
 
 
 def _did_you_mean(word: str, choices) -> str:
@@ -345,19 +397,36 @@ def _flatten(argv):
             yield x
 
 
-def load_manifest(path: Path) -> Adapter:
+def load_manifest(path: Path, *, untrusted: bool = False) -> Adapter:
+    """The adapter a manifest describes. Any problem is a :class:`ManifestError` naming the file,
+    the key and the rule — never another exception. ``untrusted`` (``certify``): an in-process
+    ``python =`` adapter is accepted only from the bundled manifests (it runs inside the
+    harness's own process, unsandboxed)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise ManifestError(f"cannot read decoder manifest: {e.strerror}", rule="manifest-missing",
+        raw = read_regular(path, MAX_MANIFEST_BYTES)
+    except FbaconfInputError as e:
+        raise ManifestError(f"cannot read decoder manifest: {e.message}", rule="manifest-missing",
                             file=str(path)) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise ManifestError(f"not UTF-8 text (byte {e.start})", rule="manifest-toml", file=str(path)) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ManifestError(f"not valid TOML: {e}", rule="manifest-toml", file=str(path)) from None
+        raise ManifestError(f"not valid TOML: {_quote(str(e))}", rule="manifest-toml", file=str(path)) from None
+    except RecursionError:
+        data = None
+    if data is None or _depth(data, MAX_MANIFEST_DEPTH) > MAX_MANIFEST_DEPTH:
+        raise ManifestError(f"nested more than {MAX_MANIFEST_DEPTH} tables/arrays deep", rule="manifest-toml",
+                            file=str(path))
     _check_manifest(data, path)
     if "python" in data:
+        if untrusted and path.resolve().parent != BUNDLED_DIR:
+            raise ManifestError("python = adapters run inside the harness's own process, unsandboxed: certify "
+                                "accepts them only from the bundled manifests; describe the decoder with "
+                                "[commands] (docs/harness.md)", rule="manifest-python", file=str(path))
         return _python_adapter(data, path, text)
     return CommandAdapter(data, path, text)
 
@@ -368,13 +437,20 @@ def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
     try:
         cls = getattr(importlib.import_module(mod_name), cls_name)
     except (ImportError, AttributeError) as e:
-        raise ManifestError(f"python = {target!r}: cannot import: {e}", rule="manifest-python",
+        raise ManifestError(f"python = {_quote(target)}: cannot import: {_quote(str(e))}", rule="manifest-python",
                             file=str(path)) from None
+    except Exception as e:  # noqa: BLE001 - the module's own import failed: the manifest's problem
+        raise ManifestError(f"python = {_quote(target)}: importing it raised {type(e).__name__}",
+                            rule="manifest-python", file=str(path)) from None
+    if not (isinstance(cls, type) and issubclass(cls, PythonAdapter)):
+        raise ManifestError(f"python = {_quote(target)} is not a subclass of "
+                            f"fbaconf.harness.adapters.PythonAdapter", rule="manifest-python", file=str(path))
     kwargs = data.get("options", {})
     try:
         adapter = cls(**kwargs)
     except TypeError as e:
-        raise ManifestError(f"[options] do not fit {target}: {e}", rule="manifest-options", file=str(path)) from None
+        raise ManifestError(f"[options] do not fit {target}: {_quote(str(e))}", rule="manifest-options",
+                            file=str(path)) from None
     adapter.name = data["name"]
     adapter.description = data.get("description", getattr(adapter, "description", ""))
     adapter.claims = list(data["claims"])
@@ -398,14 +474,14 @@ def bundled() -> dict[str, Path]:
     return {p.stem: p for p in sorted(BUNDLED_DIR.glob("*.toml"))}
 
 
-def resolve(spec: str | Path) -> Adapter:
+def resolve(spec: str | Path, *, untrusted: bool = False) -> Adapter:
     """``--decoder`` value: a manifest path, or the name of a bundled adapter (``reference``,
-    ``reference-inprocess``, ``dummy``...)."""
+    ``reference-inprocess``, ``dummy``...). ``untrusted``: see :func:`load_manifest`."""
     p = Path(spec)
     if p.suffix == ".toml" or p.exists():
-        return load_manifest(p.resolve())
+        return load_manifest(p.resolve(), untrusted=untrusted)
     names = bundled()
     if str(spec) in names:
-        return load_manifest(names[str(spec)])
-    raise ManifestError(f"no decoder manifest {spec!r}: give a .toml path or one of the bundled adapters "
-                        f"({', '.join(names)})", rule="manifest-missing", file=str(spec))
+        return load_manifest(names[str(spec)], untrusted=untrusted)
+    raise ManifestError(f"no decoder manifest {_quote(str(spec))}: give a .toml path or one of the bundled adapters "
+                        f"({', '.join(names)})", rule="manifest-missing", file=str(spec)[:QUOTE_CHARS])

@@ -1,5 +1,5 @@
-"""The harness verbs, each registered here: ``fbaconf run``, ``fbaconf certify`` (+ ``certify
-verify``, ``certify keygen``) and ``fbaconf bench`` (:mod:`.bench`).
+"""The harness verbs, each registered here: ``fbaconf run`` and ``fbaconf bench`` (:mod:`.bench`)
+(``fbaconf certify`` is the certification stage's: :mod:`fbaconf.certification.cli`).
 
 Exit codes (docs/harness.md): 0 every required case passes (and the speed requirements when
 measured); 1 some required case fails (a new failure, when ``--baseline`` is given);
@@ -7,7 +7,6 @@ measured); 1 some required case fails (a new failure, when ``--baseline`` is giv
 """
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -38,28 +37,6 @@ def register(sub) -> None:
     r.add_argument("--speed", action="store_true", help="also measure decode/render speed against the level")
     r.set_defaults(func=cmd_run)
 
-    c = sub.add_parser("certify", help="certify a decoder for a claim (or verify a certificate, make a key)",
-                       description="`fbaconf certify --decoder D --claim P@L -o DIR [--key K]` runs exactly the "
-                                   "cases the claim requires plus the speed measurement and writes a certification "
-                                   "package (sha256 digests of every file, signed with an Ed25519 key when --key is "
-                                   "given). `fbaconf certify verify DIR [--pubkey P]` re-checks a package. "
-                                   "`fbaconf certify keygen -o DIR` makes a key pair.")
-    c.add_argument("action", nargs="?", choices=("verify", "keygen"), help="verify a package / make a key pair")
-    c.add_argument("package", nargs="?", type=Path, help="(verify) the package folder")
-    c.add_argument("--key", type=Path, help="sign the package with this Ed25519 private key (PEM)")
-    c.add_argument("--pubkey", type=Path, help="(verify) check the package's signature with this public key")
-    c.add_argument("--force", action="store_true", help="replace an existing certification package in -o")
-    c.add_argument("--allow-unisolated", action="store_true",
-                   help="certify even without the bubblewrap sandbox (the statement says so)")
-    c.add_argument("--decoder", help="decoder manifest .toml or bundled adapter name")
-    c.add_argument("--claim", help="profile@level to certify (default: the decoder's highest claim)")
-    c.add_argument("-o", "--output", type=Path, help="package folder to write")
-    c.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
-    c.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
-                   help="run the cases as tasks on a Dask cluster instead of the local pool")
-    c.add_argument("--no-speed", action="store_true", help="skip the speed measurement (certificate says so)")
-    c.set_defaults(func=cmd_certify)
-
     _register_bench(sub)
 
 
@@ -71,6 +48,18 @@ def _common(p) -> None:
                    help="run the cases as tasks on a Dask cluster instead of the local pool")
     p.add_argument("--keep-workdirs", action="store_true", help="keep each case's working folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    lab_options(p)
+
+
+def lab_options(p) -> None:
+    """What the lab, not the decoder's manifest, decides: the sandbox's extra read-only folders
+    and whether provisional differences fail the claim."""
+    p.add_argument("--sandbox-ro", action="append", type=Path, default=[], metavar="PATH",
+                   help="show the decoder this folder read-only too (its runtime, e.g. a JVM); repeatable; "
+                        "certify records it in the statement")
+    p.add_argument("--strict", action="store_true",
+                   help="a failing case that rests on a provisional decision fails the claim (default: the verdict "
+                        "is PASS (provisional differences: N))")
 
 
 # ------------------------------------------------------------------ run
@@ -95,6 +84,9 @@ def cmd_run(args) -> int:
     )
     adapter = resolve(args.decoder)
     claim = resolve_claim(args.claim, adapter)
+    if args.sandbox_ro and hasattr(adapter, "lab_read_only"):
+        from .session import lab_folders
+        adapter.lab_read_only = lab_folders(args.sandbox_ro)
     suites = load_suites()
     check_suites(suites, args.suite)
     if args.retries < 0:
@@ -106,7 +98,7 @@ def cmd_run(args) -> int:
     out_dir = (args.output or Path("fbaconf-run") / adapter.name).resolve()
     options = RunOptions(jobs=args.jobs, cluster=args.cluster, resume=args.resume, keep_workdirs=args.keep_workdirs,
                          progress=False if args.no_progress else None, baseline=args.baseline, flakes=args.flakes,
-                         retries=args.retries, allow_fixed=args.allow_fixed, speed=args.speed)
+                         retries=args.retries, allow_fixed=args.allow_fixed, speed=args.speed, strict=args.strict)
     record = execute(adapter, claim, cases, suites, out_dir, options)
     paths = write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
     if args.write_baseline:
@@ -123,37 +115,6 @@ def cmd_run(args) -> int:
             print("  (a .fap player cannot hold an MPEG-4 profile claim; see docs/harness.md, \"Players\")")
     print(f"reports: {paths['html']}  {paths['json']}  {paths['junit']}")
     return record.exit_code
-
-
-# ------------------------------------------------------------------ certify
-
-
-def cmd_certify(args) -> int:
-    from . import certify
-    from .session import UsageError
-    if args.action == "keygen":
-        if not args.output:
-            raise UsageError("certify keygen needs -o DIR")
-        key, pub = certify.keygen(args.output)
-        print(f"wrote {key} (private: keep it secret) and {pub} (public: give it to whoever verifies)")
-        return 0
-    if args.action == "verify":
-        if args.package is None:
-            raise UsageError("certify verify: give the package folder")
-        problems, state = certify.verify(args.package, args.pubkey)
-        for p in problems:
-            print(f"certify verify: {p}", file=sys.stderr)
-        if problems:
-            print(f"certify verify: FAILED ({len(problems)} problem(s); {state})")
-            return 1
-        info = json.loads(certify.read_regular(args.package / certify.CERTIFICATE, 1 << 20))
-        print(f"certify verify: OK ({state}) — {info.get('decoder')} {info.get('claim')}: {info.get('verdict')}")
-        return 0
-    if not args.decoder or not args.output:
-        raise UsageError("--decoder and -o/--output are required")
-    return certify.certify(args.decoder, args.claim, args.output.resolve(), jobs=args.jobs, speed=not args.no_speed,
-                           key=args.key, force=args.force, allow_unisolated=args.allow_unisolated,
-                           cluster=args.cluster)
 
 
 # ------------------------------------------------------------------ bench

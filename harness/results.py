@@ -94,6 +94,7 @@ class CaseResult:
     stderr_tail: str = ""
     crash_kind: str | None = None  # the crash report found (sanitizer, panic, uncaught exception), if any
     baseline: str | None = None  # "known-failure", "flake", "fixed" (listed failing, passes now), "new"
+    rests_on: list[str] = field(default_factory=list)  # provisional decisions the expected output rests on (D3-D8)
 
     @property
     def first_difference(self) -> dict | None:
@@ -155,6 +156,10 @@ class RunRecord:
     missing: list[str] = field(default_factory=list)  # required cases the decoder could not take, by reason
     baseline_summary: str = ""  # "N new, N known, N fixed, N flaky" when a baseline/flakes/retries applied
     exit_code: int = 0
+    # required cases failing only on provisional decisions ({"case_id", "rests_on"}); they fail the claim
+    # only under --strict (harness/provisional.py)
+    provisional_differences: list[dict] = field(default_factory=list)
+    strict: bool = False
 
     def counts(self, results: Iterable[CaseResult] | None = None) -> dict[str, int]:
         c = {o.value: 0 for o in OUTCOME_ORDER}
@@ -169,6 +174,7 @@ class RunRecord:
             "started": self.started, "finished": self.finished, "duration_s": self.duration_s,
             "counts": self.counts(), "exit_code": self.exit_code, "provisional": self.provisional,
             "missing": self.missing, "baseline_summary": self.baseline_summary,
+            "provisional_differences": self.provisional_differences, "strict": self.strict,
             "results": [r.to_json() for r in self.results],
             "speed": [s.to_json() for s in self.speed],
         }
@@ -180,7 +186,8 @@ class RunRecord:
                    speed=[SpeedResult.from_json(s) for s in d.get("speed", [])],
                    started=d.get("started", ""), finished=d.get("finished", ""),
                    duration_s=d.get("duration_s", 0.0), provisional=d.get("provisional", []),
-                   missing=d.get("missing", []), baseline_summary=d.get("baseline_summary", ""), exit_code=d.get("exit_code", 0))  # noqa: E501
+                   missing=d.get("missing", []), baseline_summary=d.get("baseline_summary", ""), exit_code=d.get("exit_code", 0),  # noqa: E501
+                   provisional_differences=d.get("provisional_differences", []), strict=d.get("strict", False))
 
 
 class ResultLog:

@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-import fbaconf
 from fbaconf.conformance.suite import Case, CaseKind, golden_root, suites_root
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import endings, sandbox
@@ -39,6 +38,7 @@ from . import cluster as cl
 from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
 from .compare.base import worst
 from .compare.ladder import compare_outputs, outcome_for
+from .provisional import rests_on
 from .results import CaseResult, Outcome, ResultLog
 from .selection import capability, required_for
 
@@ -55,48 +55,63 @@ class RunContext:
     work_root: Path | None = None
 
 
+# Suffixes of the forms a case's expected results come in (or could be mistaken for): an
+# auxiliary file with one of them is never staged, whatever a suite lists.
+_NEVER_AUXILIARY = frozenset({".fap", ".fba", ".npz", ".bt", ".bifs", ".json"})
+
+
+def staged_inputs(adapter: Adapter, case: Case) -> dict[str, Path]:
+    """What a decoder's case folder holds (placeholder -> the suite file copied there): exactly
+    the input forms its manifest accepts — the ``.fba`` when it accepts ``fba`` (never the
+    case's ``.fap``: that text is the reference decoding, i.e. the expected output); the
+    ``.fap`` only for a program that takes the text form and not the binary one (a player);
+    the BT and/or binary BIFS scene when it accepts ``scene``/``bifs``; the rendering
+    scenario; and the files a scene names by relative URL (textures). Nothing derived from
+    the goldens, and no other case's files (docs/harness.md, "What a decoder sees")."""
+    out: dict[str, Path] = {}
+    fba, fap = case.input_path("fba"), case.input_path("fap")
+    if "fba" in adapter.inputs and fba is not None:
+        out["fba"] = out["input"] = fba
+    elif "fap" in adapter.inputs and fap is not None:
+        out["fap"] = out["input"] = fap
+    bt, bifs = case.input_path("scene"), case.input_path("bifs")
+    if "scene" in adapter.inputs and bt is not None:
+        out["scene_bt"] = out["scene"] = bt
+    if "bifs" in adapter.inputs and bifs is not None:
+        out["scene_bifs"] = bifs
+        out.setdefault("scene", bifs)
+    scenario = case.input_path("scenario")
+    if scenario is not None:
+        out["scenario"] = scenario
+    return out
+
+
+def auxiliary_files(case: Case) -> list[Path]:
+    """The files a case lists beside its inputs (a texture its scene names by a relative URL):
+    never one of the case's input or golden forms."""
+    if case.suite_dir is None:
+        return []
+    named = {v for k, v in case.inputs.items() if k != "faces" and isinstance(v, str)}
+    named |= set(case.inputs.get("faces", []))
+    return [case.suite_dir / rel for rel in case.sha256
+            if rel not in named and Path(rel).suffix.lower() not in _NEVER_AUXILIARY]
+
+
 def _prepare(ctx: RunContext, case: Case, workdir: Path) -> Job:
     ind = workdir / "in"
     outd = workdir / "out"
     ind.mkdir(parents=True)
     outd.mkdir()
     values: dict[str, str] = {}
-
-    def copy(key: str) -> str | None:
-        src = case.input_path(key)
-        if src is None:
-            return None
+    for key, src in staged_inputs(ctx.adapter, case).items():
         dst = ind / src.name
-        shutil.copyfile(src, dst)
-        return str(dst)
-
-    for key, ph in (("fba", "fba"), ("fap", "fap"), ("scene", "scene_bt"), ("bifs", "scene_bifs"),
-                    ("scenario", "scenario")):
-        v = copy(key)
-        if v is not None:
-            values[ph] = v
+        if not dst.exists():
+            shutil.copyfile(src, dst)
+        values[key] = str(dst)
+    for src in auxiliary_files(case):
+        if src.is_file() and not (ind / src.name).exists():
+            shutil.copyfile(src, ind / src.name)
     a = ctx.adapter
-    if "fba" in a.inputs and "fba" in values:
-        # A decoder of the binary stream never gets the .fap form of the case: that text is
-        # what the reference decoded, i.e. the expected output.
-        values["input"] = values["fba"]
-        fap = values.pop("fap", None)
-        if fap is not None:
-            Path(fap).unlink()
-    elif "fap" in a.inputs and "fap" in values:
-        values["input"] = values["fap"]
-    if "scene" in a.inputs and "scene_bt" in values:
-        values["scene"] = values["scene_bt"]
-    elif "bifs" in a.inputs and "scene_bifs" in values:
-        values["scene"] = values["scene_bifs"]
-    # auxiliary files of the case (e.g. a texture the scene names by a relative URL) travel with it
-    if case.suite_dir is not None:
-        named = {Path(v).name for k, v in values.items()}
-        for rel in case.sha256:
-            src = case.suite_dir / rel
-            if src.name not in named and rel not in case.inputs.get("faces", []) and src.is_file() \
-                    and not (ind / src.name).exists():
-                shutil.copyfile(src, ind / src.name)
     ext = "fap" if a.faps_format == "fap" else "npz"
     values["faps_out"] = str(outd / f"faps.{ext}")
     values["vertices_out"] = str(outd / "vertices.npz")
@@ -125,7 +140,8 @@ def _remove_quietly(path: Path) -> None:
 def run_case(ctx: RunContext, case: Case) -> CaseResult:
     t0 = time.perf_counter()
     required = required_for(ctx.claim, case, ctx.adapter)
-    base = dict(case_id=case.full_id, suite=case.suite, claim=case.claim, required=required)
+    base = dict(case_id=case.full_id, suite=case.suite, claim=case.claim, required=required,
+                rests_on=rests_on(case))
     why = capability(ctx.adapter, case)
     if why:
         return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED, message=why)
@@ -154,7 +170,8 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
         except KeyError as e:
             return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED,
                               message=f"[commands] {cmd} needs {{{e.args[0]}}}, which this case does not have")
-        view = a.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders(ctx))
+        hidden = hidden_from_decoders(ctx) + ([case.suite_dir.resolve()] if case.suite_dir else [])
+        view = a.sandbox_view(argv, job.workdir, hidden=hidden)
         res = sandbox.run(argv, job.workdir, a.limits, env=a.env, view=view)
         ending = endings.classify(res, a.limits, a.reject_exit_codes)
         proc = dict(command=argv, exit_code=res.returncode, signal=res.signal, stderr_tail=res.stderr_tail[-2000:])
@@ -176,10 +193,11 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
 
 
 def hidden_from_decoders(ctx: RunContext | None = None) -> list[Path]:
-    """What a sandboxed decoder must never see even where fbaconf's own files are visible:
-    the goldens, the suites, the run folder (results, other cases, reports), the git tree."""
-    root = Path(fbaconf.__file__).resolve().parent.parent
-    out = [Path(golden_root()).resolve(), Path(suites_root()).resolve(), root / ".git"]
+    """What a sandboxed decoder must never see even where fbaconf's own files are visible (the
+    ``{python}`` view shows the fbaconf package): the goldens, the suites, the run folder
+    (results, other cases, reports). The case's own suite folder is added per case, and a
+    signing key by :func:`fbaconf.isolation.sandbox.keep_secret`."""
+    out = [Path(golden_root()).resolve(), Path(suites_root()).resolve()]
     if ctx is not None:
         out += [Path(ctx.golden).resolve(), Path(ctx.out_dir).resolve()]
     return out

@@ -24,8 +24,9 @@ from fbaconf.profiles.model import Claim, load_profiles
 from . import baseline as bl
 from . import reports
 from .adapters import CommandAdapter, highest_claim
+from .provisional import is_provisional_difference, provisional_differences
 from .results import RunRecord
-from .runner import run_cases
+from .runner import hidden_from_decoders, run_cases
 from .speed import measure_claim
 from .sysinfo import system_info
 
@@ -64,6 +65,7 @@ class RunOptions:
     retries: int = 0
     allow_fixed: bool = False
     speed: bool = False
+    strict: bool = False  # provisional differences fail the claim (harness/provisional.py)
 
 
 def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptions | None = None):
@@ -71,8 +73,8 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
 
     Exit code: 1 when a required case fails or could not be taken (a claim means all of it),
     counting only new failures (and fixed cases, unless ``allow_fixed``) when a baseline or
-    flakes file is given; 3 only when every required case passed and only speed was missed;
-    else 0."""
+    flakes file is given — a provisional difference (:mod:`.provisional`) only under
+    ``strict``; 3 only when every required case passed and only speed was missed; else 0."""
     o = options or RunOptions()
     jobs, baseline, flakes, retries, speed = o.jobs, o.baseline, o.flakes, o.retries, o.speed
     t0 = time.perf_counter()
@@ -85,7 +87,9 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
         return _interrupted_record(adapter, claim, suites, cases, results, started, t0, stop.signum)
     if retries:
         _retry(adapter, cases, results, claim, out_dir, jobs, retries)
-    summary = bl.classify(results, bl.load(baseline) if baseline is not None else None,
+    differences = provisional_differences(results)
+    judged = results if o.strict else [r for r in results if not is_provisional_difference(r)]
+    summary = bl.classify(judged, bl.load(baseline) if baseline is not None else None,
                           bl.load_flakes(flakes) if flakes is not None else None)
     speed_results = []
     if speed:
@@ -94,6 +98,7 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
     record.speed = speed_results
     record.missing = missing_summary(results)
     record.baseline_summary = summary.line() if (baseline is not None or flakes is not None or retries) else ""
+    record.provisional_differences, record.strict = differences, o.strict
     if summary.failing(o.allow_fixed):
         record.exit_code = 1
     elif any(not s.passed for s in speed_results):
@@ -155,6 +160,20 @@ def resolve_claim(text: str | None, adapter) -> str:
         raise UsageError(f"--claim: {e}") from None
 
 
+def lab_folders(paths: list[Path]) -> list[Path]:
+    """The lab's --sandbox-ro folders, checked: absolute, existing, not too broad (UsageError)."""
+    out = []
+    for p in paths:
+        p = Path(p)
+        if not p.is_absolute() or not p.is_dir():
+            raise UsageError(f"--sandbox-ro {p}: give an absolute path to an existing folder")
+        why = sandbox.view_problem(p)
+        if why:
+            raise UsageError(f"--sandbox-ro {p}: {why}")
+        out.append(p)
+    return out
+
+
 def check_suites(suites, names: list[str]) -> None:
     """Unknown ``--suite`` names are a usage error, with the nearest name."""
     known = [s.name for s in suites]
@@ -175,6 +194,9 @@ def preflight(adapter) -> None:
               "the goldens and write outside its folder. Install it (Debian: apt-get install bubblewrap); "
               "certify refuses to run without it unless told --allow-unisolated.", file=sys.stderr)
     prog = adapter.program()
+    # the folders the sandbox would show it (program, manifest, --sandbox-ro): ViewError (exit 2) if too broad
+    adapter.sandbox_view([prog or str(adapter.commands["decode"][0])], Path("/nonexistent-case"),
+                         hidden=hidden_from_decoders())
     if prog is None:
         raise UsageError(f"decoder {adapter.name}: program {adapter.commands['decode'][0]!r} not found "
                          f"(not a file, and not on PATH)")

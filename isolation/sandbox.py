@@ -36,8 +36,11 @@ limit — and :mod:`.endings` turns it into an outcome with a useful message.
 """
 from __future__ import annotations
 
+import functools
+import importlib.util
 import math
 import os
+import pkgutil
 import select
 import shutil
 import signal
@@ -100,6 +103,9 @@ class View:
     read_only_inside: list[Path] = field(default_factory=list)  # re-bound read-only inside writable ones
 
 
+# The system folders every sandbox shows read-only (a link among them is recreated as the link).
+SYSTEM_TOPS = ("/usr", "/etc", "/bin", "/sbin", "/lib", "/lib32", "/lib64", "/libx32")
+
 _ISOLATION: str | None = None
 _ISO_LOCK = threading.Lock()
 
@@ -123,15 +129,20 @@ def isolation() -> str:
         return _ISOLATION
 
 
+def _under_any(p: Path, roots: list[Path]) -> bool:
+    return any(p == r or r in p.parents for r in roots)
+
+
 def _bwrap_argv(view: View, workdir: Path) -> list[str]:
     out = [shutil.which("bwrap") or "bwrap", "--die-with-parent", "--new-session", "--unshare-all",
            "--cap-drop", "ALL"]
-    for top in ("/usr", "/etc", "/bin", "/sbin", "/lib", "/lib32", "/lib64", "/libx32"):
+    for top in SYSTEM_TOPS:
         p = Path(top)
         if p.is_symlink():
             out += ["--symlink", os.readlink(p), top]
         elif p.is_dir():
             out += ["--ro-bind", top, top]
+    # the sandbox's own /proc (its PID namespace: none of the host's processes), /dev, /tmp
     out += ["--proc", "/proc", "--dev", "/dev", "--tmpfs", "/tmp"]
     seen = set()
     for p in view.read_only:
@@ -139,9 +150,15 @@ def _bwrap_argv(view: View, workdir: Path) -> list[str]:
         if p.exists() and str(p) not in seen:
             seen.add(str(p))
             out += ["--ro-bind", str(p), str(p)]
-    for p in view.hidden:
-        if Path(p).is_dir():
+    shown = [Path(x) for x in seen] + [Path(p) for p in view.writable] + [Path(t) for t in SYSTEM_TOPS]
+    for p in [*view.hidden, *sorted(_SECRETS)]:  # only what would otherwise show: no mount point for the rest
+        p = Path(p)
+        if not _under_any(p, shown) or p.is_symlink():
+            continue
+        if p.is_dir():
             out += ["--tmpfs", str(p)]
+        elif p.exists():
+            out += ["--ro-bind", "/dev/null", str(p)]  # a hidden file: opening it fails (nodev)
     for p in view.writable:
         if Path(p).exists():
             out += ["--bind", str(p), str(p)]
@@ -209,11 +226,79 @@ def default_view(argv: list[str], workdir: Path) -> View:
     return View(read_only=ro, writable=[Path(workdir)], read_only_inside=[Path(workdir) / "in"])
 
 
+_SECRETS: set[Path] = set()
+
+
+def keep_secret(path: Path) -> None:
+    """Hide ``path`` (a signing key read before any decoder starts) from every decoder view
+    from now on, wherever a view would show it: a device node is mounted over it, which the
+    sandbox's nodev mounts refuse to open (EACCES)."""
+    p = Path(os.path.abspath(path))
+    _SECRETS.update({p, p.resolve()})
+
+
+# Folders no view may show, nor any folder below them: the kernel's and the runtime's.
+_NEVER_SHOWN = ("/proc", "/sys", "/dev", "/run")
+
+
+def view_problem(path: Path, hidden=()) -> str | None:
+    """Why a folder must not be shown to a decoder read-only, or None: the whole file system,
+    a top-level folder other than the system ones (``/tmp``, ``/home``, ``/root``: every user's
+    and every run's files), anything under /proc, /sys, /dev or /run (the host's processes), a
+    folder holding the fbaconf project or the user's home (goldens' build copies, keys, other
+    runs), or a folder inside one that is ``hidden``. Checked as given and with links resolved."""
+    pkg_root = Path(fbaconf.__file__).resolve().parent.parent
+    guarded = [pkg_root, Path.home().resolve()]
+    given = Path(os.path.abspath(path))
+    never = [Path(t) for t in _NEVER_SHOWN]
+    if _under_any(given, never):
+        return "that is the kernel's or the runtime's (the host's processes)"
+    try:
+        forms = {given, given.resolve()}
+    except OSError as e:
+        return f"it cannot be resolved ({e.strerror})"
+    for q in forms:
+        if q == Path("/"):
+            return "that is the whole file system"
+        if _under_any(q, never):
+            return "that is the kernel's or the runtime's (the host's processes)"
+        if len(q.parts) == 2 and str(q) not in SYSTEM_TOPS:
+            return "a top-level folder holds every user's and every run's files"
+        for g in guarded:
+            if q == g or q in g.parents:
+                return f"it holds {g} (the fbaconf project or the home folder)"
+        for h in hidden:
+            h = Path(h).resolve()
+            if q == h or h in q.parents:
+                return f"it lies inside {h}, which decoders never see"
+    return None
+
+
 def python_view() -> list[Path]:
     """What a decoder started through ``{python}`` needs read-only: the Python installation,
-    the venv and the fbaconf package (the caller hides the goldens, suites and run folder)."""
-    pkg_root = Path(fbaconf.__file__).resolve().parent.parent
-    return [Path(sys.base_prefix).resolve(), Path(sys.prefix).resolve(), Path(sys.prefix), pkg_root]
+    the venv and the folders the fbaconf package is imported from — not the project folder
+    around them (tests, build copies, keys, other runs). The caller hides the goldens, the
+    suites and the run folder inside them."""
+    return [Path(sys.base_prefix).resolve(), Path(sys.prefix).resolve(), Path(sys.prefix), *package_dirs()]
+
+
+@functools.lru_cache(maxsize=1)
+def package_dirs() -> tuple[Path, ...]:
+    """The folders ``import fbaconf`` reads: one folder for an installed wheel; for an editable
+    install, ``fbaconf/`` and one folder per stage (``harness/``, ``bitstreams/``...) — never
+    the project root, and never the goldens' package (``fbaconf.golden``)."""
+    top = Path(fbaconf.__file__).resolve().parent
+    names = {m.name for m in pkgutil.iter_modules([str(top)]) if m.ispkg}
+    names |= {d.name for d in top.parent.iterdir() if (d / "__init__.py").is_file() and d.name.isidentifier()}
+    dirs = {top}
+    for name in sorted(names - {"golden"}):
+        try:
+            spec = importlib.util.find_spec(f"fbaconf.{name}")
+        except (ImportError, ValueError):
+            continue
+        for loc in (spec.submodule_search_locations or []) if spec is not None else []:
+            dirs.add(Path(loc).resolve())
+    return tuple(sorted(d for d in dirs if not any(o in d.parents for o in dirs)))
 
 
 def decoder_env(workdir: Path, env: dict[str, str] | None) -> dict[str, str]:

@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
-from fbaconf.harness import certify
+from fbaconf.certification import certify
 
 # ci: deterministic (derandomised) so a CI run is reproducible; dev: random exploration.
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True,

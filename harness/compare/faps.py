@@ -27,8 +27,12 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
     A different frame count fails (reported as the first difference unless an earlier
     frame already differs). With ``.npz`` output plane times must match within
     ``[faps] time_tol_ms`` of the tolerance file. With ``.fap`` output the header's frame
-    rate must equal the coded rate within ``[faps] header_rate_tol_hz``, and frame numbers
-    may count from 0 or from 1 (one offset for the whole file, reported in the metrics).
+    rate must equal the coded rate within ``[faps] header_rate_tol_hz`` and
+    ``header_rate_rel_tol`` (a dropped or added 1000/1001 factor fails at every rate), and
+    frame numbers — which carry the skips — may count from 0 or from 1 (one offset for the
+    whole file, reported in the metrics); the plane times a ``.fap`` cannot carry (a time
+    code, a rate change: a time that is not frame number / rate) are counted in
+    ``metrics["times_unverified"]`` (the certificate says timing was not verified).
     ``player=True`` (the decoder was given .fap text: a player): its output is its state, so
     every FAP that holds a value must be written in every frame (mask 1); one left to the
     reader's hold counts as missing — the input text was sparse, and copying it is no playing.
@@ -67,13 +71,19 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
         offset = 1  # a player numbering frames from 1, as the .fap notes allow
     fndiff = e.frame_number + offset != g.frame_number
     rate_bad = False
+    tol = load_tolerances().get("faps", {})
+    time_tol = float(tol.get("time_tol_ms", 0.5))
+    times_unverified = 0
     if text_output:
-        rate_tol = float(load_tolerances().get("faps", {}).get("header_rate_tol_hz", 0.005))
-        rate_bad = not abs(float(expected.frame_rate) - float(got.frame_rate)) <= rate_tol
+        er = float(expected.frame_rate)
+        rate_tol = min(float(tol.get("header_rate_tol_hz", 0.005)), float(tol.get("header_rate_rel_tol", 2e-4)) * er)
+        rate_bad = not abs(er - float(got.frame_rate)) <= rate_tol
+        with np.errstate(invalid="ignore", divide="ignore"):
+            implied = np.asarray(expected.frame_number, np.float64) * 1000.0 / er
+            times_unverified = int((~(np.abs(implied - np.asarray(expected.time_ms, np.float64)) <= time_tol)).sum())
     per_fap = vdiff | sdiff | missing
     # plane times (frame rate, skips, time codes, 1000/1001) are normative too (decision D6);
     # .fap text carries only frame numbers and one rate, so times are compared for .npz output
-    time_tol = float(load_tolerances().get("faps", {}).get("time_tol_ms", 0.5))
     with np.errstate(invalid="ignore"):
         tdiff = ~(np.abs(np.asarray(e.time_ms, np.float64) - np.asarray(g.time_ms, np.float64)) <= time_tol)
     if text_output:
@@ -88,6 +98,12 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
     metrics = {"frames_compared": float(n), "frames_differing": float(bad_frame.sum()),
                "faps_differing": float(per_fap.sum()), "max_abs_diff": float(max_abs.max(initial=0)),
                "expected_frames": float(ne), "got_frames": float(ng), "frame_number_offset": float(offset)}
+    # what kind of difference (harness/provisional.py: which provisional decision could explain it)
+    metrics.update(values_differing=float((vdiff | missing).sum()), status_differing=float(sdiff.sum()),
+                   frame_numbers_differing=float(fndiff.sum()), times_differing=float(tdiff.sum()),
+                   rate_differs=float(rate_bad))
+    if text_output:
+        metrics["times_unverified"] = float(times_unverified)
 
     first: dict[str, Any] | None = None
     detail = ""

@@ -44,7 +44,10 @@ def profile_of(claim: str | None) -> str:
 
 
 def verdict(record: RunRecord) -> str:
-    """``PASS`` / ``FAIL`` / ``SPEED FAIL`` / ``SETUP ERROR`` from the record's exit code."""
+    """``PASS`` / ``PASS (provisional differences: N)`` / ``FAIL`` / ``SPEED FAIL`` / ``SETUP ERROR``
+    from the record's exit code and its provisional differences (harness/provisional.py)."""
+    if record.exit_code == 0 and record.provisional_differences:
+        return f"PASS (provisional differences: {len(record.provisional_differences)})"
     return VERDICTS.get(record.exit_code, f"EXIT {record.exit_code}")
 
 

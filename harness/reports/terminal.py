@@ -157,6 +157,13 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
             if s.message:
                 lines.append(f"  {clean_text(s.operation)}: {clean_text(s.message)}")
 
+    if record.provisional_differences:
+        how = "they fail the claim (--strict)" if record.strict else "the claim passes with them; --strict fails them"
+        lines += ["", f"provisional differences ({how}): failing cases whose expected output rests on a provisional "
+                  f"decision (harness/data/provisional.toml)"]
+        lines += [f"  {clean_text(d['case_id'])}  rests on {', '.join(d['rests_on'])}"
+                  for d in record.provisional_differences]
+
     v = verdict(record)
     lines.append("")
     code = "32" if record.exit_code == 0 else ("33" if record.exit_code == 3 else "31")

@@ -1,0 +1,307 @@
+"""Certification packages: run exactly what a claim requires, write a sealed package.
+
+Package layout (``-o DIR``)::
+
+    certificate.json     claim, decoder, verdict, provisional differences, suite versions + digests
+    statement.md         the human statement: verdict, isolation, what it rests on, what was not verified
+    decoder.toml         the decoder manifest as used
+    report.json          the full run record (fbaconf.run/1);  results.jsonl  one line per case
+    junit.xml, index.html (+ artefacts/), summary.txt
+    suites/<name>.json   the suite manifests run;  golden-MANIFEST.json   the golden digests
+    SHA256SUMS           sha256 of every file above;  SIGNATURE  (--key) Ed25519 over SHA256SUMS
+
+Sealing and verifying live in :mod:`.package`: ``certify verify`` re-reads every file once,
+re-derives the verdict from ``results.jsonl`` and the claim rules, and fails on any change.
+
+The lab sets isolation: the private key is read before anything else and hidden from every
+decoder view; a ``python =`` adapter is accepted only from the bundled manifests; without
+bubblewrap or writable cgroups ``certify`` refuses (naming what is missing) unless
+``--allow-unisolated``, and the statement then says "not isolated: …".
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fbaconf._atomic import atomic_write_text
+from fbaconf.conformance.coverage import case_points
+from fbaconf.conformance.golden import MANIFEST
+from fbaconf.conformance.suite import golden_root, load_suites
+from fbaconf.errors import FbaconfInputError
+from fbaconf.harness import reports
+from fbaconf.harness.adapters import CommandAdapter, resolve
+from fbaconf.harness.provisional import agreement
+from fbaconf.harness.selection import claim_covers, select_cases
+from fbaconf.harness.session import (
+    RunOptions,
+    UsageError,
+    execute,
+    lab_folders,
+    preflight,
+    resolve_claim,
+    write_reports,
+)
+from fbaconf.isolation import cgroups, sandbox
+from fbaconf.profiles.model import Claim, load_profiles
+from fbaconf.safefs import read_regular, remove_tree
+
+from .package import (
+    CERTIFICATE,
+    FORMAT,
+    KEY_FILE,
+    PUB_FILE,
+    SIGNATURE,
+    SUMS,
+    SignatureError,
+    Verification,
+    derive_verdict,
+    keygen,
+    load_key,
+    seal,
+    verify,
+)
+
+__all__ = ["certify", "CertifyOptions", "verify", "verify_package", "keygen", "Verification", "SignatureError",
+           "CERTIFICATE", "SUMS", "SIGNATURE", "FORMAT", "KEY_FILE", "PUB_FILE", "prepare_output", "claim_basis"]
+
+
+@dataclass
+class CertifyOptions:
+    """How ``certify`` runs: parallelism, the speed phase, the signing key, replacing a package,
+    certifying without isolation, a Dask cluster, ``strict`` (provisional differences fail the
+    claim) and the lab's extra read-only folders for the decoder's runtime (``--sandbox-ro``)."""
+    jobs: int | None = None
+    speed: bool = True
+    key: Path | None = None
+    force: bool = False
+    allow_unisolated: bool = False
+    cluster: str | None = None
+    strict: bool = False
+    sandbox_ro: list[Path] = field(default_factory=list)
+
+
+def isolation_gaps(adapter) -> list[str]:
+    """What this machine lacks to isolate ``adapter`` fully (empty: nothing)."""
+    if not isinstance(adapter, CommandAdapter):
+        return []
+    gaps = []
+    if sandbox.isolation() == "none":
+        gaps.append("bubblewrap (bwrap) is not available: the decoder could read the goldens and the host")
+    if not cgroups.cgroup_bases():
+        gaps.append("no writable cgroups (/sys/fs/cgroup): memory and process limits hold per process, not for "
+                    "the decoder's whole process tree")
+    return gaps
+
+
+def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions | None = None, **kw) -> int:
+    """Certify ``decoder`` for ``claim`` into the package folder ``out`` (``kw``: fields of
+    :class:`CertifyOptions`). Returns the exit code (0 pass, 1 fail, 2 set-up, 3 speed)."""
+    o = options or CertifyOptions(**kw)
+    t0 = time.perf_counter()
+    key = None
+    if o.key is not None:  # read first, hidden from every decoder from here on
+        key = load_key(Path(o.key), private=True)
+        sandbox.keep_secret(Path(o.key))
+    adapter = resolve(decoder, untrusted=True)
+    claim = resolve_claim(claim, adapter)
+    if not any(claim_covers(c, claim) for c in adapter.claims):
+        print(f"fbaconf certify: error: the decoder does not claim {claim} (claims: {', '.join(adapter.claims)})",
+              file=sys.stderr)
+        return 2
+    if isinstance(adapter, CommandAdapter):
+        adapter.lab_read_only = lab_folders(o.sandbox_ro)
+    preflight(adapter)
+    if adapter.is_player:
+        print(f"fbaconf certify: error: {adapter.name} reads only the .fap text form (inputs: "
+              f"{', '.join(adapter.inputs)}): it is a FAP player, not a decoder. An MPEG-4 profile certificate "
+              f"requires decoding the binary face-object stream (inputs must include \"fba\"). Test a player "
+              f"with `fbaconf run` (docs/harness.md, \"Players\").", file=sys.stderr)
+        return 2
+    gaps = isolation_gaps(adapter)
+    if gaps and not o.allow_unisolated:
+        print("fbaconf certify: error: the decoder cannot be isolated on this machine: " + "; ".join(gaps) +
+              ". Install bubblewrap (Debian: apt-get install bubblewrap) and run where cgroups are writable (as "
+              "root, or in a delegated cgroup), or give --allow-unisolated (the statement then says \"not "
+              "isolated\")", file=sys.stderr)
+        return 2
+    suites = load_suites()
+    cases = select_cases(suites, claim, [], [], only_required=True, adapter=adapter)
+    out = Path(out).resolve()
+    prepare_output(out, o.force)
+    record = execute(adapter, claim, cases, suites, out,
+                     RunOptions(jobs=o.jobs, speed=o.speed, cluster=o.cluster, strict=o.strict))
+    write_reports(record, out)
+    if record.exit_code >= 128:
+        print(f"fbaconf certify: interrupted: no certificate written; partial report in {out}", file=sys.stderr)
+        return record.exit_code
+    results = [r.to_json() for r in record.results]
+    speed = [s.to_json() for s in record.speed] if o.speed else None
+    verdict, code, differences = derive_verdict(results, strict=o.strict, speed=speed)
+    if code != record.exit_code:  # one rule: the session's exit code and the package's verdict agree
+        raise RuntimeError(f"certify: the run's exit code {record.exit_code} and the verdict {verdict} disagree")
+    basis = claim_basis(record, cases, claim)
+    basis["isolation"] = _isolation_line(adapter, gaps)
+    basis["sandbox_ro"] = [str(p) for p in getattr(adapter, "lab_read_only", [])]
+    basis["timing"] = timing_note(record, adapter)
+    (out / "suites").mkdir()
+    for s in suites:
+        if s.name in {c.suite for c in cases}:
+            shutil.copyfile(s.manifest_path(), out / "suites" / f"{s.name}.json")
+    gm = golden_root() / MANIFEST
+    if gm.is_file():
+        shutil.copyfile(gm, out / "golden-MANIFEST.json")
+    if adapter.manifest_path:
+        shutil.copyfile(adapter.manifest_path, out / "decoder.toml")
+    summary = reports.terminal_summary(record, color=False)
+    atomic_write_text(out / "summary.txt", summary + "\n")
+    atomic_write_text(out / "statement.md", _statement(record, verdict, o.speed, basis))
+    counts = {k: n for k, n in record.counts().items() if n}
+    cert = {"format": FORMAT, "decoder": adapter.name, "decoder_manifest_sha256": adapter.digest(),
+            "claim": claim, "verdict": verdict, "exit_code": code, "strict": o.strict,
+            "provisional_differences": differences, "cases": len(results), "counts": counts,
+            "speed": speed if speed is not None else "not measured",
+            "suites": record.suites, "provisional": record.provisional, "issued": record.finished,
+            "rests_on": basis}
+    atomic_write_text(out / CERTIFICATE, json.dumps(cert, indent=1) + "\n")
+    seal(out, key)
+    print(summary)
+    print(f"certificate: {out / CERTIFICATE}  report: {out / 'index.html'}  ({time.perf_counter() - t0:.1f} s)")
+    return record.exit_code
+
+
+def _isolation_line(adapter, gaps: list[str]) -> str:
+    if not isinstance(adapter, CommandAdapter):
+        return "in-process (a bundled, trusted Python adapter)"
+    if gaps:
+        return "not isolated: " + "; ".join(gaps) + " (--allow-unisolated)"
+    return "bubblewrap sandbox (own PID, network, IPC namespaces; the view of docs/harness.md) and cgroups"
+
+
+def timing_note(record, adapter) -> dict:
+    """What the FAP stage could not say about timing: for ``.fap`` output, the cases whose plane
+    times (time codes, rate changes) the text cannot carry."""
+    if adapter.faps_format != "fap" or "faps" not in adapter.outputs:
+        return {"verified": True, "cases_not_verified": []}
+    cases = [r.case_id for r in record.results
+             if any(st.stage == "faps" and st.metrics.get("times_unverified", 0) > 0 for st in r.stages)]
+    return {"verified": False, "cases_not_verified": cases}
+
+
+def claim_basis(record, cases, claim: str) -> dict:
+    """What a verdict rests on: the tools the claim needs, the coverage points exercised by the
+    cases that passed (of those the claim's cases exercise), and the required cases the decoder
+    could not take."""
+    ps = load_profiles()
+    c = Claim.parse(claim, ps)
+    ok = {r.case_id for r in record.results if r.outcome.ok}
+    exercised, possible = set(), set()
+    for case in cases:
+        pts = case_points(case).points
+        possible |= pts
+        if case.full_id in ok:
+            exercised |= pts
+    return {"tools": sorted(ps.profiles[c.profile].tools),
+            "coverage_points_exercised": len(exercised), "coverage_points_of_claim": len(possible),
+            "not_exercised": sorted(possible - exercised),
+            "cases_not_taken": list(record.missing)}
+
+
+def _statement(record, verdict: str, speed: bool, basis: dict) -> str:
+    c = record.counts()
+    lines = [f"# fbaconf certification: {record.decoder['name']} — {record.claim}", "",
+             f"**Verdict: {verdict}**", "",
+             f"- decoder manifest sha256: `{record.decoder.get('manifest_sha256')}`",
+             f"- cases run: {len(record.results)} (" + ", ".join(f"{k} {v}" for k, v in c.items() if v) + ")",
+             "- suites: " + ", ".join(f"{s['name']} {s['version']}" for s in record.suites),
+             f"- issued: {record.finished}", ""]
+    if speed:
+        lines.append("## Speed")
+        for s in record.speed:
+            lines.append(f"- {s.operation}: {s.rate_fps:.1f} frames/s measured, {s.required_fps:g} required "
+                         f"({s.provenance}) — {'pass' if s.passed else 'FAIL'}")
+    else:
+        lines.append("Speed was not measured (--no-speed): this certificate does not cover the level's minimum rates.")
+    lines += ["", "## What this verdict rests on", "",
+              f"- isolation of the decoder: {basis.get('isolation', 'unknown')}",
+              "- read-only folders the lab added (--sandbox-ro): " + (", ".join(basis.get("sandbox_ro") or [])
+                                                                      or "none"),
+              f"- tools the claim requires: {', '.join(basis['tools'])}",
+              f"- coverage points exercised by passing cases: {basis['coverage_points_exercised']} of the "
+              f"{basis['coverage_points_of_claim']} the claim's cases exercise"]
+    if basis["not_exercised"]:
+        lines.append(f"- not exercised (their cases did not pass): {', '.join(basis['not_exercised'][:40])}"
+                     + (" …" if len(basis["not_exercised"]) > 40 else ""))
+    if basis["cases_not_taken"]:
+        lines += ["- required cases the decoder could not take (each fails the claim):"]
+        lines += [f"  - {m}" for m in basis["cases_not_taken"]]
+    else:
+        lines.append("- the decoder took every required case")
+    lines += _timing_lines(basis.get("timing") or {})
+    lines += _provisional_lines(record)
+    lines += ["", "## Provisional rules and limits", "",
+              "The ISO/IEC 14496 text was not available to fbaconf. This verdict rests on these provisional "
+              "decisions and limits:", ""]
+    lines += [f"- {p}" for p in record.provisional]
+    return "\n".join(lines) + "\n"
+
+
+def _timing_lines(timing: dict) -> list[str]:
+    if timing.get("verified", True):
+        return []
+    cases = timing.get("cases_not_verified") or []
+    out = ["", "## Timing", "",
+           "- timing not verified (.fap output): a .fap file carries frame numbers (with the skips, checked) and one "
+           "header rate (checked), not plane times. Write .npz output (faps_format = \"npz\") to have plane times "
+           "verified."]
+    if cases:
+        out.append(f"- {len(cases)} case(s) whose plane times .fap cannot carry (time codes, rate changes): "
+                   + ", ".join(cases))
+    return out
+
+
+def _provisional_lines(record) -> list[str]:
+    out = ["", "## Provisional requirements", "",
+           "Cases whose expected output rests on a provisional decision (harness/provisional.py): a failure there is a "
+           "provisional difference, which fails the claim only under --strict" +
+           (" (this certificate was made with --strict)." if record.strict else "."), ""]
+    agree = agreement(record.results)
+    if not agree:
+        return out + ["- none of the claim's cases rests on a provisional decision"]
+    for d, n in agree.items():
+        word = "agrees with" if n["failed"] == 0 and n["passed"] == n["cases"] else "differs from"
+        out.append(f"- {word} {d}: {n['passed']} of {n['cases']} case(s) resting on it pass")
+    if record.provisional_differences:
+        out += ["", f"Provisional differences ({len(record.provisional_differences)}):"]
+        out += [f"- {d['case_id']} (rests on {', '.join(d['rests_on'])})" for d in record.provisional_differences]
+    return out
+
+
+def verify_package(pkg: Path, pubkey: Path | None = None) -> list[str]:
+    """Every problem of a package (:func:`.package.verify`)."""
+    return verify(pkg, pubkey).problems
+
+
+def prepare_output(out: Path, force: bool) -> None:
+    """``certify -o``: an absent or empty folder, or — with ``force`` — an fbaconf package to
+    replace. Anything else of the user's is left alone (exit 2)."""
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise UsageError(f"-o {out}: exists and is not a folder")
+    if not out.exists() or not any(out.iterdir()):
+        out.mkdir(parents=True, exist_ok=True)
+        return
+    try:
+        is_pkg = str(json.loads(read_regular(out / CERTIFICATE, 1 << 20)).get("format")).startswith(
+            "fbaconf.certificate/")
+    except (FbaconfInputError, ValueError, AttributeError, RecursionError):
+        is_pkg = False
+    if not is_pkg:
+        raise UsageError(f"-o {out}: the folder is not empty and is not an fbaconf certification package; "
+                         f"give an empty or new folder")
+    if not force:
+        raise UsageError(f"-o {out}: holds a certification package already; give --force to replace it")
+    remove_tree(out)
+    out.mkdir(parents=True)
