@@ -5,15 +5,17 @@ Method (fbaconf's choice; the standard leaves the adaptation to the decoder):
 * Source points = the model's own feature points (neutral, world), target points = the
   received ones (any subset of the 84, at least 1).
 * The displacement field ``target - source`` is interpolated over space with radial basis
-  functions (``scipy.interpolate.RBFInterpolator``): thin-plate spline kernel + affine
-  polynomial (degree 1) when >= 4 points whose source positions are not coplanar; the
-  ``linear`` kernel + constant (degree 0) for 2-3 points or coplanar sets; a pure
-  translation for 1 point. No smoothing, so the field interpolates the data points.
-  Feature points that coincide on the model (lips in contact: 2.2/2.3, 2.6/2.8, 2.7/2.9)
-  form one data point with their mean displacement; afterwards every received feature
-  point's vertex is set exactly onto the received point (this removes the solver's
-  rounding residual, ~1e-9 of the model size, and opens coinciding points that received
-  different targets).
+  functions, the construction and linear system of :mod:`.rbf`: thin-plate spline kernel +
+  affine polynomial (degree 1) when >= 4 points whose source positions are not coplanar; the
+  linear kernel + constant (degree 0) for 2-3 points or coplanar sets; a pure translation for
+  1 point. No smoothing, so the field interpolates the data points. Points closer than
+  ``rbf.MERGE_TOLERANCE`` (1e-4) of the set's extent -- the feature points that coincide on
+  the model (lips in contact: 2.2/2.3, 2.6/2.8, 2.7/2.9) -- form one data point with their
+  mean displacement; a system whose condition number exceeds ``rbf.CONDITION_BOUND`` (1e8) is
+  refused (rule ``calibration-degenerate``). Afterwards every received feature point's
+  vertex is set exactly onto the received point (this removes the solver's rounding
+  residual, ~1e-9 of the model size, and opens coinciding points that received different
+  targets).
 * Every vertex of every part is moved by the field at its neutral world position;
   a Transform's translation is moved by the field at the Transform's origin (so eyes
   follow the warp); parts are then expressed back in their Transform's local frame
@@ -24,8 +26,11 @@ Method (fbaconf's choice; the standard leaves the adaptation to the decoder):
   subset as featurePointsCoord): the vertex's projection -- orthographic onto the x-y plane
   when ``useOrthoTexture`` is TRUE, else cylindrical (angle atan2(x, z) around the y axis
   through the feature points' centroid, and y) -- is mapped to (u, v) by a 2D thin-plate
-  RBF through the feature points' projections; applied to the skin part(s) (parts whose
+  RBF through the feature points' projections (merged and checked like the warp: two feature
+  points one behind the other project to one point); applied to the skin part(s) (parts whose
   vertices carry feature points), clipped to [0, 1].
+* The condition number of each system solved is kept in ``CompiledFace.extras["conditioning"]``
+  (``warp``, ``texture``).
 """
 from __future__ import annotations
 
@@ -35,61 +40,36 @@ import numpy as np
 
 from fbaconf.errors import SceneError
 
+from . import rbf
 from .compiled import CompiledFace, neutral_world
 from .faceparams import NUM_FEATURE_POINTS, fapu_from_feature_points
 
 
-def rbf_warp(src: np.ndarray, dst: np.ndarray):
-    """A function R^3 -> R^3 displacement, interpolating dst - src at src (exactly)."""
-    from scipy.interpolate import RBFInterpolator  # noqa: PLC0415 (scipy loads in ~0.3 s; only calibration needs it)
+def rbf_warp(src: np.ndarray, dst: np.ndarray, node_path: str | None = None):
+    """A function R^3 -> R^3 displacement, interpolating dst - src at src (see :mod:`.rbf`)."""
     src = np.asarray(src, dtype=np.float64)
     dst = np.asarray(dst, dtype=np.float64)
-    d = dst - src
-    n = len(src)
-    if n == 0:
+    if len(src) == 0:
         raise SceneError("calibration needs at least one feature point", rule="calibration-empty")
-    if n == 1:
-        return lambda p: np.broadcast_to(d[0], np.shape(p)).copy()
     # feature points that coincide on the model (lips in contact ...) share one data point: the
     # mean of their displacements (the vertices are put exactly on their own targets afterwards)
-    key, inv = np.unique(np.round(src, 9), axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
-    if len(key) != n:
-        src = np.array([src[inv == g][0] for g in range(len(key))])
-        d = np.array([d[inv == g].mean(0) for g in range(len(key))])
-        n = len(src)
-        if n == 1:
-            return lambda p: np.broadcast_to(d[0], np.shape(p)).copy()
-    scale = float(np.ptp(src, axis=0).max()) or 1.0
-    c = src.mean(0)
-    s_src = (src - c) / scale
-    rank = np.linalg.matrix_rank(np.c_[s_src, np.ones(n)], tol=1e-9)
-    try:
-        if n >= 4 and rank == 4:
-            f = RBFInterpolator(s_src, d, kernel="thin_plate_spline", degree=1)
-        else:
-            f = RBFInterpolator(s_src, d, kernel="linear", degree=0)
-    except (np.linalg.LinAlgError, ValueError) as e:  # near-coincident points: a singular system
-        raise SceneError(f"the feature points cannot calibrate the model (the warp is singular: {e}); "
-                         f"points too close to each other?", rule="calibration-degenerate") from None
-    return lambda p: f((np.asarray(p, dtype=np.float64).reshape(-1, 3) - c) / scale).reshape(np.shape(p))
+    f = rbf.fit(src, dst - src, what="the feature points cannot calibrate the model", node_path=node_path)
+    return _fitted(f, 3)
 
 
-def _uv_map(proj_fp: np.ndarray, uv_fp: np.ndarray):
-    from scipy.interpolate import RBFInterpolator  # noqa: PLC0415 (scipy loads in ~0.3 s; only calibration needs it)
-    n = len(proj_fp)
-    rank = np.linalg.matrix_rank(np.c_[proj_fp, np.ones(n)], tol=1e-9)
-    scale = float(np.ptp(proj_fp, axis=0).max()) or 1.0
-    c = proj_fp.mean(0)
-    try:
-        if n >= 3 and rank == 3:
-            f = RBFInterpolator((proj_fp - c) / scale, uv_fp, kernel="thin_plate_spline", degree=1)
-        else:
-            f = RBFInterpolator((proj_fp - c) / scale, uv_fp, kernel="linear", degree=0)
-    except (np.linalg.LinAlgError, ValueError) as e:
-        raise SceneError(f"the texture coordinates cannot be mapped (the warp is singular: {e})",
-                         rule="calibration-degenerate") from None
-    return lambda q: f((q - c) / scale)
+def _uv_map(proj_fp: np.ndarray, uv_fp: np.ndarray, node_path: str | None = None):
+    """The map from projected feature points to their (u, v); feature points whose projections
+    coincide (e.g. one in front of the other under the orthographic projection) are one point."""
+    f = rbf.fit(proj_fp, uv_fp, what="the texture coordinates cannot be mapped", node_path=node_path)
+    return _fitted(f, 2)
+
+
+def _fitted(f: rbf.RbfFit, k: int):
+    def apply(p):
+        p = np.asarray(p, dtype=np.float64)
+        return f(p.reshape(-1, k)).reshape(p.shape[:-1] + (-1,))
+    apply.fit = f
+    return apply
 
 
 def _project(P: np.ndarray, ortho: bool, centre: np.ndarray) -> np.ndarray:
@@ -100,18 +80,19 @@ def _project(P: np.ndarray, ortho: bool, centre: np.ndarray) -> np.ndarray:
 
 
 def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None = None, ortho: bool = False,
-              texture: str | None = None):
+              texture: str | None = None, node_path: str | None = None):
     """Warp a CompiledFace to received feature points.
 
     ``received``: float64[84, 3] in label order, NaN rows = not sent. Returns a new
-    CompiledFace (the input is not modified)."""
+    CompiledFace (the input is not modified). ``node_path`` (the FDP node) locates errors."""
     received = np.asarray(received, dtype=np.float64).reshape(NUM_FEATURE_POINTS, 3)
     sent = np.all(np.isfinite(received), axis=1)
     have = np.all(np.isfinite(model.feature_points), axis=1)
     use = sent & have
     if not use.any():
         raise SceneError("no received feature point is defined on the model", rule="calibration-empty")
-    warp = rbf_warp(model.feature_points[use], received[use])
+    warp = rbf_warp(model.feature_points[use], received[use], node_path=f"{node_path}.featurePointsCoord"
+                    if node_path else None)
     # transform origins (world), parents first
     parent = {}
     for p in model.parts:
@@ -159,13 +140,17 @@ def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None 
     out = CompiledFace(new_points, dict(model.ifs_names), new_tr, parts, list(model.mesh_tables),
                        list(model.transform_tables), fapu_from_feature_points(fps), fps, model.fit,
                        model.high_level_tables, model.fp_vertices, ortho)
+    # the condition number of each linear system the calibration solved (fbaconf suites build prints the worst)
+    out.extras["conditioning"] = {"warp": warp.fit.condition}
     if texture_coords is not None:
         tc = np.asarray(texture_coords, dtype=np.float64).reshape(-1, 2)
         if tc.shape[0] != NUM_FEATURE_POINTS or not np.all(np.isfinite(tc[sent])):
             raise SceneError("textureCoord must hold one (u, v) per feature point (84, label order)",
                              rule="fdp-texture-coord-count")
         centre = fps[sent].mean(0)
-        uvmap = _uv_map(_project(fps[sent], ortho, centre), tc[sent])
+        uvmap = _uv_map(_project(fps[sent], ortho, centre), tc[sent],
+                        node_path=f"{node_path}.textureCoord" if node_path else None)
+        out.extras["conditioning"]["texture"] = uvmap.fit.condition
         fp_parts = {pi for pi, _ in (model.fp_vertices or [])} or {0}
         new_world = neutral_world(out)
         for pi in sorted(fp_parts):

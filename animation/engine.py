@@ -122,7 +122,7 @@ def compile_scene(scene: bt.Scene | None) -> CompiledFace:
             tex = scene.resolve(fdp.get("textureCoord"))
             tc = None if tex is None else np.asarray(tex.get("point"), dtype=np.float64)
             model = calibrate(model, fps, texture_coords=tc, ortho=bool(fdp.get("useOrthoTexture")),
-                              texture=_first_texture(scene))
+                              texture=_first_texture(scene), node_path=fdp_path)
         model.fit = fit
         return model
     model = _compile_graph(scene, graph, fdp, fdp_path, fps)

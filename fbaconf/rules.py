@@ -248,6 +248,12 @@ SCENE_INTEROP_FDM = _define(
     "FAP-SCENE-003", "warning", "decision D10 (BIFS as GPAC codes it); Ostermann 1998 §2.3.2 (FaceDefMesh)",
     "FaceDefMesh.faceSceneGraphNode references an IndexedFaceSet, as the seed defines it; GPAC's MP4Box types "
     "the field SF3DNode and refuses such a USE when decoding (the bits are the same): an interop hazard.")
+SCENE_ILL_CONDITIONED = _define(
+    "FAP-SCENE-004", "error", "fbaconf decision: calibration by RBF interpolation (docs/animation.md, animation/rbf.py)",
+    "The scene's FDP calibration would rest on an ill-conditioned interpolation system (condition number above "
+    "the documented bound 1e8): feature points, or their texture-space projections, too close to each other "
+    "without coinciding, or nearly coplanar. The reference refuses it (rule calibration-degenerate) instead of "
+    "letting the result depend on the platform's LAPACK.")
 CHECK_DCT = _define(
     "FAP-CHECK-001", "warning", f"{NOTES} §4 / decision D8 (DCT segment mode)",
     "A plane uses DCT segment coding and the decoder in this build cannot parse it: checking stops there.")
@@ -325,7 +331,7 @@ _rule("bt-unknown-field", "scenes", "a node has no field of that name")
 _rule("bt-unknown-node", "scenes", "a node type outside the subset fbaconf reads")
 _rule("bt-use-undefined", "scenes", "USE …: no node was DEFined with this name before")
 _rule("calibration-empty", "animation", "calibration needs at least one feature point")
-_rule("calibration-degenerate", "animation", "the received feature points (or texture coordinates) make the calibration warp singular")
+_rule("calibration-degenerate", "animation", "the received feature points (or their texture projections) make a calibration system singular or ill-conditioned (condition number above 1e8)", code=SCENE_ILL_CONDITIONED)
 _rule("calibration-transform", "animation", "calibration supports translation-only Transforms (… rotates or scales)")
 _rule("coefficient-overflow", "bitstreams", "DC level … of FAP … exceeds …", code=SYNTAX_DCT)
 _rule("dct-prediction", "bitstreams", "predicted segment of FAP … without an intra segment", code=SYNTAX_DCT)
@@ -442,6 +448,7 @@ _rule("suite-case", "conformance", "suite …: case …: kind … not one of …
 _rule("suite-manifest", "conformance", "a suite manifest (suite.json) is not a valid fbaconf suite manifest")
 _rule("suite-missing", "conformance", "no suites at …: run `fbaconf suites build` first")
 _rule("suite-spec", "conformance", "the suite specification (conformance/data/suites.toml) is invalid")
+_rule("suite-reference", "conformance", "a case's reference cannot be made: its scene does not compile or rests on an ill-conditioned system")
 _rule("time-code", "bitstreams", "a time code field cannot be signalled (hours > 31)")
 _rule("tolerance-key", "harness", "unknown … key(s) … (known: …)")
 _rule("tolerance-order", "harness", "tolerances out of order (a warn limit above its fail limit)")

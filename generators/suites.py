@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
+from fbaconf.animation.engine import compile_scene, load_scene
+from fbaconf.animation.rbf import CONDITION_BOUND
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.bitstreams.faptext import read_fap_file, write_fap
@@ -270,12 +272,45 @@ def _view(case: Case, d: Path, text: str, name: str) -> Case:
     return v
 
 
+def reference_conditioning(cases: list[Case]) -> list[tuple[str, str, str, float]]:
+    """(suite, case, system, condition number) of every linear system the reference solves to
+    compile the scenes of the valid ``cases`` (calibration: ``warp``, ``texture``; see
+    animation/rbf.py). Raises SuiteError (rule ``suite-reference``) for a case whose scene the
+    reference refuses -- e.g. a system above ``rbf.CONDITION_BOUND`` -- so that no suite is built
+    whose goldens would depend on the platform's LAPACK."""
+    out, seen = [], {}
+    for case in cases:
+        path = case.input_path("scene")
+        if path is None or case.kind == "error":
+            continue
+        key = case.sha256.get(path.name) or str(path)
+        if key not in seen:
+            try:
+                seen[key] = compile_scene(load_scene(path)).extras.get("conditioning", {})
+            except FbaconfInputError as e:
+                raise SuiteError(f"case {case.suite}/{case.id}: the reference cannot compile its scene: {e}",
+                                 rule="suite-reference") from None
+        out += [(case.suite, case.id, system, cond) for system, cond in seen[key].items()]
+    return out
+
+
+def worst_conditioning(rows: list[tuple[str, str, str, float]]) -> str:
+    """One line: the worst condition number among ``rows`` and the bound."""
+    if not rows:
+        return "reference conditioning: no linear system solved"
+    suite, case, system, cond = max(rows, key=lambda r: r[3])
+    return (f"reference conditioning: worst condition number {cond:.3g} ({suite}/{case}, {system}) of "
+            f"{len(rows)} system(s); bound {CONDITION_BOUND:.0e} (animation/rbf.py)")
+
+
 def build(root: Path | None = None, names: list[str] | None = None, log=print) -> list[Suite]:
-    """Regenerate the suites (all, or ``names``) under ``root``; returns them."""
+    """Regenerate the suites (all, or ``names``) under ``root``; returns them. Refuses a case whose
+    reference would rest on an ill-conditioned system (:func:`reference_conditioning`) and logs the
+    worst condition number."""
     s = spec()
     root = root or suites_root()
     root.mkdir(parents=True, exist_ok=True)
-    suites = []
+    suites, conditioning = [], []
     known = {x["name"] for x in s["suite"]}
     for c in s["case"]:
         if c["suite"] not in known:
@@ -288,10 +323,12 @@ def build(root: Path | None = None, names: list[str] | None = None, log=print) -
             shutil.rmtree(d)
         d.mkdir(parents=True)
         cases = [x for c in s["case"] if c["suite"] == sd["name"] for x in build_case(c, sd, d, s["scenario"])]
+        conditioning += reference_conditioning(cases)
         suite = Suite(sd["name"], sd.get("description", ""), sd["claim"], sd["group"], s["version"], cases, d)
         atomic_write_text(d / "suite.json", json.dumps(suite.to_json(), indent=1, sort_keys=False) + "\n")
         suites.append(suite)
         log(f"built {suite.name}: {len(cases)} case(s)")
+    log(worst_conditioning(conditioning))
     return suites
 
 

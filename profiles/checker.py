@@ -231,6 +231,8 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
         _interop(scene, out)
     except Exception:  # the interop note never stops the check
         pass
+    # FAP-SCENE-004; loaded with the scene readers (it compiles the scene the way the reference does)
+    out.extend(importlib.import_module("fbaconf.profiles.conditioning").conditioning_diagnostics(scene))
     try:
         return summarize_scene(scene)
     except SceneStructureError as e:

@@ -4,7 +4,7 @@ import sys
 import numpy as np
 import pytest
 
-from fbaconf.animation import engine
+from fbaconf.animation import engine, rbf
 from fbaconf.animation.calibrate import calibrate
 from fbaconf.animation.faceparams import fapu_from_feature_points, fp_index
 from fbaconf.animation.stateio import load_npz
@@ -120,17 +120,13 @@ def test_cli_animate(tmp_path):
     assert not (tmp_path / "o2.npz").exists()
 
 
-def test_a_singular_warp_is_a_typed_error(monkeypatch):
-    """Whatever makes scipy's RBF system singular becomes one clear SceneError, not a LinAlgError."""
-    import scipy.interpolate  # noqa: PLC0415 (scipy loads in ~0.3 s; only calibration needs it)
-
-    class Singular:
-        def __init__(self, *a, **k):
-            raise np.linalg.LinAlgError("Singular matrix")
-
-    monkeypatch.setattr(scipy.interpolate, "RBFInterpolator", Singular)
+def test_an_ill_conditioned_warp_is_a_typed_error(monkeypatch):
+    """A warp whose system is above the conditioning bound is one clear SceneError (never a
+    LinAlgError, never a solution that depends on LAPACK)."""
+    monkeypatch.setattr(rbf, "CONDITION_BOUND", 1.0)
     base = engine.compile_scene(None)
     recv = base.feature_points.copy() + 1.0
     with pytest.raises(SceneError) as ei:
-        calibrate(base, recv)
+        calibrate(base, recv, node_path="Face.fdp.FDP")
     assert ei.value.rule == "calibration-degenerate"
+    assert ei.value.node_path == "Face.fdp.FDP.featurePointsCoord" and "condition number" in ei.value.message

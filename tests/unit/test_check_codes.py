@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from fbaconf import rules as R
+from fbaconf.animation.faceparams import fp_index
 from fbaconf.bitstreams import arith
 from fbaconf.bitstreams import decoder as decmod
 from fbaconf.bitstreams.bitedit import end_stream, flip_bit, get_bits, remove_bits, set_bits, splice, truncate_bits
@@ -345,6 +346,19 @@ def case_scene_interop(tmp_path, **_):
     return base(), {"scene": str(p)}
 
 
+def case_scene_ill_conditioned(tmp_path, **_):
+    # three feature points sent (3.5, 3.6, 2.1) whose orthographic texture projections are nearly
+    # collinear (2.1 is 1e-5 off the line through the eyes): the uv map's system has a condition
+    # number of ~1e13, above the bound 1e8 (animation/rbf.py)
+    sent = {fp_index("3.5"): "30 40 50", fp_index("3.6"): "-30 40 50", fp_index("2.1"): "0 40.00001 80"}
+    pts = ", ".join(sent.get(k, "3.4e38 3.4e38 3.4e38") for k in range(84))
+    uv = ", ".join("0.5 0.5" for _ in range(84))
+    p = tmp_path / "fdp.bt"
+    p.write_text(f"Face {{ fdp FDP {{ featurePointsCoord Coordinate {{ point [ {pts} ] }} "
+                 f"textureCoord TextureCoordinate {{ point [ {uv} ] }} useOrthoTexture TRUE }} }}\n")
+    return base(), {"scene": str(p)}
+
+
 def case_check_dct(monkeypatch, **_):
     real = decmod._Decoder.intra_header
 
@@ -384,6 +398,7 @@ CASES = {
     R.SYNTAX_DCT: case_dct_syntax,
     R.SYNTAX_EMULATION: case_emulation,
     R.SCENE_INTEROP_FDM: case_scene_interop,
+    R.SCENE_ILL_CONDITIONED: case_scene_ill_conditioned,
     R.SEM_FRAME_RATE_ZERO: case_frame_rate_zero,
     R.SEM_TIME_CODE_RANGE: case_time_code_range,
     R.SEM_TIME_BACKWARDS: case_time_backwards,
