@@ -16,7 +16,7 @@ Manifest (docs/harness.md, "Write a manifest")::
     [limits]
     timeout_s = 30
     memory_mb = 2048
-    memory_kind = "address-space"         # or "rss" (JVM etc.) or "none"
+    memory_kind = "tree"                  # the whole tree (a cgroup limit; else address space), "address-space", "rss", "none"
     output_mb = 256
     [env]                                 # extra environment variables for the decoder
     EXAMPLE_MODE = "strict"
@@ -223,7 +223,7 @@ def _limits(d: dict, path) -> Limits:
         raise ManifestError("[limits] must be a table", rule="manifest-limits", file=str(path))
     try:
         return Limits(timeout_s=d.get("timeout_s", 60), memory_mb=d.get("memory_mb", 2048),
-                      memory_kind=str(d.get("memory_kind", "address-space")), output_mb=d.get("output_mb", 256),
+                      memory_kind=str(d.get("memory_kind", Limits.memory_kind)), output_mb=d.get("output_mb", 256),
                       processes=d.get("processes", 64))
     except (TypeError, ValueError, OverflowError) as e:
         raise ManifestError(f"[limits]: {e}", rule="manifest-limits", file=str(path)) from None
