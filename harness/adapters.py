@@ -16,7 +16,7 @@ Manifest (docs/harness.md, "Write a manifest")::
     [limits]
     timeout_s = 30
     memory_mb = 2048
-    memory_kind = "tree"                  # the whole tree (a cgroup limit; else address space), "address-space", "rss", "none"
+    memory_kind = "tree"                  # the whole tree; or "address-space", "rss" (sampled), "none"
     output_mb = 256
     [env]                                 # extra environment variables for the decoder
     EXAMPLE_MODE = "strict"
