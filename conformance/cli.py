@@ -1,4 +1,4 @@
-"""Verbs ``fbaconf suites list|build`` and ``fbaconf golden regenerate|verify``."""
+"""Verbs ``fbaconf suites list|build|coverage|mutants`` and ``fbaconf golden regenerate|verify|margins``."""
 from __future__ import annotations
 
 import json
@@ -57,6 +57,13 @@ def register(sub) -> None:
     v = gs.add_parser("verify", help="check digests and bit-identical regeneration")
     v.add_argument("--no-regenerate", action="store_true", help="only check digests (fast)")
     v.set_defaults(func=cmd_verify)
+    m = gs.add_parser("margins", help="how far each float golden's values are from a rounding boundary",
+                      description="Rerun the reference for every case and report, per float golden (vertex "
+                                  "arrays at 6 decimals, 8-bit images), the smallest distance of a value to the "
+                                  "boundary of its rounding step, in ulps: how far another platform's result "
+                                  "may be off before regeneration changes a byte (conformance/precision.py).")
+    m.add_argument("--json", action="store_true", help="every golden's margin as JSON")
+    m.set_defaults(func=cmd_margins)
 
 
 def cmd_list(args) -> int:
@@ -112,6 +119,17 @@ def cmd_verify(args) -> int:
         print(f"golden verify: FAILED ({len(problems)} problem(s))")
         return 1
     print("golden verify: OK")
+    return 0
+
+
+def cmd_margins(args) -> int:
+    from dataclasses import asdict
+
+    from .golden import GOLDEN_SUPERSAMPLE
+    from .precision import measure, summary
+    from .suite import load_suites
+    rows = measure(load_suites(), GOLDEN_SUPERSAMPLE, log=(lambda *_: None) if args.json else print)
+    print(json.dumps([asdict(r) for r in rows], indent=1) if args.json else summary(rows))
     return 0
 
 
