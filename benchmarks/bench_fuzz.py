@@ -64,7 +64,7 @@ def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
     n, t0 = 0, time.perf_counter()
     try:
         while time.perf_counter() - t0 < seconds:
-            p.stdin.write(f"{len(data)} /dev/null\n".encode() + data)
+            p.stdin.write(f"{n + 1} {len(data)} /dev/null\n".encode() + data)
             p.stdin.flush()
             p.stdout.readline()
             n += 1

@@ -12,6 +12,7 @@ their folder.
 """
 from __future__ import annotations
 
+import errno
 import os
 import re
 import stat
@@ -34,7 +35,8 @@ _DIR_FLAGS = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | getattr(os, "O_CLOEX
 
 
 def remove_tree(path: Path | str) -> None:
-    """Delete ``path`` and everything below it; never follows symlinks, never recurses.
+    """Delete ``path`` and everything below it; never follows symlinks, never recurses, holds
+    one directory descriptor at a time whatever the depth (a 50,000-level tree is removed).
     A missing path is fine; a symlink or file at ``path`` is simply unlinked."""
     path = os.fspath(path)
     try:
@@ -46,47 +48,116 @@ def remove_tree(path: Path | str) -> None:
         return
     parent_fd = os.open(os.path.dirname(os.path.abspath(path)) or "/", _DIR_FLAGS)
     try:
-        _remove_dir_at(parent_fd, os.path.basename(os.path.abspath(path)))
+        _walk(parent_fd, os.path.basename(os.path.abspath(path)), remove=True, stop_at=None)
     finally:
         os.close(parent_fd)
 
 
-def _remove_dir_at(parent_fd: int, name: str) -> None:
-    # Stack of (fd of a directory, its name in the parent, fd of the parent).
-    root_fd = os.open(name, _DIR_FLAGS, dir_fd=parent_fd)
-    stack = [(root_fd, name, parent_fd)]
-    while stack:
-        fd, dname, pfd = stack[-1]
-        descended = False
-        with os.scandir(fd) as it:
-            for entry in it:
+class TreeChangedError(OSError):
+    """A folder moved while it was walked (its ``..`` is not the folder the walk came from)."""
+
+
+def _open_dir(parent_fd: int, name: str) -> int:
+    try:
+        return os.open(name, _DIR_FLAGS, dir_fd=parent_fd)
+    except PermissionError:
+        _chmod_dir(parent_fd)
+        try:
+            os.chmod(name, 0o700, dir_fd=parent_fd, follow_symlinks=False)
+        except (OSError, NotImplementedError):
+            pass
+        return os.open(name, _DIR_FLAGS, dir_fd=parent_fd)
+
+
+def _scan(fd: int, remove: bool, sizes: list[int]) -> list[str]:
+    """The subdirectory names of the folder ``fd``; its other entries unlinked (``remove``) or
+    their sizes added to ``sizes[0]`` (regular files only)."""
+    subdirs = []
+    with os.scandir(fd) as it:
+        for e in it:
+            try:
+                is_dir = e.is_dir(follow_symlinks=False)
+            except OSError:
+                is_dir = False
+            if is_dir:
+                subdirs.append(e.name)
+            elif remove:
                 try:
-                    is_dir = entry.is_dir(follow_symlinks=False)
-                except OSError:
-                    is_dir = False
-                if is_dir:
-                    try:
-                        child = os.open(entry.name, _DIR_FLAGS, dir_fd=fd)
-                    except OSError:
-                        _chmod_dir(fd)
-                        child = os.open(entry.name, _DIR_FLAGS, dir_fd=fd)
-                    stack.append((child, entry.name, fd))
-                    descended = True
-                    break
-                try:
-                    os.unlink(entry.name, dir_fd=fd)
+                    os.unlink(e.name, dir_fd=fd)
                 except PermissionError:
                     _chmod_dir(fd)
-                    os.unlink(entry.name, dir_fd=fd)
-        if descended:
-            continue
-        stack.pop()
-        os.close(fd)
-        try:
-            os.rmdir(dname, dir_fd=pfd)
-        except PermissionError:
-            _chmod_dir(pfd)
-            os.rmdir(dname, dir_fd=pfd)
+                    os.unlink(e.name, dir_fd=fd)
+                except FileNotFoundError:
+                    pass
+            else:
+                try:
+                    if e.is_file(follow_symlinks=False):
+                        sizes[0] += e.stat(follow_symlinks=False).st_size
+                except OSError:
+                    pass
+    return subdirs
+
+
+def _walk(parent_fd: int, name: str, *, remove: bool, stop_at: int | None, sizes: list[int] | None = None) -> int:
+    """Walk the folder ``name`` in ``parent_fd`` depth first with one descriptor open: down by
+    name, back up by ``..`` (checked against the device and inode recorded on the way down, so
+    a folder moved meanwhile stops the walk with :class:`TreeChangedError`). ``remove``: unlink
+    everything and remove the folders on the way back up; else sum the regular files' sizes
+    (stopping once past ``stop_at``) into ``sizes[0]``. Returns the bytes counted."""
+    sizes = [0] if sizes is None else sizes
+    top = os.fstat(parent_fd)
+    fd = _open_dir(parent_fd, name)
+    # one frame per level: [name in its parent, (dev, ino) of its parent, subdirectories left]
+    frames = [[name, (top.st_dev, top.st_ino), _scan(fd, remove, sizes)]]
+    again: dict[int, int] = {}
+    try:
+        while frames:
+            if stop_at is not None and sizes[0] > stop_at:
+                return sizes[0]
+            frame = frames[-1]
+            if frame[2]:
+                sub = frame[2].pop()
+                here = os.fstat(fd)
+                try:
+                    child = _open_dir(fd, sub)
+                except (FileNotFoundError, NotADirectoryError):
+                    continue
+                except OSError:
+                    if remove:
+                        raise
+                    continue
+                os.close(fd)
+                fd = child
+                frames.append([sub, (here.st_dev, here.st_ino), _scan(fd, remove, sizes)])
+                continue
+            frames.pop()
+            if frames:
+                up = os.open("..", _DIR_FLAGS, dir_fd=fd)
+                st = os.fstat(up)
+                if (st.st_dev, st.st_ino) != frame[1]:
+                    os.close(up)
+                    raise TreeChangedError(f"{frame[0]!r} moved while its tree was walked")
+            else:
+                up = parent_fd
+            os.close(fd)
+            fd = up
+            if remove:
+                try:
+                    os.rmdir(frame[0], dir_fd=up)
+                except PermissionError:
+                    _chmod_dir(up)
+                    os.rmdir(frame[0], dir_fd=up)
+                except OSError as e:  # something appeared in it meanwhile: once more
+                    if e.errno != errno.ENOTEMPTY or again.get(id(frame), 0) > 2:
+                        raise
+                    again[id(frame)] = again.get(id(frame), 0) + 1
+                    fd = _open_dir(up, frame[0])
+                    frame[2] = _scan(fd, remove, sizes)
+                    frames.append(frame)
+    finally:
+        if fd != parent_fd:
+            os.close(fd)
+    return sizes[0]
 
 
 def empty_dir(path: Path | str, keep: frozenset[str] = frozenset()) -> None:
@@ -110,34 +181,21 @@ def empty_dir(path: Path | str, keep: frozenset[str] = frozenset()) -> None:
 
 
 def tree_size(path: Path | str, stop_at: int) -> int:
-    """Bytes in the regular files below ``path`` (links not followed, any depth, no
-    recursion); stops counting once past ``stop_at``."""
+    """Bytes in the regular files below ``path`` (links not followed, any depth, no recursion,
+    one directory descriptor at a time); stops counting once past ``stop_at``. A tree that
+    changes while it is counted (a running decoder) gives what was counted so far."""
+    path = os.path.abspath(os.fspath(path))
     try:
-        root = os.open(path, _DIR_FLAGS)
+        parent_fd = os.open(os.path.dirname(path) or "/", _DIR_FLAGS)
     except OSError:
         return 0
-    total, stack = 0, [root]
+    sizes = [0]
     try:
-        while stack:
-            fd = stack.pop()
-            try:
-                with os.scandir(fd) as it:
-                    for e in it:
-                        try:
-                            if e.is_dir(follow_symlinks=False):
-                                stack.append(os.open(e.name, _DIR_FLAGS, dir_fd=fd))
-                            elif e.is_file(follow_symlinks=False):
-                                total += e.stat(follow_symlinks=False).st_size
-                        except OSError:
-                            pass
-                        if total > stop_at:
-                            return total
-            finally:
-                os.close(fd)
+        return _walk(parent_fd, os.path.basename(path), remove=False, stop_at=stop_at, sizes=sizes)
+    except OSError:  # a folder moved or vanished meanwhile: what was counted
+        return sizes[0]
     finally:
-        for fd in stack:
-            os.close(fd)
-    return total
+        os.close(parent_fd)
 
 
 def _chmod_dir(fd: int) -> None:

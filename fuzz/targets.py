@@ -304,7 +304,7 @@ class DecoderTarget:
     def _judge(self, inp: Entry, job, res) -> Verdict | None:
         """The finding (or None) for one finished decoder process."""
         ending = endings.classify(res, self.limits, self.reject_exit_codes)
-        if ending.kind == "setup":
+        if ending.kind == "setup":  # the harness's own knowledge (endings.py), never the decoder's words
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
         detail = {"exit_code": res.returncode, "signal": res.signal, "elapsed_s": round(res.elapsed_s, 3),
                   **({"notes": list(res.notes)} if res.notes else {}),
@@ -327,8 +327,9 @@ class DecoderTarget:
                                        rep.signature if rep else "") if x)
             return Verdict("crash", sig or "crash", ending.message, {**detail, "crash_kind": rep.kind if rep else None})
         if k == "unexpected":
-            rc = detail.get("exit_code")
-            sig = "fork-server-killed" if "supervisor-lost" in detail.get("notes", ()) else f"exit-{rc}"
+            rc, notes = detail.get("exit_code"), detail.get("notes", ())
+            sig = ("fork-server-killed" if "supervisor-lost" in notes else "protocol-error" if "protocol-error" in notes
+                   else f"exit-{rc}")
             return Verdict("unexpected-exit", sig, ending.message, detail)
         rc = {"decoded": 0, "not-supported": 69}.get(k, detail.get("exit_code"))
         return self._oracle(inp, job, rc, detail)

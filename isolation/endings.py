@@ -6,8 +6,12 @@ Every finished invocation of a decoder under test becomes one :class:`Ending`:
 ``kind``           meaning
 =================  ====================================================================
 ``setup``          the harness or the decoder's set-up failed, not the decoding: the
-                   launcher could not start, the program cannot be executed (126/127),
-                   or the decoder could not open a file the harness gave it (ENOENT).
+                   launcher could not start, the program cannot be executed, the sandbox
+                   could not start it — known to the harness (its check before the start,
+                   bubblewrap's status, the fork server's exec report), never read from the
+                   decoder's output: a decoder printing "No such file or directory" ran —
+                   or a runtime died reserving its address space under an address-space
+                   limit (Go, JVM: the runtime's message and the fix are named).
                    Never a Pass, never the decoder's verdict on the stream.
 ``timeout``        killed at the wall-clock or CPU-time limit.
 ``memory``         over the memory limit.
@@ -19,7 +23,8 @@ Every finished invocation of a decoder under test becomes one :class:`Ending`:
 ``decoded``        exit 0 with no crash report.
 ``reject``         one of the decoder's documented reject exit codes
                    (manifest ``reject_exit_codes``, default 1 and 2).
-``unexpected``     any other exit code.
+``unexpected``     any other exit code; a persistent decoder's broken answer, or a reply
+                   forged into the fork server's channel (``protocol-error``).
 =================  ====================================================================
 
 The run maps kinds to outcomes (``harness/compare/ladder.py``: ``outcome_for``), the fuzzer to
@@ -47,8 +52,10 @@ _JAVA_EXC = re.compile(r"Exception in thread \"[^\"]*\" ([\w.$]+)")
 _JAVA_FRAME = re.compile(r"^\s+at (\S+)\(", re.M)
 _DOTNET_EXC = re.compile(r"Unhandled exception\. ([\w.]+)")
 _BWRAP = re.compile(r"^bwrap: ([^\n]*)", re.M)
-_ENOENT = re.compile(r"No such file or directory|\bENOENT\b|FileNotFoundError|NoSuchFileException|"
-                     r"FileNotFoundException|cannot find the (?:file|path) specified")
+# A runtime that dies reserving address space at its start (under an address-space rlimit).
+_RESERVE = re.compile(r"failed to reserve page summary memory|cannot reserve arena virtual address space|"
+                      r"runtime: cannot (?:re)?map pages|Could not reserve enough space for [\w ]+|"
+                      r"Error occurred during initialization of VM|Failed to reserve virtual memory")
 
 
 @dataclass(frozen=True)
@@ -128,15 +135,44 @@ def _last_line(text: str) -> str:
     return f"; stderr: {lines[-1][:300]}" if lines else ""
 
 
+def _setup(res, cmd: str, err: str) -> Ending | None:
+    """The set-up failure the harness knows of (its notes), or None."""
+    if "harness-start-failed" in res.notes:
+        return Ending(EndingKind.SETUP, f"harness could not start the launcher: {err.strip()[:300]}")
+    if "exec-failed" in res.notes:
+        return Ending(EndingKind.SETUP, (res.detail or err).strip()[:300] or f"cannot execute {cmd}")
+    if "sandbox-failed" in res.notes:  # bubblewrap never ran the program: its stderr is bubblewrap's own
+        m = _BWRAP.search(err)
+        what = m.group(1) if m else (_last_line(err)[len("; stderr: "):] or "no message")
+        if what.startswith("execvp "):
+            prog, _, why = what[len("execvp "):].partition(": ")
+            return Ending(EndingKind.SETUP, f"sandbox: cannot execute {prog!r}: {why}")
+        return Ending(EndingKind.SETUP, f"the sandbox (bubblewrap) could not start {cmd}: {what[:300]}")
+    return None
+
+
+def _reservation(res, limits, cmd: str, err: str) -> Ending | None:
+    """A runtime that died reserving address space under the address-space rlimit: a set-up
+    problem of the limits, named with the runtime's own line and the fix."""
+    m = _RESERVE.search(err) if "as-limit" in res.notes and res.returncode != 0 else None
+    if m is None:
+        return None
+    line = next((ln.strip() for ln in err.splitlines() if m.group(0) in ln), m.group(0))[:200]
+    return Ending(EndingKind.SETUP, f"{cmd}'s runtime could not reserve its address space under the "
+                  f"{limits.memory_mb} MB address-space limit: {line!r}. Not a verdict on the stream: the "
+                  f"limit is wrong for this runtime. Fix: memory_kind = \"tree\" in the manifest's [limits] "
+                  f"(the default: the limit holds for what the process tree uses, where cgroups are writable), "
+                  f"or \"rss\"")
+
+
 def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending:
     """One :class:`Ending` for a finished :class:`~fbaconf.isolation.sandbox.ProcResult`."""
     cmd = Path(res.argv[0]).name if res.argv else "decoder"
     err = res.stderr_tail or ""
     rc = res.returncode
-    if "harness-start-failed" in res.notes:
-        return Ending(EndingKind.SETUP, f"harness could not start the launcher: {err.strip()[:300]}")
-    if rc == 127 and err.startswith("fbaconf-limit:"):
-        return Ending(EndingKind.SETUP, err.strip()[:300])
+    known = _setup(res, cmd, err) or _reservation(res, limits, cmd, err)
+    if known is not None:
+        return known
     if res.timed_out:
         why = "CPU-time limit" if "cpu-limit" in res.notes else f"timeout of {limits.timeout_s:g} s"
         return Ending(EndingKind.TIMEOUT, f"{cmd} did not finish within the {why} (killed after {res.elapsed_s:.2f} s)")
@@ -150,6 +186,8 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
         return Ending(EndingKind.UNEXPECTED, f"the fork server running {cmd} died during this input (the decoder killed "  # noqa: E501
                                     f"its parent process, or a process-tree limit did): its ending is unknown — "
                                     f"a decoder must not signal processes it did not start{_last_line(err)}")
+    if "protocol-error" in res.notes:
+        return Ending(EndingKind.UNEXPECTED, f"{cmd}: {res.detail or 'protocol error'}{_last_line(err)}")
     if res.output_limit_hit:
         return Ending(EndingKind.OUTPUT_LIMIT, f"{cmd} wrote more than the {limits.output_mb} MB output limit "
                                       f"({res.output_bytes / 2**20:.0f} MB seen" +
@@ -158,18 +196,6 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
     if res.signal:
         what = f" ({report.kind})" if report else ""
         return Ending(EndingKind.CRASH, f"{cmd} crashed: killed by {res.signal}{what}{_last_line(err)}", report)
-    m = _BWRAP.search(err)
-    if m and rc == 1:
-        what = m.group(1)
-        if what.startswith("execvp "):
-            prog, _, why = what[len("execvp "):].partition(": ")
-            return Ending(EndingKind.SETUP, f"sandbox: cannot execute {prog!r}: {why}")
-        return Ending(EndingKind.SETUP, f"the sandbox (bubblewrap) could not start the decoder: {what}")
-    if rc in (126, 127):
-        return Ending(EndingKind.SETUP, f"{cmd} could not be executed (exit code {rc}){_last_line(err)}")
-    if rc != 0 and _ENOENT.search(err):
-        return Ending(EndingKind.SETUP, f"{cmd} could not open a file it was given (exit code {rc}): a set-up failure, "
-                               f"not a verdict on the stream{_last_line(err)}")
     if report is not None:
         return Ending(EndingKind.CRASH, f"{cmd} crashed: {report.kind} (exit code {rc}){_last_line(err)}", report)
     if rc == EXIT_NOT_SUPPORTED:

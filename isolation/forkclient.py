@@ -15,11 +15,21 @@ worker, not for one input; after each input the server kills every process the d
 in the namespace (without bubblewrap: the decoder's session; the cgroup's processes die when
 the server stops), and the harness empties the worker's folder. A server that dies or stops
 answering is restarted; the input it was running is reported as the decoder's ending.
+
+The reply channel is the server's, not the decoder's: no decoder inherits it, the server is
+non-dumpable (no ``/proc/<ppid>/fd`` way in), every request carries a fresh random nonce the
+reply must echo, and a reply is at most :data:`MAX_REPLY` bytes of nine fields. Anything else
+read from the channel — garbled bytes, a reply with another nonce (a forged "exit 0"), a
+length past the bound — is a ``protocol-error`` of the input then running (the decoder wrote
+into its parent's descriptors), the server is restarted, and no reply is ever taken for a
+later input's. While an input runs its folder's size is watched (:mod:`.watch`): past
+``output_mb`` the server is stopped and the input's ending is the output limit.
 """
 from __future__ import annotations
 
 import collections
 import os
+import secrets
 import select
 import shutil
 import struct
@@ -29,10 +39,16 @@ import time
 from pathlib import Path
 
 from . import forkserver_build, sandbox
+from .cgroups import OOM_FILES, oom_events
+from .process import Finish, result
 from .sandbox import Limits, ProcResult, View
+from .watch import Watch
 
 SERVER_SCRIPT = Path(__file__).with_name("forkserver.py")
 GRACE_S = 5.0  # how long past the decoder's timeout the server may take to answer
+MAX_REPLY = 512  # bytes of one reply
+FORGED = ("protocol-error: the fork server's reply channel held {what} — the decoder (or a process it started) "
+          "wrote into its parent's descriptors; a decoder must not touch processes it did not start")
 
 
 class ForkServerError(RuntimeError):
@@ -88,19 +104,21 @@ class ForkServer:
                        for i in range(self.slots)]
         fds = [os.dup(f.fileno()) for pair in self._files for f in pair]
         inner = [*head, "--fds", *map(str, fds)]
+        sandbox_fds: list[int] = []
         if sandbox.isolation() == "bwrap":
             v = View(read_only=[*self.view.read_only, self.srv, *runtime],
                      writable=list(self.view.writable), hidden=list(self.view.hidden),
                      read_only_inside=list(self.view.read_only_inside))
-            inner = sandbox._bwrap_argv(v, self.root) + inner + ["--reap-namespace"]
+            head, _status = sandbox.sandbox_argv(v, self.root, sandbox_fds, status=False)
+            inner = head + inner + ["--reap-namespace"]
         try:  # the server gets the decoder's output files as descriptors (--fds)
             self.proc, self.cg = sandbox.launch_server(
-                inner, self.limits, cwd=self.root, pass_fds=tuple(fds),
+                inner, self.limits, cwd=self.root, pass_fds=tuple(fds + sandbox_fds),
                 env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LC_ALL": "C.UTF-8"})
         except OSError as e:
             raise ForkServerError(f"cannot start the fork server: {e}") from e
         finally:
-            for fd in fds:
+            for fd in fds + sandbox_fds:
                 os.close(fd)
         self._rbuf = b""
         self.ready = False  # the server's hello has been read: it started inside its sandbox
@@ -141,13 +159,23 @@ class ForkServer:
         if not argv or not all(isinstance(a, str) and "\0" not in a for a in argv):
             raise ValueError("argv must be a non-empty list of strings without NUL")
         limits = limits or self.limits
-        key = (tuple(argv), os.fspath(workdir), tuple(sorted(env.items())) if env else (), limits, slot)
+        if sandbox.stopping():
+            p = Pending(self, argv, Path(workdir), limits, measure_dirs, slot)
+            p.res = ProcResult(argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
+            return p
+        if self._queue and self._queue[-1].slot == slot:
+            raise RuntimeError(f"slot {slot} is still in use by the previous input")
+        if not self._queue and (self.proc is None or self.proc.poll() is not None):
+            self.close()
+            self._start()
+        as_bytes = sandbox.as_bytes_for(limits, self.cg)
+        key = (tuple(argv), os.fspath(workdir), tuple(sorted(env.items())) if env else (), limits, slot, as_bytes)
         cached = self._reqs.get(key)  # a fuzzing worker sends the same requests every time
         if cached is None:
             wd = os.path.realpath(workdir)
             os.makedirs(os.path.join(wd, "tmp"), exist_ok=True)
             env_ = sandbox.decoder_env(Path(wd), {**(self.env or {}), **(env or {})})
-            fields = [slot, limits.memory_mb * 2**20 if limits.memory_kind == "address-space" else 0,
+            fields = [slot, as_bytes,
                       limits.output_mb * 2**20, int(max(1, limits.timeout_s * 2 + 1)), repr(float(limits.timeout_s)),
                       repr(float(limits.memory_mb if limits.memory_kind == "rss" else 0)), wd, len(argv), *argv,
                       len(env_), *(f"{k}={v}" for k, v in env_.items())]
@@ -156,92 +184,105 @@ class ForkServer:
             data = b"".join(os.fsencode(str(f)) + b"\0" for f in fields)
             if len(self._reqs) > 64:
                 self._reqs.clear()
-            cached = self._reqs[key] = (struct.pack(">I", len(data)) + data, Path(wd))
-        message, wd = cached
+            cached = self._reqs[key] = (data, Path(wd))
+        body, wd = cached
         try:
             os.mkdir(wd / "tmp")  # the decoder's TMPDIR, if a caller emptied the folder
         except FileExistsError:
             pass
         p = Pending(self, argv, wd, limits, measure_dirs, slot)
-        if sandbox.stopping():
-            p.res = ProcResult(argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
-            return p
-        if self._queue and self._queue[-1].slot == slot:
-            raise RuntimeError(f"slot {slot} is still in use by the previous input")
-        if not self._queue and (self.proc is None or self.proc.poll() is not None):
-            self.close()
-            self._start()
+        p.as_limit = as_bytes > 0
         p.t0 = time.perf_counter()
-        p.req = message
-        p.sent = self.proc is not None and self._send(message)
+        p.body = body
+        p.sent = self.proc is not None and self._send(p)
         p.files = self._files[slot] if self._files else None
         self._queue.append(p)
         return p
 
     def _cgroup_events(self) -> tuple[bool, bool]:
-        """(memory limit hit, process limit hit) in this server's cgroups since it started:
-        the event counters, read through descriptors kept open (no open per input)."""
+        """(OOM events, process limit hit) in this server's cgroups since it started: the
+        kernel's counters (:func:`~.cgroups.oom_events`), read through descriptors kept open."""
         if self._events is None:
             self._events = []
-            for _kind, d in self.cg.dirs:
-                for name in ("memory.events", "memory.oom_control", "memory.failcnt", "pids.events"):
+            for kind, d in self.cg.dirs:
+                for name in (OOM_FILES.get(kind), "pids.events"):
                     try:
-                        self._events.append((name, os.open(d / name, os.O_RDONLY)))
-                    except OSError:
+                        self._events.append((kind if name != "pids.events" else "pids", os.open(d / name, os.O_RDONLY)))
+                    except (OSError, TypeError):
                         pass
         oom = pids = False
-        for name, fd in self._events:
+        for kind, fd in self._events:
+            if kind != "pids":
+                oom |= oom_events(fd, kind)
+                continue
             try:
                 text = os.pread(fd, 4096, 0).decode("ascii", "replace")
             except OSError:
                 continue
-            if name == "memory.failcnt":
-                oom |= text.strip() not in ("", "0")
-                continue
-            for line in text.splitlines():
-                k, _, v = line.partition(" ")
-                if v.strip().isdigit() and int(v) > 0:
-                    if name == "pids.events" and k == "max":
-                        pids = True
-                    elif (name, k) in (("memory.events", "oom_kill"), ("memory.events", "max"),
-                                       ("memory.oom_control", "oom_kill")):
-                        oom = True
+            pids |= any(ln.split()[:1] == ["max"] and ln.split()[1:2] != ["0"] for ln in text.splitlines())
         return oom, pids
 
-    def _send(self, message: bytes) -> bool:
+    def _send(self, p: "Pending") -> bool:
+        p.nonce = secrets.token_hex(12)
+        data = p.nonce.encode() + b"\0" + p.body
         try:
-            self.proc.stdin.write(message)
+            self.proc.stdin.write(struct.pack(">I", len(data)) + data)
             self.proc.stdin.flush()
             return True
         except (BrokenPipeError, OSError):
             return False
 
-    def _receive(self, deadline: float) -> dict | None:
-        """The next reply (replies of queued inputs may arrive in one read: the rest is kept).
-        The server's first message is its hello (``ready``): a server that dies before it
-        never started; one that dies after it was ended by what it was running."""
+    def _receive(self, deadline: float, nonce: str, watch: Watch | None = None) -> dict | str | None:
+        """The reply to the request sent with ``nonce`` (the server answers in order; bytes past
+        it stay for the next); None when the server died or hung; "output" when the watched
+        folder passed the output limit; a sentence starting "protocol-error" when what the
+        channel holds is not that reply. The server's first message is its hello (``ready``):
+        a server that dies before it never started; one that dies after it was ended by what it
+        was running."""
         fd = self.proc.stdout.fileno()
         need = 4
         while True:
             while len(self._rbuf) < need:
-                left = deadline - time.perf_counter()
-                if left <= 0 or not select.select([fd], [], [], left)[0]:
+                now = time.perf_counter()
+                left = deadline - now
+                if left <= 0:
                     return None
+                wait = min(left, watch.next_in(now)) if watch is not None else left
+                if not select.select([fd], [], [], wait)[0]:
+                    if watch is not None and watch.check(time.perf_counter()) == "output":
+                        return "output"
+                    continue
                 chunk = os.read(fd, 65536)
                 if not chunk:
                     return None
                 self._rbuf += chunk
             if need == 4:
-                need = 4 + struct.unpack(">I", self._rbuf[:4])[0]
+                size = struct.unpack(">I", self._rbuf[:4])[0]
+                if not 0 < size <= MAX_REPLY:
+                    return FORGED.format(what=f"a reply of {size} bytes (at most {MAX_REPLY})")
+                need = 4 + size
                 continue
             reply, self._rbuf = self._rbuf[4:need], self._rbuf[need:]
             if not self.ready:
                 self.ready = reply == b"ready"
+                if not self.ready:
+                    return FORGED.format(what=f"{reply[:40]!r} where the server's hello belongs")
                 need = 4
                 continue
-            status, utime, stime, maxrss, elapsed, timed_out, mem_hit = reply.split()
-            return {"status": int(status), "utime": float(utime), "stime": float(stime), "maxrss_kb": int(maxrss),
-                    "elapsed": float(elapsed), "timed_out": timed_out == b"1", "mem_hit": mem_hit == b"1"}
+            return _parse_reply(reply, nonce)
+
+def _parse_reply(reply: bytes, nonce: str) -> dict | str:
+    """A reply's fields, or the sentence saying why it is not the reply to ``nonce``."""
+    f = reply.split()
+    if len(f) != 9 or f[0] != nonce.encode():
+        what = "a reply for another request (a forged reply)" if len(f) == 9 else f"garbled bytes {reply[:40]!r}"
+        return FORGED.format(what=what)
+    try:
+        return {"status": int(f[1]), "utime": float(f[2]), "stime": float(f[3]), "maxrss_kb": int(f[4]),
+                "elapsed": float(f[5]), "timed_out": f[6] == b"1", "mem_hit": f[7] == b"1", "exec_errno": int(f[8])}
+    except ValueError:
+        return FORGED.format(what=f"garbled bytes {reply[:40]!r}")
+
 
 def _tail_fd(fd: int) -> str:
     """The last ``TAIL_BYTES`` the decoder wrote to one of its output files (kept open)."""
@@ -257,7 +298,9 @@ class Pending:
         self.server, self.argv, self.workdir, self.limits = server, argv, workdir, limits
         self.measure_dirs, self.slot = measure_dirs, slot
         self.t0 = 0.0
-        self.req = b""
+        self.body = b""
+        self.nonce = ""
+        self.as_limit = False
         self.sent = False
         self.files = None
         self.reply: dict | None = None
@@ -280,16 +323,25 @@ class Pending:
             srv._start()
             for p in (self, *srv._queue):
                 p.t0 = time.perf_counter()
-                p.sent = srv._send(p.req)
+                p.sent = srv._send(p)
                 p.files = srv._files[p.slot]
             if not self.sent:
                 self.res = ProcResult(self.argv, None, stderr_tail="cannot start the fork server",
                                       notes=["harness-start-failed"])
                 return
         begun = max(self.t0, srv._last_done)
-        self.reply = srv._receive(begun + self.limits.timeout_s + GRACE_S)
+        watch = Watch(self.limits, self.measure_dirs or [self.workdir], t0=begun)
+        self.reply = srv._receive(begun + self.limits.timeout_s + GRACE_S, self.nonce, watch)
         srv._last_done = time.perf_counter()
         self.elapsed = srv._last_done - begun
+        if isinstance(self.reply, str):  # a forged or garbled reply, or the output limit passed: restart
+            err = _tail_fd(self.files[1].fileno()) if self.files else ""
+            out = self.reply == "output"
+            self._close_server()
+            self.res = ProcResult(self.argv, None, elapsed_s=self.elapsed, stderr_tail=err,
+                                  output_limit_hit=out, output_bytes=watch.bytes,
+                                  notes=[] if out else ["protocol-error"], detail="" if out else self.reply)
+            return
         if self.reply is None:  # the server died or hung: judge this input, restart next time
             err = _tail_fd(self.files[1].fileno()) if self.files else ""
             timed_out = self.elapsed >= self.limits.timeout_s
@@ -328,9 +380,10 @@ class Pending:
         dirs = self.measure_dirs or [self.workdir]
         if srv.sum_outputs_every > 1 and reply["status"] != 0 and srv._answers % srv.sum_outputs_every:
             dirs = []
-        self.res = sandbox.result(self.argv, self.limits, reply["status"],
-                                  (reply["utime"], reply["stime"], reply["maxrss_kb"]), reply["elapsed"],
-                                  timed_out=reply["timed_out"], mem_hit=reply["mem_hit"], oom=self.oom,
-                                  pids_hit=self.pids_hit, bwrap_status=False, stdout_tail=self.out_tail,
-                                  stderr_tail=self.err_tail, measure_dirs=dirs)
+        notes = (["exec-failed"] if reply["exec_errno"] else []) + (["as-limit"] if self.as_limit else [])
+        fin = Finish(reply["status"], (reply["utime"], reply["stime"], reply["maxrss_kb"]), reply["elapsed"],
+                     timed_out=reply["timed_out"], mem_hit=reply["mem_hit"], oom=self.oom, pids_hit=self.pids_hit,
+                     notes=tuple(notes))
+        self.res = result(self.argv, self.limits, fin, stdout_tail=self.out_tail, stderr_tail=self.err_tail,
+                          measure_dirs=dirs)
         return self.res

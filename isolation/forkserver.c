@@ -5,10 +5,16 @@
  *   fbaconf-forkserver --fds OUT ERR [OUT ERR ...] [--reap-namespace]
  *
  * Request (after a 4-byte big-endian length): NUL-terminated fields
- *   slot, as, fsize, cpu, timeout, rss_mb, cwd, argc, argv..., envc, env...
+ *   nonce, slot, as, fsize, cpu, timeout, rss_mb, cwd, argc, argv..., envc, env...
  * Reply (after a 4-byte big-endian length), ASCII:
- *   status utime stime maxrss_kb elapsed timed_out mem_hit
+ *   nonce status utime stime maxrss_kb elapsed timed_out mem_hit exec_errno
  * The first message is "ready", once the server runs inside its sandbox.
+ *
+ * The reply channel is the server's stdout, which no decoder inherits; the server makes itself
+ * non-dumpable, so a decoder (without CAP_SYS_PTRACE: the sandbox drops every capability)
+ * cannot open it, nor the request pipe, through /proc/<ppid>/fd. Each reply echoes its
+ * request's nonce, which the client checks: bytes a decoder got into the channel anyway are a
+ * garbled or forged reply, the decoder's finding, never an ending moved onto another input.
  */
 #define _GNU_SOURCE
 #include <dirent.h>
@@ -20,6 +26,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/syscall.h>
@@ -30,6 +37,8 @@
 
 #define MAX_SLOTS 64
 #define MAX_FIELDS 8192
+#define NOFILE 1024 /* descriptors per decoder process (isolation/seccomp.py) */
+#define MAX_NONCE 64
 
 static int slots[MAX_SLOTS][2] = {{3, 4}};
 static int nslots = 1;
@@ -93,6 +102,10 @@ static const char *find_program(const char *prog, char **env, char *buf, size_t 
     return prog;
 }
 
+/* The child's exec error, written by the vfork()ed child into the server's memory (which it
+ * shares until it execs or exits): the server's own knowledge that the exec failed. */
+static volatile int exec_errno;
+
 /* In the vfork()ed child (the server waits until it execs or exits): system calls only. */
 static void child(const char *prog, char **argv, char **env, const char *cwd, int out_fd, int err_fd,
                   long long as, long long fsize, long long cpu) {
@@ -113,14 +126,16 @@ static void child(const char *prog, char **argv, char **env, const char *cwd, in
     set_limit(RLIMIT_AS, as);
     set_limit(RLIMIT_FSIZE, fsize);
     set_limit(RLIMIT_CPU, cpu);
+    set_limit(RLIMIT_NOFILE, NOFILE);
     struct rlimit zero = {0, 0};
     setrlimit(RLIMIT_CORE, &zero);
     if (chdir(cwd) == 0) execve(prog, argv, env);
+    exec_errno = errno ? errno : ENOEXEC;
     dprintf(2, "fbaconf-limit: cannot execute '%s': %s\n", argv[0], strerror(errno));
     _exit(127);
 }
 
-static double rss_mb(pid_t pid) {
+static double rss_one(pid_t pid) {
     char path[64], text[256];
     snprintf(path, sizeof path, "/proc/%d/statm", (int)pid);
     int fd = open(path, O_RDONLY);
@@ -132,6 +147,24 @@ static double rss_mb(pid_t pid) {
     long size, resident;
     if (sscanf(text, "%ld %ld", &size, &resident) != 2) return 0.0;
     return (double)resident * (double)sysconf(_SC_PAGESIZE) / 1048576.0;
+}
+
+/* The decoder's resident memory: inside the sandbox's own PID namespace (reap), every process
+ * but its init and this server — the decoder's whole tree; else the decoder's own. */
+static double rss_mb(pid_t pid, int reap) {
+    if (!reap) return rss_one(pid);
+    double total = 0.0;
+    DIR *d = opendir("/proc");
+    if (!d) return rss_one(pid);
+    struct dirent *e;
+    while ((e = readdir(d))) {
+        char *end;
+        long p = strtol(e->d_name, &end, 10);
+        if (*end || p <= 1 || p == getpid()) continue;
+        total += rss_one((pid_t)p);
+    }
+    closedir(d);
+    return total;
 }
 
 /* Inside the sandbox's own PID namespace: kill every process but its init and this server. */
@@ -171,7 +204,10 @@ static int serve(char *msg, uint32_t len, int reap) {
     int nf = 0;
     if (len == 0 || msg[len - 1] != 0) return -1;
     for (char *p = msg; p < msg + len && nf < MAX_FIELDS; p += strlen(p) + 1) fields[nf++] = p;
-    if (nf < 9) return -1;
+    if (nf < 10 || strlen(fields[0]) > MAX_NONCE) return -1;
+    const char *nonce = fields[0];
+    nf--;
+    for (int i = 0; i < nf; i++) fields[i] = fields[i + 1];
     int slot = atoi(fields[0]);
     long long as = atoll(fields[1]), fsize = atoll(fields[2]), cpu = atoll(fields[3]);
     double timeout = atof(fields[4]), rss_limit = atof(fields[5]);
@@ -193,12 +229,15 @@ static int serve(char *msg, uint32_t len, int reap) {
     char buf[4096];
     const char *prog = find_program(argv[0], env, buf, sizeof buf);
     double t0 = now();
+    exec_errno = 0;
     pid_t pid = vfork();
     if (pid == 0) child(prog, argv, env, cwd, out_fd, err_fd, as, fsize, cpu);
-    if (pid < 0) {
-        dprintf(err_fd, "fbaconf-limit: cannot execute '%s': %s\n", argv[0], strerror(errno));
-        char text[128];
-        snprintf(text, sizeof text, "%d 0 0 0 %.6f 0 0", 127 << 8, now() - t0);
+    if (pid < 0 || exec_errno) {
+        int why = pid < 0 ? errno : exec_errno;
+        if (pid < 0) dprintf(err_fd, "fbaconf-limit: cannot execute '%s': %s\n", argv[0], strerror(why));
+        else while (waitpid(pid, NULL, 0) < 0 && errno == EINTR) {}
+        char text[256];
+        snprintf(text, sizeof text, "%s %d 0 0 0 %.6f 0 0 %d", nonce, 127 << 8, now() - t0, why ? why : ENOEXEC);
         reply(text);
         return 0;
     }
@@ -213,7 +252,7 @@ static int serve(char *msg, uint32_t len, int reap) {
         if (w < 0 && errno != EINTR) break;
         double left = deadline - now();
         if (left <= 0) timed_out = 1;
-        else if (rss_limit > 0 && rss_mb(pid) > rss_limit) mem_hit = 1;
+        else if (rss_limit > 0 && rss_mb(pid, reap) > rss_limit) mem_hit = 1;
         if (timed_out || mem_hit) {
             if (killpg(pid, SIGKILL) != 0) kill(pid, SIGKILL);
             while (wait4(pid, &status, 0, &ru) < 0 && errno == EINTR) {}
@@ -234,7 +273,7 @@ static int serve(char *msg, uint32_t len, int reap) {
     killpg(pid, SIGKILL); /* what the decoder left behind in its session */
     if (reap) reap_namespace();
     char text[256];
-    snprintf(text, sizeof text, "%d %.6f %.6f %ld %.6f %d %d", status,
+    snprintf(text, sizeof text, "%s %d %.6f %.6f %ld %.6f %d %d 0", nonce, status,
              (double)ru.ru_utime.tv_sec + (double)ru.ru_utime.tv_usec * 1e-6,
              (double)ru.ru_stime.tv_sec + (double)ru.ru_stime.tv_usec * 1e-6,
              ru.ru_maxrss, elapsed, timed_out, mem_hit);
@@ -259,6 +298,7 @@ int main(int argc, char **argv) {
         for (int k = 0; k < 2; k++) fcntl(slots[s][k], F_SETFD, FD_CLOEXEC); /* children get one pair as 1, 2 */
     struct rlimit zero = {0, 0};
     setrlimit(RLIMIT_CORE, &zero);
+    prctl(PR_SET_DUMPABLE, 0, 0, 0, 0); /* its descriptors and memory closed to /proc (see the top) */
     signal(SIGXCPU, SIG_IGN); /* the server's own CPU time may pass a child's limit */
     signal(SIGPIPE, SIG_DFL);
     reply("ready"); /* the hello: started inside the sandbox */

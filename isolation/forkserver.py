@@ -15,18 +15,26 @@ starts in milliseconds.
 
 Protocol on stdin/stdout (the same for ``forkserver.c``, the server in C the harness uses when
 it can compile it): each message is a 4-byte big-endian length and that many bytes. A request
-is NUL-terminated fields: ``slot`` (which descriptor pair), ``as`` (address-space bytes, 0 =
-none), ``fsize`` (bytes), ``cpu`` (seconds), ``timeout`` (seconds), ``rss_mb`` (0 = not
-sampled), ``cwd``, ``argc``, the arguments, ``envc``, the ``NAME=value`` entries. A reply is
-ASCII ``status utime stime maxrss_kb elapsed timed_out mem_hit`` (``status`` the raw wait
-status). The server's first message is ``ready``, once it runs inside its sandbox. Exit code
-127 with ``fbaconf-limit: cannot execute …`` on stderr when the program cannot be started —
-the message the one-shot launcher prints, so :mod:`.endings` judges both paths alike.
+is NUL-terminated fields: ``nonce`` (the client's, echoed in the reply), ``slot`` (which
+descriptor pair), ``as`` (address-space bytes, 0 = none), ``fsize`` (bytes), ``cpu``
+(seconds), ``timeout`` (seconds), ``rss_mb`` (0 = not sampled), ``cwd``, ``argc``, the
+arguments, ``envc``, the ``NAME=value`` entries. A reply is ASCII ``nonce status utime stime
+maxrss_kb elapsed timed_out mem_hit exec_errno`` (``status`` the raw wait status,
+``exec_errno`` non-zero when the program could not be executed: the server's own knowledge;
+``fbaconf-limit: cannot execute …`` is then on its stderr). The server's first message is
+``ready``, once it runs inside its sandbox.
+
+The channel: no decoder inherits the server's stdin or stdout, and the server makes itself
+non-dumpable (``prctl(PR_SET_DUMPABLE, 0)``), so a decoder without ``CAP_SYS_PTRACE`` (the
+sandbox drops every capability) cannot open them through ``/proc/<ppid>/fd``; a reply that
+is garbled or does not echo its request's nonce is the running decoder's finding
+(:mod:`.forkclient`).
 
 ``--reap-namespace`` (only inside the sandbox's own PID namespace, where ``/proc`` lists the
 sandbox's processes alone): after each input every process but the sandbox's init and the
 server itself is killed — a decoder that forked away or left its session dies with its input.
 """
+import ctypes
 import os
 import resource
 import select
@@ -36,6 +44,7 @@ import sys
 import time
 
 SLOTS = [(3, 4)]  # (stdout, stderr) descriptor pairs, from --fds OUT ERR [OUT ERR ...]
+NOFILE = 1024  # descriptors per decoder process (isolation/seccomp.py)
 
 def _read_exact(n):
     buf = b""
@@ -47,9 +56,10 @@ def _read_exact(n):
     return buf
 
 
-def _send(reply):
-    data = ("%d %.6f %.6f %d %.6f %d %d" % (reply["status"], reply["utime"], reply["stime"], reply["maxrss_kb"],
-                                           reply["elapsed"], reply["timed_out"], reply["mem_hit"])).encode()
+def _send(nonce, reply):
+    data = ("%s %d %.6f %.6f %d %.6f %d %d %d" % (nonce, reply["status"], reply["utime"], reply["stime"],
+                                                   reply["maxrss_kb"], reply["elapsed"], reply["timed_out"],
+                                                   reply["mem_hit"], reply.get("exec_errno", 0))).encode()
     data = struct.pack(">I", len(data)) + data
     while data:
         data = data[os.write(1, data):]
@@ -73,8 +83,9 @@ def _find(prog, env):
     return prog
 
 
-def _child(req, out_fd, err_fd):
-    """In the forked child: own session, limits, descriptors, folder; then exec."""
+def _child(req, out_fd, err_fd, status_fd):
+    """In the forked child: own session, limits, descriptors, folder; then exec (its error, if
+    any, on ``status_fd``, which closes at the exec)."""
     argv = req["argv"]
     try:
         os.setsid()
@@ -82,29 +93,43 @@ def _child(req, out_fd, err_fd):
         os.dup2(null, 0)
         os.dup2(out_fd, 1)
         os.dup2(err_fd, 2)
-        os.closerange(3, 1 << 16)
+        os.dup2(status_fd, 3)
+        os.set_inheritable(3, False)
+        os.closerange(4, 1 << 16)
         for s in (signal.SIGPIPE, signal.SIGINT, signal.SIGTERM):
             signal.signal(s, signal.SIG_DFL)
         _set(resource.RLIMIT_AS, req["as"])
         _set(resource.RLIMIT_FSIZE, req["fsize"])
         _set(resource.RLIMIT_CPU, req["cpu"])
+        _set(resource.RLIMIT_NOFILE, NOFILE)
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
         os.chdir(req["cwd"])
         os.execve(_find(argv[0], req["env"]), argv, req["env"])
     except OSError as e:
+        os.write(3, str(e.errno or 8).encode())
         os.write(2, f"fbaconf-limit: cannot execute {argv[0]!r}: {e.strerror}\n".encode())
     except BaseException:  # noqa: BLE001 - never return into the server's loop
+        os.write(3, b"8")
         os.write(2, f"fbaconf-limit: cannot execute {argv[0]!r}\n".encode())
     finally:
         os._exit(127)
 
 
-def _rss_mb(pid):
+def _rss_one(pid):
     try:
         with open(f"/proc/{pid}/statm", "rb") as f:
             return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
     except (OSError, ValueError, IndexError):
         return 0.0
+
+
+def _rss_mb(pid, reap):
+    """The decoder's resident memory: its whole tree inside the sandbox's PID namespace (every
+    process but its init and this server), else its own."""
+    if not reap:
+        return _rss_one(pid)
+    me = os.getpid()
+    return sum(_rss_one(int(n)) for n in os.listdir("/proc") if n.isdigit() and int(n) not in (1, me))
 
 
 def _reap_namespace():
@@ -122,7 +147,7 @@ def _reap_namespace():
 
 
 SPAWN_MIN_AS = 256 << 20  # below this address-space limit the server forks (it cannot lower its own)
-_LIMITS = (resource.RLIMIT_AS, resource.RLIMIT_FSIZE, resource.RLIMIT_CPU)
+_LIMITS = (resource.RLIMIT_AS, resource.RLIMIT_FSIZE, resource.RLIMIT_CPU, resource.RLIMIT_NOFILE)
 
 
 _applied = {"limits": None, "cwd": None}
@@ -132,9 +157,9 @@ def _spawn(req, out_fd, err_fd):
     """posix_spawn (vfork + exec: ~0.1 ms, against ~0.5 ms for forking this process) with the
     child's limits as the server's own soft limits (set once per set of limits: the server
     itself stays far below them, ignores SIGXCPU and writes no file) and the child's signal
-    dispositions reset. Returns the pid, or None after writing the exec error."""
+    dispositions reset. Returns the pid, or the exec error (an errno, negated) after writing it."""
     argv, env = req["argv"], req["env"]
-    limits = (req["as"], req["fsize"], req["cpu"])
+    limits = (req["as"], req["fsize"], req["cpu"], NOFILE)
     if _applied["limits"] != limits:
         for which, value in zip(_LIMITS, limits):
             _set_soft(which, value)
@@ -150,7 +175,7 @@ def _spawn(req, out_fd, err_fd):
                           (os.POSIX_SPAWN_DUP2, out_fd, 1), (os.POSIX_SPAWN_DUP2, err_fd, 2)])
     except OSError as e:
         os.write(err_fd, f"fbaconf-limit: cannot execute {argv[0]!r}: {e.strerror}\n".encode())
-        return None
+        return -(e.errno or 8)
 
 
 def _set_soft(which, value):
@@ -166,13 +191,33 @@ def _set_soft(which, value):
 
 def _request(body):
     """The request's fields (see the protocol above) as a dict."""
-    f = body.split(b"\0")[:-1]
+    f = body.split(b"\0")[1:-1]  # (the nonce is the first field)
     argc = int(f[7])
     envc = int(f[8 + argc])
     env = dict(e.decode("utf-8", "surrogateescape").partition("=")[::2] for e in f[9 + argc:9 + argc + envc])
     return {"slot": int(f[0]), "as": int(f[1]), "fsize": int(f[2]), "cpu": int(f[3]), "timeout": float(f[4]),
             "rss_mb": float(f[5]), "cwd": f[6].decode("utf-8", "surrogateescape"),
             "argv": [a.decode("utf-8", "surrogateescape") for a in f[8:8 + argc]], "env": env}
+
+
+def _fork(req, out_fd, err_fd):
+    """Fork and exec in the child; the pid, or the exec error (an errno, negated)."""
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        _child(req, out_fd, err_fd, w)
+    os.close(w)
+    why = b""
+    while True:  # the exec error, or nothing once the exec closed the child's end
+        chunk = os.read(r, 16)
+        if not chunk:
+            break
+        why += chunk
+    os.close(r)
+    if not why:
+        return pid
+    os.waitpid(pid, 0)
+    return -int(why) if why.isdigit() else -8
 
 
 def serve(req, reap):
@@ -182,14 +227,12 @@ def serve(req, reap):
         os.lseek(fd, 0, os.SEEK_SET)
     t0 = time.monotonic()
     if 0 < req["as"] < SPAWN_MIN_AS:
-        pid = os.fork()
-        if pid == 0:
-            _child(req, out_fd, err_fd)
+        pid = _fork(req, out_fd, err_fd)
     else:
         pid = _spawn(req, out_fd, err_fd)
-        if pid is None:
-            return {"status": 127 << 8, "utime": 0.0, "stime": 0.0, "maxrss_kb": 0,
-                    "elapsed": time.monotonic() - t0, "timed_out": False, "mem_hit": False}
+    if pid < 0:
+        return {"status": 127 << 8, "utime": 0.0, "stime": 0.0, "maxrss_kb": 0,
+                "elapsed": time.monotonic() - t0, "timed_out": False, "mem_hit": False, "exec_errno": -pid}
     try:
         pfd = os.pidfd_open(pid)
     except (AttributeError, OSError):
@@ -204,7 +247,7 @@ def serve(req, reap):
         left = deadline - time.monotonic()
         if left <= 0:
             timed_out = True
-        elif rss_mb and _rss_mb(pid) > rss_mb:
+        elif rss_mb and _rss_mb(pid, reap) > rss_mb:
             mem_hit = True
         if timed_out or mem_hit:
             try:
@@ -245,6 +288,10 @@ def main():
         for fd in pair:
             os.set_inheritable(fd, False)  # children get one pair as 1 and 2 only
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    try:  # its descriptors and memory closed to /proc (see the top)
+        ctypes.CDLL(None, use_errno=True).prctl(4, 0, 0, 0, 0)  # PR_SET_DUMPABLE
+    except (OSError, AttributeError):
+        pass
     signal.signal(signal.SIGXCPU, signal.SIG_IGN)  # the server's own CPU time may pass a child's limit
     signal.signal(signal.SIGPIPE, signal.SIG_DFL)
     os.write(1, struct.pack(">I", 5) + b"ready")  # the hello: started inside the sandbox
@@ -255,7 +302,7 @@ def main():
         body = _read_exact(struct.unpack(">I", head)[0])
         if body is None:
             return
-        _send(serve(_request(body), reap))
+        _send(body.split(b"\0", 1)[0].decode("ascii", "replace"), serve(_request(body), reap))
 
 
 if __name__ == "__main__":

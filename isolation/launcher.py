@@ -5,13 +5,16 @@ Run as ``python -I -S launcher.py AS_BYTES FSIZE_BYTES CPU_S [--cgroup DIR]... -
 The program is usually ``bwrap …`` (the sandbox), which then execs the decoder: limits and
 cgroup membership are inherited by everything the decoder starts. Kept free of imports
 beyond the standard library's ``os``/``resource``/``signal``/``sys`` so it starts in milliseconds. A
-limit of 0 means "not set". Exit code 127 with a message on stderr when the program
-cannot be started (not found, not executable) or a cgroup cannot be joined.
+limit of 0 means "not set"; the descriptor count is always capped (``NOFILE``). Exit code 127
+with a message on stderr when the program cannot be started (not found, not executable) or a
+cgroup cannot be joined.
 """
 import os
 import resource
 import signal
 import sys
+
+NOFILE = 1024  # descriptors per process: isolation/seccomp.py's NOFILE (kept free of imports here)
 
 
 def _set(which, value):
@@ -43,6 +46,7 @@ def main():
     _set(resource.RLIMIT_AS, as_bytes)
     _set(resource.RLIMIT_FSIZE, fsize)
     _set(resource.RLIMIT_CPU, cpu)
+    _set(resource.RLIMIT_NOFILE, NOFILE)
     resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
     # Python starts with SIGPIPE and SIGXFSZ ignored, and an ignored signal stays ignored
     # across exec: without this a decoder past the file-size limit gets EFBIG instead of

@@ -1,24 +1,42 @@
-"""The persistent decoder protocol: ``[commands] serve`` keeps one decoder process alive for
-many inputs (AFL++'s persistent mode, over a pipe).
+"""The persistent decoder protocol (version 2): ``[commands] serve`` keeps one decoder process
+alive for many inputs (AFL++'s persistent mode, over a pipe).
 
 The harness starts ``serve`` once per worker, sandboxed and limited like any decoder (its
-folder, its view, address-space and file-size limits for the whole process — no CPU-time
-limit, which would add up over inputs), with stdin and stdout as pipes. Per input::
+folder, its view, the memory and file-size limits for the whole process — no CPU-time limit,
+which would add up over inputs), with stdin and stdout as pipes. Per input::
 
-    harness -> decoder:  "<size> <output path>\\n" then <size> bytes (the stream)
-    decoder -> harness:  "<code>[ <message>]\\n"
+    harness -> decoder:  "<id> <size> <output path>\\n" then <size> bytes (the stream)
+    decoder -> harness:  "<id> <code>[ <message>]\\n"
 
-``<code>`` means what the exit code of ``decode`` means (0 decoded, the output written to
-the path; 69 not supported; a reject code from ``reject_exit_codes``; anything else is a
-Fail). The output path's extension is the manifest's ``faps_format``. The process ends
-when its stdin closes.
+``<id>`` is the request's number (random, never guessable ahead), echoed in its answer. ``<code>``
+means what the exit code of ``decode`` means (0 decoded, the output written to the path; 69
+not supported; a reject code from ``reject_exit_codes``; anything else is a Fail). The output
+path's extension is the manifest's ``faps_format``. The decoder flushes its answer (nothing
+else is sent until it arrives) and ends when its stdin closes.
+
+Framing, one input at a time. The next input is written only once the previous one's answer
+is in, so whatever happens between two answers — a crash, a hang, a report on stderr — is
+the input in flight's, and the inputs queued behind it are sent, in order, to a fresh process
+(after a first crash a spare process is kept starting in the background, so the next input
+need not wait for a sandbox). Reads and writes are bounded in size and time, in both
+directions: the input is written with the input's deadline while the harness keeps reading
+(a decoder that answers instead of reading cannot block it), an answer is one line of at most
+:data:`MAX_ANSWER` bytes, and a decoder that sends more than the one answer asked for — an
+answer before its input, two answers, a megabyte of text, another request's id — has broken
+the protocol (``protocol-error``, an unexpected exit), and the process is replaced. Whose
+error it is: a garbled line, a flood, or a second line after the answer, the input in flight's;
+bytes written before the input in flight was (an answer ahead of its request, whose random id
+cannot be guessed), or a repeated answer to the previous request, the previous input's — for
+a decoder that reads one request at a time, that is what wrote them. To make that possible,
+an input's result is given out only once the next queued input has answered too (when one is
+queued: the decoder keeps working meanwhile), and an input wrongly held up by the previous
+one's error is sent again to a fresh process. A process that exits while decoding is that
+input's ending as its exit status says (a crash, a memory limit...); one that exits 0 without
+answering is a protocol error too.
 
 A crash (the process dies: a signal, a sanitizer abort, a panic), a hang (no answer within
-``timeout_s``) or a memory or output blow-up is the ending of the input being decoded; the
-harness kills the process and starts a new one for the next input (after a first crash, a
-spare process is kept starting in the background, so the next input need not wait for it).
-Whatever the decoder wrote on stderr while decoding an input is that input's stderr (crash
-reports are read from it), so a report printed without dying is judged as a crash too. The result is a
+``timeout_s``) or a memory or output blow-up is the ending of the input being decoded. The
+folder's size is watched while an input runs (:mod:`.watch`). The result is a
 :class:`~fbaconf.isolation.sandbox.ProcResult`, judged by :mod:`.endings` like a spawned
 decoder's.
 """
@@ -26,14 +44,24 @@ from __future__ import annotations
 
 import collections
 import os
+import secrets
 import select
 import subprocess
 import time
 from pathlib import Path
 
-from . import sandbox
+from fbaconf.safefs import tree_size
+
+from . import preflight, sandbox
+from .cgroups import Cgroups
 from .forkclient import ForkServerError
+from .process import Finish, exit_reported, kill_group, launch_server, result, stop_server, stopping, tail_from
 from .sandbox import Limits, ProcResult, View
+from .watch import Watch
+
+PROTOCOL = 2
+MAX_ANSWER = 4096  # bytes of one answer line
+CHUNK = 1 << 16
 
 
 class PersistentDecoder:
@@ -47,220 +75,337 @@ class PersistentDecoder:
         self.view = view
         self.limits = limits
         self.env = env
-        self.proc: subprocess.Popen | None = None
-        self.cg = None
         self.starts = 0
         self.io = self.root / ".io"
-        self._err = None
-        self._buf = b""
-        self._queue: collections.deque = collections.deque()
-        self._answers = 0
-        self._err_mark = 0
-        self._last_done = 0.0
+        self.server: _Server | None = None
+        self._spare: _Server | None = None  # started ahead, after a first crash
         self._launches = 0
-        self._spare: tuple | None = None  # (process, cgroups, stderr) started ahead, after a first crash
+        self._pending: collections.deque[Answer] = collections.deque()
+        self._inflight: Answer | None = None
+        self._answers = 0
 
-    def _launch(self) -> tuple:
-        """One sandboxed ``serve`` process, not yet given an input: (process, cgroups, stderr)."""
+    # ---------------------------------------------------------------- processes
+    def _launch(self) -> "_Server":
+        """One sandboxed ``serve`` process, not yet given an input."""
         self.io.mkdir(parents=True, exist_ok=True)
         (self.workdir / "tmp").mkdir(parents=True, exist_ok=True)
-        inner = list(self.argv)
+        env = sandbox.decoder_env(self.workdir, self.env)
+        why = preflight.exec_problem(self.argv, env)
+        if why is not None:
+            raise ForkServerError(f"cannot start the persistent decoder: {why}")
+        inner, fds, status_r = list(self.argv), [], None
         if sandbox.isolation() == "bwrap":
-            inner = sandbox._bwrap_argv(self.view, self.workdir) + inner
+            head, status_r = sandbox.sandbox_argv(self.view, self.workdir, fds)
+            inner = head + inner
         lim = self.limits
         self._launches += 1
         err = open(self.io / f"stderr{self._launches % 2}", "wb+")  # the process in use and its spare
+        cg = Cgroups(processes=lim.processes, memory_mb=lim.memory_mb if lim.memory_kind != "none" else 0)
+        as_bytes = sandbox.as_bytes_for(lim, cg)
         try:
-            proc, cg = sandbox.launch_server(
-                inner, lim, cwd=self.workdir, env=sandbox.decoder_env(self.workdir, self.env), stderr=err,
-                as_bytes=lim.memory_mb * 2**20 if lim.memory_kind == "address-space" else 0,
-                fsize=lim.output_mb * 2**20)
+            proc, cg = launch_server(inner, lim, cwd=self.workdir, env=env, stderr=err, pass_fds=tuple(fds),
+                                     as_bytes=as_bytes, fsize=lim.output_mb * 2**20, cg=cg)
         except OSError as e:
             err.close()
+            if status_r is not None:
+                os.close(status_r)
             raise ForkServerError(f"cannot start the persistent decoder: {e}") from e
-        return proc, cg, err
+        finally:
+            for fd in fds:
+                os.close(fd)
+        for f in (proc.stdin, proc.stdout):
+            os.set_blocking(f.fileno(), False)
+        return _Server(proc, cg, err, status_r, as_bytes > 0)
 
     def _start(self) -> None:
         """The process for the next inputs: the spare if one is ready, else a new one. After a
         first restart a spare is kept starting in the background, so a decoder that crashes
         often does not wait for a sandbox to start before each next input."""
         spare, self._spare = self._spare, None
-        if spare is not None and spare[0].poll() is not None:  # it died waiting
-            _stop(spare)
+        if spare is not None and spare.proc.poll() is not None:  # it died waiting
+            spare.stop()
             spare = None
-        self.proc, self.cg, self._err = spare or self._launch()
-        self._buf = b""
-        self._err_mark = 0
+        self.server = spare or self._launch()
         self.starts += 1
         if self.starts > 1:
             self._spare = self._launch()
 
     def _drop(self) -> None:
         """Stop the process in use (it ended or broke the protocol); the spare stays."""
-        for a in self._queue:  # inputs queued behind the one that ended the process: sent again
-            a.sent = False
-        p, self.proc = self.proc, None
-        _stop((p, self.cg, self._err))
-        self.cg = self._err = None
+        srv, self.server = self.server, None
+        if srv is not None:
+            srv.stop()
 
     def close(self) -> None:
         self._drop()
         spare, self._spare = self._spare, None
         if spare is not None:
-            _stop(spare)
+            spare.stop()
 
+    # ---------------------------------------------------------------- inputs
     def run(self, data: bytes, out_path: str) -> ProcResult:
         """Decode one input; its ending as a :class:`ProcResult` (``returncode`` = the answered
         code, or the process's own ending when it died)."""
         return self.start(data, out_path).result()
 
     def start(self, data: bytes, out_path: str) -> "Answer":
-        """Send one input; the :class:`Answer` waits for it (one input at a time)."""
-        a = Answer(self)
-        if sandbox.stopping():
+        """Queue one input; it is written to the decoder once every input before it has its
+        answer. The :class:`Answer` waits for it."""
+        a = Answer(self, data, out_path)
+        if stopping():
             a.res = ProcResult(self.argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
             return a
-        if not self._queue and (self.proc is None or self.proc.poll() is not None):
-            self._drop()
-            self._start()
-        a.message = f"{len(data)} {out_path}\n".encode() + data
-        self._send(a)
-        self._queue.append(a)
+        self._pending.append(a)
+        if self._inflight is None:
+            self._dispatch()
         return a
 
-    def _send(self, a: "Answer") -> None:
-        a.err_start = os.fstat(self._err.fileno()).st_size
-        a.t0 = time.perf_counter()
-        try:
-            self.proc.stdin.write(a.message)
-            self.proc.stdin.flush()
-            a.sent = True
-        except (BrokenPipeError, OSError):
-            a.sent = False
+    def _dispatch(self) -> None:
+        """Write the next queued input (the decoder is free)."""
+        while self._inflight is None and self._pending:
+            a = self._pending.popleft()
+            if a.res is not None:
+                continue
+            if self.server is None or self.server.proc.poll() is not None:
+                self._drop()
+                try:
+                    self._start()
+                except ForkServerError as e:
+                    a.res = ProcResult(self.argv, None, stderr_tail=str(e), notes=["exec-failed"], detail=str(e))
+                    continue
+            self._inflight = a
+            self.server.send(a, self.limits)  # how it went is read by _complete
 
-    def _resend(self, a: "Answer") -> None:
-        """A fresh process for ``a`` and the inputs queued behind it."""
-        self._drop()
-        self._start()
-        for x in (a, *self._queue):
-            self._send(x)
+    def _complete(self, a: "Answer") -> None:
+        """Read ``a``'s answer (``a`` is in flight) and judge it; then the next input goes out."""
+        srv = self.server
+        watch = Watch(self.limits, [self.workdir], pid=srv.proc.pid, procs=srv.cg.procs if srv.cg.dirs else None,
+                      t0=a.t0)
+        got = srv.read_answer(a, a.t0 + self.limits.timeout_s, watch)
+        a.elapsed = time.perf_counter() - a.t0
+        self._inflight = None
+        if got == "answered":
+            a.res = self._answered(a, srv)
+            srv.last = a
+        elif got in ("timeout", "memory", "output"):
+            a.res = self._ended(a, srv, got)
+        elif got == "eof":
+            a.res = self._ended(a, srv, None)
+        else:  # a protocol error: of this input, or of the previous one (module doc)
+            whose, why = got
+            prev = srv.last
+            if whose == "previous" and prev is not None and not prev.consumed:
+                prev.res = self._broken(prev, srv, why)
+                a.reset()
+                self._pending.appendleft(a)  # held up by the previous input's error: again, on a fresh process
+            else:
+                a.res = self._broken(a, srv, why)
+        self._dispatch()
 
-    def _answered(self, line: bytes, err: str, elapsed: float) -> ProcResult:
-        text = line.decode("utf-8", "replace").strip()
-        head = text.split(" ", 1)[0]
-        if not head.lstrip("-").isdigit():
-            self._drop()  # the protocol is broken: start afresh, judge this answer
-            return ProcResult(self.argv, 125, elapsed_s=elapsed,
-                              stderr_tail=err + f"\n[persistent] not an answer line: {text[:120]!r}")
-        res = ProcResult(self.argv, int(head), elapsed_s=elapsed, stderr_tail=err)
+    def _answered(self, a: "Answer", srv: "_Server") -> ProcResult:
+        head = a.line.split(b" ", 2)
+        code = int(head[1])
+        res = ProcResult(self.argv, code, elapsed_s=a.elapsed, stderr_tail=srv.err_since(a.err_start))
         self._answers += 1
-        if res.returncode == 0 or self._answers % 16 == 0:  # each file is capped by RLIMIT_FSIZE anyway
-            res.output_bytes = sandbox.tree_size(self.workdir, stop_at=self.limits.output_mb * 2**20 * 4)
+        if code == 0 or self._answers % 16 == 0:  # each file is capped by RLIMIT_FSIZE anyway
+            res.output_bytes = tree_size(self.workdir, stop_at=self.limits.output_mb * 2**20 * 4)
             if res.output_bytes > self.limits.output_mb * 2**20:
                 res.output_limit_hit = True
         return res
 
-    def _ended(self, err_start: int, elapsed: float, timed_out: bool) -> ProcResult:
-        """The process died or hung while decoding: its ending, then a fresh start next time."""
-        p = self.proc
-        if timed_out:
-            sandbox._kill_group(p.pid)
-        if not timed_out:  # it died: give it a moment to be reaped, else it hangs with its stdout closed
+    def _broken(self, a: "Answer", srv: "_Server", why: str) -> ProcResult:
+        """The decoder broke the protocol during ``a``: that input's ending; a fresh process next."""
+        err = srv.err_since(a.err_start)
+        self._drop()
+        return ProcResult(self.argv, None, elapsed_s=a.elapsed, stderr_tail=err, notes=["protocol-error"],
+                          detail=f"broke the persistent protocol (version {PROTOCOL}, docs/fuzzing.md): {why}")
+
+    def _ended(self, a: "Answer", srv: "_Server", hit: str | None) -> ProcResult:
+        """The process died (``hit`` None) or was stopped at a limit while decoding ``a``."""
+        p = srv.proc
+        if hit is not None:
+            kill_group(p.pid)
+        else:  # it died: give it a moment to be reaped, else it hangs with its stdout closed
             for _ in range(200):
                 if os.waitid(os.P_PID, p.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None:
                     break
                 time.sleep(0.005)
             else:
-                timed_out = True
-                sandbox._kill_group(p.pid)
+                hit = "timeout"
+                kill_group(p.pid)
         try:
             _pid, status, ru = os.wait4(p.pid, 0)
         except ChildProcessError:
             status, ru = 0, None
         p.returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
-        oom, pids_hit = self.cg.oom_killed(), self.cg.pids_exhausted()
-        err = _tail_from(self._err.fileno(), err_start)
-        res = sandbox.result(self.argv, self.limits, status, ru, elapsed, timed_out=timed_out, mem_hit=False,
-                             oom=oom, pids_hit=pids_hit, bwrap_status=sandbox.isolation() == "bwrap",
-                             stdout_tail="", stderr_tail=err, measure_dirs=[self.workdir])
+        notes = ["as-limit"] if srv.as_limit else []
+        if srv.status_r is not None and hit is None and not exit_reported(srv.take_status()) and not stopping():
+            notes.append("sandbox-failed")
+        fin = Finish(status, ru, a.elapsed, timed_out=hit == "timeout", mem_hit=hit == "memory",
+                     out_hit=hit == "output", oom=srv.cg.oom_killed(), pids_hit=srv.cg.pids_exhausted(),
+                     bwrap_status=sandbox.isolation() == "bwrap", notes=tuple(notes))
+        res = result(self.argv, self.limits, fin, stdout_tail="", stderr_tail=srv.err_since(a.err_start),
+                     measure_dirs=[self.workdir])
         self._drop()
-        if res.returncode == 0 and not timed_out:  # it exited cleanly in the middle of an input
-            res.returncode = 125
-            res.stderr_tail += "\n[persistent] the decoder exited without answering"
+        if res.returncode == 0 and hit is None:  # it exited cleanly in the middle of an input
+            res.returncode = None
+            res.notes.append("protocol-error")
+            res.detail = f"broke the persistent protocol (version {PROTOCOL}): exited without answering request {a.id}"
         return res
 
-    def _read_line(self, deadline: float) -> bytes | None:
-        """One answer line; b"" when the process closed its stdout; None on timeout."""
-        fd = self.proc.stdout.fileno()
-        while b"\n" not in self._buf:
+
+class _Server:
+    """One running ``serve`` process: its pipes (non-blocking), cgroups, stderr file, the
+    bubblewrap status descriptor, what it has sent back so far and the input it answered last."""
+
+    def __init__(self, proc: subprocess.Popen, cg, err, status_r: int | None, as_limit: bool) -> None:
+        self.proc, self.cg, self.err, self.status_r, self.as_limit = proc, cg, err, status_r, as_limit
+        self.buf = b""
+        self.last: Answer | None = None
+
+    def take_status(self) -> int | None:
+        fd, self.status_r = self.status_r, None
+        return fd
+
+    def stop(self) -> None:
+        stop_server(self.proc, self.cg, grace_s=0.5)  # end of input first: a well-behaved server exits
+        self.err.close()
+        if self.status_r is not None:
+            os.close(self.status_r)
+            self.status_r = None
+
+    def err_since(self, start: int) -> str:
+        return tail_from(self.err.fileno(), start)
+
+    def send(self, a: "Answer", limits: Limits) -> None:
+        """Write ``a``'s request within its deadline, reading what the decoder sends meanwhile
+        (kept for :meth:`read_answer`; more than one answer's worth is a protocol error)."""
+        a.id = secrets.randbits(48)
+        a.srv = self
+        a.err_start = os.fstat(self.err.fileno()).st_size
+        a.t0 = time.perf_counter()
+        data = memoryview(f"{a.id} {len(a.data)} {a.out_path}\n".encode() + a.data)
+        wfd, rfd = self.proc.stdin.fileno(), self.proc.stdout.fileno()
+        deadline = a.t0 + limits.timeout_s
+        if not self._take(rfd, a, wait=False):
+            return
+        while data:
             left = deadline - time.perf_counter()
-            if left <= 0 or not select.select([fd], [], [], left)[0]:
-                return None
-            chunk = os.read(fd, 65536)
-            if not chunk:
-                return b""
-            self._buf += chunk
-            if len(self._buf) > 65536:
-                return self._buf[:200]
-        line, _, self._buf = self._buf.partition(b"\n")
-        return line
+            if left <= 0:
+                a.pending_end = "timeout"  # it does not read its input
+                return
+            readable, writable, _ = select.select([rfd], [wfd], [], left)
+            if readable and not self._take(rfd, a):
+                return
+            if writable:
+                try:
+                    data = data[os.write(wfd, data):]
+                except BlockingIOError:
+                    continue
+                except (BrokenPipeError, OSError):
+                    a.pending_end = "eof"  # it died (or closed its input): its ending says which
+                    return
+        a.early = bool(self.buf)  # written before it had all of this request: not its answer (module doc)
 
+    def _take(self, rfd: int, a: "Answer", wait: bool = True) -> bool:
+        """Read what the decoder sent (``wait``: select said there is something); False (and
+        ``a.pending_end`` set) when that ends the input."""
+        if not wait and not select.select([rfd], [], [], 0)[0]:
+            return True
+        try:
+            chunk = os.read(rfd, CHUNK)
+        except BlockingIOError:
+            return True
+        except OSError:
+            chunk = b""
+        if not chunk:
+            a.pending_end = "eof"
+            return False
+        self.buf += chunk
+        if len(self.buf) > MAX_ANSWER:
+            a.pending_end = ("this", f"sent {len(self.buf)}+ bytes where one answer line of at most {MAX_ANSWER} "
+                                     f"belongs")
+            return False
+        return True
 
-def _stop(server: tuple) -> None:
-    """Stop one (process, cgroups, stderr) of :meth:`PersistentDecoder._launch`."""
-    proc, cg, err = server
-    sandbox.stop_server(proc, cg, grace_s=0.5)  # end of input first: a well-behaved server exits
-    if err is not None:
-        err.close()
-
-
-def _tail_from(fd: int, start: int, end: int | None = None) -> str:
-    size = os.fstat(fd).st_size if end is None else end
-    at = max(start, size - sandbox.TAIL_BYTES)
-    data = os.pread(fd, size - at, at) if size > at else b""
-    return ("…" if at > start else "") + data.decode("utf-8", "replace")
-
+    def read_answer(self, a: "Answer", deadline: float, watch: Watch):
+        """Wait for ``a``'s answer: "answered" (``a.line`` set), "eof", "timeout", "memory",
+        "output", or (whose, why) when the decoder broke the protocol — whose: "this" input's
+        doing or the "previous" one's (module doc)."""
+        rfd = self.proc.stdout.fileno()
+        if a.pending_end is not None:
+            return a.pending_end
+        if a.early:
+            return ("previous", f"wrote {self.buf[:60]!r} before request {a.id} was written in full (an answer "
+                                f"ahead of its request, or more than one answer)")
+        while b"\n" not in self.buf:
+            now = time.perf_counter()
+            if now >= deadline:
+                return "timeout"
+            if not select.select([rfd], [], [], min(deadline - now, watch.next_in(now)))[0]:
+                hit = watch.check(time.perf_counter())
+                if hit:
+                    return hit
+                continue
+            if not self._take(rfd, a):
+                return a.pending_end
+        line, _, rest = self.buf.partition(b"\n")
+        self.buf = b""
+        head = line.split(b" ", 2)
+        if len(head) < 2 or not head[0].isdigit() or not head[1].lstrip(b"-").isdigit() or len(head[1]) > 9:
+            return ("this", f"not an answer line (version {PROTOCOL}: '<id> <code>[ <message>]'): {line[:120]!r}")
+        rid = int(head[0]) if len(head[0]) < 20 else -1
+        if rid != a.id:
+            prev = self.last.id if self.last is not None else None
+            what = (f"answered request {rid} more than once" if rid == prev else
+                    f"answered request {head[0][:20].decode()}, which was never sent (an answer ahead of its request)")
+            return ("previous", what)
+        if rest:
+            return ("this", f"sent more than the one answer to request {a.id}: {rest[:80]!r}")
+        a.line = line
+        return "answered"
 
 
 class Answer:
-    """One input sent to a :class:`PersistentDecoder`: ``wait`` until it answered or ended
+    """One input queued to a :class:`PersistentDecoder`: ``wait`` until it answered or ended
     (the process is free for the next input), ``result`` judges it."""
 
-    def __init__(self, dec: PersistentDecoder) -> None:
-        self.dec = dec
+    def __init__(self, dec: PersistentDecoder, data: bytes, out_path: str) -> None:
+        self.dec, self.data, self.out_path = dec, data, out_path
         self.res: ProcResult | None = None
-        self.sent = False
+        self.consumed = False  # its result was given out
+        self.reset()
+
+    def reset(self) -> None:
+        """Not sent (again): no request id, no process."""
+        self.srv: _Server | None = None
+        self.id = 0
         self.t0 = 0.0
+        self.elapsed = 0.0
         self.err_start = 0
-        self.line: bytes | None = None
-        self.message = b""
+        self.line = b""
+        self.early = False  # bytes came before its request was written in full
+        self.pending_end = None  # how it ended while its input was written
 
     def wait(self) -> None:
-        if self.res is not None or self.line is not None:
-            return
         dec = self.dec
-        while dec._queue and dec._queue[0] is not self:
-            dec._queue[0].wait()  # inputs sent earlier answer first
-        if dec._queue and dec._queue[0] is self:
-            dec._queue.popleft()
-        if not self.sent or dec.proc is None:
-            dec._resend(self)  # sent to a process that ended under an earlier input
-        # this input's time and stderr begin where the previous answer ended
-        begun = max(self.t0, dec._last_done)
-        err_start = max(self.err_start, dec._err_mark)
-        line = dec._read_line(begun + dec.limits.timeout_s) if self.sent else b""
-        dec._last_done = time.perf_counter()
-        elapsed = dec._last_done - begun
-        if not line:  # None: no answer in time; b"": the process closed its end (it died)
-            self.res = dec._ended(err_start, elapsed, timed_out=line is None)
-            return
-        self.line, self.elapsed = line, elapsed
-        err_end = os.fstat(dec._err.fileno()).st_size
-        dec._err_mark = err_end
-        self.err = _tail_from(dec._err.fileno(), err_start, err_end)
+        while self.res is None:
+            if dec._inflight is None:
+                dec._dispatch()
+                if dec._inflight is None:  # not queued (a stop), or ended at its dispatch
+                    if self.res is None:
+                        self.res = ProcResult(dec.argv, None, stderr_tail="harness stopping",
+                                              notes=["harness-start-failed"])
+                    return
+            dec._complete(dec._inflight)
 
     def result(self) -> ProcResult:
+        """Its ending — once the input queued after it on the same process has answered too
+        (whatever that brings, a repeated or early answer, is this input's doing)."""
         self.wait()
-        if self.res is None:
-            self.res = self.dec._answered(self.line, self.err, self.elapsed)
+        dec, nxt = self.dec, self.dec._inflight
+        if (not self.consumed and nxt is not None and nxt.res is None and self.srv is not None
+                and nxt.srv is self.srv and self.srv.last is self):
+            dec._complete(nxt)
+        self.consumed = True
         return self.res

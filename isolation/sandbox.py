@@ -14,14 +14,21 @@ warns once and ``certify`` refuses unless told ``--allow-unisolated``.
 Limits per invocation:
 
 * wall-clock ``timeout_s`` — the whole process group is killed (SIGKILL) when it expires;
-* memory: ``memory_mb`` as an address-space rlimit per process (``memory_kind =
-  "address-space"``, the default), or for runtimes that reserve large virtual ranges up
-  front (JVM, some Go/JS runtimes) ``"rss"``: the resident set; ``"none"``. Where the
-  machine's cgroups are writable, the limit also holds for the whole process tree together
-  (a cgroup memory limit), and ``processes`` caps the number of processes (pids.max);
+* memory (``memory_kind``): ``"tree"`` (the default) — ``memory_mb`` over the whole process
+  tree, as a cgroup memory limit where the machine's cgroups are writable (what the tree
+  really uses: a Go or Java runtime's address-space reservation does not count), else as an
+  address-space rlimit per process (the fallback, :func:`isolation_report` says so);
+  ``"address-space"`` — the rlimit per process always (and the cgroup limit too);
+  ``"rss"`` — the resident set of the whole tree, sampled every 10 ms (and the cgroup limit);
+  ``"none"``. ``processes`` caps the number of processes (pids.max). A runtime that dies
+  reserving its address space under an address-space limit is a set-up problem
+  (:mod:`.endings` names the runtime's message and the fix);
 * output: ``output_mb`` per file (RLIMIT_FSIZE: a write beyond it raises SIGXFSZ in the
-  decoder) and in total over the working directory (checked after the run);
-* CPU seconds (RLIMIT_CPU, a backstop at twice the timeout); no core dumps.
+  decoder) and in total over the working directory, measured while the decoder runs
+  (:mod:`.watch`: the tree is killed once past the limit) and after;
+* CPU seconds (RLIMIT_CPU, a backstop at twice the timeout); 1024 descriptors per process;
+  no core dumps; no inotify or fanotify instances (:mod:`.seccomp`: a decoder cannot take
+  the host user's).
 
 The limits are applied by a launcher, so nothing runs between fork and exec in this
 (threaded) process: util-linux's ``prlimit`` (about 1.5 ms), which sets the rlimits and execs
@@ -30,6 +37,12 @@ has moved it into the case's cgroups, so everything the decoder starts is counte
 ``prlimit``, a Python launcher (``launcher.py``, about 13 ms) joins the cgroups and sets the
 rlimits itself. stdout and stderr go to files outside the decoder's view; only
 their tails are kept, read without following links or blocking.
+
+Set-up failures are the harness's own knowledge, never read from the decoder's output: the
+program is checked before the start (:mod:`.preflight`: found, a regular executable file,
+its ``#!`` interpreter present), and bubblewrap reports on a status descriptor whether the
+program ran (``--json-status-fd``: an ``exit-code`` only when it did) — an ending without
+one is the sandbox's or the exec's failure, whatever the decoder could have printed.
 
 The result names what happened — exit code, signal name, timeout, output limit, memory
 limit — and :mod:`.endings` turns it into an outcome with a useful message.
@@ -43,25 +56,41 @@ import os
 import pkgutil
 import select
 import shutil
-import signal
-import stat
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import fbaconf
-from fbaconf.safefs import tree_size
 
+from . import cgroups, preflight, seccomp
 from .cgroups import Cgroups
+from .process import (  # noqa: F401 (the names callers import from here)
+    _RUNNING,
+    _STOP,
+    LIMIT_LAUNCHER,
+    TAIL_BYTES,
+    Finish,
+    ProcResult,
+    exit_reported,
+    kill_group,
+    launch_argv,
+    launch_server,
+    pidfd,
+    read_tail,
+    release,
+    reset_stop,
+    result,
+    stop_all,
+    stop_server,
+    stopping,
+    tempfile_dir,
+)
+from .watch import Watch
 
-LIMIT_LAUNCHER = Path(__file__).with_name("launcher.py")
-_SIGNALS = {int(s) for s in signal.Signals}
-MEMORY_KINDS = ("address-space", "rss", "none")
-TAIL_BYTES = 4000
+MEMORY_KINDS = ("tree", "address-space", "rss", "none")
 
 
 # Sane bounds of every limit: a limit outside them is a manifest error, never a disabled check.
@@ -75,7 +104,7 @@ MAX_PROCESSES = 4096
 class Limits:
     timeout_s: float = 60.0
     memory_mb: int = 2048
-    memory_kind: str = "address-space"
+    memory_kind: str = "tree"
     output_mb: int = 256
     processes: int = 64
 
@@ -167,54 +196,6 @@ def _bwrap_argv(view: View, workdir: Path) -> list[str]:
             out += ["--ro-bind", str(p), str(p)]
     out += ["--chdir", str(workdir), "--"]
     return out
-
-
-@dataclass
-class ProcResult:
-    argv: list[str]
-    returncode: int | None  # None when killed by the harness before it exited on its own
-    signal: str | None = None  # e.g. "SIGSEGV"
-    timed_out: bool = False
-    elapsed_s: float = 0.0
-    cpu_s: float = 0.0
-    maxrss_mb: float = 0.0
-    stdout_tail: str = ""
-    stderr_tail: str = ""
-    output_limit_hit: bool = False
-    memory_limit_hit: bool = False
-    output_bytes: int = 0
-    notes: list[str] = field(default_factory=list)
-
-
-def _tail(path: Path) -> str:
-    """The last ``TAIL_BYTES`` of a regular file, read without following a link and without
-    blocking (a FIFO or device put in its place reads as empty)."""
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
-    except OSError:
-        return ""
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISREG(st.st_mode):
-            return ""
-        size = st.st_size
-        os.lseek(fd, max(0, size - TAIL_BYTES), os.SEEK_SET)
-        data = os.read(fd, TAIL_BYTES)
-    except OSError:
-        return ""
-    finally:
-        os.close(fd)
-    text = data.decode("utf-8", "replace")
-    return ("…" if size > TAIL_BYTES else "") + text
-
-
-def _rss_mb(pid: int) -> float:
-    try:
-        with open(f"/proc/{pid}/statm", "rb") as f:
-            pages = int(f.read().split()[1])
-        return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
-    except (OSError, ValueError, IndexError):
-        return 0.0
 
 
 def default_view(argv: list[str], workdir: Path) -> View:
@@ -314,57 +295,37 @@ def decoder_env(workdir: Path, env: dict[str, str] | None) -> dict[str, str]:
     return out
 
 
+# ------------------------------------------------------------------ one invocation
 
-# The shell waits for the harness's go (a line on stdin) once it has been moved into the
-# case's cgroups, then execs the launcher with stdin from /dev/null.
-_HOLD = 'read -r _ || exit 126; exec "$@" </dev/null'
-
-
-def _rlimit_arg(which: int, value: int) -> str:
-    """prlimit's SOFT:HARD for ``value`` as ``launcher._set`` sets it: capped by the current
-    hard limit, which it lowers to the value only when it was unlimited."""
-    import resource  # noqa: PLC0415 (POSIX only)
-    _soft, hard = resource.getrlimit(which)
-    if hard == resource.RLIM_INFINITY:
-        return f"{value}:{value}"
-    return f"{min(value, hard)}:{hard}"
+def as_bytes_for(limits: Limits, cg: Cgroups | None) -> int:
+    """The address-space rlimit (bytes, 0 = none) a decoder process gets: always for
+    ``memory_kind = "address-space"``; for ``"tree"`` only where no cgroup holds the tree's
+    memory (``cg`` has no memory limit), the fallback."""
+    if not limits.memory_mb:
+        return 0
+    if limits.memory_kind == "address-space" or (limits.memory_kind == "tree" and not (cg is not None and
+                                                                                      cg.has_memory)):
+        return limits.memory_mb * 2**20
+    return 0
 
 
-def launch_argv(as_bytes: int, fsize: int, cpu: int, cgroups: list[Path], inner: list[str]) -> tuple[list[str], bool]:
-    """The launcher command that applies the limits and execs ``inner``, and whether it waits
-    for the harness to move it into ``cgroups`` (then write a line to its stdin)."""
-    import resource  # noqa: PLC0415 (POSIX only)
-    # FBACONF_LAUNCHER=python: always the Python launcher (benchmarks/bench_run.py compares the two)
-    prlimit = None if os.environ.get("FBACONF_LAUNCHER", "").lower() == "python" else shutil.which("prlimit")
-    if prlimit is None:
-        cg = [x for d in cgroups for x in ("--cgroup", str(d))]
-        return [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize),
-                str(cpu), *cg, "--", *inner], False
-    lim = [f"--{name}={_rlimit_arg(which, v)}" for name, which, v in
-           (("as", resource.RLIMIT_AS, as_bytes), ("fsize", resource.RLIMIT_FSIZE, fsize),
-            ("cpu", resource.RLIMIT_CPU, cpu)) if v > 0]
-    argv = [prlimit, *lim, "--core=0:0", "--", *inner]
-    if cgroups:
-        return ["/bin/sh", "-c", _HOLD, "fbaconf-launch", *argv], True
-    return argv, False
-
-
-def _release(proc, cgroups: list[Path]) -> str | None:
-    """Move the held launcher into ``cgroups`` and let it go; the reason when it cannot be."""
-    try:
-        for d in cgroups:
-            with open(d / "cgroup.procs", "w") as f:
-                f.write(str(proc.pid))
-    except OSError as e:
-        proc.kill()
-        proc.wait()
-        return f"fbaconf-limit: cannot join cgroup {d}: {e.strerror}"
-    try:
-        proc.stdin.write(b"go\n")
-        proc.stdin.close()
-    except OSError:
-        pass  # the shell died: its ending is the result
-    return None
+def sandbox_argv(view: View, workdir: Path, fds: list[int], *, status: bool = True) -> tuple[list[str], int | None]:
+    """bubblewrap's command for ``view``, with the seccomp filter (:mod:`.seccomp`) and, when
+    ``status``, a status descriptor: returns (argv, the descriptor to read bubblewrap's status
+    from). The descriptors bubblewrap reads are added to ``fds`` (pass them to the start,
+    close them after)."""
+    argv = _bwrap_argv(view, workdir)
+    extra: list[str] = []
+    if seccomp.supported():
+        sfd = seccomp.program_fd()
+        fds.append(sfd)
+        extra += ["--seccomp", str(sfd)]
+    status_r = None
+    if status:
+        status_r, w = os.pipe()
+        fds.append(w)
+        extra += ["--json-status-fd", str(w)]
+    return argv[:1] + extra + argv[1:], status_r
 
 
 def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,
@@ -374,214 +335,133 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
     if not argv or not all(isinstance(a, str) for a in argv):
         raise ValueError("argv must be a non-empty list of strings")
     workdir = Path(workdir).resolve()
-    tmp = workdir / "tmp"
-    tmp.mkdir(parents=True, exist_ok=True)
+    (workdir / "tmp").mkdir(parents=True, exist_ok=True)
+    base_env = decoder_env(workdir, env)
+    why = preflight.exec_problem(argv, base_env)
+    if why is not None:  # known before the start: nothing runs
+        return ProcResult(argv, None, stderr_tail=why, notes=["exec-failed"])
+    measure = measure_dirs or [workdir]
+    cg = Cgroups(processes=limits.processes, memory_mb=limits.memory_mb if limits.memory_kind != "none" else 0)
+    as_bytes = as_bytes_for(limits, cg)
+    fds: list[int] = []
+    status_r = None
+    sandboxed = isolation() == "bwrap"
+    inner = list(argv)
+    if sandboxed:
+        head, status_r = sandbox_argv(view or default_view(argv, workdir), workdir, fds)
+        inner = head + inner
+    cg_dirs = [d for _k, d in cg.dirs]
+    full, held = launch_argv(as_bytes, limits.output_mb * 2**20, int(max(1, limits.timeout_s * 2 + 1)), cg_dirs,
+                             inner)
     io_dir = Path(tempfile_dir())
     out_path, err_path = io_dir / "stdout", io_dir / "stderr"
-    as_bytes = limits.memory_mb * 2**20 if limits.memory_kind == "address-space" else 0
-    fsize = limits.output_mb * 2**20
-    cpu = int(max(1, limits.timeout_s * 2 + 1))
-    cg = Cgroups(processes=limits.processes,
-                 memory_mb=limits.memory_mb if limits.memory_kind != "none" else 0)
-    inner = list(argv)
-    sandboxed = isolation() == "bwrap"
-    if sandboxed:
-        inner = _bwrap_argv(view or default_view(argv, workdir), workdir) + inner
-    cg_dirs = [d for _k, d in cg.dirs]
-    full, held = launch_argv(as_bytes, fsize, cpu, cg_dirs, inner)
-    base_env = decoder_env(workdir, env)
     t0 = time.perf_counter()
     try:
         with open(out_path, "wb") as fo, open(err_path, "wb") as fe:
             try:
                 proc = subprocess.Popen(full, cwd=workdir, stdin=subprocess.PIPE if held else subprocess.DEVNULL,
-                                        stdout=fo, stderr=fe, env=base_env, start_new_session=True, close_fds=True)
+                                        stdout=fo, stderr=fe, env=base_env, start_new_session=True, close_fds=True,
+                                        pass_fds=tuple(fds))
             except OSError as e:  # the launcher itself could not start: a harness problem
                 cg.close()
-                return ProcResult(argv, None, elapsed_s=0.0, stderr_tail=f"cannot start: {e}",
-                                  notes=["harness-start-failed"])
-            why = _release(proc, cg_dirs) if held else None
+                return ProcResult(argv, None, stderr_tail=f"cannot start: {e}", notes=["harness-start-failed"])
+            finally:
+                for fd in fds:
+                    os.close(fd)
+            why = release(proc, cg_dirs) if held else None
             if why is not None:
                 cg.close()
-                return ProcResult(argv, None, elapsed_s=0.0, stderr_tail=why, notes=["harness-start-failed"])
+                return ProcResult(argv, None, stderr_tail=why, notes=["harness-start-failed"])
             _RUNNING.add(proc.pid)
             try:
-                status, rusage, timed_out, mem_hit = _wait(proc, t0, limits)
+                watch = Watch(limits, measure, pid=proc.pid, procs=cg.procs if cg.dirs else None, t0=t0)
+                status, rusage, hit = _wait(proc, t0, limits, watch)
             finally:
                 _RUNNING.discard(proc.pid)
-                _kill_group(proc.pid)  # leftover children of the decoder
-                oom = cg.oom_killed()
-                pids_hit = cg.pids_exhausted()
+                kill_group(proc.pid)  # leftover children of the decoder
+                oom, pids_hit = cg.oom_killed(), cg.pids_exhausted()
                 cg.close()
-        elapsed = time.perf_counter() - t0
-        res = result(argv, limits, status, rusage, elapsed, timed_out=timed_out, mem_hit=mem_hit, oom=oom,
-                     pids_hit=pids_hit, bwrap_status=sandboxed, stdout_tail=_tail(out_path),
-                     stderr_tail=_tail(err_path), measure_dirs=measure_dirs or [workdir])
+        notes = ["as-limit"] if as_bytes else []
+        ran, status_r = exit_reported(status_r), None
+        if not ran and hit is None and not oom and not stopping():
+            notes.append("sandbox-failed")  # bubblewrap never saw the program run: its set-up or exec failed
+        fin = Finish(status, rusage, time.perf_counter() - t0, timed_out=hit == "timeout", mem_hit=hit == "memory",
+                     out_hit=hit == "output", oom=oom, pids_hit=pids_hit, bwrap_status=sandboxed, notes=tuple(notes))
+        return result(argv, limits, fin, stdout_tail=read_tail(out_path), stderr_tail=read_tail(err_path),
+                      measure_dirs=measure)
     finally:
+        if status_r is not None:
+            os.close(status_r)
         shutil.rmtree(io_dir, ignore_errors=True)
-    return res
 
 
-def result(argv: list[str], limits: Limits, status: int, rusage, elapsed: float, *, timed_out: bool,  # noqa: PLR0913
-           mem_hit: bool, oom: bool, pids_hit: bool, bwrap_status: bool, stdout_tail: str, stderr_tail: str,
-           measure_dirs: list[Path]) -> ProcResult:
-    """The :class:`ProcResult` of one finished decoder process (its raw wait status and
-    rusage): signal names, the limit that ended it, the output it left — shared by the
-    one-shot launcher (:func:`run`) and the fork server (:mod:`.spawner`).
-    ``rusage`` is a ``resource.struct_rusage`` or a (utime, stime, maxrss_kb) tuple."""
-    rc = os.waitstatus_to_exitcode(status)
-    if bwrap_status and 128 < rc < 128 + 65 and rc - 128 in _SIGNALS:
-        rc = -(rc - 128)  # bubblewrap reports a decoder killed by signal N as exit code 128 + N
-    if rusage is not None and not isinstance(rusage, tuple):
-        rusage = (rusage.ru_utime, rusage.ru_stime, rusage.ru_maxrss)
-    res = ProcResult(argv, None if (timed_out or mem_hit) else (rc if rc >= 0 else None), elapsed_s=elapsed,
-                     timed_out=timed_out, memory_limit_hit=mem_hit or oom,
-                     cpu_s=(rusage[0] + rusage[1]) if rusage else 0.0,
-                     maxrss_mb=(rusage[2] / 1024.0) if rusage else 0.0,
-                     stdout_tail=stdout_tail, stderr_tail=stderr_tail)
-    if pids_hit:
-        res.notes.append("process-limit")
-    if oom:
-        res.notes.append("tree-memory-limit")  # a process of the tree was killed at the cgroup memory limit
-    if rc < 0 and not (timed_out or mem_hit):
-        try:
-            res.signal = signal.Signals(-rc).name
-        except ValueError:
-            res.signal = f"signal {-rc}"
-        if res.signal == "SIGXFSZ":
-            res.output_limit_hit = True
-        if res.signal == "SIGXCPU":
-            res.timed_out = True
-            res.notes.append("cpu-limit")
-    if limits.memory_kind == "address-space" and limits.memory_mb and not res.timed_out:
-        err = res.stderr_tail.lower()
-        if any(s in err for s in ("memoryerror", "bad_alloc", "out of memory", "cannot allocate memory",
-                                  "outofmemoryerror", "memory allocation of", "failed to allocate")):
-            res.memory_limit_hit = True
-    total = 0
-    for d in measure_dirs:
-        total += tree_size(d, stop_at=limits.output_mb * 2**20 * 4)
-    res.output_bytes = total
-    if total > limits.output_mb * 2**20:
-        res.output_limit_hit = True
-    return res
-
-
-def launch_server(inner: list[str], limits: Limits, *, cwd: Path, env: dict[str, str], stderr=None,
-                  pass_fds: tuple[int, ...] = (), as_bytes: int = 0, fsize: int = 0) -> tuple[subprocess.Popen, "Cgroups"]:  # noqa: E501
-    """Start a long-lived process (a fork server, a persistent decoder) through the limit
-    launcher, in its own cgroups and session, with stdin/stdout as pipes; registered so
-    :func:`stop_all` kills it. ``as_bytes``/``fsize``: rlimits for the whole process (0 = none;
-    never a CPU-time limit, which would add up over inputs). Raises OSError."""
-    cg = Cgroups(processes=limits.processes,
-                 memory_mb=limits.memory_mb if limits.memory_kind != "none" else 0)
-    full = [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize), "0",
-            *cg.launcher_args(), "--", *inner]
-    try:
-        proc = subprocess.Popen(full, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=stderr, cwd=cwd,
-                                start_new_session=True, close_fds=True, pass_fds=pass_fds, env=env)
-    except OSError:
-        cg.close()
-        raise
-    _RUNNING.add(proc.pid)
-    return proc, cg
-
-
-def stop_server(proc: subprocess.Popen | None, cg: "Cgroups | None", *, grace_s: float = 0.0) -> None:
-    """Stop what :func:`launch_server` started: close its stdin (a well-behaved server exits;
-    ``grace_s`` to let it), kill its process group, reap it, close its pipes and cgroups."""
-    if proc is not None:
-        _RUNNING.discard(proc.pid)
-        try:
-            proc.stdin.close()
-        except OSError:
-            pass
-        if grace_s:
-            try:
-                proc.wait(timeout=grace_s)
-            except subprocess.TimeoutExpired:
-                pass
-        _kill_group(proc.pid)
-        try:
-            proc.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            pass
-        try:
-            proc.stdout.close()
-        except OSError:
-            pass
-    if cg is not None:
-        cg.close()
-
-
-def tempfile_dir() -> str:
-    return tempfile.mkdtemp(prefix="fbaconf-io-")
-
-
-def _wait(proc, t0: float, limits: Limits):
-    """Wait for the decoder to end, its deadline, its resident-memory limit (sampled every
-    10 ms) or a stop: blocked on a pidfd where the kernel has them (no polling delay added
-    to a fast decoder's run), else polled with a backoff up to 10 ms."""
+def _wait(proc, t0: float, limits: Limits, watch: Watch):
+    """Wait for the decoder to end, its deadline, a limit the :class:`~.watch.Watch` sees passed
+    (output, sampled resident memory) or a stop: blocked on a pidfd where the kernel has them
+    (no polling delay added to a fast decoder's run), else polled with a backoff up to 10 ms.
+    Returns (wait status, rusage, "timeout" | "memory" | "output" | None)."""
     deadline = t0 + limits.timeout_s
-    status, rusage, timed_out, mem_hit = None, None, False, False
     delay = 0.0005
-    pidfd = _pidfd(proc.pid)
-    sample_rss = limits.memory_kind == "rss" and bool(limits.memory_mb)
+    fd = pidfd(proc.pid)
     try:
         while True:
             pid, st, ru = os.wait4(proc.pid, os.WNOHANG)
             if pid:
-                return st, ru, timed_out, mem_hit
+                return st, ru, None
             now = time.perf_counter()
-            if now >= deadline:
-                timed_out = True
-            elif sample_rss and _rss_mb(proc.pid) > limits.memory_mb:
-                mem_hit = True
-            if timed_out or mem_hit or _STOP.is_set():
-                _kill_group(proc.pid)
+            hit = "timeout" if now >= deadline else watch.check(now)
+            if hit or _STOP.is_set():
+                kill_group(proc.pid)
                 _pid, status, rusage = os.wait4(proc.pid, 0)
-                return status, rusage, timed_out, mem_hit
-            if pidfd is not None:
-                # stop_all() kills the group, which wakes this; 0.1 s bounds a missed wake-up
-                select.select([pidfd], [], [], max(0.0, min(deadline - now, 0.01 if sample_rss else 0.1)))
+                return status, rusage, hit
+            left = max(0.0, min(deadline - now, watch.next_in(time.perf_counter()), 0.1))
+            if fd is not None:
+                select.select([fd], [], [], left)  # stop_all() kills the group, which wakes this
             else:
-                time.sleep(delay)
+                time.sleep(min(left, delay))
                 delay = min(delay * 2, 0.01)
     finally:
-        if pidfd is not None:
-            os.close(pidfd)
+        if fd is not None:
+            os.close(fd)
 
 
-def _pidfd(pid: int) -> int | None:
-    try:
-        return os.pidfd_open(pid)
-    except (AttributeError, OSError):  # no pidfd_open (kernel < 5.3, not Linux)
-        return None
+# ------------------------------------------------------------------ what this machine isolates
+
+@dataclass(frozen=True)
+class IsolationReport:
+    """Which isolation features this machine gives decoders; ``missing`` says, in words, what
+    is not there and what that leaves open (empty when everything is)."""
+    bubblewrap: bool
+    controllers: frozenset[str]
+    seccomp: bool
+    missing: tuple[str, ...]
+
+    @property
+    def complete(self) -> bool:
+        return not self.missing
+
+    def line(self) -> str:
+        if self.complete:
+            return "isolated: bubblewrap sandbox, cgroup memory and process limits, seccomp filter"
+        return "not isolated: " + "; ".join(self.missing)
 
 
-# ------------------------------------------------------------------ interruption
-_RUNNING: set[int] = set()
-_STOP = threading.Event()
-
-
-def stop_all() -> None:
-    """Kill every decoder process group this harness is running (Ctrl-C, SIGTERM): each
-    running :func:`run` returns at once; no new decoder starts until :func:`reset_stop`."""
-    _STOP.set()
-    for pid in list(_RUNNING):
-        _kill_group(pid)
-
-
-def reset_stop() -> None:
-    _STOP.clear()
-
-
-def stopping() -> bool:
-    return _STOP.is_set()
-
-
-def _kill_group(pid: int) -> None:
-    try:
-        os.killpg(pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
+def isolation_report() -> IsolationReport:
+    """What :func:`run` can isolate a decoder with here: bubblewrap, writable cgroups (memory
+    and pids controllers), the seccomp filter — and what is missing (``certify`` refuses or
+    marks its statement with :meth:`IsolationReport.line`)."""
+    bw = isolation() == "bwrap"
+    ctl = cgroups.controllers()
+    missing = []
+    if not bw:
+        missing.append("bubblewrap (bwrap): decoders run unsandboxed, seeing the whole machine, its network and "
+                       "its processes")
+    if "memory" not in ctl:
+        missing.append("writable cgroups with the memory controller: no memory limit on a decoder's whole process "
+                       "tree (an address-space limit per process instead: three 800 MB children pass a 1 GB limit)")
+    if "pids" not in ctl:
+        missing.append("writable cgroups with the pids controller: no limit on the processes a decoder starts")
+    if bw and not seccomp.supported():
+        missing.append("the seccomp filter (an architecture it does not know): a decoder can take the host user's "
+                       "inotify instances")
+    return IsolationReport(bw, frozenset(ctl), bw and seccomp.supported(), tuple(missing))

@@ -289,18 +289,20 @@ static int usage(void)
     return EXIT_USAGE;
 }
 
-/* fbaconf's persistent protocol (docs/fuzzing.md): per input "<size> <output path>\n" and
- * <size> bytes on stdin; the answer "<code>\n" on stdout, the code meaning what the exit code
- * of a one-shot run means (0 written, 1 invalid, 3 I/O). Ends at the end of stdin. Added by
- * the project after the independent writing, for fast fuzzing. */
+/* fbaconf's persistent protocol, version 2 (docs/fuzzing.md): per input "<id> <size> <output
+ * path>\n" and <size> bytes on stdin; the answer "<id> <code>\n" on stdout, the code meaning
+ * what the exit code of a one-shot run means (0 written, 1 invalid, 3 I/O). Ends at the end of
+ * stdin. Added by the project after the independent writing, for fast fuzzing. */
 static int serve(void)
 {
     char line[4352];
     while (fgets(line, sizeof line, stdin)) {
-        char *sp = strchr(line, ' '), *nl = strchr(line, '\n');
-        if (!sp || !nl) return EXIT_USAGE;
+        char *end;
+        unsigned long long id = strtoull(line, &end, 10);
+        char *sp = strchr(end + (*end == ' '), ' '), *nl = strchr(line, '\n');
+        if (end == line || *end != ' ' || !sp || !nl) return EXIT_USAGE;
         *nl = 0;
-        long long size = strtoll(line, NULL, 10);
+        long long size = strtoll(end, NULL, 10);
         if (size < 0 || size > 64LL << 20) return EXIT_USAGE;
         uint8_t *data = malloc(size > 0 ? (size_t)size : 1);
         if (!data) return EXIT_IO;
@@ -318,7 +320,7 @@ static int serve(void)
             free(out.p);
             fba_result_free(&r);
         }
-        printf("%d\n", rc);
+        printf("%llu %d\n", id, rc);
         fflush(stdout);
     }
     return 0;

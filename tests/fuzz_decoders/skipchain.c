@@ -86,13 +86,15 @@ static int decode(unsigned char *data, long size) {
 static int serve(void) {
     char line[4096];
     while (fgets(line, sizeof line, stdin)) {
-        long size = strtol(line, NULL, 10);
+        char *end;
+        unsigned long id = strtoul(line, &end, 10);
+        long size = strtol(end, NULL, 10);
         if (size < 0 || size > (64L << 20)) return 2;
         unsigned char *data = malloc(size > 0 ? size : 1);
         if (fread(data, 1, size, stdin) != (size_t)size) { free(data); return 2; }
         int code = decode(data, size);
         free(data);
-        printf("%d\n", code);
+        printf("%lu %d\n", id, code);
         fflush(stdout);
     }
     return 0;

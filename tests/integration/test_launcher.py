@@ -43,7 +43,7 @@ def test_held_launch_waits_for_the_cgroup_move(tmp_path: Path):
     proc = subprocess.Popen(argv, stdin=subprocess.PIPE, start_new_session=True)
     time.sleep(0.3)
     assert not marker.exists(), "the program ran before the harness let it go"
-    assert sandbox._release(proc, [cg]) is None
+    assert sandbox.release(proc, [cg]) is None
     assert proc.wait(5) == 0
     assert (cg / "cgroup.procs").read_text() == str(proc.pid)
     assert marker.read_text().strip() == str(proc.pid)  # exec chain: the same process
@@ -55,7 +55,7 @@ def test_a_cgroup_that_cannot_be_joined_stops_the_launch(tmp_path: Path):
     gone = tmp_path / "no-such-cgroup"
     argv, held = sandbox.launch_argv(0, 0, 0, [gone], ["/bin/sh", "-c", f"touch {marker}"])
     proc = subprocess.Popen(argv, stdin=subprocess.PIPE, start_new_session=True)
-    why = sandbox._release(proc, [gone])
+    why = sandbox.release(proc, [gone])
     assert why is not None and why.startswith("fbaconf-limit: cannot join cgroup") and str(gone) in why
     assert proc.poll() is not None and not marker.exists()
 

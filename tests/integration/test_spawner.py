@@ -129,7 +129,7 @@ def test_fork_server_judges_like_a_fresh_sandbox(tmp_path, server):
     file size, exec failure, signals), and :mod:`exits` judges the two paths alike."""
     root = tmp_path / "w"
     (root / "case" / "in").mkdir(parents=True)
-    lim = Limits(timeout_s=1.0, memory_mb=300, output_mb=4)
+    lim = Limits(timeout_s=1.0, memory_mb=300, memory_kind="address-space", output_mb=4)
     py = os.path.realpath(sys.executable)
     view = default_view([py], root / "case")
     with ForkServer(root, view, lim) as fs:
@@ -222,13 +222,13 @@ def test_a_fork_server_that_cannot_start_is_a_set_up_failure(tmp_path, monkeypat
 
 
 SERVE = """def answer(code):
-    print(code, flush=True)
+    print(rid, code, flush=True)
 n = 0
 while True:
     line = sys.stdin.buffer.readline()
     if not line:
         break
-    size, out = line.decode().rstrip('\\n').split(' ', 1)
+    rid, size, out = line.decode().rstrip('\\n').split(' ', 2)
     data = sys.stdin.buffer.read(int(size))
     n += 1
     sys.stderr.write('input %d of this process\\n' % n)
@@ -273,7 +273,7 @@ def test_persistent_protocol_survives_crashes_and_hangs(tmp_path):
         assert dec.starts == 6  # the first, and one after SEGV, HANG, JUNK and each QUIT
         # after the first restart a spare was kept starting, and each later restart took it
         assert dec._launches == dec.starts + 1
-        spare = dec._spare[0]
+        spare = dec._spare.proc
         assert spare.poll() is None  # ready for the next crash
     finally:
         t.close()

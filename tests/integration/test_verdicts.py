@@ -77,7 +77,8 @@ MATRIX = [
     ("segfault", "os.kill(os.getpid(), signal.SIGSEGV)", Outcome.CRASH, "SIGSEGV"),
     ("exit0-output", "open(sys.argv[2], 'w').write('2.1 x 25 1\\n' + '0 ' * 68 + '\\n0\\n'); sys.exit(0)",
      Outcome.FAIL, "without complaint"),
-    ("missing-input", "open(sys.argv[1] + '.nope'); sys.exit(0)", Outcome.ERROR, "could not open"),
+    # a decoder that cannot open a file ran: its ending is its own (no set-up failure read from its text)
+    ("missing-input", "open(sys.argv[1] + '.nope'); sys.exit(0)", Outcome.CRASH, "FileNotFoundError"),
     ("odd-exit", "sys.exit(7)", Outcome.FAIL, "not a documented reject code"),
 ]
 
@@ -94,9 +95,13 @@ def test_a_crash_report_is_named_in_the_result(tmp_path):
     assert r.crash_kind == "Rust panic"
 
 
-def test_missing_input_on_a_valid_stream_is_error_not_fail(tmp_path):
-    r = run_one(pydec(tmp_path, "lost", "open('/nonexistent/in.fba'); sys.exit(0)"), VALID_CASE, tmp_path)
-    assert r.outcome == Outcome.ERROR
+def test_no_such_file_on_stderr_is_the_decoders_ending_not_a_set_up_failure(tmp_path):
+    """Set-up failures are the harness's knowledge (issue 29): a decoder that prints "No such
+    file or directory" and exits 2 rejected the stream; on a valid stream that is a Fail."""
+    body = "sys.stderr.write('dec: /nonexistent/in.fba: No such file or directory\\n'); sys.exit(2)"
+    m = pydec(tmp_path, "lost", body)
+    assert run_one(m, VALID_CASE, tmp_path).outcome == Outcome.FAIL
+    assert run_one(m, ERROR_CASE, tmp_path).outcome == Outcome.PASS
 
 
 def test_documented_reject_codes_are_the_manifests(tmp_path):
@@ -191,7 +196,7 @@ while True:
     line = sys.stdin.buffer.readline()
     if not line:
         break
-    size, out = line.decode().rstrip("\\n").split(" ", 1)
+    rid, size, out = line.decode().rstrip("\\n").split(" ", 2)
     data = sys.stdin.buffer.read(int(size))
     path = os.path.join(os.environ["TMPDIR"], "in.fba")
     open(path, "wb").write(data)
@@ -202,7 +207,7 @@ while True:
     except SystemExit as e:  # the persistent form of an exit code is the answer
         code = e.code or 0
     sys.stderr.flush()
-    print(code, flush=True)
+    print(rid, code, flush=True)
 """
 
 

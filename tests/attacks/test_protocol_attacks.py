@@ -1,0 +1,229 @@
+"""Hostile decoders against the fuzzer's fast paths (issue 29): the persistent protocol and the
+fork server's reply channel. Each attack must become a finding of the input that made it —
+no hang, no harness traceback, no ending moved onto another input — and the inputs around it
+must be judged as usual.
+"""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
+from fbaconf.fuzz.inputs import Entry
+from fbaconf.fuzz.targets import DecoderTarget
+from fbaconf.harness import adapters, speed
+from fbaconf.isolation import forkserver_build, sandbox
+
+STREAM = b"\x00\x00\x01\xba" + bytes(40)
+
+# the persistent protocol, version 2: "<id> <size> <path>\n" + bytes in, "<id> <code>\n" out
+SERVE = """import os, signal, sys, time
+def read():
+    line = sys.stdin.buffer.readline()
+    if not line:
+        sys.exit(0)
+    rid, size, out = line.decode().rstrip('\\n').split(' ', 2)
+    return int(rid), sys.stdin.buffer.read(int(size))
+def answer(rid, code):
+    sys.stdout.write('%d %d\\n' % (rid, code)); sys.stdout.flush()
+"""
+
+
+def _manifest(tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 3") -> Path:
+    prog = tmp_path / "dec.py"
+    prog.write_text("import os, signal, sys, time\n" + body)
+    lines = ['name = "t"', 'claims = ["simple@1"]', 'inputs = ["fba"]', 'outputs = ["faps"]', 'faps_format = "fap"',
+             "[commands]", f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]']
+    if serve is not None:
+        srv = tmp_path / "serve.py"
+        srv.write_text(SERVE + serve)
+        lines.append(f'serve = ["{{python}}", "{srv}"]')
+    lines += ["[limits]", limits]
+    m = tmp_path / "t.toml"
+    m.write_text("\n".join(lines) + "\n")
+    return m
+
+
+def _target(tmp_path: Path, m: Path, **kw) -> DecoderTarget:
+    return DecoderTarget(adapters.resolve(m), tmp_path / "work", oracle=False, **kw)
+
+
+def _queue(t: DecoderTarget, payloads: list[bytes]) -> list:
+    """Queue every input (as the fuzzing loop does, up to its depth) and judge each in order."""
+    runs = [t.start(Entry(STREAM + p)) for p in payloads]
+    return [r.result().verdict for r in runs]
+
+
+def _key(v) -> str | None:
+    return None if v is None else f"{v.cls}:{v.signature}"
+
+
+def test_a_ten_megabyte_answer_is_its_inputs_protocol_error_not_a_deadlock(tmp_path):
+    serve = """while True:
+    rid, data = read()
+    if b'FLOOD' in data:
+        sys.stdout.buffer.write(b'x' * (10 << 20)); sys.stdout.flush()
+    answer(rid, 69)
+"""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)", serve=serve))
+    assert t.persistent
+    try:
+        t0 = time.perf_counter()
+        got = _queue(t, [b"", b"FLOOD", b"", b""])
+        assert [_key(v) for v in got] == [None, "unexpected-exit:protocol-error", None, None]
+        assert "at most 4096" in got[1].message
+        assert time.perf_counter() - t0 < 15
+    finally:
+        t.close()
+
+
+def test_early_and_extra_answers_are_a_protocol_error_of_that_input(tmp_path):
+    """64 answers sent ahead (the ids of requests not yet sent) and an answer sent twice: each
+    is the finding of the input that provoked it, the others are judged as usual (before, the
+    early answers deadlocked the run and a double answer made every later input a false
+    finding)."""
+    serve = """while True:
+    rid, data = read()
+    if b'EARLY' in data:
+        for k in range(64):
+            answer(rid + k, 69)
+        continue
+    answer(rid, 69)
+    if b'TWICE' in data:
+        answer(rid, 69)
+"""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)", serve=serve))
+    try:
+        got = _queue(t, [b"", b"", b"TWICE", b"", b"EARLY", b"", b"", b""])
+        assert [_key(v) for v in got] == [None, None, "unexpected-exit:protocol-error", None,
+                                          "unexpected-exit:protocol-error", None, None, None]
+        assert all("broke the persistent protocol" in got[i].message for i in (2, 4))
+    finally:
+        t.close()
+
+
+def test_a_decoder_that_answers_before_any_input_cannot_hang_the_run(tmp_path):
+    serve = """for k in range(64):
+    answer(k + 1, 0)
+while True:
+    rid, data = read()
+    answer(rid, 69)
+"""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)", serve=serve))
+    try:
+        t0 = time.perf_counter()
+        got = _queue(t, [b""] * 8)
+        assert {_key(v) for v in got} == {"unexpected-exit:protocol-error"}  # every process does it
+        assert time.perf_counter() - t0 < 30
+    finally:
+        t.close()
+
+
+def test_a_decoder_that_stops_reading_its_input_is_a_hang_not_a_deadlock(tmp_path):
+    """The input is written with its deadline while the answers are read: 4 MB to a decoder
+    that never reads them (a full pipe) ends at the timeout as that input's hang."""
+    serve = """rid, data = read()
+answer(rid, 69)
+while True:
+    time.sleep(1)
+"""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)", serve=serve, limits="timeout_s = 1"))
+    try:
+        t0 = time.perf_counter()
+        runs = [t.start(Entry(STREAM)), t.start(Entry(STREAM + bytes(4 << 20)))]
+        got = [r.result().verdict for r in runs]
+        assert [_key(v) for v in got] == [None, "hang:timeout"]
+        assert time.perf_counter() - t0 < 10
+    finally:
+        t.close()
+
+
+def test_the_speed_phase_through_a_flooding_serve_fails_fast(tmp_path):
+    """bench and certify's speed phase use the same protocol: a 10 MB answer fails the speed
+    measurement, it does not hang it."""
+    serve = """while True:
+    rid, data = read()
+    sys.stdout.buffer.write(b'%d 0 ' % rid + b'x' * (10 << 20) + b'\\n'); sys.stdout.flush()
+"""
+    a = adapters.resolve(_manifest(tmp_path, "sys.exit(69)", serve=serve))
+    t0 = time.perf_counter()
+    (r,) = [x for x in speed.measure_claim(a, "simple@1", lengths=[2, 4], repeats=1) if x.operation == "decode"]
+    assert not r.passed and "protocol" in r.message, r.message
+    assert time.perf_counter() - t0 < 60
+
+
+# ------------------------------------------------------------------ the fork server's channel
+
+@pytest.fixture(params=["c", "python"])
+def server(request, monkeypatch):
+    if request.param == "c" and forkserver_build.forkserver_binary() is None:
+        pytest.skip("no C compiler: the fork server in C cannot be built")
+    if request.param == "python":
+        monkeypatch.setattr(forkserver_build, "forkserver_binary", lambda: None)
+    return request.param
+
+
+FORGE = """import struct
+data = open(sys.argv[1], 'rb').read()
+if b'FORGE' in data or b'GARBLE' in data:
+    reply = b'%s 0 0.0 0.0 1000 0.001 0 0 0' % (b'0' * 24)  # a well-formed "exit 0" with a guessed nonce
+    msg = struct.pack('>I', len(reply)) + reply if b'FORGE' in data else b'\\xff' * 64
+    try:
+        fd = os.open('/proc/%d/fd/1' % os.getppid(), os.O_WRONLY)
+        os.write(fd, msg)
+        sys.stderr.write('forged into the server channel\\n')
+    except OSError as e:
+        sys.stderr.write('cannot reach the server channel: %s\\n' % e)
+    sys.stderr.flush()
+    os.kill(os.getpid(), signal.SIGSEGV)
+sys.exit(69)
+"""
+
+
+def test_the_fork_servers_channel_is_out_of_a_sandboxed_decoders_reach(tmp_path, server):
+    """In the sandbox the server is non-dumpable: /proc/<ppid>/fd/1 does not open, and the
+    decoder's real ending (SIGSEGV) stays with its own input."""
+    if sandbox.isolation() == "none":
+        pytest.skip("bubblewrap is not installed: no sandbox here")
+    t = _target(tmp_path, _manifest(tmp_path, FORGE))
+    assert t.fork_server and not t.persistent
+    try:
+        got = _queue(t, [b"", b"FORGE", b"", b"GARBLE", b""])
+        assert [_key(v) for v in got] == [None, "crash:SIGSEGV", None, "crash:SIGSEGV", None]
+        assert "cannot reach the server channel" in got[1].detail["stderr_tail"]
+    finally:
+        t.close()
+
+
+def test_a_reply_forged_into_the_fork_servers_channel_is_the_decoders_finding(tmp_path, server, monkeypatch):
+    """Unsandboxed (a root decoder can open its parent's descriptors), the forged "exit 0" and
+    the garbled bytes reach the channel: each is a protocol error of the input that wrote
+    them — never a harness traceback, never a SIGSEGV moved onto the next input."""
+    monkeypatch.setattr(sandbox, "_ISOLATION", "none")
+    t = _target(tmp_path, _manifest(tmp_path, FORGE))
+    try:
+        got = _queue(t, [b"", b"FORGE", b"", b"GARBLE", b""])
+        keys = [_key(v) for v in got]
+        if os.geteuid() != 0:  # without root the non-dumpable server is out of reach here too
+            assert keys == [None, "crash:SIGSEGV", None, "crash:SIGSEGV", None]
+            return
+        assert keys == [None, "unexpected-exit:protocol-error", None, "unexpected-exit:protocol-error", None]
+        assert "reply channel" in got[1].message and "another request" in got[1].message
+        assert "reply channel" in got[3].message
+    finally:
+        t.close()
+
+
+def test_no_such_file_on_stderr_does_not_stop_a_fuzz_campaign(tmp_path):
+    """Set-up failures are the harness's knowledge: a decoder whose every error says "No such
+    file or directory" is fuzzed to the end of its budget (before, its first input stopped
+    the campaign as a set-up failure)."""
+    m = _manifest(tmp_path, "sys.stderr.write('dec: config.dat: No such file or directory\\n'); sys.exit(2)")
+    for mode in ({"fork_server": True}, {"fork_server": False, "persistent": False}):
+        t = _target(tmp_path, m, **mode)
+        fz = Fuzzer(t, [Entry(STREAM, origin="seed")], FuzzConfig(seed=1, max_execs=12, progress=False, seconds=60))
+        fz.run()
+        assert fz.stats.execs == 12

@@ -1,0 +1,82 @@
+"""A finding belongs to the input that caused it, in every mode (issue 31): a decoder that
+crashes on one input among many queued to it — through ``[commands] serve`` (the persistent
+protocol, framed per input), the fork server and a fresh sandbox per input — gives the same
+finding, naming that input; the finding replays, and is minimised."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
+from fbaconf.fuzz.inputs import Entry
+from fbaconf.fuzz.targets import PIPELINE_DEPTH, DecoderTarget
+from fbaconf.harness import adapters
+
+# the decoder crashes on any input holding BOOM; it rejects everything else (exit/answer 2)
+DECODE = """import os, signal, sys
+data = open(sys.argv[1], 'rb').read()
+sys.stderr.write('decoding %d bytes\\n' % len(data))
+if b'BOOM' in data:
+    sys.stderr.write('about to crash\\n'); sys.stderr.flush()
+    os.kill(os.getpid(), signal.SIGSEGV)
+sys.exit(2)
+"""
+SERVE = """import os, signal, sys
+while True:
+    line = sys.stdin.buffer.readline()
+    if not line:
+        break
+    rid, size, out = line.decode().rstrip('\\n').split(' ', 2)
+    data = sys.stdin.buffer.read(int(size))
+    sys.stderr.write('decoding %d bytes\\n' % len(data))
+    if b'BOOM' in data:
+        sys.stderr.write('about to crash\\n'); sys.stderr.flush()
+        os.kill(os.getpid(), signal.SIGSEGV)
+    print(rid, 2, flush=True)
+"""
+N = 5  # the crashing input's place in the queue
+
+
+def _manifest(tmp_path: Path) -> Path:
+    (tmp_path / "dec.py").write_text(DECODE)
+    (tmp_path / "serve.py").write_text(SERVE)
+    m = tmp_path / "boom.toml"
+    m.write_text('name = "boom"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n'
+                 f'[commands]\ndecode = ["{{python}}", "{tmp_path / "dec.py"}", "{{input}}", "{{faps_out}}"]\n'
+                 f'serve = ["{{python}}", "{tmp_path / "serve.py"}"]\n[limits]\ntimeout_s = 5\n')
+    return m
+
+
+def _seeds() -> list[Entry]:
+    """Twelve inputs the reference rejects (no oracle finding); the N-th carries the crash in
+    the middle of 300 bytes of filler."""
+    seeds = [Entry(bytes([0xFF, i]) * 150, origin=f"seed-{i}") for i in range(12)]
+    seeds[N] = Entry(bytes([0xFF, N]) * 70 + b"BOOM" + bytes([0xFF, N]) * 78, origin=f"seed-{N}")
+    return seeds
+
+
+@pytest.mark.parametrize("mode", ["persistent", "fork-server", "spawn"])
+def test_a_crash_among_queued_inputs_is_found_on_its_input_replays_and_is_minimised(tmp_path, mode):
+    target = DecoderTarget(adapters.resolve(_manifest(tmp_path)), tmp_path / "work",
+                           fork_server=mode != "spawn", persistent=mode == "persistent")
+    assert (target.persistent, target.fork_server) == {"persistent": (True, True), "fork-server": (False, True),
+                                                       "spawn": (False, False)}[mode]
+    assert target.depth == (PIPELINE_DEPTH if mode != "spawn" else 1) and N < PIPELINE_DEPTH - 1
+    fz = Fuzzer(target, _seeds(), FuzzConfig(seed=3, max_execs=12, seconds=120, progress=False,
+                                              minimise_seconds=60, minimise_tests=400))
+    fz.run()
+    assert fz.stats.execs == 12
+    (f,) = fz.findings.values()  # one finding: no crash blamed on a neighbour, no "exit-2" for the real one
+    assert (f.verdict.cls, f.verdict.signature) == ("crash", "SIGSEGV"), f.verdict.message
+    assert (f.index, f.original.origin) == (N, f"seed-{N}")
+    assert "about to crash" in f.verdict.detail["stderr_tail"]  # its own stderr, no neighbour's
+    assert f.verdict.detail["stderr_tail"].count("decoding") == 1
+    assert f.minimal == b"BOOM" and f.min_stats.bytes_before == 300
+    # it replays, the original and the minimal input alike, in this mode
+    try:
+        for data in (f.original.data, f.minimal):
+            assert target.execute(Entry(data, origin="replay")).verdict.key == f.verdict.key
+        assert target.execute(Entry(bytes(40), origin="replay")).verdict is None
+    finally:
+        target.close()
