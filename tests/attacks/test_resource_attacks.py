@@ -1,0 +1,183 @@
+"""Resource accounting against honest and hostile decoders (issue 29): memory judged from the
+kernel's OOM events (never from page cache reaching the limit), the output limit enforced
+while the decoder writes, trees of any depth counted and removed, no inotify instances taken
+from the host's user, ``memory_kind = "rss"`` sampling the decoder's tree (not the launcher).
+"""
+from __future__ import annotations
+
+import os
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+import fbaconf
+from fbaconf.conformance.suite import load_suites
+from fbaconf.harness import adapters
+from fbaconf.harness.results import Outcome
+from fbaconf.harness.runner import run_cases
+from fbaconf.isolation import cgroups, endings, sandbox
+from fbaconf.isolation.sandbox import Limits
+
+ROOT = Path(fbaconf.__file__).resolve().parents[1]
+VALID = "simple-l1-core/dct-q4"
+
+
+def needs_sandbox():
+    if sandbox.isolation() == "none":
+        if os.environ.get("CI"):
+            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
+        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
+
+
+def needs_cgroups():
+    if "memory" not in cgroups.controllers():
+        if os.environ.get("CI") and os.geteuid() == 0:
+            pytest.fail("no writable memory cgroup in CI (running as root)")
+        pytest.skip("no writable memory cgroup here (not root?): no whole-tree memory limit")
+
+
+def decoder(tmp_path: Path, name: str, body: str, limits: str) -> Path:
+    """A decoder written in Python ({python} SCRIPT {input} {faps_out}); ``honest()`` decodes
+    with the reference."""
+    script = tmp_path / f"{name}.py"
+    script.write_text(textwrap.dedent('''\
+        import os, sys, time
+        IN, OUT = sys.argv[1], sys.argv[2]
+        def honest():
+            from fbaconf.pipeline import reference_outputs
+            reference_outputs(IN, faps_out=OUT)
+        ''') + textwrap.dedent(body))
+    m = tmp_path / f"{name}.toml"
+    m.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
+                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{faps_out}}"]\n[limits]\n{limits}')
+    return m
+
+
+def run_one(tmp_path: Path, m: Path):
+    suite, cid = VALID.split("/")
+    (s,) = load_suites(names=[suite])
+    (r,) = run_cases(adapters.resolve(m), [c for c in s.cases if c.id == cid], claim="simple@1",
+                     out_dir=tmp_path / "run", jobs=1, progress=False)
+    return r
+
+
+def test_an_honest_decoder_with_400_mb_of_scratch_files_passes(tmp_path):
+    """Before: page cache reaching the 256 MB cgroup limit counted as OOM (memory.failcnt), so
+    this decoder (38 MB resident, exit 0) read "Crash: exceeded 256 MB"."""
+    needs_sandbox()
+    needs_cgroups()
+    body = '''
+        chunk = bytes(range(256)) * 4096  # 1 MB
+        for k in range(4):  # 4 x 100 MB written, read back and removed: 400 MB through the page cache
+            p = os.path.join(os.environ["TMPDIR"], "scratch%d" % k)
+            with open(p, "wb") as f:
+                for _ in range(100):
+                    f.write(chunk)
+            with open(p, "rb") as f:
+                while f.read(1 << 20):
+                    pass
+            os.unlink(p)
+        honest()
+        '''
+    r = run_one(tmp_path, decoder(tmp_path, "scratch", body, "timeout_s = 60\nmemory_mb = 256\noutput_mb = 256\n"))
+    assert r.outcome == Outcome.PASS, r.message
+
+
+def test_a_disk_flood_is_stopped_at_the_output_limit_while_it_writes(tmp_path):
+    """1.2 GB in files each under the per-file limit: before, all of it landed on disk and the
+    total was checked after the run; now the decoder is killed once the folder passes 256 MB."""
+    work = tmp_path / "case"
+    flood = work / "in" / "flood.py"  # in the case folder: what a sandboxed decoder sees
+    flood.parent.mkdir(parents=True)
+    flood.write_text(textwrap.dedent('''\
+        import os
+        chunk = b"\\1" * (1 << 20)
+        for k in range(12):  # 12 x 100 MB
+            with open("flood%d" % k, "wb") as f:
+                for _ in range(100):
+                    f.write(chunk)
+        print("wrote it all")
+        '''))
+    lim = Limits(timeout_s=60, memory_mb=512, output_mb=256)
+    t0 = time.perf_counter()
+    res = sandbox.run([os.path.realpath(sys.executable), str(flood)], work, lim)
+    ending = endings.classify(res, lim)
+    assert ending.kind == "output-limit", ending.message
+    assert "wrote it all" not in res.stdout_tail
+    assert 256 << 20 < res.output_bytes < 400 << 20, res.output_bytes  # stopped at the limit (+ one interval)
+    assert time.perf_counter() - t0 < 60
+
+
+def test_a_50000_level_tree_with_338_mb_below_a_25000_level_chain_is_counted_and_removed(tmp_path):
+    """Before: one descriptor per level — the 50,000-level tree stayed in the run folder, and
+    338 MB below a 25,000-level chain were neither counted nor removed."""
+    body = '''
+        fd = os.open(".", os.O_RDONLY)
+        for i in range(50000):
+            os.mkdir("d", dir_fd=fd)
+            nfd = os.open("d", os.O_RDONLY, dir_fd=fd)
+            os.close(fd)
+            fd = nfd
+            if i == 25000:
+                for k in range(2):  # 2 x 169 MB (sparse: each under the per-file limit)
+                    f = os.open("hidden%d" % k, os.O_WRONLY | os.O_CREAT, 0o644, dir_fd=fd)
+                    os.ftruncate(f, 169 << 20)
+                    os.close(f)
+        honest()
+        '''
+    r = run_one(tmp_path, decoder(tmp_path, "deep", body, "timeout_s = 120\noutput_mb = 256\n"))
+    assert r.outcome != Outcome.PASS and "output limit" in r.message, r.message
+    assert not (tmp_path / "run" / "work").exists()  # the whole run folder's work tree is gone
+
+
+def test_a_decoder_takes_no_inotify_instance_from_the_hosts_user(tmp_path):
+    """Before: a sandboxed decoder held all 128 of root's inotify instances on the host."""
+    needs_sandbox()
+    probe = tmp_path / "case" / "in" / "inotify.py"
+    probe.parent.mkdir(parents=True)
+    probe.write_text(textwrap.dedent('''\
+        import ctypes, os
+        libc = ctypes.CDLL(None, use_errno=True)
+        got = [libc.inotify_init1(0) for _ in range(200)] + [libc.fanotify_init(0, 0)]
+        print("instances", sum(1 for fd in got if fd >= 0), os.strerror(ctypes.get_errno()))
+        '''))
+    lim = Limits(timeout_s=20)
+    res = sandbox.run([os.path.realpath(sys.executable), str(probe)], tmp_path / "case", lim)
+    assert res.returncode == 0, res.stderr_tail
+    assert res.stdout_tail.split()[:2] == ["instances", "0"], res.stdout_tail
+
+
+def test_rss_is_sampled_over_the_decoders_tree_not_the_launcher(tmp_path, monkeypatch):
+    """memory_kind = "rss" without cgroups (the sampled limit alone): a child of the decoder
+    holding 300 MB resident passes a 150 MB limit — before, the launcher's resident set was
+    sampled and the child ran free."""
+    monkeypatch.setattr(cgroups, "_CG_BASES", [])  # no cgroup limit: the sampling alone
+    hog = tmp_path / "case" / "in" / "hog.py"
+    hog.parent.mkdir(parents=True)
+    hog.write_text(textwrap.dedent('''\
+        import subprocess, sys, time
+        child = "x = bytearray(300 << 20)\\nfor i in range(0, len(x), 4096): x[i] = 1\\nimport time; time.sleep(10)"
+        subprocess.run([sys.executable, "-c", child])
+        print("the child ran free")
+        '''))
+    lim = Limits(timeout_s=30, memory_mb=150, memory_kind="rss")
+    res = sandbox.run([os.path.realpath(sys.executable), str(hog)], tmp_path / "case", lim)
+    ending = endings.classify(res, lim)
+    assert ending.kind == "memory" and "resident-set" in ending.message, ending.message
+    assert res.elapsed_s < 8 and "ran free" not in res.stdout_tail
+
+
+def test_isolation_report_names_what_is_missing(monkeypatch):
+    rep = sandbox.isolation_report()
+    if sandbox.isolation() == "bwrap" and {"memory", "pids"} <= cgroups.controllers():
+        assert rep.complete and rep.line().startswith("isolated")
+    monkeypatch.setattr(cgroups, "_CG_BASES", [])
+    monkeypatch.setattr(sandbox, "_ISOLATION", "none")
+    rep = sandbox.isolation_report()
+    assert not rep.complete and rep.line().startswith("not isolated: ")
+    assert [m.split(":")[0] for m in rep.missing] == ["bubblewrap (bwrap)",
+                                                      "writable cgroups with the memory controller",
+                                                      "writable cgroups with the pids controller"]
