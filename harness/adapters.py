@@ -261,7 +261,7 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
     where = str(path) if path else "<manifest>"
 
     def bad(msg: str, rule: str) -> ManifestError:
-        return ManifestError(msg, rule=rule, file=where)
+        return ManifestError(msg if len(msg) <= 400 else msg[:400] + "…", rule=rule, file=where)
 
     for key in ("name", "claims", "inputs", "outputs"):
         if key not in data:

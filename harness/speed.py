@@ -271,6 +271,8 @@ class _Runner:
         a = self.adapter
         assert isinstance(a, CommandAdapter)
         supplied = {"fba", "fap", "vertices_out", "images_dir", "faps_out", "scene", "faps_out_dir"}
+        if "fba" in a.inputs:  # the content's .fap is its expected output: never shown to a decoder of the stream
+            supplied.discard("fap")
         while True:
             job = job_for()
             try:

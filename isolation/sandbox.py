@@ -252,6 +252,8 @@ def view_problem(path: Path, hidden=()) -> str | None:
             h = Path(h).resolve()
             if q == h or h in q.parents:
                 return f"it lies inside {h}, which decoders never see"
+        if any(k.parent == q or q in k.parents for k in _SECRETS):
+            return "it holds the signing key (keep the key outside every folder a decoder sees)"
     return None
 
 

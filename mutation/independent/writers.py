@@ -33,13 +33,12 @@ MUTANTS_LIST: list[Mutant] = [
     _src("ind-wr-rate-int", _RATE,
          "the frame rate is written as an integer (12.5 -> 12)",
          "return str(int(r)) if r.is_integer() else repr(r)", "return str(int(r))"),
+    # killed since issue 28: the header rate is held to 0.02 % too, and 0.4995 (0.5 x 1000/1001)
+    # written as 0.50 loses the 1000/1001 factor (rate-offset-sixteenths)
     _src("ind-wr-rate-2dp", _RATE,
          "a fractional frame rate is written with two decimals (29.97002997 -> 29.97)",
          "return str(int(r)) if r.is_integer() else repr(r)",
-         """return str(int(r)) if r.is_integer() else f"{r:.2f}\"""",
-         equivalent="two decimals is what the .fap header is held to: the header rate must equal the coded "
-                    "rate within [faps] header_rate_tol_hz = 0.005 (tolerances.toml: 29.97 for 30000/1001), "
-                    "and rounding to two decimals is always within it"),
+         """return str(int(r)) if r.is_integer() else f"{r:.2f}\""""),
     _src("ind-wr-count-last-plus1", _W,
          "the header frame count is last frame number + 1 instead of the number of frames",
          """out = [f"{version} {name} {_format_rate(rate)} {n}"]""",

@@ -221,6 +221,14 @@ def test_the_project_root_is_not_in_view_only_the_package(seen):
     assert not [p for p in files if p.startswith(str(ROOT / "examples")) or p == str(ROOT / "pyproject.toml")]
 
 
+def test_its_program_and_manifest_folders_are_in_view(seen):
+    tmp, inv = seen
+    files = set(inv["seen"])
+    assert str(tmp / "inventory" / "inventory.py") in files and str(tmp / "inventory" / "inventory.toml") in files
+    assert str(Path(sys.executable)) in files  # {python}: the program's folder (the venv's bin)
+    assert any(p.startswith(str(Path(sys.base_prefix).resolve()) + "/lib/") for p in files)
+
+
 def test_nothing_of_the_run_folder_or_other_runs_is_in_view(seen):
     tmp, inv = seen
     run = str((tmp / "run").resolve())
@@ -306,19 +314,52 @@ def test_the_python_view_is_the_interpreter_and_the_package(tmp_path):
 
 
 def test_a_secret_file_in_view_cannot_be_read(tmp_path):
+    """The fallback under the refusal above: a key inside a folder a view shows anyway (the
+    {python} view's folders are never checked) is covered, unreadable."""
     needs_sandbox()
-    m = python_decoder(tmp_path, "keyreader", '''
-        key = os.path.join(os.path.dirname(sys.argv[0]), "lab.key")
-        print("KEY:" + open(key).read() + ":END", file=sys.stderr)
-        sys.exit(3)
-        ''')
-    key = m.parent / "lab.key"
+    shown = tmp_path / "shown"
+    shown.mkdir()
+    key = shown / "lab.key"
     key.write_text("-----BEGIN PRIVATE KEY----- s3cr3t-k3y-bytes")
+    (shown / "other.txt").write_text("visible")
+    work = tmp_path / "case"
+    (work / "in").mkdir(parents=True)
+    view = sandbox.View(read_only=[shown, Path("/bin")], writable=[work], read_only_inside=[work / "in"])
     saved = set(sandbox._SECRETS)
     try:
         sandbox.keep_secret(key)
-        rs = run(tmp_path, m, WITH_SIBLING[:1])
+        res = sandbox.run(["/bin/sh", "-c", f"cat {shown}/other.txt; cat {key}"], work, sandbox.Limits(timeout_s=10),
+                          view=view)
     finally:
         sandbox._SECRETS.clear()
         sandbox._SECRETS.update(saved)
-    assert "s3cr3t" not in rs[0].stderr_tail and "Permission denied" in rs[0].stderr_tail
+    assert "visible" in res.stdout_tail and "s3cr3t" not in res.stdout_tail + res.stderr_tail
+    assert "Permission denied" in res.stderr_tail
+
+
+# ------------------------------------------------------------------ the speed phase
+
+
+def test_the_speed_phase_shows_a_stream_decoder_no_expected_output(tmp_path):
+    """The speed content folder is in the decoder's view: it holds the streams, never their .fap
+    (the expected output), and a command that asks for {fap} cannot be given one."""
+    needs_sandbox()
+    from fbaconf.harness import speed  # noqa: PLC0415 (only this test)
+    body = '''
+        here = os.path.dirname(IN)
+        bad = [f for f in os.listdir(here) if f.endswith((".fap", ".npz"))]
+        if bad:
+            print("SAW", bad, file=sys.stderr)
+            sys.exit(3)
+        from fbaconf.pipeline import reference_outputs
+        reference_outputs(IN, faps_out=OUT)
+        '''
+    m = python_decoder(tmp_path, "speedlook", body, fmt="npz", claim="simple@1")
+    r = speed.measure(adapters.resolve(m), "simple@1", "decode", lengths=[8, 16], repeats=1,
+                      work_dir=tmp_path / "speed", persistent=False)
+    assert r is not None and r.rate_fps > 0
+    asks = manifest(tmp_path, "asksfap", ["{python}", "-c", "pass", "{input}", "{fap}", "{faps_out}"], fmt="npz",
+                    claim="simple@1")
+    with pytest.raises(speed.SpeedError, match="fap"):
+        speed.measure(adapters.resolve(asks), "simple@1", "decode", lengths=[8, 16], repeats=1,
+                      work_dir=tmp_path / "speed2", persistent=False)
