@@ -171,6 +171,8 @@ class CommandAdapter(Adapter):
         self.env = {str(k): str(v) for k, v in data.get("env", {}).items()}
         self.limits = _limits(data.get("limits", {}), path)
         self.reject_exit_codes = frozenset(data.get("reject_exit_codes", DEFAULT_REJECT_EXIT_CODES))
+        # serve answers what decode writes: speed may be measured through it (checked on a sample, harness/speed.py)
+        self.serve_equivalent = bool(data.get("serve_equivalent", False)) and "serve" in self.commands
         self.lab_read_only: list[Path] = []  # the lab's --sandbox-ro folders (never the manifest's)
         self.supports_multi = "decode_multi" in self.commands
 
@@ -278,7 +280,7 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
                             ("inputs", list, "a list"), ("outputs", list, "a list"), ("faps_format", str, "a string"),
                             ("commands", dict, "a table"), ("limits", dict, "a table"), ("env", dict, "a table"),
                             ("python", str, "a string"), ("options", dict, "a table"),
-                            ("reject_exit_codes", list, "a list")):
+                            ("reject_exit_codes", list, "a list"), ("serve_equivalent", bool, "true or false")):
         if key in data and not isinstance(data[key], kind):
             raise bad(f"{key} must be {what}, not {type(data[key]).__name__}", _KEY_RULE.get(key, "manifest-key"))
     if "tools" in data and not all(isinstance(t, str) for t in data["tools"]):
@@ -353,7 +355,7 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
 
 
 MANIFEST_KEYS = ("name", "description", "claims", "tools", "inputs", "outputs", "faps_format", "commands", "limits",
-                 "env", "python", "options", "reject_exit_codes")
+                 "env", "python", "options", "reject_exit_codes", "serve_equivalent")
 LIMIT_KEYS = ("timeout_s", "memory_mb", "memory_kind", "output_mb", "processes")
 _KEY_RULE = {"name": "manifest-name", "claims": "manifest-claims", "tools": "manifest-tools",
              "inputs": "manifest-inputs", "outputs": "manifest-outputs", "faps_format": "manifest-faps-format",

@@ -17,11 +17,7 @@ frame-dependent part of the largest run (its time minus the smallest run's) reac
 noise — or a run would pass ``max_run_s`` or the length ``max_frames``. The series is then ``n/10, n/2, n``.
 
 Content. A procedural sequence (all low-level and high-level FAPs, 25 Hz) encoded by the
-reference encoder. Long streams are built without re-encoding: a 100-frame block encoded
-once is repeated (every copy starts with an intra plane and its plane start code, so the
-decoder's state resets; the result decodes to the block's frames tiled), plus a tail
-block for the remainder. Decoders that accept only ``.fap`` text get the reference
-decoding of that stream as text.
+reference encoder, in files named at random (:mod:`.speedcontent`).
 
 Operations. ``decode``: the adapter's ``decode`` command with the FAP output (outputs a
 command names unconditionally are supplied too and their cost is included; a named
@@ -32,16 +28,22 @@ no supersampling); skipped (``None``, see :func:`skip_reason`) for adapters with
 ``images`` output. A scene is written (the bundled default head; BT, or BIFS for a decoder
 that declares only the ``bifs`` input) only when the command requires ``{scene}``.
 
-Persistent decoders. A command decoder with ``[commands] serve`` (the persistent protocol,
-docs/fuzzing.md) that reads binary streams and writes FAPs is measured through it for
-``decode`` (``persistent=False`` to spawn instead): one process decodes every run, so each
-sample is one answer's round trip and the fitted start-up is the protocol's per-input cost,
-not a process start. The result's message says which way it was measured.
+The command measured is the one certified: ``decode``. A manifest may declare its
+``[commands] serve`` (the persistent protocol, docs/fuzzing.md) equivalent
+(``serve_equivalent = true``): a decoder that reads binary streams and writes FAPs is then
+measured through it (``persistent=False`` to spawn instead) — one process decodes every run, so
+each sample is one answer's round trip and the fitted start-up is the protocol's per-input
+cost — after the harness has checked the claim on a sample: the first :data:`EQUIVALENCE_RUNS`
+lengths are decoded by ``decode`` too, and the two outputs must be the same frames. A fast
+``serve`` beside a slow ``decode`` is measured as ``decode``; one that answers differently
+fails. The result's message says which way it was measured.
 
-Output check. Every run's output must hold the frames it was given: a FAP output of ``n``
-frames (``.npz``: its arrays; ``.fap``: its header count and at least one line per frame),
-a render an image per frame, or a non-empty vertices file — a decoder cannot earn a rate by
-stopping early on long streams.
+Output check, on content (issue 29). Every run's FAP output must hold the ``n`` frames it was
+given, and a sample of them (the first, the last and six drawn at random per run) must be the
+reference decoding of the content (:func:`.speedcontent.output_problem`); a render must write an
+image per frame, a vertices output must be non-empty — a decoder cannot earn a rate by stopping
+early on long streams or by writing ``n`` lines of anything. A fitted per-frame cost that is not
+positive is an error, never an infinite rate.
 
 A run that fails (non-zero exit, crash, timeout, missing or short output) raises
 :class:`SpeedRunError`; :func:`measure_claim` turns it into a failed :class:`SpeedResult`.
@@ -58,30 +60,23 @@ from typing import Callable
 
 import numpy as np
 
-from fbaconf.animation.bundled import default_head_scene
-from fbaconf.bitstreams.decoder import decode
-from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.faptext import write_fap
-from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.persistent import PersistentDecoder
 from fbaconf.profiles.model import Claim, load_profiles
-from fbaconf.rendering.scenario import Scenario
 from fbaconf.safefs import remove_tree
-from fbaconf.scenes import bifs, bt
 
 from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim
+from .compare.faps import compare_faps
 from .compare.ladder import outcome_for
-from .compare.loaders import OutputError, check_output_file, load_output_faps
+from .compare.loaders import OutputError, load_output_faps
 from .results import Outcome, SpeedResult
 from .runner import hidden_from_decoders
+from .speedcontent import BLOCK_FRAMES, Content, content_stream, output_problem  # noqa: F401 (re-exported)
 
 OPERATIONS = ("decode", "render")
 LIMIT_FOR = {"decode": "decode_rate", "render": "render_rate"}
-CONTENT_RATE = 25.0  # Hz of the generated content
-CONTENT_QUANT = 4  # fap_quant of the generated stream
-BLOCK_FRAMES = 100  # long streams repeat one encoded block of this many frames
+EQUIVALENCE_RUNS = 2  # lengths decoded by both serve and decode before serve is timed
 START_FRAMES = 8  # first length of the adaptive search
 SERIES = (0.1, 0.5, 1.0)  # the measured lengths, as fractions of the largest
 DEFAULT_RENDER_SIZE = (64, 64)
@@ -106,94 +101,6 @@ class SpeedRunError(Exception):
         self.stderr_tail = stderr_tail
 
 
-# --------------------------------------------------------------------------- content
-
-class _Content:
-    """Generated streams (and .fap text, scenes, scenarios) in one directory, by length."""
-
-    def __init__(self, root: Path) -> None:
-        self.root = Path(root)
-        self.root.mkdir(parents=True, exist_ok=True)
-        self._enc: dict[int, bytes] = {}
-        self._fba: dict[int, Path] = {}
-        self._fap: dict[int, Path] = {}
-        self._scene: dict[str, Path] = {}
-
-    def _encoded(self, n: int) -> bytes:
-        if n not in self._enc:
-            self._enc[n] = encode(synthetic_sequence(n, CONTENT_RATE),
-                                  EncoderOptions(fap_quant=CONTENT_QUANT)).data
-        return self._enc[n]
-
-    def stream_bytes(self, n: int) -> bytes:
-        """An ``n``-frame .fba stream (``n`` >= 1)."""
-        if n <= BLOCK_FRAMES:
-            return self._encoded(n)
-        m, r = divmod(n, BLOCK_FRAMES)
-        head, body, end = _split(self._encoded(BLOCK_FRAMES))
-        parts = [head, body * m]
-        if r:
-            h2, tail, _e = _split(self._encoded(r))
-            if h2 != head:  # pragma: no cover - the object header does not depend on content
-                return self._direct(n)
-            parts.append(tail)
-        parts.append(end)
-        return b"".join(parts)
-
-    def _direct(self, n: int) -> bytes:  # pragma: no cover - fallback
-        return self._encoded(n)
-
-    def fba(self, n: int) -> Path:
-        if n not in self._fba:
-            p = self.root / f"content-{n}.fba"
-            p.write_bytes(self.stream_bytes(n))
-            self._fba[n] = p
-        return self._fba[n]
-
-    def fap(self, n: int) -> Path:
-        if n not in self._fap:
-            frames = decode(self.stream_bytes(n)).frames
-            p = self.root / f"content-{n}.fap"
-            p.write_text(write_fap(frames), encoding="utf-8")
-            self._fap[n] = p
-        return self._fap[n]
-
-    def scene(self, kind: str) -> Path:
-        """The bundled default head as a ``bt`` (text) or ``bifs`` (binary) scene file."""
-        if kind not in self._scene:
-            p = self.root / f"default-head.{kind}"
-            if kind == "bifs":
-                p.write_bytes(bifs.encode(default_head_scene()))
-            else:
-                p.write_text(bt.write(default_head_scene()), encoding="utf-8")
-            self._scene[kind] = p
-        return self._scene[kind]
-
-    def scenario(self, name: str, **changes) -> Path:
-        p = self.root / f"{name}.toml"
-        if not p.exists():
-            p.write_text(Scenario.default().with_(**changes).to_toml(), encoding="utf-8")
-        return p
-
-
-_PLANE_START = b"\x00\x00\x01\xbb"
-_END = b"\x00\x00\x01\xb1"
-
-
-def _split(data: bytes) -> tuple[bytes, bytes, bytes]:
-    """(object header, planes, end code) of a stream written with plane start codes."""
-    i = data.find(_PLANE_START)
-    if i < 0 or not data.endswith(_END):  # pragma: no cover - encoder options fixed above
-        raise SpeedError("generated stream lacks plane start codes / end code", rule="speed-content")
-    return data[:i], data[i:-len(_END)], data[-len(_END):]
-
-
-def content_stream(n: int) -> bytes:
-    """The ``n``-frame stream the speed measurement feeds decoders (for tests and tools)."""
-    with tempfile.TemporaryDirectory(prefix="fbaconf-speed-") as d:
-        return _Content(Path(d)).stream_bytes(n)
-
-
 # --------------------------------------------------------------------------- one run
 
 def skip_reason(adapter: Adapter, operation: str) -> str | None:
@@ -208,12 +115,14 @@ def skip_reason(adapter: Adapter, operation: str) -> str | None:
 
 
 class _Runner:
-    def __init__(self, adapter: Adapter, operation: str, content: _Content, runs_dir: Path,
+    def __init__(self, adapter: Adapter, operation: str, content: Content, runs_dir: Path,
                  render_size: tuple[int, int], persistent: bool = True) -> None:
         self.adapter = adapter
         self.persistent = (persistent and operation == "decode" and isinstance(adapter, CommandAdapter)
-                           and "serve" in adapter.commands and "fba" in adapter.inputs and "faps" in adapter.outputs)
+                           and "serve" in adapter.commands and getattr(adapter, "serve_equivalent", False)
+                           and "fba" in adapter.inputs and "faps" in adapter.outputs)
         self._server = None  # the persistent decoder, started at the first run
+        self._equivalent: set[int] = set()  # lengths serve's output was checked against decode's on
         self.operation = operation
         self.content = content
         self.runs_dir = runs_dir
@@ -326,6 +235,7 @@ class _Runner:
             self._judge(res, n, argv)
             elapsed = res.elapsed_s
             self.last_cpu_s = res.cpu_s
+            self.last_output = job.path("faps_out") if "faps_out" in job.values else None
         elif isinstance(a, PythonAdapter):
             argv = None
             job = job_for()
@@ -359,8 +269,8 @@ class _Runner:
             argv = a.argv("serve", job)
             view = a.sandbox_view(argv, workdir, hidden=hidden_from_decoders())
             self._server = PersistentDecoder(argv, root, workdir, view, a.limits, env=a.env or None)
-            self.notes.append("measured through the persistent protocol ([commands] serve): one process for "
-                              "every run, no process start-up per sample")
+            self.notes.append("measured through the persistent protocol ([commands] serve, declared equivalent to "
+                              "decode): one process for every run, no process start-up per sample")
         out = workdir / "out"
         if out.exists():
             remove_tree(out)
@@ -370,7 +280,34 @@ class _Runner:
         self._judge(res, n, self._server.argv)
         self.last_cpu_s = None
         self._check_output(Job(workdir=workdir, values={"faps_out": str(path)}, frames=n), n, self._server.argv)
+        if n not in self._equivalent and len(self._equivalent) < EQUIVALENCE_RUNS:
+            self._check_equivalent(n, path)
         return res.elapsed_s
+
+    def _check_equivalent(self, n: int, serve_out: Path) -> None:
+        """The manifest says serve is decode: decode the same ``n`` frames with ``decode`` and
+        compare the two outputs frame for frame (module doc)."""
+        self._equivalent.add(n)
+        self.count += 1
+        workdir = self.runs_dir / f"equivalence-{self.count:04d}"
+        workdir.mkdir(parents=True)
+        try:
+            self._run(n, workdir)
+            try:
+                by_decode = load_output_faps(self.last_output, max_bytes=self.adapter.limits.output_mb * 2**20)
+                by_serve = load_output_faps(serve_out, max_bytes=self.adapter.limits.output_mb * 2**20)
+            except OutputError as e:
+                raise SpeedRunError(self.operation, n, Outcome.FAIL, f"serve_equivalent: {e}") from None
+            r = compare_faps(by_decode, by_serve, text_output=serve_out.suffix == ".fap")
+            if not r.outcome.ok:
+                raise SpeedRunError(self.operation, n, Outcome.FAIL,
+                                    f"the manifest declares [commands] serve equivalent to decode, but on {n} frames "
+                                    f"serve's output differs from decode's: {r.message}", self._server.argv)
+        finally:
+            remove_tree(workdir)
+        if len(self._equivalent) == EQUIVALENCE_RUNS:
+            self.notes.append(f"serve's output checked against decode's on {EQUIVALENCE_RUNS} lengths "
+                              f"({', '.join(map(str, sorted(self._equivalent)))} frames): the same frames")
 
     def _judge(self, res, n: int, argv) -> None:
         """A run that did not decode (exit code, crash, timeout...) fails the measurement."""
@@ -384,16 +321,11 @@ class _Runner:
             k for k in ("faps_out", "vertices_out", "images_dir") if k in job.values)
         p = job.path(key)
         if key == "faps_out":
-            try:
-                check_output_file(p, self.adapter.limits.output_mb * 2**20)
-                got = output_frames(p)
-            except OutputError as e:
-                why = (f"wrote no output at {{{key}}} ({p})" if e.rule == "output-missing" else
-                       f"its output at {{{key}}} is unusable: {e}")
-                raise SpeedRunError(self.operation, n, Outcome.FAIL, f"the decoder finished but {why}", argv) from None
-            if got != n:
+            why = output_problem(p, n, self.content, max_bytes=self.adapter.limits.output_mb * 2**20,
+                                 player="fba" not in self.adapter.inputs)
+            if why is not None:
                 raise SpeedRunError(self.operation, n, Outcome.FAIL,
-                                    f"the decoder was given {n} frames but its output at {{{key}}} holds {got}", argv)
+                                    f"the decoder {why.replace('its output', f'its output at {{{key}}}')}", argv)
             return
         ok = p is not None and (any(p.iterdir()) if p.is_dir() else (p.is_file() and p.stat().st_size > 0))
         if not ok:
@@ -405,20 +337,6 @@ class _Runner:
                 raise SpeedRunError(self.operation, n, Outcome.FAIL,
                                     f"the decoder was asked to render {n} frames but wrote {got} images at "
                                     f"{{{key}}}", argv)
-
-
-def output_frames(path: Path) -> int:
-    """How many frames a decoder's FAP output holds, cheaply (speed runs reach 100,000 frames):
-    an ``.npz``'s frame arrays; a ``.fap`` file's header count, provided at least that many
-    lines follow it (a header alone does not count). Raises OutputError when unreadable."""
-    if path.suffix != ".fap":
-        return len(load_output_faps(path).frame_number)
-    lines = [ln for ln in path.read_bytes().splitlines() if ln.strip() and not ln.lstrip().startswith(b"#")]
-    try:
-        declared = int(lines[0].split()[-1])
-    except (IndexError, ValueError):
-        raise OutputError("no .fap header with a frame count", rule="output-fap-count", file=str(path)) from None
-    return min(declared, len(lines) - 1)  # each frame takes at least one line (its values)
 
 
 # --------------------------------------------------------------------------- fitting
@@ -518,7 +436,7 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
     else:
         root = Path(work_dir)
     try:
-        runner = _Runner(adapter, operation, _Content(root / "content"), root / f"runs-{operation}",
+        runner = _Runner(adapter, operation, Content(root / "content"), root / f"runs-{operation}",
                          tuple(render_size), persistent=persistent)
         t_start = time.perf_counter()
         if lengths is None:
@@ -549,16 +467,20 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
         if tmp is not None:
             tmp.cleanup()
     notes = list(runner.notes)
-    if per_frame <= 0:
-        rate = math.inf
-        notes.append(f"per-frame cost below the measurement's resolution at {lengths[-1]} frames")
-    else:
-        rate = 1.0 / per_frame
+    if not per_frame > 0:  # never an infinite rate: the time did not grow with the frames decoded
+        return SpeedResult(operation=operation, claim=claim, per_frame_s=per_frame, startup_s=startup, rate_fps=0.0,
+                           required_fps=required, passed=False, provenance=provenance, samples=samples, fit_r2=r2,
+                           message=f"no decode rate: the fitted per-frame cost is {per_frame * 1000:.4f} ms, not "
+                                   f"positive — the run time did not grow with the {lengths} frames decoded (a "
+                                   f"decoder's time must; the measurement cannot resolve it, or the decoder does "
+                                   f"not decode what it is given); lengths {lengths} x {repeats}"
+                                   + "".join(f"; {n}" for n in notes))
+    rate = 1.0 / per_frame
     passed = rate >= required
     span = per_frame * (lengths[-1] - lengths[0])
-    if 0 < per_frame and span < 0.1 * target_s and lengths[-1] < max_frames:
+    if span < 0.1 * target_s and lengths[-1] < max_frames:
         notes.append(f"frame-dependent time only {span * 1000:.0f} ms: low precision")
-    if r2 < 0.9 and per_frame > 0:
+    if r2 < 0.9:
         note = f"poor linear fit (r2 {r2:.3f}): wall-clock timings are noisy (a loaded machine?)"
         if all("cpu_s" in s for s in samples):
             try:
