@@ -112,4 +112,11 @@ def load_findings(fuzz_dir: Path) -> list[tuple[Path, dict]]:
 
 
 def replay(target, data: bytes, kind: str = "stream") -> Verdict | None:
-    return target.execute(Entry(data, kind=kind, origin="replay")).verdict
+    """The verdict of ``target`` on ``data``. A replay is a run of its own: the fork server or
+    persistent decoder it starts is stopped when it ends (``target.close``)."""
+    try:
+        return target.execute(Entry(data, kind=kind, origin="replay")).verdict
+    finally:
+        close = getattr(target, "close", None)
+        if close is not None:
+            close()

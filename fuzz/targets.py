@@ -252,6 +252,13 @@ class DecoderTarget:
                     slot.input_fd = None
         self._local = threading.local()
 
+    def __enter__(self) -> "DecoderTarget":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """A target used on its own (``with DecoderTarget(...) as t``) stops its servers at the end."""
+        self.close()
+
     def argv_for(self, job) -> list[str]:
         try:
             return self.adapter.argv("decode", job)

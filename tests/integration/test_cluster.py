@@ -11,6 +11,7 @@ import threading
 from pathlib import Path
 
 import pytest
+from test_fuzz_lifecycle import alive  # tests/integration: the fork-server count
 
 from fbaconf.conformance.suite import load_suites
 from fbaconf.fuzz.campaign import ShardSpec, run_campaign
@@ -87,9 +88,10 @@ def test_cluster_verdicts_equal_the_pool_and_a_lost_worker_loses_nothing(tmp_pat
     assert sorted(logged) == sorted(c.full_id for c in cases)
 
 
-def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(tmp_path):
+def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(tmp_path, monkeypatch):
     """fuzz --cluster local:2: shards on two workers, one worker killed mid-round; the planted
-    skip-chain crash is found, reported once (hits merged across shards), minimised once."""
+    skip-chain crash is found, reported once (hits merged across shards), minimised once; and
+    no fork server of any shard (the killed worker's included) outlives the campaign."""
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc not available")
@@ -100,6 +102,15 @@ def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(t
                  'faps_format = "fap"\n[commands]\ndecode = ["{manifest_dir}/skipchain", "{input}", "{faps_out}"]\n'
                  '[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n')
     killed = []
+    # the workers' shard folders (tempfile) under tmp_path: their servers' command lines name it
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+
+    servers, done = [0], threading.Event()
+
+    def count_servers():  # the most shard servers seen at once while the campaign runs
+        while not done.wait(0.25):
+            servers[0] = max(servers[0], len(alive(str(tmp_path))))
 
     def kill_one_worker():
         workers = [p for p in _children() if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()]
@@ -109,9 +120,11 @@ def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(t
     with cluster.client("local:2") as c:
         timer = threading.Timer(4.0, kill_one_worker)
         timer.start()
+        threading.Thread(target=count_servers, daemon=True).start()
         camp, findings = run_campaign(c, ShardSpec(str(m), timeout_s=1.0), workers=2, seconds=8, seed=5,
                                       out=tmp_path / "out", minimise_seconds=5, progress=lambda _m: None)
         timer.cancel()
+        done.set()
     assert killed, "a worker was killed mid-round"
     assert camp.shards == 2  # the lost worker's shard was rerun, not lost nor counted twice
     crashes = [f for f in findings if f.verdict.cls == "crash" and "SIGSEGV" in f.verdict.signature]
@@ -119,3 +132,5 @@ def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(t
     doc = json.loads((crashes[0].path / "finding.json").read_text())
     assert doc["minimal"]["bytes"] < doc["original"]["bytes"]
     assert len(list((tmp_path / "out" / "findings").iterdir())) == len(findings)
+    assert servers[0] >= 1  # the shards' servers were counted while they ran
+    assert alive(str(tmp_path), grace_s=5.0) == []

@@ -339,8 +339,8 @@ def test_cli(tmp_path):
 def test_relative_work_folder_gives_no_bogus_finding(tmp_path, monkeypatch, seeds):
     """A relative -o used to make every command decoder miss its input (a bogus finding)."""
     monkeypatch.chdir(tmp_path)
-    target = DecoderTarget(resolve("reference"), Path("rel-work"))
-    assert target.execute(seeds[0]).verdict is None
+    with DecoderTarget(resolve("reference"), Path("rel-work")) as target:  # its server stops at the end
+        assert target.execute(seeds[0]).verdict is None
 
 
 def test_text_fuzzing_finds_a_players_crash_and_a_copier(tmp_path):
