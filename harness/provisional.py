@@ -7,7 +7,10 @@ decision when a plausible other reading changes its expected output:
 * **D8** — the case codes a plane with the DCT segment mode (tool ``dct``): its transform,
   scaling, prediction and run/level VLC tables are fbaconf's own;
 * **D3-D7** — the checker (:func:`fbaconf.profiles.checker.check_stream`) warns with a
-  ``FAP-DECISION-*`` code on one of the case's streams; the code's clause names the decision.
+  ``FAP-DECISION-*`` code on one of the case's streams; the code's clause names the decision;
+* for an invalid stream (an ``error`` case, whose expected output is a rejection): the
+  decisions named by the clauses of the errors that make it invalid (``viseme-select-range``
+  rests on D5, ``dct-bad-vlc`` on D8, ``first-predicted`` on D2; ``trailing-zero-byte`` on none).
 
 This module is the one place that says so (:func:`rests_on`); it is derived from the case's
 tools and streams, so the suites carry no copy of it.
@@ -16,7 +19,8 @@ The verdict rule (docs/harness.md, "Provisional requirements"), modelled on the 
 *CompatibilityWarning* (a result that does not fail a conformance submission): a required case
 that **fails**, rests on provisional decisions, and differs only in ways one of them can
 explain (:data:`CAN_CHANGE`: a DCT or an alphabet reading desynchronises the decoding —
-any value, a rejection; D6 changes only timing; D3 only what a FAP holds) is a *provisional
+any value, a rejection; D6 changes timing, or whether a stream without a usable rate is
+accepted; D3 only what a FAP holds; D2 only whether a first predicted plane is an error) is a *provisional
 difference*. It stays a Fail in every report, but the claim's verdict is ``PASS (provisional
 differences: N)`` when nothing else fails, and ``FAIL`` under ``--strict``. A crash, a hang,
 a blown limit, a set-up error — or, say, frame numbers without their skips on a case that
@@ -29,7 +33,7 @@ import re
 from collections import defaultdict
 from pathlib import Path
 
-from fbaconf.conformance.suite import Case
+from fbaconf.conformance.suite import Case, CaseKind
 from fbaconf.profiles.checker import check_stream
 from fbaconf.rules import CODES
 
@@ -48,14 +52,20 @@ def decision_of_code(code: str) -> str | None:
 
 
 @functools.lru_cache(maxsize=1024)
-def _stream_decisions(path: str, digest: str) -> tuple[str, ...]:
-    """The decisions the checker warns a stream depends on (cached by the file's sha256)."""
+def _stream_decisions(path: str, digest: str, invalid: bool) -> tuple[str, ...]:
+    """The decisions a stream's expected result depends on (cached by the file's sha256): for a
+    valid stream those the checker's FAP-DECISION warnings name; for an invalid one those the
+    clauses of its errors name."""
     try:
         data = Path(path).read_bytes()
     except OSError:
         return ()
-    found = {decision_of_code(d.code) for d in check_stream(data) if d.code.startswith(DECISION_PREFIX)}
-    return tuple(sorted(x for x in found if x))
+    ds = check_stream(data)
+    if invalid:
+        found = {decision_of_code(d.code) for d in ds if d.severity == "error"}
+    else:
+        found = {decision_of_code(d.code) for d in ds if d.code.startswith(DECISION_PREFIX)}
+    return tuple(sorted(x for x in found if x in CAN_CHANGE))
 
 
 def rests_on(case: Case) -> list[str]:
@@ -63,12 +73,13 @@ def rests_on(case: Case) -> list[str]:
     ``["D5", "D8"]``); empty when it rests only on public facts and the decisions every
     case shares (D1, D2)."""
     out: set[str] = set()
-    if "dct" in case.tools:
+    invalid = case.kind == CaseKind.ERROR
+    if "dct" in case.tools and not invalid:
         out.add(DCT_DECISION)
     streams = [case.inputs.get("fba")] + list(case.inputs.get("faces", []))
     for rel in streams:
         if isinstance(rel, str) and case.suite_dir is not None:
-            out.update(_stream_decisions(str(case.suite_dir / rel), case.sha256.get(rel, "")))
+            out.update(_stream_decisions(str(case.suite_dir / rel), case.sha256.get(rel, ""), invalid))
     return sorted(out)
 
 
@@ -77,10 +88,11 @@ def rests_on(case: Case) -> list[str]:
 # numbers, plane times, the header rate). Anything else (vertices or images failing while the FAPs
 # match) no decision explains.
 CAN_CHANGE: dict[str, frozenset[str]] = {
+    "D2": frozenset({"verdict"}),
     "D3": frozenset({"values"}),
     "D4": frozenset({"values", "verdict"}),
     "D5": frozenset({"values", "verdict"}),
-    "D6": frozenset({"timing"}),
+    "D6": frozenset({"timing", "verdict"}),  # the rate: plane times, and whether "no rate" is an error
     "D7": frozenset({"values", "verdict", "count"}),
     "D8": frozenset({"values", "verdict", "count", "timing"}),
 }
