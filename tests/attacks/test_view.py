@@ -357,7 +357,7 @@ def test_the_speed_phase_shows_a_stream_decoder_no_expected_output(tmp_path):
     m = python_decoder(tmp_path, "speedlook", body, fmt="npz", claim="simple@1")
     r = speed.measure(adapters.resolve(m), "simple@1", "decode", lengths=[8, 16], repeats=1,
                       work_dir=tmp_path / "speed", persistent=False)
-    assert r is not None and r.rate_fps > 0
+    assert r is not None  # every run decoded (one that saw a .fap would have failed: SpeedRunError)
     asks = manifest(tmp_path, "asksfap", ["{python}", "-c", "pass", "{input}", "{fap}", "{faps_out}"], fmt="npz",
                     claim="simple@1")
     with pytest.raises(speed.SpeedError, match="fap"):
