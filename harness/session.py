@@ -184,15 +184,27 @@ def check_suites(suites, names: list[str]) -> None:
                              f" (known: {', '.join(known)})"))
 
 
+def isolation_notice(adapter) -> str:
+    """One line: whether decoders are isolated on this machine (``run`` and ``certify`` print it)."""
+    if sandbox.isolation() == "bwrap":
+        here = "decoders run isolated on this machine (bubblewrap sandbox)"
+    else:
+        why = ("switched off (FBACONF_SANDBOX=none)" if os.environ.get("FBACONF_SANDBOX") == "none"
+               else "not available")
+        here = (f"WARNING: bubblewrap (bwrap) is {why}: decoders run UNISOLATED on this machine — they can "
+                "read the goldens and write outside their folder. Install it (Debian: apt-get install bubblewrap); "
+                "certify refuses to run a decoder without it unless told --allow-unisolated")
+    if not isinstance(adapter, CommandAdapter):
+        return f"fbaconf: isolation: {adapter.name} runs inside fbaconf (no sandbox applies); {here}"
+    return f"fbaconf: isolation: {here}"
+
+
 def preflight(adapter) -> None:
-    """Before any case: a command decoder's program must exist and be executable; one loud
-    warning when no sandbox can isolate it."""
+    """Before any case: one line saying whether decoders are isolated here; a command decoder's
+    program must exist and be executable."""
+    print(isolation_notice(adapter), file=sys.stderr)
     if not isinstance(adapter, CommandAdapter):
         return
-    if sandbox.isolation() == "none":
-        print("fbaconf: WARNING: bubblewrap (bwrap) is not available: the decoder runs UNISOLATED — it can read "
-              "the goldens and write outside its folder. Install it (Debian: apt-get install bubblewrap); "
-              "certify refuses to run without it unless told --allow-unisolated.", file=sys.stderr)
     prog = adapter.program()
     # the folders the sandbox would show it (program, manifest, --sandbox-ro): ViewError (exit 2) if too broad
     adapter.sandbox_view([prog or str(adapter.commands["decode"][0])], Path("/nonexistent-case"),

@@ -1,0 +1,29 @@
+"""`fbaconf run` and `certify` say in one line whether decoders are isolated on this machine
+(issue 30): bubblewrap present, missing, or switched off; an in-process adapter says so too."""
+from __future__ import annotations
+
+import pytest
+
+from fbaconf.harness import adapters
+from fbaconf.harness.session import isolation_notice, preflight
+from fbaconf.isolation import sandbox
+
+
+@pytest.mark.parametrize("have,env,words", [
+    ("bwrap", None, "decoders run isolated on this machine (bubblewrap sandbox)"),
+    ("none", None, "bubblewrap (bwrap) is not available: decoders run UNISOLATED"),
+    ("none", "none", "bubblewrap (bwrap) is switched off (FBACONF_SANDBOX=none): decoders run UNISOLATED"),
+])
+def test_one_line_says_whether_decoders_are_isolated(monkeypatch, capsys, have, env, words):
+    monkeypatch.setattr(sandbox, "isolation", lambda: have)
+    if env:
+        monkeypatch.setenv("FBACONF_SANDBOX", env)
+    else:
+        monkeypatch.delenv("FBACONF_SANDBOX", raising=False)
+    ref = adapters.resolve("reference")  # a command decoder (the bundled reference program)
+    line = isolation_notice(ref)
+    assert line.startswith("fbaconf: isolation: ") and words in line and "\n" not in line
+    inproc = isolation_notice(adapters.resolve("reference-inprocess"))
+    assert "reference-inprocess runs inside fbaconf (no sandbox applies)" in inproc and words in inproc
+    preflight(adapters.resolve("reference-inprocess"))  # what run and certify print first
+    assert capsys.readouterr().err.strip() == inproc
