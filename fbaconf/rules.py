@@ -398,7 +398,7 @@ _rule("manifest-reject-codes", "harness", "a decoder manifest's reject_exit_code
 _rule("manifest-sandbox", "harness", "a decoder manifest has a [sandbox] table: the lab, not the manifest, sets what a decoder sees (--sandbox-ro)")
 _rule("sandbox-view", "harness", "a folder the sandbox would show a decoder shows too much (/, a top-level folder, the fbaconf project, /proc…)")
 _rule("certificate-json", "harness", "a certification package's JSON file is not JSON, or is nested too deeply")
-_rule("cluster", "harness", "--cluster is not local[:N] or tcp://HOST:PORT, Dask is missing, or the scheduler cannot be reached")
+_rule("cluster", "harness", "--cluster is not local[:N] or tls://HOST:PORT, Dask is missing, the lab's TLS certificates are not given, or the scheduler cannot be reached")
 _rule("certificate-key", "harness", "a signing key is missing, not PEM, or not Ed25519; or a key would be overwritten")
 _rule("manifest-name", "harness", "a decoder manifest's name is not a plain name (it names the run folder)")
 _rule("output-unsafe", "harness", "a decoder's output is not a regular file (FIFO, device, symlink) or is larger than allowed")

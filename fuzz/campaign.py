@@ -1,5 +1,5 @@
 """Fuzzing campaigns on a Dask cluster: ``fbaconf fuzz --decoder D.toml --cluster local[:N]``
-or ``--cluster tcp://HOST:PORT`` (the cluster set-up of :mod:`fbaconf.harness.cluster`).
+or ``--cluster tls://HOST:PORT`` (the cluster set-up of :mod:`fbaconf.harness.cluster`).
 
 A campaign runs in rounds. Each round is one task per worker, a *shard*: an ordinary
 one-at-a-time :class:`~fbaconf.fuzz.engine.Fuzzer` in the worker (its own seed, its own fork
@@ -10,10 +10,17 @@ signature across shards (hits summed), the corpus merged and handed to the next 
 coverage united. At the end each distinct finding is minimised once, as a task, and written
 like a local run's. A worker lost mid-round loses nothing: Dask reruns its shard elsewhere,
 and a shard is a pure function of its seed, so the rerun finds what the lost one would have.
+
+The cluster is the harness's (mutual TLS, :mod:`fbaconf.harness.cluster`); task keys are
+random, and a shard's or a minimisation's report travels as JSON text (inputs as base64),
+parsed and checked as plain data here before it is merged (:func:`shard_report`).
 """
 from __future__ import annotations
 
+import base64
+import binascii
 import hashlib
+import json
 import shutil
 import tempfile
 import time
@@ -22,6 +29,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from fbaconf.harness.adapters import resolve
+from fbaconf.harness.cluster import ClusterError, from_data, task_key
 
 from .corpus import default_seeds
 from .engine import FuzzConfig, Fuzzer
@@ -51,8 +59,28 @@ def _target(spec: ShardSpec, work: Path):
                          fork_server=not spec.spawn, persistent=not spec.spawn)
 
 
-def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -> dict:
-    """One shard, in a worker: fuzz for ``seconds`` and report (no minimisation, no files)."""
+def _b64(data: bytes) -> str:
+    return base64.b64encode(data).decode("ascii")
+
+
+def _unb64(text, what: str) -> bytes:
+    if not isinstance(text, str):
+        raise ClusterError(f"{what} from the cluster is not base64 text")
+    try:
+        return base64.b64decode(text.encode("ascii"), validate=True)
+    except (binascii.Error, UnicodeEncodeError):
+        raise ClusterError(f"{what} from the cluster is not base64 text") from None
+
+
+def _json(doc: dict) -> str:
+    """A worker's report as JSON text (numbers that numpy made become plain ones)."""
+    return json.dumps(doc, default=lambda o: o.item() if hasattr(o, "item") else
+                      o.tolist() if hasattr(o, "tolist") else str(o))
+
+
+def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -> str:
+    """One shard, in a worker: fuzz for ``seconds`` and report (no minimisation, no files),
+    as JSON text (:func:`shard_report` reads it)."""
     work = Path(tempfile.mkdtemp(prefix="fbaconf-shard-"))
     try:
         target = _target(spec, work)
@@ -62,21 +90,52 @@ def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -
                                coverage_every=spec.coverage_every, minimise_findings=False))
         fz.run()
         st = fz.stats
-        return {"seed": seed, "execs": st.execs, "fuzz_seconds": st.elapsed - st.minimise_s,
-                "features": sorted(st.features), "universe": list(st.universe),
-                "corpus": [e.data for e in fz.new_corpus],
-                "findings": [{"key": f.verdict.key, "cls": f.verdict.cls, "signature": f.verdict.signature,
-                              "message": f.verdict.message, "detail": f.verdict.detail, "data": f.original.data,
-                              "kind": f.original.kind, "origin": f.original.origin, "index": f.index,
-                              "corpus_size": f.original.corpus_size, "hits": f.hits, "seed": seed,
-                              "found_at_s": f.found_at_s}
-                             for f in fz.findings.values()]}
+        return _json({"seed": seed, "execs": st.execs, "fuzz_seconds": st.elapsed - st.minimise_s,
+                      "features": sorted(st.features), "universe": list(st.universe),
+                      "corpus": [_b64(e.data) for e in fz.new_corpus],
+                      "findings": [{"key": f.verdict.key, "cls": f.verdict.cls, "signature": f.verdict.signature,
+                                    "message": f.verdict.message, "detail": f.verdict.detail,
+                                    "data": _b64(f.original.data), "kind": f.original.kind,
+                                    "origin": f.original.origin, "index": f.index,
+                                    "corpus_size": f.original.corpus_size, "hits": f.hits, "seed": seed,
+                                    "found_at_s": f.found_at_s}
+                                   for f in fz.findings.values()]})
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
-def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: float, tests: int) -> dict:
-    """Minimise one finding in a worker: the smallest input with the same class and signature."""
+_SHARD_FIELDS = {"seed": int, "execs": int, "fuzz_seconds": (int, float), "features": list, "universe": list,
+                 "corpus": list, "findings": list}
+_FINDING_FIELDS = {"key": str, "cls": str, "signature": str, "message": str, "detail": dict, "data": str,
+                   "kind": str, "origin": str, "index": int, "corpus_size": (int, type(None)), "hits": int,
+                   "seed": int, "found_at_s": (int, float)}
+
+
+def _fields(d: dict, want: dict, what: str) -> None:
+    for k, t in want.items():
+        if k not in d or isinstance(d[k], bool) or not isinstance(d[k], t):
+            raise ClusterError(f"{what} from the cluster lacks {k!r} or holds the wrong kind of value there")
+
+
+def shard_report(text) -> dict:
+    """A shard's JSON report, checked (plain data, the fields merged and their kinds) and with
+    its inputs decoded; ClusterError for anything else."""
+    r = from_data(text, "shard report")
+    _fields(r, _SHARD_FIELDS, "a shard report")
+    if not all(isinstance(x, str) for x in r["features"] + r["universe"]):
+        raise ClusterError("a shard report's features are not names")
+    r["corpus"] = [_unb64(b, "a corpus entry") for b in r["corpus"]]
+    for f in r["findings"]:
+        if not isinstance(f, dict):
+            raise ClusterError("a shard report's finding is not a table")
+        _fields(f, _FINDING_FIELDS, "a shard report's finding")
+        f["data"] = _unb64(f["data"], "a finding's input")
+    return r
+
+
+def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: float, tests: int) -> str:
+    """Minimise one finding in a worker: the smallest input with the same class and signature
+    (JSON text, read by :func:`minimise_report`)."""
     work = Path(tempfile.mkdtemp(prefix="fbaconf-min-"))
     target = _target(spec, work)
     last = {}
@@ -89,8 +148,8 @@ def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: fl
             return False
         minimal, stats = minimise(data, test, max_tests=tests, max_seconds=seconds)
         v = last.get("v")
-        return {"minimal": minimal, "tests": stats.tests, "seconds": stats.seconds,
-                "message": v.message if v else None, "detail": v.detail if v else None}
+        return _json({"minimal": _b64(minimal), "tests": stats.tests, "seconds": stats.seconds,
+                      "message": v.message if v else None, "detail": v.detail if v else None})
     finally:
         target.close()
         shutil.rmtree(work, ignore_errors=True)
@@ -132,6 +191,15 @@ class Campaign:
         return new
 
 
+def minimise_report(text) -> dict:
+    """A minimisation's JSON report, checked, its input decoded."""
+    m = from_data(text, "minimisation report")
+    _fields(m, {"minimal": str, "tests": int, "seconds": (int, float), "message": (str, type(None)),
+                "detail": (dict, type(None))}, "a minimisation report")
+    m["minimal"] = _unb64(m["minimal"], "a minimised input")
+    return m
+
+
 def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int, out: Path,  # noqa: PLR0913
                  minimise_seconds: float, progress=print, round_s: float = ROUND_S) -> tuple[Campaign, list]:
     """Rounds of one shard per worker until ``seconds`` have passed; then each distinct finding
@@ -147,10 +215,10 @@ def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int,
         length = max(1.0, min(round_s, left))
         merged = list(camp.corpus.values())
         futs = [c.submit(run_shard, spec, seed * 1_000_003 + rnd * 1009 + i, length, merged,
-                         key=f"fbaconf-shard-{seed}-{rnd}-{i}", pure=False, retries=3)
+                         key=task_key("shard"), pure=False, retries=3)
                 for i in range(workers)]
         for _fut, r in as_completed(futs, with_results=True):
-            for f in camp.merge(r):
+            for f in camp.merge(shard_report(r)):
                 progress(f"finding {f['cls']} ({f['signature']}) in shard seed {f['seed']}: {f['message'][:120]}")
         rnd += 1
         progress(f"[{time.perf_counter() - t0:6.1f}s] round {rnd}: {camp.execs} execs, "
@@ -158,9 +226,9 @@ def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int,
     wall = time.perf_counter() - t0
     # each distinct finding minimised once, on the cluster
     mins = {k: c.submit(minimise_task, spec, f["data"], f["kind"], k, minimise_seconds, 600,
-                        key=f"fbaconf-min-{seed}-{hashlib.sha1(k.encode()).hexdigest()[:12]}", pure=False, retries=2)
+                        key=task_key("min"), pure=False, retries=2)
             for k, f in camp.findings.items()}
-    findings = _write(camp, {k: fut.result() for k, fut in mins.items()}, spec, out)
+    findings = _write(camp, {k: minimise_report(fut.result()) for k, fut in mins.items()}, spec, out)
     camp.wall_s = wall
     return camp, findings
 

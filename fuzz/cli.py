@@ -3,7 +3,7 @@
 ::
 
     fbaconf fuzz --decoder D.toml --seconds N [--seed S] [-j N] [-o DIR] [--target stream|scene]
-                 [--spawn] [--coverage-every N] [--cluster local[:N]|tcp://HOST:PORT]
+                 [--spawn] [--coverage-every N] [--cluster local[:N]|tls://HOST:PORT]
     fbaconf fuzz --self [--seconds N] [--seed S] [-o DIR]
     fbaconf fuzz --decoder D.toml --replay FILE         # run one input, print its classification
     fbaconf fuzz --promote DIR [--data-dir PATH]         # findings -> regression suite cases
@@ -56,7 +56,7 @@ def register(sub) -> None:
     p.add_argument("--seeds", type=Path, action="append", default=[],
                    help="extra seed files or folders (*.fba) besides the conformance suites")
     p.add_argument("--max-execs", type=int, default=None, help="stop after this many inputs")
-    p.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
+    p.add_argument("--cluster", metavar="local[:N]|tls://HOST:PORT",
                    help="--decoder: run the campaign as shards on a Dask cluster (one per worker, corpus merged "
                         "between rounds, findings deduplicated and minimised once)")
     p.add_argument("--spawn", action="store_true",

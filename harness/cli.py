@@ -44,7 +44,7 @@ def _common(p) -> None:
     p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
     p.add_argument("--claim", help="profile@level under test (default: the decoder's highest claim)")
     p.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
-    p.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
+    p.add_argument("--cluster", metavar="local[:N]|tls://HOST:PORT",
                    help="run the cases as tasks on a Dask cluster instead of the local pool")
     p.add_argument("--keep-workdirs", action="store_true", help="keep each case's working folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

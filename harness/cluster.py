@@ -1,25 +1,65 @@
-"""Cases as tasks on a Dask cluster: ``--cluster local[:N]`` or ``--cluster tcp://HOST:PORT``.
+"""Cases as tasks on a Dask cluster: ``--cluster local[:N]`` or ``--cluster tls://HOST:PORT``.
 
 The embedded thread pool (``-j N``) stays the default; a cluster is for campaigns that
 outgrow one machine. ``local[:N]`` starts a ``LocalCluster`` of N single-threaded worker
-processes on this machine (default: the CPU count); ``tcp://HOST:PORT`` connects to a
-running Dask scheduler whose workers have fbaconf installed and see the same paths (a shared
-filesystem: suites, goldens, the decoder and the run folder).
+processes on this machine (default: the CPU count); ``tls://HOST:PORT`` (``tcp://`` is read
+as the same, always over TLS) connects to a running Dask scheduler whose workers have fbaconf
+installed and see the same paths (a shared filesystem: suites, goldens, the decoder and the
+run folder).
 
 Each case is one task (``run_case`` in a worker); results stream back to this process,
 which writes them to the same resumable ``results.jsonl`` as the pool does. A worker lost
 mid-run loses nothing: Dask reruns the tasks it held on another worker. Why Dask: it is the
 well-kept Python engine for exactly this (task futures, ``as_completed``, lost-worker
 recovery, a local cluster and a remote scheduler behind one API), so fbaconf writes none of it.
+
+Security (issue 29). Anyone who can talk to a Dask scheduler or worker can run code on the
+workers, so every cluster is mutual TLS (``distributed.security.Security``): each end proves
+itself with a certificate signed by the cluster's own authority.
+
+* ``local``: the authority and one certificate are made for the run (``cryptography``; RSA
+  2048, valid one day) in a private temporary folder (mode 0700, removed after); the
+  scheduler, workers and nannies listen on 127.0.0.1 only, over TLS; their HTTP servers
+  (health, metrics) on 127.0.0.1 too. A local process without the run's certificate — another
+  user's, or the same user's not started by this run — cannot join or submit.
+* ``tls://HOST:PORT``: the lab's certificates are required — ``FBACONF_CLUSTER_CA``,
+  ``FBACONF_CLUSTER_CERT`` and ``FBACONF_CLUSTER_KEY`` (PEM files: the lab's authority, and a
+  client certificate and key it signed), else Dask's own configuration
+  (``distributed.comm.tls.ca-file``, ``distributed.comm.tls.client.cert`` and ``.key``, e.g.
+  ``DASK_DISTRIBUTED__COMM__TLS__CA_FILE``); without them the connection is refused before it
+  is made. The lab starts its scheduler and workers with the same authority
+  (``dask scheduler --tls-ca-file ca.pem --tls-cert node.pem --tls-key node-key.pem``, the
+  same for ``dask worker``): docs/fuzzing.md, "Who may talk to the cluster".
+
+Task keys are random (a stranger cannot pre-submit a result under a key fbaconf will ask for).
+A task returns its result as JSON text (plain data: dicts, lists, strings, numbers), which
+this process parses and validates (:func:`from_data`, :func:`plain`) before it builds a result
+from it; the client accepts task results serialized as msgpack only, never pickled. (Dask's own protocol may still carry
+pickled control messages between the cluster's authenticated members: the defence against a
+stranger is that no stranger is a member.)
 """
 from __future__ import annotations
 
+import datetime
+import ipaddress
+import json
 import os
 import re
+import secrets
+import shutil
+import tempfile
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Callable, Iterator
 
 from fbaconf.errors import FbaconfInputError
+
+from .results import CaseResult
+
+MAX_DEPTH = 32
+MAX_ITEMS = 1 << 20
+MAX_TEXT = 16 << 20
+RESULT_DESERIALIZERS = ("msgpack",)  # task results: never a pickle
 
 
 class ClusterError(FbaconfInputError):
@@ -27,44 +67,186 @@ class ClusterError(FbaconfInputError):
 
 
 def parse(spec: str) -> tuple[str, str | int]:
-    """``local`` / ``local:N`` -> ("local", N); ``tcp://host:port`` -> ("tcp", address)."""
+    """``local`` / ``local:N`` -> ("local", N); ``tls://host:port`` or ``tcp://host:port`` ->
+    ("tls", "tls://host:port")."""
     m = re.fullmatch(r"local(?::(\d+))?", spec or "")
     if m:
         n = int(m.group(1)) if m.group(1) else (os.cpu_count() or 1)
         if not 1 <= n <= 1024:
             raise ClusterError(f"--cluster {spec}: the worker count must be 1..1024")
         return "local", n
-    if re.fullmatch(r"tcp://[\w.\-\[\]:]+:\d+", spec or ""):
-        return "tcp", spec
-    raise ClusterError(f"--cluster {spec!r}: give local, local:N or tcp://HOST:PORT")
+    m = re.fullmatch(r"(?:tcp|tls)://([\w.\-\[\]:]+:\d+)", spec or "")
+    if m:
+        return "tls", f"tls://{m.group(1)}"
+    raise ClusterError(f"--cluster {spec!r}: give local, local:N or tls://HOST:PORT")
 
+
+# ------------------------------------------------------------------ certificates
+
+def make_certificates(folder: Path, *, common_name: str = "fbaconf-run") -> dict[str, Path]:
+    """A certificate authority and one certificate (and key) it signed, for 127.0.0.1 and
+    localhost, written to ``folder`` (made private); returns the PEM paths: ca, cert, key."""
+    from cryptography import x509  # noqa: PLC0415 (the cluster extra)
+    from cryptography.hazmat.primitives import hashes, serialization  # noqa: PLC0415
+    from cryptography.hazmat.primitives.asymmetric import rsa  # noqa: PLC0415
+    from cryptography.x509.oid import NameOID  # noqa: PLC0415
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    os.chmod(folder, 0o700)
+    now = datetime.datetime.now(datetime.timezone.utc)
+
+    def name(cn: str):
+        return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])
+
+    def cert(subject, issuer, public, signer, *, ca: bool):
+        b = (x509.CertificateBuilder().subject_name(subject).issuer_name(issuer).public_key(public)
+             .serial_number(x509.random_serial_number()).not_valid_before(now - datetime.timedelta(minutes=5))
+             .not_valid_after(now + datetime.timedelta(days=1))
+             .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True))
+        if not ca:
+            b = b.add_extension(x509.SubjectAlternativeName([x509.DNSName("localhost"),
+                                                             x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]),
+                                critical=False)
+        return b.sign(signer, hashes.SHA256())
+
+    ca_key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
+    ca_name = name(f"{common_name}-ca-{secrets.token_hex(4)}")
+    ca = cert(ca_name, ca_name, ca_key.public_key(), ca_key, ca=True)
+    key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
+    leaf = cert(name(common_name), ca_name, key.public_key(), ca_key, ca=False)
+    paths = {"ca": folder / "ca.pem", "cert": folder / "cert.pem", "key": folder / "key.pem"}
+    pem = serialization.Encoding.PEM
+    for p, data in ((paths["ca"], ca.public_bytes(pem)), (paths["cert"], leaf.public_bytes(pem)),
+                    (paths["key"], key.private_bytes(pem, serialization.PrivateFormat.PKCS8,
+                                                     serialization.NoEncryption()))):
+        fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+    return paths
+
+
+def security_for(paths: dict[str, Path]):
+    """Mutual TLS for every role (scheduler, worker, client) with one authority and certificate."""
+    from distributed.security import Security  # noqa: PLC0415 (the cluster extra)
+    ca, cert, key = (str(paths[k]) for k in ("ca", "cert", "key"))
+    return Security(tls_ca_file=ca, tls_client_cert=cert, tls_client_key=key, tls_scheduler_cert=cert,
+                    tls_scheduler_key=key, tls_worker_cert=cert, tls_worker_key=key, require_encryption=True)
+
+
+def lab_security():
+    """The lab's certificates for a remote scheduler (module doc), or ClusterError."""
+    from distributed.security import Security  # noqa: PLC0415 (the cluster extra)
+    env = {k: os.environ.get(f"FBACONF_CLUSTER_{k.upper()}") for k in ("ca", "cert", "key")}
+    if all(env.values()):
+        for k, v in env.items():
+            if not Path(v).is_file():
+                raise ClusterError(f"FBACONF_CLUSTER_{k.upper()}={v}: no such file")
+        return Security(tls_ca_file=env["ca"], tls_client_cert=env["cert"], tls_client_key=env["key"],
+                        require_encryption=True)
+    sec = Security(require_encryption=True)  # dask's configuration (distributed.comm.tls.*)
+    if sec.tls_ca_file and sec.tls_client_cert:
+        return sec
+    raise ClusterError("a remote Dask scheduler is reached only over TLS with the lab's certificates: set "
+                       "FBACONF_CLUSTER_CA, FBACONF_CLUSTER_CERT and FBACONF_CLUSTER_KEY (PEM files: the lab's "
+                       "certificate authority, a client certificate it signed and its key), or dask's "
+                       "distributed.comm.tls configuration (docs/fuzzing.md, \"Who may talk to the cluster\")")
+
+
+# ------------------------------------------------------------------ clients
 
 @contextmanager
 def client(spec: str) -> Iterator:
-    """A connected ``distributed.Client`` for ``spec`` (closed, and a local cluster shut down, after)."""
+    """A connected ``distributed.Client`` for ``spec`` (closed, and a local cluster shut down and
+    its certificates removed, after)."""
     kind, arg = parse(spec)
     try:
         from distributed import Client, LocalCluster  # noqa: PLC0415 (Dask: optional (the cluster extra))
     except ImportError:
         raise ClusterError("--cluster needs Dask: pip install 'dask[distributed]'") from None
     if kind == "local":
-        cluster = LocalCluster(n_workers=int(arg), threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=40)
-        c = Client(cluster)
+        folder = Path(tempfile.mkdtemp(prefix="fbaconf-tls-"))
         try:
-            yield c
+            sec = security_for(make_certificates(folder / "certs"))
+            cluster = LocalCluster(n_workers=int(arg), threads_per_worker=1, processes=True, protocol="tls://",
+                                   host="127.0.0.1", security=sec, dashboard_address="127.0.0.1:0",
+                                   worker_dashboard_address="127.0.0.1:0", silence_logs=40)
+            try:
+                c = Client(cluster, security=sec, deserializers=RESULT_DESERIALIZERS)
+                try:
+                    yield c
+                finally:
+                    c.close()
+            finally:
+                cluster.close()
         finally:
-            c.close()
-            cluster.close()
+            shutil.rmtree(folder, ignore_errors=True)
     else:
+        sec = lab_security()
         try:
-            c = Client(str(arg), timeout=30)
-        except OSError as e:
-            raise ClusterError(f"cannot reach the Dask scheduler at {arg}: {e}") from None
+            c = Client(str(arg), timeout=30, security=sec, deserializers=RESULT_DESERIALIZERS)
+        except (OSError, TimeoutError) as e:
+            raise ClusterError(f"cannot reach the Dask scheduler at {arg} over TLS: {e}") from None
         try:
             yield c
         finally:
             c.close()
+
+
+def task_key(kind: str) -> str:
+    """A task key no one can guess ahead (a stranger cannot pre-submit a result under it)."""
+    return f"fbaconf-{kind}-{secrets.token_hex(16)}"
+
+
+# ------------------------------------------------------------------ results as data
+
+def plain(obj, what: str = "result", *, _depth: int = 0, _count: list | None = None):
+    """``obj`` if it is plain data — dicts with string keys, lists (tuples read as lists),
+    strings, bytes, whole and real numbers, booleans, None — within bounds of depth, size and
+    text; ClusterError otherwise. What a worker sends back is checked with it before use."""
+    count = _count if _count is not None else [0]
+    count[0] += 1
+    if _depth > MAX_DEPTH or count[0] > MAX_ITEMS:
+        raise ClusterError(f"a {what} from the cluster is nested or sized past the bounds")
+    if obj is None or isinstance(obj, (bool, int, float)):
+        return obj
+    if isinstance(obj, (str, bytes)):
+        if len(obj) > MAX_TEXT:
+            raise ClusterError(f"a {what} from the cluster holds a text of {len(obj)} bytes")
+        return obj
+    if isinstance(obj, (list, tuple)):
+        return [plain(x, what, _depth=_depth + 1, _count=count) for x in obj]
+    if isinstance(obj, dict):
+        if not all(isinstance(k, str) for k in obj):
+            raise ClusterError(f"a {what} from the cluster has a key that is not a string")
+        return {k: plain(v, what, _depth=_depth + 1, _count=count) for k, v in obj.items()}
+    raise ClusterError(f"a {what} from the cluster is not plain data ({type(obj).__name__})")
+
+
+def as_data(obj) -> str:
+    """What a task sends back: JSON text (plain data by construction, msgpack-serialized)."""
+    return json.dumps(obj)
+
+
+def from_data(text, what: str) -> dict:
+    """A task's JSON text, parsed and checked (:func:`plain`) — ClusterError for anything else."""
+    if not isinstance(text, str) or len(text) > MAX_TEXT:
+        raise ClusterError(f"a {what} from the cluster is not the JSON text a task sends")
+    try:
+        got = json.loads(text)
+    except (ValueError, RecursionError):
+        raise ClusterError(f"a {what} from the cluster is not JSON") from None
+    got = plain(got, what)
+    if not isinstance(got, dict):
+        raise ClusterError(f"a {what} from the cluster is not a table")
+    return got
+
+
+def _case_task(run_case: Callable, ctx, case) -> str:
+    """In a worker: one case, its result as plain data (an exception as such, never raised:
+    an exception object would travel pickled)."""
+    try:
+        return as_data({"result": run_case(ctx, case).to_json()})
+    except Exception as e:  # noqa: BLE001 - reported as data, judged by the coordinator
+        return as_data({"error": f"{type(e).__name__}: {str(e)[:2000]}", "case": getattr(case, "full_id", "?")})
 
 
 def run_on_cluster(c, run_case: Callable, ctx, cases, on_result: Callable, stopping: Callable[[], bool]) -> None:
@@ -72,11 +254,17 @@ def run_on_cluster(c, run_case: Callable, ctx, cases, on_result: Callable, stopp
     ``on_result`` as it arrives. Tasks of a lost worker are rerun by Dask; a task that raises
     is retried twice."""
     from distributed import as_completed  # noqa: PLC0415 (Dask: optional (the cluster extra))
-    futures = [c.submit(run_case, ctx, case, key=f"fbaconf-case-{i}-{case.full_id}", pure=False, retries=2)
-               for i, case in enumerate(cases)]
+    futures = [c.submit(_case_task, run_case, ctx, case, key=task_key("case"), pure=False, retries=2)
+               for case in cases]
     ac = as_completed(futures, with_results=True)
-    for _fut, result in ac:
+    for _fut, got in ac:
         if stopping():
             c.cancel(futures)
             return
-        on_result(result)
+        got = from_data(got, "case result")
+        if "error" in got:
+            raise ClusterError(f"case {got.get('case')} failed in a worker: {got['error']}")
+        try:
+            on_result(CaseResult.from_json(got["result"]))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ClusterError(f"a case result from the cluster does not read as one: {e}") from None

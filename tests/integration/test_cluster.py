@@ -42,7 +42,8 @@ def slow_manifest(tmp_path: Path) -> Path:
 
 
 @pytest.mark.parametrize("spec,expected", [("local", ("local", os.cpu_count() or 1)), ("local:3", ("local", 3)),
-                                           ("tcp://10.1.2.3:8786", ("tcp", "tcp://10.1.2.3:8786"))])
+                                           ("tcp://10.1.2.3:8786", ("tls", "tls://10.1.2.3:8786")),
+                                           ("tls://10.1.2.3:8786", ("tls", "tls://10.1.2.3:8786"))])
 def test_cluster_specs(spec, expected):
     assert cluster.parse(spec) == expected
 
