@@ -17,7 +17,9 @@ frame-dependent part of the largest run (its time minus the smallest run's) reac
 noise — or a run would pass ``max_run_s`` or the length ``max_frames``. The series is then ``n/10, n/2, n``.
 
 Content. A procedural sequence (all low-level and high-level FAPs, 25 Hz) encoded by the
-reference encoder, in files named at random (:mod:`.speedcontent`).
+reference encoder, in files named at random (``content-<random>.fba``;
+:mod:`fbaconf.generators.speed_content`), whose reference decoding of any length comes from two
+decoded blocks (a 100,000-frame run costs no reference decode).
 
 Operations. ``decode``: the adapter's ``decode`` command with the FAP output (outputs a
 command names unconditionally are supplied too and their cost is included; a named
@@ -40,7 +42,7 @@ fails. The result's message says which way it was measured.
 
 Output check, on content (issue 29). Every run's FAP output must hold the ``n`` frames it was
 given, and a sample of them (the first, the last and six drawn at random per run) must be the
-reference decoding of the content (:func:`.speedcontent.output_problem`); a render must write an
+reference decoding of the content (:func:`output_problem`); a render must write an
 image per frame, a vertices output must be non-empty — a decoder cannot earn a rate by stopping
 early on long streams or by writing ``n`` lines of anything. A fitted per-frame cost that is not
 positive is an error, never an infinite rate.
@@ -52,6 +54,7 @@ from __future__ import annotations
 
 import math
 import os
+import secrets
 import statistics
 import tempfile
 import time
@@ -60,23 +63,26 @@ from typing import Callable
 
 import numpy as np
 
+from fbaconf.bitstreams.faptext import read_fap_text
+from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.errors import FbaconfInputError
+from fbaconf.generators.speed_content import BLOCK_FRAMES, Content, content_stream  # noqa: F401 (re-exported)
 from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.persistent import PersistentDecoder
 from fbaconf.profiles.model import Claim, load_profiles
-from fbaconf.safefs import remove_tree
+from fbaconf.safefs import UnsafeFileError, open_regular, read_regular, remove_tree
 
 from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim
 from .compare.faps import compare_faps
 from .compare.ladder import outcome_for
-from .compare.loaders import OutputError, load_output_faps
+from .compare.loaders import OutputError, check_output_file, load_output_faps
 from .results import Outcome, SpeedResult
 from .runner import hidden_from_decoders
-from .speedcontent import BLOCK_FRAMES, Content, content_stream, output_problem  # noqa: F401 (re-exported)
 
 OPERATIONS = ("decode", "render")
 LIMIT_FOR = {"decode": "decode_rate", "render": "render_rate"}
 EQUIVALENCE_RUNS = 2  # lengths decoded by both serve and decode before serve is timed
+RANDOM_FRAMES = 6  # frames of a run's output compared besides the first and the last
 START_FRAMES = 8  # first length of the adaptive search
 SERIES = (0.1, 0.5, 1.0)  # the measured lengths, as fractions of the largest
 DEFAULT_RENDER_SIZE = (64, 64)
@@ -337,6 +343,75 @@ class _Runner:
                 raise SpeedRunError(self.operation, n, Outcome.FAIL,
                                     f"the decoder was asked to render {n} frames but wrote {got} images at "
                                     f"{{{key}}}", argv)
+
+
+# --------------------------------------------------------------------------- judging an output
+# A .fap output is read frame by frame for the sampled frames only when it is laid out as the
+# format's writers lay it out (a header, then a mask line of all ones and a data line per
+# frame); any other layout is read whole.
+
+def sample(n: int) -> np.ndarray:
+    """The frames compared in one run of ``n``: the first, the last, and a fresh random draw."""
+    rnd = secrets.SystemRandom()
+    inner = rnd.sample(range(1, n - 1), min(RANDOM_FRAMES, max(0, n - 2))) if n > 2 else []
+    return np.array(sorted({0, n - 1, *inner}), dtype=np.int64)
+
+
+def output_problem(path: Path, n: int, content: Content, *, max_bytes: int, player: bool = False) -> str | None:
+    """Why the FAP output at ``path`` is not the reference decoding of the ``n``-frame content
+    (module doc, "Output check") — a clause to follow "the decoder" — or None. Raises nothing for the
+    decoder's output."""
+    try:
+        check_output_file(path, max_bytes)
+        ks = sample(n)
+        got, count, text = _sampled(path, n, ks, max_bytes)
+    except OutputError as e:
+        return (f"finished but wrote no output ({path})" if e.rule == "output-missing" else
+                f"finished but its output is unusable: {e}")
+    if count != n:
+        return f"was given {n} frames but its output holds {count}"
+    r = compare_faps(content.expected(n, ks), got, text_output=text, player=player)
+    if r.outcome.ok:
+        return None
+    d = r.first_difference or {}
+    k = int(ks[d["frame"]]) if isinstance(d.get("frame"), (int, np.integer)) and d["frame"] < len(ks) else None
+    where = f"frame {k}" if k is not None else "a sampled frame"
+    return (f"finished but its output is not the decoding of the content it was given ({where} of {n}, "
+            f"{d.get('what', 'value')}"
+            f"{' of FAP ' + str(d['fap']) if d.get('fap') is not None else ''}: expected {d.get('expected')}, "
+            f"got {d.get('got')})")
+
+
+def _sampled(path: Path, n: int, ks: np.ndarray, max_bytes: int) -> tuple[FapFrames, int, bool]:
+    """(frames ``ks`` of the output, its frame count, whether it is .fap text)."""
+    try:
+        with open_regular(path, max_bytes) as f:
+            zipped = f.read(4) == b"PK\x03\x04"
+        if zipped or path.suffix.lower() == ".npz":
+            frames = load_output_faps(path, max_bytes=max_bytes)
+            return (frames.select(ks) if len(frames) == n else frames), len(frames), False
+        data = read_regular(path, max_bytes)
+    except UnsafeFileError as e:
+        raise OutputError(f"unusable output: {e}", rule="output-unsafe", file=str(path)) from None
+    lines = [ln for ln in data.split(b"\n") if ln.strip() and not ln.lstrip().startswith(b"#")]
+    try:
+        head = lines[0].split()
+        declared = int(head[-1])
+    except (IndexError, ValueError):
+        raise OutputError("no .fap header with a frame count", rule="output-fap-count", file=str(path)) from None
+    ones = b" ".join([b"1"] * 68)
+    if declared == n and len(lines) == 1 + 2 * n and all(lines[1 + 2 * k].strip() == ones for k in ks):
+        mini = b" ".join(head[:-1] + [str(len(ks)).encode()]) + b"\n" + b"".join(
+            lines[1 + 2 * k] + b"\n" + lines[2 + 2 * k] + b"\n" for k in ks)
+        try:
+            frames, _header, _w = read_fap_text(mini.decode("utf-8"), file=str(path))
+        except (FbaconfInputError, UnicodeDecodeError) as e:
+            raise OutputError(f"unreadable FAP output: {e}", rule="output-fap-text", file=str(path)) from None
+        return frames, n, True
+    if declared != n or len(lines) - 1 < n:  # each frame takes at least one line: short, whatever it holds
+        return FapFrames.empty(0), min(declared, len(lines) - 1), True
+    frames = load_output_faps(path, max_bytes=max_bytes)  # another layout: read whole
+    return (frames.select(ks) if len(frames) == n else frames), len(frames), True
 
 
 # --------------------------------------------------------------------------- fitting

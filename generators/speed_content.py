@@ -1,6 +1,7 @@
-"""The speed measurement's content and how a run's output is judged (:mod:`.speed`).
+"""The content the speed measurement feeds decoders (:mod:`fbaconf.harness.speed`), and its
+reference decoding.
 
-Content. A procedural sequence (all low-level and high-level FAPs, 25 Hz) encoded by the
+A procedural sequence (all low-level and high-level FAPs, 25 Hz) encoded by the
 reference encoder. Long streams are built without re-encoding: a 100-frame block encoded once
 is repeated (every copy starts with an intra plane and its plane start code, so the decoder's
 state resets; the result decodes to the block's frames tiled, frame numbers and times running
@@ -8,15 +9,6 @@ on), plus a tail block for the remainder. Decoders that accept only ``.fap`` tex
 reference decoding of that stream as text. The files are named at random
 (``content-<random>.fba``): their names say nothing of their length.
 
-Judging an output on content, not on its frame count (issue 29): a run's FAP output must
-hold the ``n`` frames it was given, and a sample of them — the first, the last and
-:data:`RANDOM_FRAMES` drawn at random for each run, so a decoder cannot know which — must be
-the reference decoding of the content, compared exactly as a conformance case compares FAPs
-(:func:`~fbaconf.harness.compare.faps.compare_faps`). The reference frames of any length come
-from the two decoded blocks, so a 100,000-frame run costs no reference decode. A ``.fap``
-output is read frame by frame for the sampled frames only when it is laid out as the format's
-writers lay it out (a header, then a mask line of all ones and a data line per frame); any
-other layout is read whole.
 """
 from __future__ import annotations
 
@@ -29,21 +21,16 @@ import numpy as np
 from fbaconf.animation.bundled import default_head_scene
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
-from fbaconf.bitstreams.faptext import read_fap_text, write_fap
+from fbaconf.bitstreams.faptext import write_fap
 from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.errors import FbaconfInputError
 from fbaconf.rendering.scenario import Scenario
-from fbaconf.safefs import UnsafeFileError, open_regular, read_regular
 from fbaconf.scenes import bifs, bt
-
-from .compare.faps import compare_faps
-from .compare.loaders import OutputError, check_output_file, load_output_faps
 
 CONTENT_RATE = 25.0  # Hz of the generated content
 CONTENT_QUANT = 4  # fap_quant of the generated stream
 BLOCK_FRAMES = 100  # long streams repeat one encoded block of this many frames
-RANDOM_FRAMES = 6  # frames compared per run besides the first and the last
 _PLANE_START = b"\x00\x00\x01\xbb"
 _END = b"\x00\x00\x01\xb1"
 
@@ -154,69 +141,3 @@ def content_stream(n: int) -> bytes:
     """The ``n``-frame stream the speed measurement feeds decoders (for tests and tools)."""
     with tempfile.TemporaryDirectory(prefix="fbaconf-speed-") as d:
         return Content(Path(d)).stream_bytes(n)
-
-
-# --------------------------------------------------------------------------- judging an output
-
-def sample(n: int) -> np.ndarray:
-    """The frames compared in one run of ``n``: the first, the last, and a fresh random draw."""
-    rnd = secrets.SystemRandom()
-    inner = rnd.sample(range(1, n - 1), min(RANDOM_FRAMES, max(0, n - 2))) if n > 2 else []
-    return np.array(sorted({0, n - 1, *inner}), dtype=np.int64)
-
-
-def output_problem(path: Path, n: int, content: Content, *, max_bytes: int, player: bool = False) -> str | None:
-    """Why the FAP output at ``path`` is not the reference decoding of the ``n``-frame content
-    (module doc) — a clause to follow "the decoder" — or None. Raises nothing for the
-    decoder's output."""
-    try:
-        check_output_file(path, max_bytes)
-        ks = sample(n)
-        got, count, text = _sampled(path, n, ks, max_bytes)
-    except OutputError as e:
-        return (f"finished but wrote no output ({path})" if e.rule == "output-missing" else
-                f"finished but its output is unusable: {e}")
-    if count != n:
-        return f"was given {n} frames but its output holds {count}"
-    r = compare_faps(content.expected(n, ks), got, text_output=text, player=player)
-    if r.outcome.ok:
-        return None
-    d = r.first_difference or {}
-    k = int(ks[d["frame"]]) if isinstance(d.get("frame"), (int, np.integer)) and d["frame"] < len(ks) else None
-    where = f"frame {k}" if k is not None else "a sampled frame"
-    return (f"finished but its output is not the decoding of the content it was given ({where} of {n}, "
-            f"{d.get('what', 'value')}"
-            f"{' of FAP ' + str(d['fap']) if d.get('fap') is not None else ''}: expected {d.get('expected')}, "
-            f"got {d.get('got')})")
-
-
-def _sampled(path: Path, n: int, ks: np.ndarray, max_bytes: int) -> tuple[FapFrames, int, bool]:
-    """(frames ``ks`` of the output, its frame count, whether it is .fap text)."""
-    try:
-        with open_regular(path, max_bytes) as f:
-            zipped = f.read(4) == b"PK\x03\x04"
-        if zipped or path.suffix.lower() == ".npz":
-            frames = load_output_faps(path, max_bytes=max_bytes)
-            return (frames.select(ks) if len(frames) == n else frames), len(frames), False
-        data = read_regular(path, max_bytes)
-    except UnsafeFileError as e:
-        raise OutputError(f"unusable output: {e}", rule="output-unsafe", file=str(path)) from None
-    lines = [ln for ln in data.split(b"\n") if ln.strip() and not ln.lstrip().startswith(b"#")]
-    try:
-        head = lines[0].split()
-        declared = int(head[-1])
-    except (IndexError, ValueError):
-        raise OutputError("no .fap header with a frame count", rule="output-fap-count", file=str(path)) from None
-    ones = b" ".join([b"1"] * 68)
-    if declared == n and len(lines) == 1 + 2 * n and all(lines[1 + 2 * k].strip() == ones for k in ks):
-        mini = b" ".join(head[:-1] + [str(len(ks)).encode()]) + b"\n" + b"".join(
-            lines[1 + 2 * k] + b"\n" + lines[2 + 2 * k] + b"\n" for k in ks)
-        try:
-            frames, _header, _w = read_fap_text(mini.decode("utf-8"), file=str(path))
-        except (FbaconfInputError, UnicodeDecodeError) as e:
-            raise OutputError(f"unreadable FAP output: {e}", rule="output-fap-text", file=str(path)) from None
-        return frames, n, True
-    if declared != n or len(lines) - 1 < n:  # each frame takes at least one line: short, whatever it holds
-        return FapFrames.empty(0), min(declared, len(lines) - 1), True
-    frames = load_output_faps(path, max_bytes=max_bytes)  # another layout: read whole
-    return (frames.select(ks) if len(frames) == n else frames), len(frames), True
