@@ -36,6 +36,7 @@ from fbaconf.profiles.checker import ARITH_BLOCKS, analyse, lookahead_stuffing
 from fbaconf.profiles.model import load_profiles
 from fbaconf.scenes import bt
 
+from .coder_coverage import coder_points
 from .suite import CaseKind, load_suites
 
 FORMAT = "fbaconf.coverage/1"
@@ -244,6 +245,7 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
     if len({p.coding_type for p in planes}) > 1:
         hits.add("coding.switch")
     hits |= frames_points(frames)
+    hits |= coder_points(data)
     return hits
 
 

@@ -196,6 +196,10 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
         else:
             case.stages = ["faps"]
             case.goldens = {"faps": "faps.npz"}
+            if ext == "fba":  # a valid stream: the players' input too (sparse text, see sparse_text)
+                decoded = decode(src.read_bytes()).frames
+                _write(d, f"{case.id}.fap", write_fap(sparse_text(decoded), name=case.id), case, "fap")
+                case.frames = len(decoded)
         return case
     if gen == "error" and c.get("mutation") in ("too-short", "not-face", "stuffing", "viseme-select",
                                                  "expression-select", "intensity", "value-overflow",

@@ -273,6 +273,21 @@ MUTANTS_LIST = [
     Mutant("render-shifted-camera", "fbaconf.rendering.raster:project", "image centre one pixel off",
            patch=_camera_shift),
 ]
+# --- the look-ahead at a block end, position by position (D7; the coder-lookahead-* cases, issue 33): a
+# decoder that mishandles one window position p only (a bit-mask or index slip in its window bookkeeping)
+_FINISH = "fbaconf.bitstreams.arith:ArithDecoder.finish"
+LOOKAHEAD = arith.LOOKAHEAD
+MUTANTS_LIST += [
+    Mutant(f"lookahead-rewind-at-{p}", _FINISH,
+           f"block end: a stuffing bit removed at look-ahead position {p} is counted in the block (D7 says hand it "
+           "back): the next field starts one bit late",
+           "sum(1 for c in self.stuffing if c <= used)",
+           f"sum(1 for c in self.stuffing if c <= used or c == used + {p})",
+           pure_decoder=True) for p in range(1, LOOKAHEAD + 1)] + [
+    Mutant(f"lookahead-error-at-{p}", _FINISH,
+           f"block end: a '0' in the stuffing slot at look-ahead position {p} is reported as an error (D7: those bits "
+           "belong to the next field)", "if count <= used:", f"if count <= used or count == used + {p}:",
+           pure_decoder=True) for p in range(1, LOOKAHEAD + 1)]
 MUTANTS_LIST = MUTANTS_LIST + INDEPENDENT  # the suite's own (family "suite"), then the independent ones
 MUTANTS: dict[str, Mutant] = {m.name: m for m in MUTANTS_LIST}
 FAMILIES = ("suite", "independent")

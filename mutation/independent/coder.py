@@ -124,11 +124,10 @@ MUTANTS_LIST: list[Mutant] = [
        "elif low >= Q2:", "elif low > Q2:", "§3.3 renormalisation at q2"),
     _m("ind-cod-renorm-middle-high-le-q3", f"{AD}.decode",
        "middle renormalisation when high <= q3 (boundary included)",
-       "elif low >= Q1 and high < Q3:", "elif low >= Q1 and high <= Q3:", "§3.3 q1/q3 middle case",
-       equivalent="observed, not proven: its condition (high = 49152 right after narrowing, low in [q1, q2)) "
-                  "was reached in plane 1020 of a 1,025-frame search stream (seed 1) and the output was "
-                  "identical; the extra middle step leaves the interval doubled (high 65537), the decoder "
-                  "one shift early, and the next shift brings it back in step"),
+       "elif low >= Q1 and high < Q3:", "elif low >= Q1 and high <= Q3:", "§3.3 q1/q3 middle case"),
+    # (once listed as equivalent: the tie needs a symbol of probability above 1/4 ending exactly at q3, and the
+    # extra middle step — interval doubled, one bit more of value — rounds a later boundary the other way when
+    # the coded point sits at an edge; the case coder-tie-high-q3 is such a stream)
     _m("ind-cod-renorm-middle-low-gt-q1", f"{AD}.decode",
        "middle renormalisation only when low > q1 (boundary excluded)",
        "elif low >= Q1 and high < Q3:", "elif low > Q1 and high < Q3:", "§3.3 q1/q3 middle case"),

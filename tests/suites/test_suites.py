@@ -66,7 +66,9 @@ def test_suite_groups_and_claims():
         for c in s.cases:
             if c.kind == "decode" and c.inputs.get("fba") and c.full_id not in NO_TEXT:
                 assert c.inputs.get("fap"), f"{c.full_id}: every stream case also comes as .fap text"
-                assert 1 <= c.frames <= 60 or c.id in ("lookahead-stuffing",), c.full_id
+                # the coder corners that need predicted models skewed by 20-216 planes first are longer
+                assert 1 <= c.frames <= 60 or c.id in ("lookahead-stuffing",) or c.id.startswith("coder-"), \
+                    c.full_id
 
 
 def test_regression_toml_is_merged(tmp_path):

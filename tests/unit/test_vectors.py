@@ -106,17 +106,57 @@ def failing() -> list[str]:
 
 
 # Reference mutants (mutation/measure.py) the vectors must kill: each breaks one rule a vector
-# was written for. Not killed by these vectors (their rules need longer hand derivations):
-# stuffing-not-removed, wrong-rewind: v15 puts a stuffing bit in a block and the reference reads
-# it as the spec says, but these two mutants compensate the bit in their rewind and decode the
-# same values there; the suite's lookahead-stuffing case kills them.
+# was written for. Not killed by these vectors: stuffing-not-removed (no vector has a stuffing
+# bit inside a block where that mutant's rewind does not compensate it; the suite's
+# lookahead-stuffing case kills it).
 KILLED = ["dequant-step-index", "dequant-quant-plus-one", "prediction-sign", "intra-symbol-offset",
           "alphabet-floor-division", "predicted-alphabet-from-intra-range", "ignore-retained", "mask-type-2-as-1",
           "mask-bits-reversed", "minmax-marker-skipped", "minmax-lists-ignored", "minmax-sign-swapped",
           "intensity-not-scaled", "expression-field-order", "init-face-def-swapped", "skip-not-counted",
           "skip-chain-not-continued", "time-code-ignored", "time-code-minutes-as-seconds", "default-rate-30",
           "skip-not-in-time", "frequency-offset-ignored", "viseme-prediction-sign",
-          "non-adaptive-model"]
+          "non-adaptive-model", "wrong-rewind", "ind-cod-d7-rewind-14-stream-bits",
+          "ind-cod-d7-lookahead-stuffing-error"]
+
+
+# The coder corner vectors (tests/vectors/make_coder_corners.py, issue 33): each kills the mutant of the
+# decoder rule it was made for — a tie taken the other way, a look-ahead position mishandled.
+TIE_MUTANTS = {"high-q2": "ind-cod-renorm-high-le-q2", "low-q2": "ind-cod-renorm-low-gt-q2",
+               "low-q1": "ind-cod-renorm-middle-low-gt-q1", "high-q3": "ind-cod-renorm-middle-high-le-q3"}
+
+
+def corner_mutant(name: str) -> str:
+    tie = re.fullmatch(r"c\d\d-coder-tie-(.+)", name)
+    if tie:
+        return TIE_MUTANTS[tie.group(1)]
+    rule, pos = re.fullmatch(r"c\d\d-coder-lookahead-(rewind|error)-(\d\d)", name).groups()
+    return f"lookahead-{rule}-at-{int(pos)}"
+
+
+CORNERS = [n for n in NAMES if "-coder-" in n]
+
+
+def test_there_are_corner_vectors_for_every_tie_and_position():
+    assert len(CORNERS) == 4 + 2 * 14
+    assert sorted({corner_mutant(n) for n in CORNERS}) == sorted(
+        list(TIE_MUTANTS.values()) + [f"lookahead-{r}-at-{p}" for r in ("rewind", "error") for p in range(1, 15)])
+
+
+def test_each_corner_vector_kills_its_mutant():
+    """Under its mutant (a process of its own) the corner vector fails; the reference passes it."""
+    code = ("import json, runpy, sys\nfrom fbaconf.mutation.measure import apply\napply(sys.argv[1])\n"
+            f"ns = runpy.run_path({str(Path(__file__).resolve())!r})\n"
+            "try:\n    ns['test_vector'](sys.argv[2])\n    print('passed')\n"
+            "except BaseException:\n    print('failed')\n")
+
+    def run(name):
+        r = subprocess.run([sys.executable, "-c", code, corner_mutant(name), name], capture_output=True, text=True,
+                           timeout=300)
+        assert r.returncode == 0, r.stderr[-1500:]
+        return name, r.stdout.strip().splitlines()[-1]
+    with ThreadPoolExecutor(2) as pool:
+        survived = [n for n, out in pool.map(run, CORNERS) if out != "failed"]
+    assert survived == []
 
 
 def test_each_vector_fails_when_its_rule_is_broken():
