@@ -23,6 +23,12 @@ A case::
 
 ``claim`` is the lowest profile@level whose certification requires the case: a decoder
 claiming P@L runs every case whose claim is P'@L' with P' included in P and L' <= L.
+
+A manifest is read defensively (a suite folder can come from anywhere: ``FBACONF_SUITES``):
+a regular file of at most :data:`MAX_MANIFEST_BYTES`, JSON nested at most :data:`MAX_DEPTH`
+deep, every field of the kind the schema above gives it, every claim a known profile@level —
+anything else is one :class:`SuiteError` naming the file, the case and the field, never a
+traceback later in a run.
 """
 from __future__ import annotations
 
@@ -35,9 +41,12 @@ from pathlib import Path
 from typing import Any
 
 from fbaconf.errors import FbaconfInputError
-from fbaconf.safefs import confined, safe_name
+from fbaconf.profiles.model import Claim, load_profiles
+from fbaconf.safefs import confined, read_regular, safe_name
 
 SUITE_FORMAT = "fbaconf.suite/1"
+MAX_MANIFEST_BYTES = 64 << 20
+MAX_DEPTH = 32
 class CaseKind(StrEnum):
     """What a case asks of a decoder: decode a valid stream, reject an invalid one, or decode
     several faces at once."""
@@ -53,6 +62,60 @@ INPUT_KEYS = ("fba", "fap", "scene", "bifs", "scenario", "faces")
 
 class SuiteError(FbaconfInputError):
     """A suite manifest or one of its files is missing, malformed or does not match its digest."""
+
+
+def _quote(v, n: int = 60) -> str:
+    text = repr(v)
+    return text if len(text) <= n else text[:n] + "…"
+
+
+_STR_LISTS = ("tools", "covers", "stages")
+_TABLES = ("goldens", "tolerances", "expect")
+
+
+def check_claim(claim, where: str) -> str:
+    """``claim`` if it is a known profile@level, else SuiteError naming ``where``."""
+    try:
+        Claim.parse(claim, load_profiles())
+    except ValueError as e:
+        raise SuiteError(f"{where}: claim {_quote(claim)}: {e}", rule="suite-case") from None
+    return claim
+
+
+def _check_case(d: dict, suite: str) -> None:  # noqa: C901 - one check per field of the schema
+    """Every field of case ``d`` of the kind the schema gives it (module doc)."""
+    where = f"suite {suite}: case {_quote(d.get('id'))}"
+
+    def bad(what: str) -> SuiteError:
+        return SuiteError(f"{where}: {what}", rule="suite-case")
+    for k in ("id", "claim", "group", "kind", "description"):
+        if k in d and not isinstance(d[k], str):
+            raise bad(f"{k} must be a string, not {type(d[k]).__name__}")
+    for k in _STR_LISTS:
+        if k in d and (not isinstance(d[k], list) or not all(isinstance(x, str) for x in d[k])):
+            raise bad(f"{k} must be a list of strings, not {_quote(d[k])}")
+    for k in _TABLES:
+        if k in d and not isinstance(d[k], dict):
+            raise bad(f"{k} must be a table, not {type(d[k]).__name__}")
+    if "frames" in d and (isinstance(d["frames"], bool) or not isinstance(d["frames"], int) or d["frames"] < 0):
+        raise bad(f"frames must be a whole number >= 0, not {_quote(d['frames'])}")
+    inputs = d.get("inputs", {})
+    if not isinstance(inputs, dict):
+        raise bad(f"inputs must be a table of {', '.join(INPUT_KEYS)}, not {type(inputs).__name__}")
+    for k, v in inputs.items():
+        if k not in INPUT_KEYS:
+            raise bad(f"inputs: unknown key {_quote(k)} (known: {', '.join(INPUT_KEYS)})")
+        ok = (isinstance(v, list) and all(isinstance(x, str) for x in v)) if k == "faces" else isinstance(v, str)
+        if not ok:
+            raise bad(f"inputs.{k} must be {'a list of file names' if k == 'faces' else 'a file name'}, "
+                      f"not {_quote(v)}")
+    sha = d.get("sha256", {})
+    if not isinstance(sha, dict) or not all(isinstance(k, str) and isinstance(v, str) and len(v) == 64 and
+                                            all(c in "0123456789abcdef" for c in v) for k, v in sha.items()):
+        raise bad("sha256 must be a table of file name = 64 lowercase hex digits")
+    if "claim" not in d or "id" not in d:
+        raise bad("a case needs an id and a claim")
+    check_claim(d["claim"], where)
 
 
 def package_root() -> Path:
@@ -137,6 +200,7 @@ class Case:
 
     @classmethod
     def from_json(cls, d: dict, suite: str, suite_dir: Path | None) -> "Case":
+        _check_case(d, suite)
         try:
             c = cls(suite=suite, suite_dir=suite_dir, **{k: d[k] for k in d if k in cls.__dataclass_fields__
                                                          and k not in ("suite", "suite_dir")})
@@ -180,19 +244,26 @@ class Suite:
     def load(cls, directory: Path) -> "Suite":
         directory = Path(directory)
         mf = directory / "suite.json"
-        try:
-            d = json.loads(mf.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise SuiteError(f"no suite manifest: {mf}", rule="suite-missing", file=str(mf)) from None
-        except (OSError, ValueError) as e:
-            raise SuiteError(f"unreadable suite manifest: {e}", rule="suite-manifest", file=str(mf)) from None
+        if not mf.exists() and not mf.is_symlink():
+            raise SuiteError(f"no suite manifest: {mf}", rule="suite-missing", file=str(mf))
+        try:  # a regular file (never a FIFO that blocks, a link elsewhere, a device that streams)
+            d = json.loads(read_regular(mf, MAX_MANIFEST_BYTES).decode("utf-8"))
+        except FbaconfInputError as e:
+            raise SuiteError(f"unreadable suite manifest: {e.message}", rule="suite-manifest", file=str(mf)) from None
+        except (ValueError, RecursionError) as e:  # not UTF-8, not JSON, nested past the parser's depth
+            raise SuiteError(f"unreadable suite manifest: {str(e)[:200] or type(e).__name__}", rule="suite-manifest",
+                             file=str(mf)) from None
         if not isinstance(d, dict) or d.get("format") != SUITE_FORMAT:
             raise SuiteError(f"not an {SUITE_FORMAT} manifest", rule="suite-manifest", file=str(mf))
+        if _depth(d) > MAX_DEPTH:
+            raise SuiteError(f"malformed manifest: nested deeper than {MAX_DEPTH}", rule="suite-manifest",
+                             file=str(mf))
         try:
             name = safe_name(d["name"], what="suite name")
             claim, cases = d["claim"], d["cases"]
             if not isinstance(claim, str) or not isinstance(cases, list) or not all(isinstance(c, dict) for c in cases):
                 raise TypeError("claim must be a string and cases a list of objects")
+            check_claim(claim, f"suite {name}")
             suite = cls(name=name, description=str(d.get("description", "")), claim=claim,
                         group=str(d.get("group", "")), version=str(d.get("version", "")), path=directory,
                         cases=[Case.from_json(c, name, directory) for c in cases])
@@ -214,6 +285,21 @@ class Suite:
                 elif sha256_file(p) != digest:
                     problems.append(f"{c.full_id}: {rel} does not match its sha256")
         return problems
+
+
+def _depth(obj) -> int:
+    """How deep ``obj`` (parsed JSON) nests, without recursion."""
+    deepest, todo = 0, [(obj, 1)]
+    while todo:
+        o, k = todo.pop()
+        deepest = max(deepest, k)
+        if deepest > MAX_DEPTH:
+            return deepest
+        if isinstance(o, dict):
+            todo += [(v, k + 1) for v in o.values()]
+        elif isinstance(o, list):
+            todo += [(v, k + 1) for v in o]
+    return deepest
 
 
 def load_suites(root: Path | None = None, names: list[str] | None = None) -> list[Suite]:

@@ -13,6 +13,8 @@ missing, or not a face object stream at all) or a bad command line.
 from __future__ import annotations
 
 import json
+import os
+import stat
 import sys
 from pathlib import Path
 
@@ -119,6 +121,19 @@ def _loc_text(loc: dict) -> str:
     return ", ".join(parts) or "stream"
 
 
+def not_regular(path) -> str | None:
+    """Why ``path`` is not a regular file to read (a FIFO, a device, a folder...), or None; asked
+    with ``stat``, which never blocks, before anything opens it."""
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        return e.strerror or str(e)
+    if stat.S_ISREG(st.st_mode):
+        return None
+    return ("is a FIFO" if stat.S_ISFIFO(st.st_mode) else "is a folder" if stat.S_ISDIR(st.st_mode) else
+            "is a device or a socket") + ", not a regular file"
+
+
 def run(args) -> int:
     ps = load_profiles()
     claim = None
@@ -129,7 +144,14 @@ def run(args) -> int:
             print(f"fbaconf check: error: {e}", file=sys.stderr)
             return 2
     path = Path(args.input)
+    why = args.scene and not_regular(args.scene)
+    if why:
+        print(f"fbaconf check: error: scene {args.scene}: {why}", file=sys.stderr)
+        return 2
     try:
+        why = not_regular(path)
+        if why:  # refused before it is opened: a FIFO would block, a device stream forever
+            raise OSError(why)
         data = path.read_bytes()
     except OSError as e:
         rep = Report([D.diag(R.INPUT_UNREADABLE, f"cannot read {args.input}: {e.strerror or e}")],

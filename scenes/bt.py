@@ -21,7 +21,9 @@ shortest round-trip repr).
 
 Errors raise :class:`TextFormatError` with line:column and the node path, e.g.
 ``Face.fdp.FDP.faceDefTables[2].faceDefMesh[0].coordIndex`` (an SFNode field adds
-``.field.Type``, an MFNode field ``.field[i]``).
+``.field.Type``, an MFNode field ``.field[i]``). The reader is bounded: a file of at most
+:data:`MAX_FILE_BYTES` (a regular file: never a FIFO that blocks), tokens of at most
+:data:`MAX_TOKEN` characters, and an error quotes at most the first 40 characters of a token.
 """  # noqa: E501
 from __future__ import annotations
 
@@ -37,10 +39,13 @@ from typing import Any, Iterator
 import numpy as np
 
 from fbaconf.bitstreams.tables import fap_table
-from fbaconf.errors import TextFormatError
+from fbaconf.errors import FbaconfInputError, TextFormatError
+from fbaconf.safefs import read_regular
 
 FAP_NOT_SET = -2147483648  # FAP node field default 0x80000000
 MAX_DEPTH = 100  # node nesting limit of the reader (a deeper file is rejected, never a RecursionError)
+MAX_TOKEN = 1 << 20  # characters of one token (a name, a number, a quoted string)
+MAX_FILE_BYTES = 64 << 20  # a scene file (the default head is about 1 MB)
 _VEC_SIZES = {"SFVec2f": 2, "SFVec3f": 3, "SFColor": 3, "SFRotation": 4}
 _MF_VEC = {"MFVec2f": 2, "MFVec3f": 3, "MFColor": 3, "MFRotation": 4}
 SF_TYPES = {"SFInt32", "SFFloat", "SFTime", "SFBool", "SFString", "SFNode", *_VEC_SIZES}
@@ -217,6 +222,9 @@ class _Reader:
             kind = m.lastgroup
             if kind in ("ws", "comment"):
                 continue
+            if m.end() - m.start() > MAX_TOKEN:  # measured before the token is copied
+                raise self.error(f"a token of {m.end() - m.start()} characters ({text[m.start():m.start() + 40]!r}…), "
+                                 f"longer than the reader's limit of {MAX_TOKEN}", m.start(), "bt-token-size")
             if kind == "bad":
                 raise self.error("unterminated string" if m.group() == '"' else f"unexpected character {m.group()!r}",
                                  m.start(), "bt-token")
@@ -247,7 +255,7 @@ class _Reader:
     def expect(self, value, path):
         kind, v, off = self.next(path, repr(value))
         if v != value or kind != "punct":
-            raise self.error(f"expected {value!r}, got {v!r}", off, "bt-syntax", path)
+            raise self.error(f"expected {_clip(value)}, got {_clip(v)}", off, "bt-syntax", path)
 
     # nodes -----------------------------------------------------------------------
     def scene(self) -> Scene:
@@ -257,7 +265,7 @@ class _Reader:
             nodes = self._top_group()
             kind, v, off = self.peek()
             if kind != "eof":
-                raise self.error(f"nothing may follow the top {TOP_GROUP} (got {v!r})", off, "bt-syntax")
+                raise self.error(f"nothing may follow the top {TOP_GROUP} (got {_clip(v)})", off, "bt-syntax")
             return Scene(nodes, self.file)
         nodes = []
         while self.peek()[0] != "eof":
@@ -294,7 +302,7 @@ class _Reader:
             self.next()
             kind, v, off = self.next(TOP_GROUP, "'}'")
         if kind != "punct" or v != "}":
-            raise self.error(f"the top {TOP_GROUP} carries only children (got {v!r})", off, "bt-syntax", TOP_GROUP)
+            raise self.error(f"the top {TOP_GROUP} carries only children (got {_clip(v)})", off, "bt-syntax", TOP_GROUP)
         return nodes
 
     def node_or_use(self, path, allow_null=True, sf=False, allowed=None):
@@ -314,28 +322,28 @@ class _Reader:
         if self.depth > MAX_DEPTH:
             raise self.error(f"nodes nested deeper than {MAX_DEPTH}", off, "bt-depth", path)
         if kind != "word":
-            raise self.error(f"expected a node, got {v!r}", off, "bt-syntax", path)
+            raise self.error(f"expected a node, got {_clip(v)}", off, "bt-syntax", path)
         if v == "NULL" and allow_null:
             return None
         if v == "USE":
             kind, name, off2 = self.next(path, "a DEF name")
             if kind != "word" or name not in self.defs:
-                raise self.error(f"USE {name}: no node was DEFined with this name before", off2, "bt-use-undefined",
-                                 path)
+                raise self.error(f"USE {_clip(name)}: no node was DEFined with this name before", off2,
+                                 "bt-use-undefined", path)
             self._check_type(self.defs[name].type, allowed, off2, path)
             return Use(name)
         def_name = None
         if v == "DEF":
             kind, def_name, off2 = self.next(path, "a DEF name")
             if kind != "word" or not _NAME.match(def_name) or def_name in ("USE", "DEF", "NULL"):
-                raise self.error(f"bad DEF name {def_name!r}", off2, "bt-def-name", path)
+                raise self.error(f"bad DEF name {_clip(def_name)}", off2, "bt-def-name", path)
             if def_name in self.defs or def_name in self.pending:
                 raise self.error(f"DEF {def_name} is defined twice", off2, "bt-def-duplicate", path)
             self.pending.add(def_name)
             kind, v, off = self.next(path, "a node type")
         specs = node_specs().get(v)
         if specs is None:
-            raise self.error(f"unknown node type {v!r}", off, "bt-unknown-node", path)
+            raise self.error(f"unknown node type {_clip(v)}", off, "bt-unknown-node", path)
         self._check_type(v, allowed, off, path)
         npath = v if path is None else (f"{path}.{v}" if sf else path)
         node = Node(v, {}, def_name)
@@ -345,12 +353,12 @@ class _Reader:
             if kind == "punct" and fname == "}":
                 break
             if kind != "word":
-                raise self.error(f"expected a field name, got {fname!r}", foff, "bt-syntax", npath)
+                raise self.error(f"expected a field name, got {_clip(fname)}", foff, "bt-syntax", npath)
             spec = specs.get(fname)
             if spec is None:
-                raise self.error(f"{v} has no field {fname!r}", foff, "bt-unknown-field", npath)
+                raise self.error(f"{v} has no field {_clip(fname)}", foff, "bt-unknown-field", npath)
             if fname in node.fields:
-                raise self.error(f"field {fname!r} given twice", foff, "bt-duplicate-field", npath)
+                raise self.error(f"field {_clip(fname)} given twice", foff, "bt-duplicate-field", npath)
             node.fields[fname] = self.value(spec, f"{npath}.{fname}")
         if def_name is not None:
             self.pending.discard(def_name)
@@ -361,24 +369,24 @@ class _Reader:
     def number(self, path, integer: bool):
         kind, v, off = self.next(path, "a number")
         if kind != "word":
-            raise self.error(f"expected a number, got {v!r}", off, "bt-number", path)
+            raise self.error(f"expected a number, got {_clip(v)}", off, "bt-number", path)
         if integer:
             if not _INT.match(v):
-                raise self.error(f"expected an integer, got {v!r}", off, "bt-number", path)
+                raise self.error(f"expected an integer, got {_clip(v)}", off, "bt-number", path)
             if len(v.lstrip("+-").lstrip("0")) > 12:  # beyond SFInt32 by its length alone (no huge int())
                 raise self.error(f"integer {v[:20]}... ({len(v)} characters) out of SFInt32 range", off,
                                  "bt-number", path)
             n = int(v, 10) if not v.lstrip("+-").startswith(("0x", "0X")) else int(v, 16)
             if n > 0xFFFFFFFF or n < -2147483648:
-                raise self.error(f"integer {v} out of SFInt32 range", off, "bt-number", path)
+                raise self.error(f"integer {_clip(v)} out of SFInt32 range", off, "bt-number", path)
             if n > 2147483647:  # hex written unsigned (0x80000000)
                 n -= 1 << 32
             return n
         if not _FLOAT.match(v):
-            raise self.error(f"expected a number, got {v!r}", off, "bt-number", path)
+            raise self.error(f"expected a number, got {_clip(v)}", off, "bt-number", path)
         x = float(v)
         if not np.isfinite(x):
-            raise self.error(f"number {v} out of range", off, "bt-number", path)
+            raise self.error(f"number {_clip(v)} out of range", off, "bt-number", path)
         return x
 
     def sf(self, t, path):
@@ -391,12 +399,12 @@ class _Reader:
         if t == "SFBool":
             kind, v, off = self.next(path, "TRUE or FALSE")
             if v not in ("TRUE", "FALSE", "true", "false") or kind != "word":  # MP4Box dumps lowercase
-                raise self.error(f"expected TRUE or FALSE, got {v!r}", off, "bt-bool", path)
+                raise self.error(f"expected TRUE or FALSE, got {_clip(v)}", off, "bt-bool", path)
             return v in ("TRUE", "true")
         if t == "SFString":
             kind, v, off = self.next(path, "a string")
             if kind != "str":
-                raise self.error(f"expected a quoted string, got {v!r}", off, "bt-string", path)
+                raise self.error(f"expected a quoted string, got {_clip(v)}", off, "bt-string", path)
             return re.sub(r"\\(.)", r"\1", v[1:-1], flags=re.S)
         raise AssertionError(t)
 
@@ -407,7 +415,7 @@ class _Reader:
         if kind == "word":
             m = _OD_WORD.match(v)
             if m is None:
-                raise self.error(f"expected a quoted string or od:N, got {v!r}", off, "bt-string", path)
+                raise self.error(f"expected a quoted string or od:N, got {_clip(v)}", off, "bt-string", path)
             self.next(path)
             n = int(m.group(1))
             return f"od:{n}" if n else ""
@@ -459,12 +467,21 @@ def parse(text: str, file: str | None = None) -> Scene:
 
 
 def read(path) -> Scene:
+    """A BT file: a regular file of at most MAX_FILE_BYTES, UTF-8 (TextFormatError otherwise)."""
     p = Path(path)
     try:
-        text = p.read_text("utf-8")
+        text = read_regular(p, MAX_FILE_BYTES).decode("utf-8")
     except UnicodeDecodeError as e:
         raise TextFormatError(f"not UTF-8 text: {e}", line=1, column=1, rule="bt-encoding", file=str(p)) from None
+    except FbaconfInputError as e:  # a FIFO, a device, a link, or too large
+        why = e.message.replace("(outputs must be regular files)", "(a scene must be a regular file)")
+        raise TextFormatError(f"cannot read the scene: {why}", line=1, column=1, rule="bt-file", file=str(p)) from None
     return parse(text, str(p))
+
+
+def _clip(token: str, n: int = 40) -> str:
+    """A token as an error message quotes it: its first ``n`` characters."""
+    return repr(token) if len(token) <= n else repr(token[:n]) + f"… ({len(token)} characters)"
 
 
 # ---------------------------------------------------------------------------------- writer
