@@ -174,7 +174,8 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
         view = a.sandbox_view(argv, job.workdir, hidden=hidden)
         res = sandbox.run(argv, job.workdir, a.limits, env=a.env, view=view)
         ending = endings.classify(res, a.limits, a.reject_exit_codes)
-        proc = dict(command=argv, exit_code=res.returncode, signal=res.signal, stderr_tail=res.stderr_tail[-2000:])
+        proc = dict(command=argv, exit_code=res.returncode, signal=res.signal,
+                    stderr_tail=_stderr_kept(res.stderr_tail, ending))
     else:
         ending, proc = _run_python(a, job)
     verdict = outcome_for(ending, invalid_stream=case.kind == CaseKind.ERROR,
@@ -190,6 +191,17 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
     msg = "; ".join(f"{s.stage}: {s.message}" for s in failing) if failing else \
         f"{', '.join(s.stage for s in stages)} match"
     return CaseResult(**base, outcome=outcome, message=msg, stages=stages, **proc)
+
+
+def _stderr_kept(err: str, ending) -> str:
+    """The 2,000 characters of stderr a result keeps: from the crash report's first line when there is
+    one (a sanitizer's report ends in a long legend that would push out the lines that matter),
+    else the end."""
+    line = ending.report.line if ending.report is not None else ""
+    at = err.find(line) if line else -1
+    if at >= 0:
+        return err[err.rfind("\n", 0, at) + 1:][:2000]
+    return err[-2000:]
 
 
 def hidden_from_decoders(ctx: RunContext | None = None) -> list[Path]:

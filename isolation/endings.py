@@ -60,45 +60,78 @@ _RESERVE = re.compile(r"failed to reserve page summary memory|cannot reserve are
 
 @dataclass(frozen=True)
 class CrashReport:
-    """A crash report found on stderr: ``kind`` in words a vendor knows, ``signature`` a short
-    hash of the top frames (deduplicates fuzz findings)."""
+    """A crash report found on stderr: ``kind`` in words a vendor knows (addresses masked),
+    ``signature`` a short hash of the top frames (deduplicates fuzz findings), ``line`` the
+    report's first line as printed (the sanitizer's ``ERROR:`` line, ``panic: …``, the exception),
+    ``where`` the innermost frame of the decoder's own code when the report names one."""
     kind: str
     signature: str
+    line: str = ""
+    where: str = ""
+
+
+_HEX = re.compile(r"0x[0-9a-fA-F]+")
 
 
 def _h(items) -> str:
     return hashlib.sha256("\n".join(items).encode()).hexdigest()[:10]
 
 
-def crash_report(text: str) -> CrashReport | None:
+def _line_at(text: str, pos: int, *, join_next: bool = False) -> str:
+    """The whole line of ``text`` holding position ``pos`` (with the next one when it ends in ``:``
+    and ``join_next``: a Rust panic's message follows its location), at most 300 characters."""
+    start = text.rfind("\n", 0, pos) + 1
+    end = text.find("\n", pos)
+    line = text[start:end if end >= 0 else len(text)].strip()
+    if join_next and line.endswith(":") and end >= 0:
+        nxt = text[end + 1:].split("\n", 1)[0].strip()
+        line = f"{line} {nxt}" if nxt else line
+    return line[:300]
+
+
+def _python_exception_line(text: str) -> str:
+    """The exception line of the first Python traceback: the first unindented line after its frames."""
+    after = text[text.index("Traceback (most recent call last)"):].splitlines()[1:]
+    return next((ln.strip() for ln in after if ln.strip() and not ln[:1].isspace()), "")[:300]
+
+
+def crash_report(text: str) -> CrashReport | None:  # noqa: C901 (one branch per runtime)
     """The crash report a process printed: sanitizer, Python traceback, Go/Rust panic, uncaught
     Java or .NET exception — or None."""
     m = _SANITIZER.search(text)
     if m or "UndefinedBehaviorSanitizer" in text or _UBSAN.search(text):
         frames = _ASAN_FRAME.findall(text)[:5]
+        u = _UBSAN.search(text)
         if m:
-            kind = f"{m.group(1)} {m.group(2)}"
+            kind, at = f"{m.group(1)} {m.group(2)}", m.start()
+        elif u:
+            kind, at = f"UndefinedBehaviorSanitizer: {_HEX.sub('0x?', u.group(1))[:80]}", u.start()
         else:
-            u = _UBSAN.search(text)
-            kind = f"UndefinedBehaviorSanitizer: {u.group(1)[:80]}" if u else "UndefinedBehaviorSanitizer"
-        return CrashReport(kind, _h(frames or [kind]))
+            kind, at = "UndefinedBehaviorSanitizer", text.index("UndefinedBehaviorSanitizer")
+        return CrashReport(kind, _h(frames or [kind]), _line_at(text, at), frames[0] if frames else "")
     m = _RUST_PANIC.search(text)
     if m:
-        return CrashReport("Rust panic", _h([m.group(1)]))
+        return CrashReport("Rust panic", _h([m.group(1)]), _line_at(text, m.start(), join_next=True), m.group(1))
     m = _GO_PANIC.search(text)
     if m and "goroutine" in text:
-        return CrashReport("Go panic", _h(_GO_FRAME.findall(text)[:5] or [m.group(1)]))
+        frames = _GO_FRAME.findall(text)
+        own = next((f for f in frames if not f.startswith("runtime.")), "")
+        return CrashReport("Go panic", _h(frames[:5] or [m.group(1)]), _line_at(text, m.start()), own)
     m = _JAVA_EXC.search(text)
     if m:
-        return CrashReport(f"uncaught Java exception {m.group(1)}", _h(_JAVA_FRAME.findall(text)[:5] or [m.group(1)]))
+        frames = _JAVA_FRAME.findall(text)
+        return CrashReport(f"uncaught Java exception {m.group(1)}", _h(frames[:5] or [m.group(1)]),
+                           _line_at(text, m.start()), frames[0] if frames else "")
     m = _DOTNET_EXC.search(text)
     if m:
-        return CrashReport(f"unhandled .NET exception {m.group(1)}", _h([m.group(1)]))
+        return CrashReport(f"unhandled .NET exception {m.group(1)}", _h([m.group(1)]), _line_at(text, m.start()))
     if "Traceback (most recent call last)" in text:
-        frames = [f"{Path(f).name}:{ln}:{fn}" for f, ln, fn in _PY_FRAME.findall(text)][-5:]
-        last = [ln for ln in text.strip().splitlines() if ln.strip()][-1:] or ["?"]
-        exc = last[0].split(":")[0].strip()
-        return CrashReport(f"uncaught Python exception {exc}", _h(frames + [exc]))
+        found = _PY_FRAME.findall(text)
+        frames = [f"{Path(f).name}:{ln}:{fn}" for f, ln, fn in found][-5:]
+        line = _python_exception_line(text) or "?"
+        exc = line.split(":")[0].strip()
+        return CrashReport(f"uncaught Python exception {exc}", _h(frames + [exc]), line,
+                           found[-1][2] if found else "")
     return None
 
 
@@ -193,11 +226,14 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
                                       f"({res.output_bytes / 2**20:.0f} MB seen" +
                                       (f", killed by {res.signal})" if res.signal else ")"))
     report = crash_report(err)
+    # the crash report's own first line (sanitizer ERROR, panic, exception), not whatever stderr ended with
+    said = f"; stderr: {report.line}" if report is not None and report.line else _last_line(err)
+    where = f" in {report.where}" if report is not None and report.where else ""
     if res.signal:
-        what = f" ({report.kind})" if report else ""
-        return Ending(EndingKind.CRASH, f"{cmd} crashed: killed by {res.signal}{what}{_last_line(err)}", report)
+        what = f" ({report.kind}{where})" if report else ""
+        return Ending(EndingKind.CRASH, f"{cmd} crashed: killed by {res.signal}{what}{said}", report)
     if report is not None:
-        return Ending(EndingKind.CRASH, f"{cmd} crashed: {report.kind} (exit code {rc}){_last_line(err)}", report)
+        return Ending(EndingKind.CRASH, f"{cmd} crashed: {report.kind}{where} (exit code {rc}){said}", report)
     if rc == EXIT_NOT_SUPPORTED:
         return Ending(EndingKind.NOT_SUPPORTED, f"{cmd} exited with code 69 (not supported){_last_line(err)}")
     if rc == 0:

@@ -52,12 +52,18 @@ def verdict(record: RunRecord) -> str:
 
 
 def _fmt_value(v: Any) -> str:
+    """A value as a reader writes it: floats to 6 digits, lists in brackets, a table as ``key value``
+    pairs (never a Python repr)."""
     if isinstance(v, float):
         if not math.isfinite(v):
             return str(v)
         return f"{v:.6g}"
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_fmt_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "(" + ", ".join(f"{k} {_fmt_value(x)}" for k, x in v.items()) + ")"
+    if v is None:
+        return "none"
     return str(v)
 
 
@@ -122,12 +128,44 @@ def _speed_summary(speed: list[SpeedResult]) -> str:
     return f"; speed: {len(speed) - bad} of {len(speed)} pass" + (f", {bad} below the level minimum" if bad else "")
 
 
+# Baseline classes in the order a CI log shows them: what fails the run first.
+_BASELINE_ORDER = {"new": 0, "fixed": 1}
+
+
 def _problem_cases(record: RunRecord) -> list[CaseResult]:
-    """Cases worth a closer look, worst first: failing, quality warnings, baseline changes."""
+    """Cases worth a closer look: new failures first (a required case the decoder cannot take
+    included), then fixed ones, then the rest worst first: failing, quality warnings, flakes."""
     rank = {o: i for i, o in enumerate(OUTCOME_ORDER)}
-    picked = [r for r in record.results
-              if r.outcome.failing or r.outcome is Outcome.QUALITY_WARNING or r.baseline in ("fixed", "flake")]
-    return sorted(picked, key=lambda r: (rank[r.outcome], not r.required, r.case_id))
+    picked = [r for r in record.results if r.outcome.failing or r.outcome is Outcome.QUALITY_WARNING
+              or r.baseline in ("fixed", "flake", "new")]
+    return sorted(picked, key=lambda r: (_BASELINE_ORDER.get(r.baseline or "", 2), rank[r.outcome], not r.required,
+                                         r.case_id))
+
+
+def baseline_changes(record: RunRecord) -> tuple[list[CaseResult], list[CaseResult]]:
+    """The required cases that fail the run against its baseline: (new failures, fixed cases)."""
+    new = [r for r in record.results if r.required and r.baseline == "new"]
+    fixed = [r for r in record.results if r.required and r.baseline == "fixed"]
+    return new, fixed
+
+
+def baseline_lines(record: RunRecord, limit: int = 30) -> list[str]:
+    """What a CI log shows first: ``baseline: N new, N known, N fixed, N flaky``, then every new
+    failure and every fixed case by name (plain text, cleaned)."""
+    if not record.baseline_summary:
+        return []
+    new, fixed = baseline_changes(record)
+    out = [f"baseline: {record.baseline_summary}"]
+    for r in new[:limit]:
+        what = r.message.splitlines()[0] if r.message else ""
+        out.append(f"  NEW    {r.case_id}  {r.outcome.value}" + (f": {what[:200]}" if what else ""))
+    for r in fixed[:limit]:
+        out.append(f"  FIXED  {r.case_id}  passes now, listed as failing: remove its line from the baseline "
+                   f"(or --allow-fixed)")
+    more = max(0, len(new) - limit) + max(0, len(fixed) - limit)
+    if more:
+        out.append(f"  ... and {more} more (see the cases to look at below)")
+    return [clean_text(x) for x in out]
 
 
 def _speed_rows(speed: list[SpeedResult]) -> list[list[str]]:
@@ -136,20 +174,24 @@ def _speed_rows(speed: list[SpeedResult]) -> list[list[str]]:
 
 
 def _normalised(message: str) -> str:
-    """A message with what differs between identical failures (paths, numbers) masked."""
+    """A message with what differs between identical failures masked: paths, addresses
+    (``0x7ffd…``, ``+0x1c``), process ids, numbers."""
     m = re.sub(r"/\S+", "<path>", message or "")
-    return re.sub(r"\d+(\.\d+)?", "N", m)[:160]
+    m = re.sub(r"0x[0-9a-fA-F]+", "0x?", m)
+    return re.sub(r"[-+]?\d+(\.\d+)?", "N", m)[:160]
 
 
 def failure_groups(record: RunRecord) -> list[tuple[str, list[CaseResult]]]:
     """The cases worth a look, identical failures grouped (same outcome, same failure
-    signature, same message up to paths and numbers), worst and largest groups first."""
+    signature, same message up to paths, addresses and numbers): new failures first, then fixed
+    cases, then the worst and largest groups."""
     groups: dict[tuple, list[CaseResult]] = {}
     for r in _problem_cases(record):
         key = (r.outcome.value, signature(r), r.crash_kind or "", _normalised(r.message), r.baseline or "")
         groups.setdefault(key, []).append(r)
     rank = {o.value: i for i, o in enumerate(OUTCOME_ORDER)}
-    out = sorted(groups.items(), key=lambda kv: (rank[kv[0][0]], -len(kv[1]), kv[1][0].case_id))
+    out = sorted(groups.items(), key=lambda kv: (_BASELINE_ORDER.get(kv[0][4], 2), rank[kv[0][0]], -len(kv[1]),
+                                                 kv[1][0].case_id))
     return [(k[0], rs) for k, rs in out]
 
 

@@ -24,6 +24,7 @@ from .common import (
     _speed_summary,
     _suite_names,
     _summary_counts,
+    baseline_changes,
     clean_text,
     failure_groups,
     profile_of,
@@ -282,6 +283,33 @@ def _kv_table(d: dict) -> str:
     return "<table class='meta'>" + "".join(rows) + "</table>"
 
 
+def _baseline_html(record: RunRecord) -> str:
+    """``Baseline: N new, N known, N fixed, N flaky`` and the cases that fail the run against it, by name."""
+    if not record.baseline_summary:
+        return ""
+    new, fixed = baseline_changes(record)
+    items = [f"<li><b>new</b> <a class='mono' href='#case-{_e(_anchor(r.case_id))}'>{_e(r.case_id)}</a> "
+             f"{_e(r.outcome.value)}</li>" for r in new]
+    items += [f"<li><b>fixed</b> <span class='mono'>{_e(r.case_id)}</span>: passes now, listed as failing: remove "
+              f"its line from the baseline (or --allow-fixed)</li>" for r in fixed]
+    return (f"<div class='card'><b>Baseline</b>: {_e(record.baseline_summary)}"
+            + (f"<ul>{''.join(items)}</ul>" if items else "") + "</div>")
+
+
+def _provisional_differences_html(record: RunRecord) -> str:
+    """The failing cases whose expected output rests on a provisional decision (harness/provisional.py)."""
+    diffs = record.provisional_differences
+    if not diffs:
+        return ""
+    how = ("they fail the claim (--strict)" if record.strict else
+           "the claim passes with them; --strict fails them")
+    return (f"<div class='card'><b>Provisional differences ({len(diffs)})</b>: failing cases whose expected "
+            f"output rests on a provisional decision (harness/data/provisional.toml); {_e(how)}<ul>"
+            + "".join(f"<li><a class='mono' href='#case-{_e(_anchor(str(d.get('case_id', ''))))}'>"
+                      f"{_e(d.get('case_id', ''))}</a> rests on {_e(', '.join(map(str, d.get('rests_on', []))))}</li>"
+                      for d in diffs) + "</ul></div>")
+
+
 def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
     """The page written by :func:`write_html` (artefacts outside ``out_dir`` are copied as a side effect)."""
     out_dir = Path(out_dir)
@@ -298,10 +326,19 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
     h.append(f"<h1>{_e(title)} <span class='badge verdict v-{v.split()[0]}'>{_e(v)}</span></h1>")
     h.append(f"<p class='muted'>{_e(_summary_counts(record.counts()) + _speed_summary(record.speed))}; "
              f"exit code {_e(record.exit_code)}</p>")
-    # failures first, identical failures grouped (one card, the other cases listed)
+    # the summary table first, then what fails the run against its baseline, then the failures
+    total = record.counts()
+    h.append("<h2>Summary</h2>")
+    h.append(_counts_table_html("suite", _by(record, lambda r: r.suite), _suite_names(record), total))
+    by_profile = _by(record, lambda r: profile_of(r.claim))
+    if len(by_profile) > 1:
+        h.append(_counts_table_html("profile", by_profile, sorted(by_profile), total))
+    h.append(_baseline_html(record))
     if record.missing:
         h.append("<div class='card'><b>Claim not met</b>: required cases the decoder could not take:<ul>"
                  + "".join(f"<li>{_e(m)}</li>" for m in record.missing) + "</ul></div>")
+    h.append(_provisional_differences_html(record))
+    # identical failures grouped (one card, the other cases listed), new failures first
     groups = failure_groups(record)
     problems = [r for _o, rs in groups for r in rs]
     if groups:
@@ -310,14 +347,8 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
             h.append(_case_html(rs[0], out_dir, base_dir))
             if len(rs) > 1:
                 h.append(f"<p class='muted'>The same failure in {len(rs) - 1} more case(s): "
-                         + ", ".join(f"<span class='mono'>{_e(r.case_id)}</span>" for r in rs[1:]) + "</p>")
-    # summary
-    total = record.counts()
-    h.append("<h2>Summary</h2>")
-    h.append(_counts_table_html("suite", _by(record, lambda r: r.suite), _suite_names(record), total))
-    by_profile = _by(record, lambda r: profile_of(r.claim))
-    if len(by_profile) > 1:
-        h.append(_counts_table_html("profile", by_profile, sorted(by_profile), total))
+                         + ", ".join(f"<span class='mono' id='case-{_e(_anchor(r.case_id))}'>{_e(r.case_id)}</span>"
+                                     for r in rs[1:]) + "</p>")
     # speed
     if record.speed:
         h.append("<h2>Speed</h2><table><tr><th>operation</th><th>claim</th><th class='num'>measured fps</th>"

@@ -76,6 +76,8 @@ def junit_xml(record: RunRecord) -> bytes:
     dec = record.decoder or {}
     common = [("decoder", dec.get("name")), ("decoder.manifest_sha256", dec.get("manifest_sha256")),
               ("claim", record.claim), ("exit_code", record.exit_code), ("verdict", verdict(record))]
+    if record.baseline_summary:  # "N new, N known, N fixed, N flaky"
+        common.append(("baseline", record.baseline_summary))
     common += [(f"provisional.{i}", p) for i, p in enumerate(record.provisional)]
     common += [(f"system.{k}", v) for k, v in (record.system or {}).items()]
     suite_meta = {str(s.get("name")): s for s in record.suites}
@@ -91,7 +93,7 @@ def junit_xml(record: RunRecord) -> bytes:
             tc = ET.SubElement(ts, "testcase", classname=clean_text(f"fbaconf.{r.suite}"), name=clean_text(r.case_id),
                                time=_sec(r.duration_s))
             o = r.outcome
-            msg = _one_line(r.message or o.value)
+            msg = _one_line(("new: " if r.baseline == "new" else "") + (r.message or o.value))
             excused = r.baseline in ("known-failure", "flake") and not o.ok
             if excused:
                 # agrees with the exit code: a known failure or a flake does not fail the run
@@ -104,7 +106,8 @@ def junit_xml(record: RunRecord) -> bytes:
                                    type="BaselineFixed")
                 c["failures"] += 1
             elif o is Outcome.NOT_SUPPORTED and r.required:
-                el = ET.SubElement(tc, "failure", message=_one_line(f"required by the claim but not supported: "
+                el = ET.SubElement(tc, "failure", message=_one_line(("new: " if r.baseline == "new" else "")
+                                                                    + f"required by the claim but not supported: "
                                                                     f"{r.message}"), type=o.value)
                 c["failures"] += 1
             elif o in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH):

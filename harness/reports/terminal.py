@@ -3,9 +3,11 @@ from __future__ import annotations
 
 import re
 import shlex
+from pathlib import Path
 from typing import Iterable
 
 from fbaconf.harness.results import Outcome, RunRecord
+from fbaconf.isolation.endings import crash_report
 
 from .common import (
     COLUMNS,
@@ -14,6 +16,7 @@ from .common import (
     _speed_summary,
     _suite_names,
     _summary_counts,
+    baseline_lines,
     clean_text,
     failure_groups,
     format_difference,
@@ -47,11 +50,30 @@ def _indent(text: str, prefix: str) -> list[str]:
     return [prefix + line for line in text.splitlines()] or [prefix.rstrip()]
 
 
+_CASE_FOLDER = re.compile(r"/\S*/work/case-[A-Za-z0-9_]+(?=/)")
+
+
 def _reproduce(r) -> str:
-    """The command of a case, with the case's (deleted) work folder named for what it was."""
+    """The command of a case: as run when its work folder was kept (``--keep-workdirs``), else with
+    the deleted folder named for what it was."""
     cmd = " ".join(shlex.quote(c) for c in r.command)
-    cmd = re.sub(r"/\S*/work/case-[A-Za-z0-9_]+/", "<case folder>/", cmd)
+    folders = set(_CASE_FOLDER.findall(cmd))
+    if folders and all(Path(f).is_dir() for f in folders):
+        return clean_text(cmd)
+    cmd = _CASE_FOLDER.sub("<case folder>", cmd)
     return clean_text(cmd) + "   (rerun with --keep-workdirs)"
+
+
+def _stderr_excerpt(r, n: int = 6) -> tuple[str, list[str]]:
+    """What of a case's stderr the summary shows: the crash report's first lines when stderr holds
+    one (sanitizer, panic, exception), else the last lines."""
+    text = r.stderr_tail
+    rep = crash_report(text) if r.crash_kind else None
+    at = text.find(rep.line) if rep is not None and rep.line else -1
+    if at >= 0:
+        start = text.rfind("\n", 0, at) + 1
+        return "the crash report", [clean_text(x) for x in text[start:].rstrip().splitlines()[:n]]
+    return "last lines", clean_text(text).rstrip().splitlines()[-(n - 1):]
 
 
 def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: int = 20) -> str:  # noqa: C901
@@ -65,6 +87,7 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
     lines.append(f"fbaconf run: decoder {clean_text(dec.get('name', '?'))}"
                  + (f", claim {clean_text(record.claim)}" if record.claim else "")
                  + (f", {record.duration_s:.1f} s" if record.duration_s else ""))
+    lines += ["  " + x for x in baseline_lines(record)]  # what fails the run against its baseline, first
     suites = []
     for s in record.suites:
         n = s.get("cases")
@@ -134,8 +157,8 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
                 if how:
                     lines.append("      " + ", ".join(how))
                 if r.stderr_tail:
-                    tail = clean_text(r.stderr_tail).rstrip().splitlines()[-5:]
-                    lines.append("      stderr (last lines):")
+                    label, tail = _stderr_excerpt(r)
+                    lines.append(f"      stderr ({label}):")
                     lines.extend("        " + t for t in tail)
             if r.command:
                 lines.append("      reproduce: " + _reproduce(r))
