@@ -30,7 +30,9 @@ def register(sub) -> None:
                    "passes is flaky (default 0)")
     r.add_argument("--allow-fixed", action="store_true",
                    help="do not fail the run when a case the baseline lists as failing now passes")
-    r.add_argument("--write-baseline", type=Path, help="write the failing cases of this run as a baseline file")
+    r.add_argument("--write-baseline", type=Path, help="record every required case that did not pass (NotSupported "
+                   "included) in this baseline file; an existing file is updated, its comments, Flake lines and "
+                   "lines of cases not run kept")
     r.add_argument("--junit", type=Path, help="write JUnit XML here")
     r.add_argument("--json", type=Path, help="write the JSON report here")
     r.add_argument("--html", type=Path, help="write the HTML report into this folder")
@@ -94,6 +96,16 @@ def cmd_run(args) -> int:
     cases = select_cases(suites, claim, args.suite, args.case, args.only_required, adapter)
     if not cases:
         raise UsageError("no case selected (check --case and --only-required)")
+    # the baseline files are checked before any case runs (a bad line is a usage error now, not after the run)
+    if args.baseline is not None:
+        ids = {c.full_id for s in suites for c in s.cases}
+        for case_id in sorted(set(bl.load(args.baseline)) - ids):
+            print(f"fbaconf: warning: {args.baseline} lists {case_id}, which no suite holds (removed or renamed?): "
+                  f"remove its line", file=sys.stderr)
+    if args.flakes is not None:
+        bl.load_flakes(args.flakes)
+    if args.write_baseline is not None:
+        bl.check_writable(args.write_baseline)
     preflight(adapter)
     out_dir = (args.output or Path("fbaconf-run") / adapter.name).resolve()
     options = RunOptions(jobs=args.jobs, cluster=args.cluster, resume=args.resume, keep_workdirs=args.keep_workdirs,
@@ -101,14 +113,14 @@ def cmd_run(args) -> int:
                          retries=args.retries, allow_fixed=args.allow_fixed, speed=args.speed, strict=args.strict)
     record = execute(adapter, claim, cases, suites, out_dir, options)
     paths = write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
-    if args.write_baseline:
-        n = bl.write(record.results, args.write_baseline)
-        print(f"wrote baseline with {n} known failure(s) to {args.write_baseline}")
     print(reports.terminal_summary(record, color=use_color(sys.stdout)))
+    if args.write_baseline:
+        print(bl.write(record.results, args.write_baseline).line())
     if record.baseline_summary:
         print(f"baseline: {record.baseline_summary}")
     if record.missing:
-        print(f"claim {claim} not met: the decoder could not take every case it requires:")
+        accepted = " (the baseline lists them: the run passes)" if record.exit_code == 0 else ""
+        print(f"claim {claim} not met{accepted}: the decoder could not take every case it requires:")
         for m in record.missing:
             print(f"  {m}")
         if adapter.is_player:

@@ -77,6 +77,9 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
     ``strict``; 3 only when every required case passed and only speed was missed; else 0."""
     o = options or RunOptions()
     jobs, baseline, flakes, retries, speed = o.jobs, o.baseline, o.flakes, o.retries, o.speed
+    # read (and check) the baseline and flakes files before any case: a bad line stops the run at once
+    known = bl.load(baseline) if baseline is not None else None
+    flaky = bl.load_flakes(flakes) if flakes is not None else None
     t0 = time.perf_counter()
     started = _now()
     out_dir = Path(out_dir).resolve()
@@ -89,8 +92,7 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
         _retry(adapter, cases, results, claim, out_dir, jobs, retries)
     differences = provisional_differences(results)
     judged = results if o.strict else [r for r in results if not is_provisional_difference(r)]
-    summary = bl.classify(judged, bl.load(baseline) if baseline is not None else None,
-                          bl.load_flakes(flakes) if flakes is not None else None)
+    summary = bl.classify(judged, known, flaky)
     speed_results = []
     if speed:
         speed_results = [s for s in measure_claim(adapter, claim) if s is not None]
@@ -122,7 +124,7 @@ def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) ->
         for r in todo:
             if r.case_id in passed:
                 r.baseline = "flake"
-                r.message = f"flaky: passed on re-run {attempt}; first run: {r.message}"
+                r.message = f"{bl.RETRY_PASSED} {attempt}; first run: {r.message}"
         todo = [r for r in todo if r.case_id not in passed]
 
 
@@ -210,8 +212,12 @@ def preflight(adapter) -> None:
     adapter.sandbox_view([prog or str(adapter.commands["decode"][0])], Path("/nonexistent-case"),
                          hidden=hidden_from_decoders())
     if prog is None:
-        raise UsageError(f"decoder {adapter.name}: program {adapter.commands['decode'][0]!r} not found "
-                         f"(not a file, and not on PATH)")
+        first = str(adapter.commands["decode"][0])
+        where = Path(adapter.manifest_path).resolve().parent if adapter.manifest_path is not None else None
+        shown = os.path.normpath(first.replace("{manifest_dir}", str(where))) if where is not None else first
+        raise UsageError(f"decoder {adapter.name}: program {shown} not found (not a file, and not on PATH)"
+                         + (f"; [commands] decode names it \"{first}\": build the decoder first" if shown != first
+                            else ""))
     if not os.access(prog, os.X_OK):
         raise UsageError(f"decoder {adapter.name}: program {prog} is not executable")
 
