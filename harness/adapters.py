@@ -181,14 +181,18 @@ class CommandAdapter(Adapter):
 
     def sandbox_view(self, argv: list[str], workdir: Path, hidden=()):
         """What this decoder sees in the sandbox (docs/harness.md, "What a decoder sees"): its
-        program's and manifest's folders read-only, the folders the lab gave with
-        ``--sandbox-ro`` read-only, its case folder (inputs read-only), and — when started
+        program's folder (a ``{python}`` command's script's) and manifest's folder read-only,
+        the folders the lab gave with ``--sandbox-ro`` read-only, its case folder (inputs
+        read-only), and — when started
         through ``{python}`` — the Python installation and the fbaconf package read-only; with
         ``hidden`` (goldens, suites, the run folder, a signing key) emptied wherever they would
         show. No manifest key widens it. Raises :class:`ViewError` for a folder that would
         show too much (``/``, a top-level folder, the fbaconf project, /proc...)."""
         v = default_view(argv, workdir)
         shown = list(v.read_only)
+        through_python = argv[0] == sys.executable or Path(argv[0]).resolve() == Path(sys.executable).resolve()
+        if through_python and len(argv) > 1 and Path(argv[1]).is_file():
+            shown.append(Path(argv[1]).resolve().parent)  # `{python} script.py`: the script is the program
         if self.manifest_path is not None:
             shown.append(Path(self.manifest_path).resolve().parent)
         shown += [Path(p) for p in self.lab_read_only]
@@ -199,7 +203,7 @@ class CommandAdapter(Adapter):
                                 f"in a folder of its own", rule="sandbox-view",
                                 file=str(self.manifest_path or self.name))
         v.read_only = shown
-        if argv[0] == sys.executable or Path(argv[0]).resolve() == Path(sys.executable).resolve():
+        if through_python:
             v.read_only += python_view()
         v.hidden += [Path(h) for h in hidden]
         return v

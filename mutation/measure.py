@@ -399,45 +399,39 @@ def format_results(results: list[dict]) -> str:
 # ------------------------------------------------------------------ adapter
 
 
-class MutantAdapter:
+class MutantAdapter(PythonAdapter):
     """In-process adapter class for manifests: each case runs the mutant decoder program in a
     subprocess (``python -m fbaconf.mutation.measure decode NAME ...``), so the mutant's
     patches never touch the harness process (thread-safe with ``-j``)."""
+    supports_multi = True
+    description = "fbaconf reference decoder with one injected bug (mutation/measure.py)"
 
-    def __new__(cls, mutant: str = "", **kw):
+    def __init__(self, mutant: str = "") -> None:
+        super().__init__()
+        if mutant not in MUTANTS:
+            raise ManifestError(f"[options] mutant = {mutant!r}: unknown (known: {', '.join(MUTANTS)})",
+                                rule="manifest-options")
+        self.mutant = mutant
 
-        class _MutantAdapter(PythonAdapter):
-            supports_multi = True
-            description = "fbaconf reference decoder with one injected bug (mutation/measure.py)"
-
-            def __init__(self, mutant: str) -> None:
-                super().__init__()
-                if mutant not in MUTANTS:
-                    raise ManifestError(f"[options] mutant = {mutant!r}: unknown (known: {', '.join(MUTANTS)})",
-                                        rule="manifest-options")
-                self.mutant = mutant
-
-            def run(self, job) -> None:
-                base = [sys.executable, "-m", "fbaconf.mutation.measure", "decode", self.mutant]
-                if job.faces:
-                    argv = base + ["decode-multi", "--out-dir", str(job.path("faps_out_dir")),
-                                   "--format", self.faps_format] + list(job.faces)
-                else:
-                    argv = base + ["decode", str(job.path("input"))]
-                    for opt, key in (("--scene", "scene"), ("--scenario", "scenario")):
-                        if job.values.get(key):
-                            argv += [opt, job.values[key]]
-                    if "faps" in self.outputs:
-                        argv += ["--faps-out", job.values["faps_out"]]
-                    if "vertices" in self.outputs:
-                        argv += ["--vertices-out", job.values["vertices_out"]]
-                    if "images" in self.outputs:
-                        argv += ["--images-dir", job.values["images_dir"]]
-                p = subprocess.run(argv, capture_output=True, text=True, timeout=self.limits.timeout_s)
-                if p.returncode != 0:
-                    raise RuntimeError(f"mutant decoder exited {p.returncode}: {p.stderr.strip()[-300:]}")
-
-        return _MutantAdapter(mutant)
+    def run(self, job) -> None:
+        base = [sys.executable, "-m", "fbaconf.mutation.measure", "decode", self.mutant]
+        if job.faces:
+            argv = base + ["decode-multi", "--out-dir", str(job.path("faps_out_dir")),
+                           "--format", self.faps_format] + list(job.faces)
+        else:
+            argv = base + ["decode", str(job.path("input"))]
+            for opt, key in (("--scene", "scene"), ("--scenario", "scenario")):
+                if job.values.get(key):
+                    argv += [opt, job.values[key]]
+            if "faps" in self.outputs:
+                argv += ["--faps-out", job.values["faps_out"]]
+            if "vertices" in self.outputs:
+                argv += ["--vertices-out", job.values["vertices_out"]]
+            if "images" in self.outputs:
+                argv += ["--images-dir", job.values["images_dir"]]
+        p = subprocess.run(argv, capture_output=True, text=True, timeout=self.limits.timeout_s)
+        if p.returncode != 0:
+            raise RuntimeError(f"mutant decoder exited {p.returncode}: {p.stderr.strip()[-300:]}")
 
 
 # ------------------------------------------------------------------ program

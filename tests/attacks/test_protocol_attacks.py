@@ -32,11 +32,13 @@ def answer(rid, code):
 """
 
 
-def _manifest(tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 3") -> Path:
+def _manifest(tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 3",
+              equivalent: bool = False) -> Path:
     prog = tmp_path / "dec.py"
     prog.write_text("import os, signal, sys, time\n" + body)
     lines = ['name = "t"', 'claims = ["simple@1"]', 'inputs = ["fba"]', 'outputs = ["faps"]', 'faps_format = "fap"',
-             "[commands]", f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]']
+             f"serve_equivalent = {str(equivalent).lower()}", "[commands]",
+             f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]']
     if serve is not None:
         srv = tmp_path / "serve.py"
         srv.write_text(SERVE + serve)
@@ -142,13 +144,14 @@ while True:
 
 
 def test_the_speed_phase_through_a_flooding_serve_fails_fast(tmp_path):
-    """bench and certify's speed phase use the same protocol: a 10 MB answer fails the speed
-    measurement, it does not hang it."""
+    """bench and certify's speed phase use the same protocol where the manifest declares serve
+    equivalent to decode (it is then timed first): a 10 MB answer fails the speed measurement,
+    it does not hang it."""
     serve = """while True:
     rid, data = read()
     sys.stdout.buffer.write(b'%d 0 ' % rid + b'x' * (10 << 20) + b'\\n'); sys.stdout.flush()
 """
-    a = adapters.resolve(_manifest(tmp_path, "sys.exit(69)", serve=serve))
+    a = adapters.resolve(_manifest(tmp_path, "sys.exit(69)", serve=serve, equivalent=True))
     t0 = time.perf_counter()
     (r,) = [x for x in speed.measure_claim(a, "simple@1", lengths=[2, 4], repeats=1) if x.operation == "decode"]
     assert not r.passed and "protocol" in r.message, r.message

@@ -294,6 +294,24 @@ def test_a_view_that_would_show_too_much_is_refused(tmp_path, where):
         a.sandbox_view(["/bin/true"], tmp_path / "case")
 
 
+def test_a_python_script_beside_its_manifest_folder_is_in_view(tmp_path):
+    """`{python} {manifest_dir}/../prog.py` (examples/glrender): the script is the program, so its
+    folder shows read-only; a script in a folder no view may show (/tmp itself) is refused."""
+    (tmp_path / "manifests").mkdir()
+    script = tmp_path / "prog.py"
+    script.write_text("")
+    m = manifest(tmp_path / "manifests", "script", ["{python}", str(script), "{input}", "{faps_out}"])
+    a = adapters.resolve(m)
+    assert tmp_path.resolve() in a.sandbox_view([sys.executable, str(script)], tmp_path / "case").read_only
+    loose = Path("/tmp") / f"fbaconf-view-test-{tmp_path.name}.py"
+    loose.write_text("")
+    try:
+        with pytest.raises(ViewError, match="top-level"):
+            a.sandbox_view([sys.executable, str(loose)], tmp_path / "case")
+    finally:
+        loose.unlink()
+
+
 def test_a_manifest_in_the_project_root_is_refused_before_anything_runs(tmp_path):
     """A manifest beside the clone's build/ (a copy of the goldens) and keys would show them."""
     m = ROOT / "tmp-view-test-manifest.toml"
