@@ -12,7 +12,9 @@ def register(subparsers) -> None:
         description="Animate the scene's face (or, without --scene, the bundled default head) with the FAP "
                     "frames: FIT, left/right fill, visemes/expressions, FaceDefTables, Transforms. Writes a "
                     "FaceState .npz (vertices float64[frames, vertices, 3], parts, triangles, effective FAPs).")
-    p.add_argument("--scene", type=Path, default=None, help="scene file: BT text, or binary BIFS by its .bifs/.bif extension (default: the bundled default head)")  # noqa: E501
+    p.add_argument("--scene", type=Path, default=None,
+                   help="scene file: BT text, or binary BIFS by its .bifs/.bif extension "
+                        "(default: the bundled default head)")
     p.add_argument("--faps", type=Path, required=True, help="FAP frames: .npz (FapFrames) or .fap text")
     p.add_argument("-o", "--output", type=Path, required=True, help="output .npz")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")

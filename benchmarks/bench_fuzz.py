@@ -78,8 +78,9 @@ def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False
               c_server: bool = True) -> tuple[float, str, int]:
     os.environ["FBACONF_FORKSERVER"] = "c" if c_server else "python"
     target = DecoderTarget(load_manifest(manifest), work, timeout_s=1.0, fork_server=not spawn, persistent=not spawn)
-    mode = ("persistent" if target.persistent else f"fork server in {forkserver_build.server_kind()}" if target.fork_server  # noqa: E501
-            else "spawn")
+    mode = "persistent" if target.persistent else "spawn"
+    if target.fork_server and not target.persistent:
+        mode = f"fork server in {forkserver_build.server_kind()}"
     fz = Fuzzer(target, default_seeds(),
                 FuzzConfig(seed=7, seconds=seconds, progress=False, coverage_every=8, minimise_seconds=2,
                            minimise_tests=50))

@@ -1,4 +1,5 @@
-"""The fuzzing loop: batches of reproducible inputs, the corpus grown by new syntax features, findings deduplicated and minimised."""  # noqa: E501
+"""The fuzzing loop: batches of reproducible inputs, the corpus grown by new syntax features, findings
+deduplicated and minimised."""
 from __future__ import annotations
 
 import collections

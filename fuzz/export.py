@@ -109,7 +109,7 @@ short prefixes of them, {generated} generated valid streams; {tokens} dictionary
 
 | file | for |
 |---|---|
-| `corpus/` | the seed corpus: every stream is valid or a conformance error case, so coverage starts deep in the syntax |
+| `corpus/` | the seed corpus: valid streams and conformance error cases (coverage starts deep) |
 | `fba.dict` | AFL++ / libFuzzer dictionary: start codes, aligned stuffing, header patterns |
 | `fuzz_target.c` | a libFuzzer target template |
 | `oss-fuzz/build.sh` | the lines an OSS-Fuzz `build.sh` needs to ship the seeds and the dictionary |
@@ -124,7 +124,7 @@ afl-fuzz -i corpus -o findings -x fba.dict -- ./your_decoder @@ /dev/null
 
 A crash found this way can be classified, minimised and promoted to a regression case with
 `fbaconf fuzz --decoder D.toml --replay FILE` and `fbaconf fuzz --promote`.
-"""  # noqa: E501
+"""
 
 
 def export(out: Path, n_valid: int = 64, seed: int = 0) -> dict:

@@ -74,7 +74,8 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
     doc = {
         "format": "fbaconf.fuzz-finding/1", "id": f.id, "class": f.verdict.cls, "signature": f.verdict.signature,
         "message": f.verdict.message, "minimal_message": mv.message, "target": getattr(target, "name", "?"),
-        "input_kind": f.original.kind, "decoder": info, "seed": fz.seed, "input_index": f.index, "corpus_size": f.original.corpus_size,  # noqa: E501
+        "input_kind": f.original.kind, "decoder": info, "seed": fz.seed, "input_index": f.index,
+        "corpus_size": f.original.corpus_size,
         "origin": f.original.origin, "input_valid": bool(f.original.valid),
         "found_at_s": round(f.found_at_s, 2), "hits": f.hits,
         "original": {"file": f"original.{ext}", "bytes": len(f.original.data),

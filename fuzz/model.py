@@ -1,4 +1,5 @@
-"""The syntax model of a face-object stream for fuzzing: start codes and header fields found in the bytes, the features a run reports as its coverage."""  # noqa: E501
+"""The syntax model of a face-object stream for fuzzing: start codes and header fields found in the
+bytes, the features a run reports as its coverage."""
 from __future__ import annotations
 
 import collections

@@ -1,4 +1,5 @@
-"""Targets and verdicts: the decoder under test (through the harness's sandbox and its one classifier of process endings) and fbaconf itself (--self)."""  # noqa: E501
+"""Targets and verdicts: the decoder under test (through the harness's sandbox and its one classifier
+of process endings) and fbaconf itself (--self)."""
 from __future__ import annotations
 
 import os

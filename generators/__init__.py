@@ -1,1 +1,4 @@
-"""Generators: code that makes the bundled models and the conformance suites. Run on purpose (``fbaconf suites build``, ``python -m fbaconf.generators.models``), never at test time: what they make is committed as data. One exception is made per measurement and never committed: the speed content (``speed_content``)."""  # noqa: E501
+"""Generators: code that makes the bundled models and the conformance suites. Run on purpose (``fbaconf
+suites build``, ``python -m fbaconf.generators.models``), never at test time: what they make is
+committed as data. One exception is made per measurement and never committed: the speed content
+(``speed_content``)."""

@@ -1,4 +1,5 @@
-"""Generated FaceDefTables for the default head: FaceDefMesh (4-5 intervals per FAP) and FaceDefTransform (eyeballs, pupils, head rotation) for all 66 low-level FAPs."""  # noqa: E501
+"""Generated FaceDefTables for the default head: FaceDefMesh (4-5 intervals per FAP) and
+FaceDefTransform (eyeballs, pupils, head rotation) for all 66 low-level FAPs."""
 from __future__ import annotations
 
 from dataclasses import dataclass

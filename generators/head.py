@@ -226,7 +226,8 @@ def _build_skin(n_lon: int, density: float):
                                                          dtype=int)], [0.0, 0.0]])
     u = (phis / (2 * np.pi) + 0.5) % 1.0
     v = (V[:, 1] - V[:, 1].min()) / np.ptp(V[:, 1])
-    tags = dict(slit=slit, eye_info=eye_info, eye_shell=eye_shell, mouth_row_y=MOUTH_Y, upper_copy=is_upper, lower_copy=is_lower,  # noqa: E501
+    tags = dict(slit=slit, eye_info=eye_info, eye_shell=eye_shell, mouth_row_y=MOUTH_Y, upper_copy=is_upper,
+                lower_copy=is_lower,
                 front=np.cos(phis), corner_x=float(xcm), grid=(idx, upper, r_m, r_e, mouth_cols))
     return V, np.array(tris, dtype=np.int64), np.stack([u, v], axis=1), tags, eye_z, eye_shell
 

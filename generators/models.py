@@ -209,8 +209,11 @@ def logo_scene() -> bt.Scene:
     S = parts["Stem"].vertices
     w = np.clip((-S[:, 1]) / 80.0, 0, 1) ** 2
     idx = np.nonzero(w > 0)[0]
-    T[3] = [mesh_from_function("Stem", idx, lambda a: np.stack([a * u[2] * w[idx] * 0.5, -a * u[2] * w[idx] * 0.2,
-                                                               a * u[2] * w[idx] * saturate(a, 3)], 1), fap_borders(3), u[2])]  # noqa: E501
+
+    def stem(a):
+        return np.stack([a * u[2] * w[idx] * 0.5, -a * u[2] * w[idx] * 0.2, a * u[2] * w[idx] * saturate(a, 3)], 1)
+
+    T[3] = [mesh_from_function("Stem", idx, stem, fap_borders(3), u[2])]
     B = parts["TopBar"].vertices
     for fap, cx in ((31, 0.0), (33, 25.0), (35, 60.0), (32, 0.0), (34, 25.0), (36, 60.0)):
         wb = np.exp(-((B[:, 0] - cx) / 20.0) ** 2)

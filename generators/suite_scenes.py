@@ -1,4 +1,5 @@
-"""Scenes of the suites: the bundled models, calibration subsets, FIT graphs and FaceDefTable interval grids (written at a fixed precision)."""  # noqa: E501
+"""Scenes of the suites: the bundled models, calibration subsets, FIT graphs and FaceDefTable interval
+grids (written at a fixed precision)."""
 from __future__ import annotations
 
 import struct

@@ -4,13 +4,14 @@ special streams in :mod:`.streams`).
 
 Deterministic: the same fbaconf version writes byte-identical files on any machine
 (procedural content, reference encoder, fixed seeds, the bundled models from their committed
-data, generated geometry rounded to 6 decimals before it is written), so the sha256 digests in each ``suite.json`` are stable
+data, generated geometry rounded to 6 decimals before it is written), so the sha256 digests in each
+``suite.json`` are stable
 and the goldens made from them (``fbaconf golden regenerate``) can be verified bit for bit.
 
 Each case folder-less: a suite folder holds ``suite.json`` and the case files named
 ``<case>.fba``, ``<case>.fap``, ``<case>.bt``, ``<case>.bifs`` (when the BIFS codec is
 available), ``scenario.toml`` (shared by the suite's image cases), ``<case>-face<i>.fba``.
-"""  # noqa: E501
+"""
 from __future__ import annotations
 
 import json
@@ -42,6 +43,8 @@ from .suite_scenes import make_scene
 # Generated geometry is written at this many decimals: the files do not change with a
 # numpy/libm build's last digit (0.000001 mm-like units: far below every tolerance).
 GEOMETRY_DECIMALS = 6
+# the case kind of each generator kind in conformance/data/suites.toml
+_CASE_KIND = {"stream": "decode", "multi": "multi", "error": "error", "file": "decode", "special": "decode"}
 
 
 def spec(data_dir: Path | None = None) -> dict:
@@ -179,7 +182,7 @@ def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> list[Case]:
 def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> Case:
     gen = c.get("generator", "stream")
     case = Case(id=c["id"], suite=suite["name"], claim=c.get("claim", suite["claim"]), group=suite["group"],
-                kind={"stream": "decode", "multi": "multi", "error": "error", "file": "decode", "special": "decode"}[gen],  # noqa: E501
+                kind=_CASE_KIND[gen],
                 description=c.get("description", ""), tools=list(c.get("tools", [])), covers=list(c.get("covers", [])),
                 suite_dir=d)
     if gen == "file":

@@ -342,11 +342,13 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
             parts = item if isinstance(item, list) else [item]
             for s in parts:
                 if not isinstance(s, str):
-                    raise bad(f"[commands] {cname}: argv items must be strings or lists of strings", "manifest-commands")  # noqa: E501
+                    raise bad(f"[commands] {cname}: argv items must be strings or lists of strings",
+                              "manifest-commands")
                 for n in _PH.findall(s):
                     if cname == "serve" and n not in SERVE_PLACEHOLDERS:
+                        usable = ", ".join("{" + p + "}" for p in SERVE_PLACEHOLDERS)
                         raise bad(f"[commands] serve: {{{n}}} has no value for a persistent decoder, which gets "
-                                  f"each input on stdin (usable: {', '.join('{' + p + '}' for p in SERVE_PLACEHOLDERS)})",  # noqa: E501
+                                  f"each input on stdin (usable: {usable})",
                                   "manifest-placeholder")
                     if n not in PLACEHOLDERS:
                         raise bad(f"[commands] {cname}: unknown placeholder {_quote(n)} (known: "

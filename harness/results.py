@@ -186,7 +186,8 @@ class RunRecord:
                    speed=[SpeedResult.from_json(s) for s in d.get("speed", [])],
                    started=d.get("started", ""), finished=d.get("finished", ""),
                    duration_s=d.get("duration_s", 0.0), provisional=d.get("provisional", []),
-                   missing=d.get("missing", []), baseline_summary=d.get("baseline_summary", ""), exit_code=d.get("exit_code", 0),  # noqa: E501
+                   missing=d.get("missing", []), baseline_summary=d.get("baseline_summary",
+                                                                        ""), exit_code=d.get("exit_code", 0),
                    provisional_differences=d.get("provisional_differences", []), strict=d.get("strict", False))
 
 

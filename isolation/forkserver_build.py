@@ -5,9 +5,10 @@ Python server's own work (parsing the request, ``posix_spawn`` through the inter
 waiting, replying); the same loop in C costs a few microseconds. It is built once per
 harness process with the machine's C compiler (``$CC``, else ``cc``, ``gcc`` or ``clang``)
 into a private temporary folder, removed at exit. Without a compiler, or with
-``FBACONF_PURE_PYTHON=1`` or ``FBACONF_FORKSERVER=python``, the harness uses ``forkserver.py``, which speaks the same protocol
+``FBACONF_PURE_PYTHON=1`` or ``FBACONF_FORKSERVER=python``, the harness uses ``forkserver.py``,
+which speaks the same protocol
 and behaves the same (``tests/integration/test_spawner.py`` runs its cases through both).
-"""  # noqa: E501
+"""
 from __future__ import annotations
 
 import atexit

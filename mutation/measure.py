@@ -341,7 +341,8 @@ def run_mutant(name: str | None, claim: str = "predictable@2", *, stop_at_first:
                                 "outcome": r.outcome.value, "message": r.message[:300]})
                 if stop_at_first:
                     break
-    return {"mutant": name or "reference", "killed": bool(failing), "killed_by": failing[0]["case"] if failing else None,  # noqa: E501
+    return {"mutant": name or "reference", "killed": bool(failing),
+            "killed_by": failing[0]["case"] if failing else None,
             "failing": failing, "ran": ran, "total": len(plan), "seconds": round(time.perf_counter() - t0, 2)}
 
 

@@ -19,7 +19,8 @@ FAMILIES = (
     ("FAP-INPUT", "Input"),
     ("FAP-SYNTAX", "Syntax"),
     ("FAP-SEM", "Semantics"),
-    ("FAP-DECISION", "Decision dependence (warnings: the stream relies on an fbaconf reading where another is plausible)"),  # noqa: E501
+    ("FAP-DECISION",
+     "Decision dependence (warnings: the stream relies on an fbaconf reading where another is plausible)"),
     ("FAP-PROFILE", "Profile"),
     ("FAP-LEVEL", "Level"),
     ("FAP-CLAIM", "Claim"),
@@ -71,8 +72,10 @@ def generate() -> str:
         lines.append(f"| `{r.rule}` | {r.stage} | {r.severity} | {code} | {_cell(r.description)} |")
     lines.append("")
     ps = load_profiles()
-    lines += ["## Level limits checked (from profiles/data/profiles.toml)", "",
-              "| limit | unit | " + " | ".join(f"L{lv}" for lv in ps.levels) + " | from profile | provenance | checked |",  # noqa: E501
+    lines += ["## Level limits checked (from profiles/data/profiles.toml)",
+              "",
+              "| limit | unit | " + " | ".join(f"L{lv}" for lv in ps.levels)
+              + " | from profile | provenance | checked |",
               "|---|---|" + "---|" * len(ps.levels) + "---|---|---|"]
     for lim in ps.limits.values():
         vals = " | ".join(f"{lim.values[lv]:g}" for lv in ps.levels)

@@ -568,7 +568,8 @@ def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
                                         f"(bounds {int(bounds[f - 1, il])}..{int(bounds[f - 1, ih])}, fap_quant {q})",
                                         fap=f, **loc))
                     for li in (ih, il):
-                        if not replaced[f - 1, li] and _tdiv(int(raw[f - 1, li]), d) != _tdiv(int(bounds[f - 1, li]), d):  # noqa: E501
+                        moved = _tdiv(int(raw[f - 1, li]), d) != _tdiv(int(bounds[f - 1, li]), d)
+                        if not replaced[f - 1, li] and moved:
                             out.append(diag(R.DECISION_DEFAULT_ROUNDING,
                                             f"FAP {f} uses the default {LIST_ORDER[li]} bound {int(raw[f - 1, li])}, "
                                             f"rounded to {int(bounds[f - 1, li])} by D4 (alphabet differs)",

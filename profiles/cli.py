@@ -41,7 +41,8 @@ def register(subparsers) -> None:
     p.add_argument("--max-issues", type=int, default=0, metavar="N",
                    help="report at most N diagnostics (0 = no limit); the exit status still counts all")
     p.add_argument("--only", nargs="+", default=[], metavar="CODE", help="report only these codes (PREFIX* allowed)")
-    p.add_argument("--ignore", nargs="+", default=[], metavar="CODE", help="do not report these codes (PREFIX* allowed)")  # noqa: E501
+    p.add_argument("--ignore", nargs="+", default=[], metavar="CODE",
+                   help="do not report these codes (PREFIX* allowed)")
     p.add_argument("--smallest-claim", action="store_true", help="print the lowest profile@level the stream fits")
     p.add_argument("--locations", type=int, default=5, metavar="N",
                    help="locations listed per folded issue (default 5)")

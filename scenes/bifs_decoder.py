@@ -1,4 +1,5 @@
-"""Binary BIFS decoder: a BIFSConfig plus ReplaceScene access unit to a BT scene, with a per-field bit trace; reading .bifs files."""  # noqa: E501
+"""Binary BIFS decoder: a BIFSConfig plus ReplaceScene access unit to a BT scene, with a per-field bit
+trace; reading .bifs files."""
 from __future__ import annotations
 
 import math

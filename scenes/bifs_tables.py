@@ -1,4 +1,5 @@
-"""Binary BIFS: constants, typed errors and the node/field tables of scenes/data/bifs_nodes.toml (checked against the BT field tables)."""  # noqa: E501
+"""Binary BIFS: constants, typed errors and the node/field tables of scenes/data/bifs_nodes.toml
+(checked against the BT field tables)."""
 from __future__ import annotations
 
 import math

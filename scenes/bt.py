@@ -7,7 +7,8 @@ MF values in ``[ ... ]`` (or a single value without brackets), SFVec2f/SFVec3f/S
 ``\\"`` and ``\\\\`` escapes (an MFURL item also as MP4Box dumps it: ``od:N`` unquoted), ``#``
 comments to the end of the line; commas are whitespace.
 A file is a sequence of top-level nodes. DEF names must be unique in a file (a second
-DEF of a name is an error); ``USE`` may name a node only after its closing brace. Field tables come from ``data/bt_nodes.toml``
+DEF of a name is an error); ``USE`` may name a node only after its closing brace. Field tables come
+from ``data/bt_nodes.toml``
 (plus the FAP node's 66 SFInt32 fields from the FAP table).
 
 Scene model: :class:`Node` (``type``, ``fields`` = only the fields written in the file, in
@@ -24,7 +25,7 @@ Errors raise :class:`TextFormatError` with line:column and the node path, e.g.
 ``.field.Type``, an MFNode field ``.field[i]``). The reader is bounded: a file of at most
 :data:`MAX_FILE_BYTES` (a regular file: never a FIFO that blocks), tokens of at most
 :data:`MAX_TOKEN` characters, and an error quotes at most the first 40 characters of a token.
-"""  # noqa: E501
+"""
 from __future__ import annotations
 
 import bisect

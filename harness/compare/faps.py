@@ -1,4 +1,5 @@
-"""The FAP stage: exact, normative comparison of decoded FAP frames (values, statuses, frame numbers, times, the .fap header rate)."""  # noqa: E501
+"""The FAP stage: exact, normative comparison of decoded FAP frames (values, statuses, frame numbers,
+times, the .fap header rate)."""
 from __future__ import annotations
 
 from typing import Any

@@ -1,4 +1,5 @@
-"""The image stage: a contrast-aware per-pixel rule and CIEDE2000 against converged golden images, heat-map artefacts."""  # noqa: E501
+"""The image stage: a contrast-aware per-pixel rule and CIEDE2000 against converged golden images,
+heat-map artefacts."""
 from __future__ import annotations
 
 import math

@@ -87,7 +87,8 @@ def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], o
         if stage == "faps":
             gp = gdir / case.goldens["faps"]
             if not gp.is_file():
-                stages.append(StageResult("faps", Outcome.ERROR, f"golden missing: {gp} (run fbaconf golden regenerate)"))  # noqa: E501
+                stages.append(StageResult("faps", Outcome.ERROR,
+                                          f"golden missing: {gp} (run fbaconf golden regenerate)"))
                 continue
             text_in = job.values.get("input", "").lower().endswith(".fap")
             stages.append(_faps_stage(FapFrames.load_npz(gp), job.path("faps_out"), "faps", text_in))
@@ -170,8 +171,8 @@ def _effective_faps_stage(golden: Path, got_path: Path, tol: dict) -> StageResul
     series = {"max |effective FAP error|": [float(x) for x in np.minimum(per_frame, 1e30)]}
     bad = np.argwhere(diff > atol)
     if len(bad) == 0:
-        return StageResult(name, Outcome.PASS, "effective FAPs match", metrics={"max_abs_diff": float(diff.max(initial=0))},  # noqa: E501
-                           series=series)
+        return StageResult(name, Outcome.PASS, "effective FAPs match",
+                           metrics={"max_abs_diff": float(diff.max(initial=0))}, series=series)
     f, j = (int(x) for x in bad[0])
     fd = {"frame": f, "fap": j + 1, "name": fap_table()[j].name, "expected": float(exp[f, j]), "got": float(got[f, j])}
     return StageResult(name, Outcome.FAIL,

@@ -1,4 +1,5 @@
-"""Reading a decoder's output files defensively: regular files only, capped sizes, .npz without pickles or zip bombs, .fap text."""  # noqa: E501
+"""Reading a decoder's output files defensively: regular files only, capped sizes, .npz without pickles
+or zip bombs, .fap text."""
 from __future__ import annotations
 
 import math

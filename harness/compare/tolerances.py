@@ -1,4 +1,5 @@
-"""Tolerances of the comparison ladder: harness/data/tolerances.toml (every number with its reason) and a case's overrides."""  # noqa: E501
+"""Tolerances of the comparison ladder: harness/data/tolerances.toml (every number with its reason) and
+a case's overrides."""
 from __future__ import annotations
 
 import math

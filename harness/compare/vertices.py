@@ -1,4 +1,5 @@
-"""The vertex stage: per-frame maximum and RMS euclidean error of the animated mesh, the first vertex named with its mesh part."""  # noqa: E501
+"""The vertex stage: per-frame maximum and RMS euclidean error of the animated mesh, the first vertex
+named with its mesh part."""
 from __future__ import annotations
 
 import bisect
