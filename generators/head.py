@@ -1,4 +1,6 @@
-"""The generated default head: skull, skin with nose, lips and eye openings, eyeballs, eyebrows, teeth, tongue, mouth cavity, ears and neck, and its 84 feature points on real vertices (deterministic: no randomness, no files read)."""  # noqa: E501
+"""The generated default head: skull, skin with nose, lips and eye openings, eyeballs, eyebrows, teeth,
+tongue, mouth cavity, ears and neck, and its 84 feature points on real vertices (deterministic: no
+randomness, no files read)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
