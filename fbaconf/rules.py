@@ -375,6 +375,7 @@ _rule("fit-missing-node", "animation", "link (…, …) names a node that does n
 _rule("frame-order", "bitstreams", "frame numbers must be >= 0")
 _rule("frame-rate", "bitstreams", "the frame rate to encode cannot be signalled (frame_rate 8 bits + seconds/16, optional 1000/1001)")
 _rule("frame-rate-zero", "bitstreams", "the signalled frame rate is 0 (spec notes D6)", code=SEM_FRAME_RATE_ZERO)
+_rule("fuzz-setup", "fuzz", "a fuzz campaign cannot start: a target has no seed inputs, or the package to mutate cannot be made")
 _rule("geometry-colors", "rendering", "vertex_colors must be finite float[…, 3], got shape …")
 _rule("geometry-empty", "animation", "faceSceneGraph has no IndexedFaceSet")
 _rule("geometry-finite", "animation", "Transform fields must be finite")

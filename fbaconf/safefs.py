@@ -239,23 +239,29 @@ def read_regular(path: Path | str, max_bytes: int) -> bytes:
 
 def confined(base: Path | str, rel: str, *, what: str = "path") -> Path:
     """``base / rel`` if ``rel`` is a plain relative path that stays inside ``base`` (no
-    ``..``, not absolute, no NUL, no symlink on the way); :class:`PathEscapeError` otherwise."""
+    ``..``, not absolute, no NUL, no symlink on the way, no component the file system cannot
+    name); :class:`PathEscapeError` otherwise (quoting at most 80 characters of ``rel``)."""
+    shown = repr(rel) if not isinstance(rel, str) or len(rel) <= 80 else repr(rel[:80]) + f"… ({len(rel)} characters)"
     if not isinstance(rel, str) or not rel or "\x00" in rel or "\\" in rel:
-        raise PathEscapeError(f"{what} {rel!r} is not a relative path name")
+        raise PathEscapeError(f"{what} {shown} is not a relative path name")
     p = Path(rel)
     if p.is_absolute() or any(part in ("..", "") for part in rel.split("/")) or rel.startswith("~"):
-        raise PathEscapeError(f"{what} {rel!r} would leave {base}")
+        raise PathEscapeError(f"{what} {shown} would leave {base}")
+    if any(len(os.fsencode(part)) > 255 for part in p.parts):
+        raise PathEscapeError(f"{what} {shown}: a path component longer than 255 bytes")
     base = Path(base)
     out = base / p
     cur = base
-    for part in p.parts:
-        cur = cur / part
-        if cur.is_symlink():
-            raise PathEscapeError(f"{what} {rel!r}: {cur} is a symbolic link")
     try:
+        for part in p.parts:
+            cur = cur / part
+            if cur.is_symlink():
+                raise PathEscapeError(f"{what} {shown}: {cur} is a symbolic link")
         out.resolve().relative_to(base.resolve())
     except ValueError:
-        raise PathEscapeError(f"{what} {rel!r} would leave {base}") from None
+        raise PathEscapeError(f"{what} {shown} would leave {base}") from None
+    except OSError as e:  # a name the file system refuses (too long, a loop...)
+        raise PathEscapeError(f"{what} {shown}: {e.strerror or e}") from None
     return out
 
 
