@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import math
 import re
+import shlex
+from pathlib import Path
 from typing import Any
 
 from fbaconf.harness.baseline import signature
@@ -166,6 +168,19 @@ def baseline_lines(record: RunRecord, limit: int = 30) -> list[str]:
     if more:
         out.append(f"  ... and {more} more (see the cases to look at below)")
     return [clean_text(x) for x in out]
+
+
+_CASE_FOLDER = re.compile(r"/\S*/work/case-[A-Za-z0-9_]+(?=/)")
+
+
+def reproduce_line(r: CaseResult, keep_option: str = "--keep-workdirs") -> str:
+    """The command of a case: as run when its work folder was kept (``keep_option``), else with
+    the deleted folder named for what it was."""
+    cmd = " ".join(shlex.quote(str(c)) for c in r.command)
+    folders = set(_CASE_FOLDER.findall(cmd))
+    if folders and all(Path(f).is_dir() for f in folders):
+        return clean_text(cmd)
+    return clean_text(_CASE_FOLDER.sub("<case folder>", cmd)) + f"   (rerun with {keep_option})"
 
 
 def _speed_rows(speed: list[SpeedResult]) -> list[list[str]]:

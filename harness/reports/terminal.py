@@ -1,9 +1,6 @@
 """The terminal summary: aligned tables per suite, profile and outcome, the failing cases, speed, the verdict line."""
 from __future__ import annotations
 
-import re
-import shlex
-from pathlib import Path
 from typing import Iterable
 
 from fbaconf.harness.results import Outcome, RunRecord
@@ -22,6 +19,7 @@ from .common import (
     format_difference,
     profile_of,
     provisional_line,
+    reproduce_line,
     verdict,
 )
 
@@ -48,20 +46,6 @@ def _table(header: list[str], rows: list[list[str]], right: set[int], colour=Non
 
 def _indent(text: str, prefix: str) -> list[str]:
     return [prefix + line for line in text.splitlines()] or [prefix.rstrip()]
-
-
-_CASE_FOLDER = re.compile(r"/\S*/work/case-[A-Za-z0-9_]+(?=/)")
-
-
-def _reproduce(r) -> str:
-    """The command of a case: as run when its work folder was kept (``--keep-workdirs``), else with
-    the deleted folder named for what it was."""
-    cmd = " ".join(shlex.quote(c) for c in r.command)
-    folders = set(_CASE_FOLDER.findall(cmd))
-    if folders and all(Path(f).is_dir() for f in folders):
-        return clean_text(cmd)
-    cmd = _CASE_FOLDER.sub("<case folder>", cmd)
-    return clean_text(cmd) + "   (rerun with --keep-workdirs)"
 
 
 def _stderr_excerpt(r, n: int = 6) -> tuple[str, list[str]]:
@@ -161,7 +145,7 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
                     lines.append(f"      stderr ({label}):")
                     lines.extend("        " + t for t in tail)
             if r.command:
-                lines.append("      reproduce: " + _reproduce(r))
+                lines.append("      reproduce: " + reproduce_line(r))
         if len(shown) < len(groups):
             lines.append(f"  ... and {len(groups) - len(shown)} more group(s) (see the JSON/HTML report)")
 

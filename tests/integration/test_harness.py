@@ -240,7 +240,7 @@ def test_baseline_turns_known_failures_into_non_failures(tmp_path):
     results = run_cases(a, cs, claim="simple@1", out_dir=tmp_path / "r", jobs=2, progress=False)
     assert all(r.outcome == Outcome.FAIL for r in results)
     bfile = tmp_path / "baseline.txt"
-    assert baseline.write(results[:1], bfile) == 1
+    assert baseline.write(results[:1], bfile).added == [cs[0].full_id]
     new = baseline.apply(results, baseline.load(bfile))
     assert [r.case_id for r in new] == [cs[1].full_id]
     assert results[0].baseline == "known-failure"
@@ -315,7 +315,7 @@ def test_pytest_plugin_gives_one_item_per_case(tmp_path):
     (tmp_path / "conftest.py").write_text("")
     r = subprocess.run([sys.executable, "-m", "pytest", "-p",
                         "no:cacheprovider", "-q", "--fbaconf-decoder", str(m), "--fbaconf-suite", "simple-l1-core",
-                        "--fbaconf-suite", "calibration-l1-core", "-k",
+                        "--fbaconf-suite", "calibration-l1-core", "--fbaconf-strict", "-k",
                         "arith-q8-visemes-expressions or fdp-all-points", "-rA",
                         str(tmp_path)],
                        capture_output=True, text=True, cwd=tmp_path, timeout=600)
@@ -325,6 +325,11 @@ def test_pytest_plugin_gives_one_item_per_case(tmp_path):
     # fdp-all-points and its two image-only views (-three-quarter, -flat-culled) are outside the claim
     assert "1 failed" in out and "3 skipped" in out
     assert "first difference" in out
+    # the case rests on decision D5: without --fbaconf-strict its difference is provisional (as in `fbaconf run`)
+    r = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-rx", "--fbaconf-decoder",
+                        str(m), "fbaconf::" + SIMPLE, str(tmp_path)], capture_output=True, text=True, cwd=tmp_path,
+                       timeout=600)
+    assert r.returncode == 0 and "provisional difference (rests on D5; --fbaconf-strict fails it)" in r.stdout
 
 
 # ----------------------------------------------------------------------------- worked example
