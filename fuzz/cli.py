@@ -101,6 +101,8 @@ def cmd_fuzz(args) -> int:
         from .promote import promote
         added = promote(args.promote, args.data_dir, log=lambda s: print(s, file=sys.stderr))
         print(f"promoted {len(added)} finding(s) to the regression suite")
+        for line in _after_promotion(added, args):
+            print(line)
         if args.json:
             print(json.dumps(added, indent=1))
         return 0
@@ -270,3 +272,23 @@ def _finish(fz, out: Path, args) -> int:
             size = f"{ms.bytes_before} -> {ms.bytes_after} bytes" if ms else f"{len(f.original.data)} bytes"
             print(f"  {f.id}: {f.verdict.cls} ({f.verdict.signature}) x{f.hits}, {size}: {f.verdict.message[:120]}")
     return 1 if fz.findings else 0
+
+
+def _after_promotion(added: list[dict], args) -> list[str]:
+    """What to do after ``--promote``: build the suite (and goldens), check the decoder on it, commit."""
+    if not added:
+        return ["nothing new: every finding is already a regression case (or none is a stream)"]
+    from .findings import load_findings  # noqa: PLC0415 (the verb's own imports are lazy)
+    from .promote import REGRESSION_SUITE  # noqa: PLC0415
+    decoders = sorted({str((doc.get("decoder") or {}).get("manifest") or "") for _d, doc in load_findings(args.promote)}
+                      - {""})
+    data = f"{args.data_dir}/" if args.data_dir else "conformance/data/"
+    out = ["next:",
+           f"  1. fbaconf suites build {REGRESSION_SUITE} --goldens   # the new case(s) join the suite, with goldens",
+           f"  2. fbaconf run --decoder {decoders[0] if decoders else 'D.toml'} --suite {REGRESSION_SUITE}"
+           "   # fails on them until the decoder is fixed",
+           f"  3. commit {data}regression.toml, {data}regression/, conformance/suites/{REGRESSION_SUITE}/ and golden/"]
+    if args.data_dir:
+        out.insert(1, f"  (the cases went to {args.data_dir}; `suites build` reads the package's conformance/data: "
+                      "copy them there first)")
+    return out
