@@ -56,6 +56,8 @@ def register(sub) -> None:
     r.set_defaults(func=cmd_regenerate)
     v = gs.add_parser("verify", help="check digests and bit-identical regeneration")
     v.add_argument("--no-regenerate", action="store_true", help="only check digests (fast)")
+    v.add_argument("--suite", action="append", default=[], metavar="NAME",
+                   help="regenerate only this suite's goldens (repeatable; every digest is still checked)")
     v.set_defaults(func=cmd_verify)
     m = gs.add_parser("margins", help="how far each float golden's values are from a rounding boundary",
                       description="Rerun the reference for every case and report, per float golden (vertex "
@@ -112,7 +114,7 @@ def cmd_regenerate(args) -> int:
 
 def cmd_verify(args) -> int:
     from .golden import verify
-    problems = verify(regenerate_check=not args.no_regenerate)
+    problems = verify(regenerate_check=not args.no_regenerate, only=args.suite or None)
     for p in problems:
         print(f"golden verify: {p}", file=sys.stderr)
     if problems:

@@ -147,8 +147,10 @@ def compare_regenerated(files: dict[str, str], root: Path, regen: dict[str, str]
     return problems, near
 
 
-def verify(root: Path | None = None, *, regenerate_check: bool = True, log=print) -> list[str]:
-    """Problems found (empty list = goldens verified)."""
+def verify(root: Path | None = None, *, regenerate_check: bool = True, only: list[str] | None = None,
+           log=print) -> list[str]:
+    """Problems found (empty list = goldens verified). ``only``: regenerate only these suites (the
+    digests of every golden and suite input are checked all the same)."""
     root = root or golden_root()
     mp = root / MANIFEST
     try:
@@ -181,7 +183,13 @@ def verify(root: Path | None = None, *, regenerate_check: bool = True, log=print
         if s.name not in manifest.get("suites", {}):
             problems.append(f"suite {s.name} has no goldens")
     log(f"digests: {len(files)} golden file(s) checked")
+    unknown = sorted(set(only or ()) - set(by_name))
+    if unknown:
+        return problems + [f"no suite named {', '.join(unknown)}"]
     if regenerate_check and not problems:
+        if only:
+            suites = [s for s in suites if s.name in only]
+            files = {rel: d for rel, d in files.items() if rel.split("/", 1)[0] in only}
         with tempfile.TemporaryDirectory(prefix="fbaconf-golden-") as tmp:
             t = Path(tmp)
             regen = regenerate(suites, t, log=lambda *_: None)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fbaconf.conformance import precision
-from fbaconf.conformance.golden import canonical_npz, compare_regenerated
+from fbaconf.conformance.golden import canonical_npz, compare_regenerated, verify
 from fbaconf.conformance.suite import sha256_file
 from fbaconf.rendering.images import openimageio, srgb_to_linear, write_png
 
@@ -87,3 +87,9 @@ def test_verify_names_a_file_within_tolerance_and_refuses_one_beyond(tmp_path):
     problems, near = compare_regenerated(files, committed, regen_files, regen)
     assert near == ["s/c/vertices.npz: 1 value(s) differ, each by at most one rounding step (1e-06)"]
     assert problems == ["regenerating s/c/faps.npz does not reproduce it (not even within one rounding step)"]
+
+
+def test_verify_of_one_suite_still_checks_every_digest_and_names_an_unknown_suite():
+    said = []
+    assert verify(only=["no-such-suite"], log=said.append) == ["no suite named no-such-suite"]
+    assert any(s.startswith("digests: ") and int(s.split()[1]) > 200 for s in said), said
