@@ -142,7 +142,7 @@ def _err(src: str, msg: str) -> ProfileDataError:
     return ProfileDataError(f"{src}: {msg}")
 
 
-def parse_profiles(text: str, source: str = "<profiles>") -> ProfileSet:  # noqa: C901
+def parse_profiles(text: str, source: str = "<profiles>") -> ProfileSet:
     """Parse and validate profile data (TOML text)."""
     try:
         raw = tomllib.loads(text)
@@ -150,16 +150,27 @@ def parse_profiles(text: str, source: str = "<profiles>") -> ProfileSet:  # noqa
         raise _err(source, f"not valid TOML: {e}") from None
     if raw.get("format") != "fbaconf.profiles/1":
         raise _err(source, "format must be 'fbaconf.profiles/1'")
-    tools: dict[str, Tool] = {}
-    for tid, t in raw.get("tools", {}).items():
-        if t.get("source") not in TOOL_SOURCES:
-            raise _err(source, f"tools.{tid}.source must be one of {TOOL_SOURCES}")
-        tools[tid] = Tool(tid, str(t.get("description", "")), t["source"])
+    tools = _parse_tools(raw.get("tools", {}), source)
     levels = tuple(int(x) for x in raw.get("levels", {}).get("numbers", ()))
     if not levels or list(levels) != sorted(set(levels)):
         raise _err(source, "levels.numbers must be a non-empty increasing list")
+    profiles = _parse_profile_table(raw.get("profiles", {}), tools, levels, source)
+    limits = {lid: _parse_limit(lid, lim, profiles, levels, source) for lid, lim in raw.get("limits", {}).items()}
+    return ProfileSet(tools, profiles, levels, limits, source)
 
-    rawp = raw.get("profiles", {})
+
+def _parse_tools(raw: dict, source: str) -> dict[str, Tool]:
+    tools: dict[str, Tool] = {}
+    for tid, t in raw.items():
+        if t.get("source") not in TOOL_SOURCES:
+            raise _err(source, f"tools.{tid}.source must be one of {TOOL_SOURCES}")
+        tools[tid] = Tool(tid, str(t.get("description", "")), t["source"])
+    return tools
+
+
+def _parse_profile_table(rawp: dict, tools: dict[str, Tool], levels: tuple[int, ...],
+                         source: str) -> dict[str, Profile]:
+    """The ``[profiles]`` table: references checked, includes closed (no cycle), ranks ordered."""
     if not rawp:
         raise _err(source, "no profiles")
     for pid, p in rawp.items():
@@ -187,53 +198,54 @@ def parse_profiles(text: str, source: str = "<profiles>") -> ProfileSet:  # noqa
         all_tools = set(p.get("tools", []))
         for a in anc:
             all_tools |= set(rawp[a].get("tools", []))
-        ind: dict[int, Indication] = {}
-        for lv, v in p.get("indication", {}).items():
-            if int(lv) not in levels:
-                raise _err(source, f"profiles.{pid}.indication: unknown level {lv}")
-            if v.get("provenance") not in PROVENANCES:
-                raise _err(source, f"profiles.{pid}.indication.{lv}.provenance must be one of {PROVENANCES}")
-            ind[int(lv)] = Indication(int(v["code"]), str(v.get("name", "")), v["provenance"],
-                                      bool(v.get("private", False)))
         rank = p.get("rank")
         if not isinstance(rank, int):
             raise _err(source, f"profiles.{pid}.rank must be an integer")
         profiles[pid] = Profile(pid, str(p.get("name", pid)), rank, tuple(p.get("includes", [])),
-                                tuple(p.get("tools", [])), frozenset(all_tools), p["provenance"], ind,
-                                frozenset(anc))
+                                tuple(p.get("tools", [])), frozenset(all_tools), p["provenance"],
+                                _parse_indications(pid, p.get("indication", {}), levels, source), frozenset(anc))
     for pid, p in profiles.items():
         for a in p.ancestors:
             if profiles[a].rank >= p.rank:
                 raise _err(source, f"profile {pid} includes {a} so its rank must be larger")
     if len({p.rank for p in profiles.values()}) != len(profiles):
         raise _err(source, "profile ranks must be distinct")
+    return profiles
 
-    limits: dict[str, Limit] = {}
-    for lid, lim in raw.get("limits", {}).items():
-        where = f"limits.{lid}"
-        for key in ("description", "unit", "kind", "applies_from", "bounds", "provenance", "values"):
-            if key not in lim:
-                raise _err(source, f"{where}: missing {key}")
-        if lim["kind"] not in LIMIT_KINDS:
-            raise _err(source, f"{where}.kind must be one of {LIMIT_KINDS}")
-        if lim["bounds"] not in LIMIT_BOUNDS:
-            raise _err(source, f"{where}.bounds must be one of {LIMIT_BOUNDS}")
-        if lim["provenance"] not in PROVENANCES:
-            raise _err(source, f"{where}.provenance must be one of {PROVENANCES}")
-        if lim["applies_from"] not in profiles:
-            raise _err(source, f"{where}.applies_from: unknown profile {lim['applies_from']!r}")
-        vals = {int(k): v for k, v in lim["values"].items()}
-        if set(vals) != set(levels):
-            raise _err(source, f"{where}.values must give a value for every level {levels}")
-        for lv, v in vals.items():
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or v < 0:
-                raise _err(source, f"{where}.values.{lv} must be a non-negative number")
-        ordered = [vals[lv] for lv in levels]
-        if lim["kind"] == "max" and ordered != sorted(ordered):
-            raise _err(source, f"{where}: a max limit must not decrease with the level")
-        limits[lid] = Limit(lid, lim["description"], lim["unit"], lim["kind"], lim["applies_from"],
-                            lim["bounds"], lim["provenance"], vals)
-    return ProfileSet(tools, profiles, levels, limits, source)
+
+def _parse_indications(pid: str, raw: dict, levels: tuple[int, ...], source: str) -> dict[int, Indication]:
+    ind: dict[int, Indication] = {}
+    for lv, v in raw.items():
+        if int(lv) not in levels:
+            raise _err(source, f"profiles.{pid}.indication: unknown level {lv}")
+        if v.get("provenance") not in PROVENANCES:
+            raise _err(source, f"profiles.{pid}.indication.{lv}.provenance must be one of {PROVENANCES}")
+        ind[int(lv)] = Indication(int(v["code"]), str(v.get("name", "")), v["provenance"],
+                                  bool(v.get("private", False)))
+    return ind
+
+
+def _parse_limit(lid: str, lim: dict, profiles: dict[str, Profile], levels: tuple[int, ...], source: str) -> Limit:
+    where = f"limits.{lid}"
+    for key in ("description", "unit", "kind", "applies_from", "bounds", "provenance", "values"):
+        if key not in lim:
+            raise _err(source, f"{where}: missing {key}")
+    for key, allowed in (("kind", LIMIT_KINDS), ("bounds", LIMIT_BOUNDS), ("provenance", PROVENANCES)):
+        if lim[key] not in allowed:
+            raise _err(source, f"{where}.{key} must be one of {allowed}")
+    if lim["applies_from"] not in profiles:
+        raise _err(source, f"{where}.applies_from: unknown profile {lim['applies_from']!r}")
+    vals = {int(k): v for k, v in lim["values"].items()}
+    if set(vals) != set(levels):
+        raise _err(source, f"{where}.values must give a value for every level {levels}")
+    for lv, v in vals.items():
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or v < 0:
+            raise _err(source, f"{where}.values.{lv} must be a non-negative number")
+    ordered = [vals[lv] for lv in levels]
+    if lim["kind"] == "max" and ordered != sorted(ordered):
+        raise _err(source, f"{where}: a max limit must not decrease with the level")
+    return Limit(lid, lim["description"], lim["unit"], lim["kind"], lim["applies_from"], lim["bounds"],
+                 lim["provenance"], vals)
 
 
 @lru_cache(maxsize=1)
