@@ -14,7 +14,7 @@ from datetime import datetime, timezone
 from importlib import metadata
 
 # Distributions whose versions can change a verdict (numerics, image I/O, colour maths).
-DISTRIBUTIONS = ("fbaconf", "numpy", "scipy", "OpenImageIO", "colour-science")
+DISTRIBUTIONS = ("fbaconf", "numpy", "OpenImageIO", "colour-science")
 
 
 def _cpu_model() -> str:
