@@ -138,7 +138,7 @@ def _first_texture(scene: bt.Scene) -> str | None:
     return None
 
 
-def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:  # noqa: C901
+def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:
     points: dict[int, np.ndarray] = {}
     names: dict[int, str] = {}
     transforms: dict[int, dict] = {}
@@ -181,33 +181,8 @@ def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:  # noqa: C
             names.setdefault(key, geo.def_name or f"IFS@{gpath}")
             path_of.setdefault(key, gpath)
             tris = _triangulate(geo.get("coordIndex"), len(pts), bool(geo.get("ccw")), gpath)
-            app = scene.resolve(node.get("appearance"))
-            mat = scene.resolve(app.get("material")) if app is not None else None
-            color = tuple(mat.get("diffuseColor")) if mat is not None else (0.8, 0.8, 0.8)
-            spec = float(np.mean(mat.get("specularColor"))) if mat is not None else 0.0
-            shin = float(mat.get("shininess")) if mat is not None else 0.2
-            tex = scene.resolve(app.get("texture")) if app is not None else None
-            texture = (tex.get("url") or [None])[0] if tex is not None and tex.type == "ImageTexture" else None
-            vcol = None
-            cnode = scene.resolve(geo.get("color"))
-            if cnode is not None and geo.get("colorPerVertex") and len(geo.get("colorIndex")) == 0:
-                c = np.asarray(cnode.get("color"), dtype=np.float64)
-                if c.shape == (len(pts), 3) and np.all(np.isfinite(c)):
-                    vcol = c.astype(np.float32)
-            uv = None
-            tnode = scene.resolve(geo.get("texCoord"))
-            if tnode is not None:
-                uvp = np.asarray(tnode.get("point"), dtype=np.float64)
-                tci = np.asarray(geo.get("texCoordIndex"), dtype=np.int64)
-                if tci.size == 0 and len(uvp) == len(pts):
-                    uv = uvp
-                elif tci.size == len(geo.get("coordIndex")):
-                    # per corner: first assignment per vertex wins (documented)
-                    ci = np.asarray(geo.get("coordIndex"), dtype=np.int64)
-                    ok = (ci >= 0) & (tci >= 0) & (tci < len(uvp))
-                    uv = np.zeros((len(pts), 2))
-                    vv, first = np.unique(ci[ok], return_index=True)
-                    uv[vv] = uvp[tci[ok][first]]
+            color, spec, shin, texture = _appearance(scene, scene.resolve(node.get("appearance")))
+            vcol, uv = _vertex_colors(scene, geo, len(pts)), _tex_coords(scene, geo, len(pts))
             name = names[key] if sum(1 for p in parts if p.ifs == key) == 0 else f"{names[key]}#{len(parts)}"
             parts.append(PartInstance(name, key, list(chain), tris, color, vcol, uv, texture, spec, shin))
         else:
@@ -219,6 +194,56 @@ def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:  # noqa: C
         raise SceneError("faceSceneGraph has no IndexedFaceSet", rule="geometry-empty",
                          node_path=f"{fdp_path}.faceSceneGraph")
     fapu = fapu_from_feature_points(fps, node_path=f"{fdp_path}.featurePointsCoord")
+    meshes, trs = _facedef_tables(scene, fdp, fdp_path, points, transforms)
+    model = CompiledFace(points, names, transforms, parts, meshes, trs, fapu, fps,
+                         useOrtho=bool(fdp.get("useOrthoTexture")))
+    model.fp_vertices = _match_feature_points(model)
+    return model
+
+
+def _appearance(scene, app) -> tuple[tuple, float, float, str | None]:
+    """A Shape's (diffuse colour, specular level, shininess, texture URL) from its Appearance."""
+    mat = scene.resolve(app.get("material")) if app is not None else None
+    color = tuple(mat.get("diffuseColor")) if mat is not None else (0.8, 0.8, 0.8)
+    spec = float(np.mean(mat.get("specularColor"))) if mat is not None else 0.0
+    shin = float(mat.get("shininess")) if mat is not None else 0.2
+    tex = scene.resolve(app.get("texture")) if app is not None else None
+    texture = (tex.get("url") or [None])[0] if tex is not None and tex.type == "ImageTexture" else None
+    return color, spec, shin, texture
+
+
+def _vertex_colors(scene, geo, n: int) -> np.ndarray | None:
+    """Per-vertex colours (colorPerVertex, no colorIndex, one finite colour per point) or None."""
+    cnode = scene.resolve(geo.get("color"))
+    if cnode is not None and geo.get("colorPerVertex") and len(geo.get("colorIndex")) == 0:
+        c = np.asarray(cnode.get("color"), dtype=np.float64)
+        if c.shape == (n, 3) and np.all(np.isfinite(c)):
+            return c.astype(np.float32)
+    return None
+
+
+def _tex_coords(scene, geo, n: int) -> np.ndarray | None:
+    """Per-vertex texture coordinates: per point, or per corner (the first assignment per vertex
+    wins, documented), or None."""
+    tnode = scene.resolve(geo.get("texCoord"))
+    if tnode is None:
+        return None
+    uvp = np.asarray(tnode.get("point"), dtype=np.float64)
+    tci = np.asarray(geo.get("texCoordIndex"), dtype=np.int64)
+    if tci.size == 0 and len(uvp) == n:
+        return uvp
+    if tci.size == len(geo.get("coordIndex")):
+        ci = np.asarray(geo.get("coordIndex"), dtype=np.int64)
+        ok = (ci >= 0) & (tci >= 0) & (tci < len(uvp))
+        uv = np.zeros((n, 2))
+        vv, first = np.unique(ci[ok], return_index=True)
+        uv[vv] = uvp[tci[ok][first]]
+        return uv
+    return None
+
+
+def _facedef_tables(scene, fdp, fdp_path: str, points: dict, transforms: dict) -> tuple[list, list]:
+    """The FDP's FaceDefTables compiled: (FaceDefMesh tables, FaceDefTransform tables)."""
     meshes, trs = [], []
     for ti, tnode in enumerate(fdp.get("faceDefTables")):
         tnode = scene.resolve(tnode)
@@ -247,10 +272,7 @@ def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:  # noqa: C
             trs.append(TransformTable.build(fap, id(tgt), int(xnode.get("fieldId")), xnode.get("rotationDef"),
                                             xnode.get("scaleDef"), xnode.get("translationDef"),
                                             high_level_select=hls, node_path=xpath))
-    model = CompiledFace(points, names, transforms, parts, meshes, trs, fapu, fps,
-                         useOrtho=bool(fdp.get("useOrthoTexture")))
-    model.fp_vertices = _match_feature_points(model)
-    return model
+    return meshes, trs
 
 
 def _match_feature_points(model: CompiledFace) -> list | None:
