@@ -171,14 +171,12 @@ def _json(data: bytes, what: str):
 
 
 def _depth(value) -> int:
-    stack, deepest = [(value, 1)], 0
-    while stack:
-        v, d = stack.pop()
-        if isinstance(v, (dict, list)):
-            deepest = max(deepest, d)
-            if d > MAX_JSON_DEPTH:
-                return d
-            stack.extend((x, d + 1) for x in (v.values() if isinstance(v, dict) else v))
+    """How deep ``value``'s containers nest (0 for a scalar), counted a level at a time and
+    stopped one level past MAX_JSON_DEPTH; only containers are visited."""
+    level, deepest = ([value] if isinstance(value, (dict, list)) else []), 0
+    while level and deepest <= MAX_JSON_DEPTH:
+        deepest += 1
+        level = [x for v in level for x in (v.values() if isinstance(v, dict) else v) if isinstance(x, (dict, list))]
     return deepest
 
 
