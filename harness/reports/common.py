@@ -69,7 +69,7 @@ def _fmt_value(v: Any) -> str:
     return str(v)
 
 
-_DIFF_WHERE = ("frame", "time_ms", "fap", "name", "vertex", "part", "pixel", "channel", "field")
+_DIFF_WHERE = ("frame", "time_ms", "fap", "name", "vertex", "part", "pixel", "channel", "field", "what")
 
 
 def format_difference(d: dict | None) -> str:
@@ -91,6 +91,8 @@ def format_difference(d: dict | None) -> str:
             where.append(item)
     if "fap" not in d and "vertex" not in d:
         where += [f"{k} {_fmt_value(d[k])}" for k in ("name", "part") if k in d]
+    if "what" in d:  # what of the frame differs: time_ms, status, frame count...
+        where.append(_fmt_value(d["what"]).replace("time_ms", "time (ms)"))
     text = ", ".join(where)
     vals = []
     if "expected" in d:

@@ -142,3 +142,6 @@ def test_junit_carries_the_baseline_line_and_tags_new_failures(tmp_path):
 def test_a_difference_is_written_as_words_not_a_python_repr():
     d = {"frame": 2, "fap": 31, "expected": 1, "got": None, "detail": {"frame": 0, "state": "SET"}}
     assert format_difference(d) == "frame 2, FAP 31: expected 1, got no value; detail (frame 0, state SET)"
+    # what differs in the frame is named where it differs, not left as a trailing "what time_ms"
+    d = {"frame": 15, "frame_number": 15, "what": "time_ms", "expected": 500.5, "got": 500.0}
+    assert format_difference(d) == "frame 15, time (ms): expected 500.5, got 500; frame_number 15"
