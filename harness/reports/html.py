@@ -342,7 +342,8 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
     groups = failure_groups(record)
     problems = [r for _o, rs in groups for r in rs]
     if groups:
-        h.append(f"<h2>Failures and warnings ({len(problems)} cases, {len(groups)} groups)</h2>")
+        h.append(f"<h2>Failures and warnings ({len(problems)} case(s) in {len(groups)} group(s) of identical "
+                 f"failures)</h2>")
         for _o, rs in groups:
             h.append(_case_html(rs[0], out_dir, base_dir))
             if len(rs) > 1:

@@ -74,7 +74,7 @@ def test_the_crash_line_is_the_reports_first_line_not_the_last_stderr_line():
     assert e.message == "dec crashed: killed by SIGSEGV; stderr: b"
 
 
-def test_one_bug_failing_sixty_cases_with_differing_addresses_is_one_group():
+def test_one_bug_failing_sixty_cases_with_differing_addresses_is_one_group(tmp_path):
     rng = random.Random(7)
     rs = [crashed(f"simple-l1-core/case-{i:02d}", asan_text(rng)) for i in range(60)]
     assert len({re.search(r"at pc (0x[0-9a-f]+)", r.message).group(1) for r in rs}) == 60  # all differ
@@ -84,6 +84,8 @@ def test_one_bug_failing_sixty_cases_with_differing_addresses_is_one_group():
     assert [len(g) for _o, g in failure_groups(record)] == [60, 5, 1]
     text = terminal_summary(record)
     assert "66 in 3 group(s) of identical failures" in text and "Crash x60" in text
+    page = html_report(record, tmp_path)
+    assert "<h2>Failures and warnings (66 case(s) in 3 group(s) of identical failures)</h2>" in page
     assert "stderr (the crash report):" in text and "ABORTING" not in text
 
 
