@@ -20,6 +20,9 @@ from pathlib import Path
 
 import pytest
 
+from fbaconf.harness.adapters import resolve
+from fbaconf.harness.session import UsageError, preflight
+
 CASES = ["arith-q1-all-faps", "timecode-past-a-minute"]
 DECODER = """\
 import os, sys
@@ -197,3 +200,15 @@ def test_a_malformed_baseline_stops_the_run_before_any_case(tmp_path):
     r = fbaconf_run(repo, "-o", "run", "--baseline", "ci/baseline.txt")
     assert r.returncode == 2 and "ci/baseline.txt: line 4: expected 'suite/case,Outcome[,signature]'" in r.stderr
     assert not (repo / "run" / "results.jsonl").exists()
+
+
+def test_a_decoder_not_built_yet_is_named_with_its_folder_expanded(tmp_path):
+    """The manifest's {manifest_dir} template is expanded in the message, which says what to do."""
+    repo = make_repo(tmp_path)
+    m = repo / "ci" / "acme.toml"
+    m.write_text(m.read_text().replace('"{python}", "{manifest_dir}/acme.py"', '"{manifest_dir}/../build/acme"'))
+    with pytest.raises(UsageError) as e:
+        preflight(resolve(str(m)))
+    assert e.value.args[0] == (f"decoder acme: program {repo}/build/acme not found (not a file, and not on "
+                               f"PATH); [commands] decode names it \"{{manifest_dir}}/../build/acme\": build the "
+                               f"decoder first")
