@@ -107,11 +107,7 @@ def compile_scene(scene: bt.Scene | None) -> CompiledFace:
     fit = None
     fit_node = scene.resolve(face.get("fit"))
     if fit_node is not None:
-        fit = FitGraph.from_fields(fit_node.get("FAPs"), fit_node.get("Graph"), fit_node.get("numeratorExp"),
-                                   fit_node.get("denominatorExp"), fit_node.get("numeratorImpulse"),
-                                   fit_node.get("numeratorTerms"), fit_node.get("denominatorTerms"),
-                                   fit_node.get("numeratorCoefs"), fit_node.get("denominatorCoefs"),
-                                   node_path=f"{fpath}.fit.FIT")
+        fit = FitGraph.from_node(fit_node, node_path=f"{fpath}.fit.FIT")
     graph = fdp.get("faceSceneGraph") if fdp is not None else []
     if fdp is None or not graph:
         if fdp is not None and len(fdp.get("faceDefTables")):

@@ -111,90 +111,30 @@ class FitGraph:
     order: list[int] = field(default_factory=list)  # child nodes in topological order
 
     @classmethod
-    def from_fields(cls, faps, graph, numerator_exp=(), denominator_exp=(), numerator_impulse=(),  # noqa: C901, PLR0913
-                    numerator_terms=(), denominator_terms=(), numerator_coefs=(), denominator_coefs=(),
-                    *, node_path: str | None = None) -> "FitGraph":
+    def from_node(cls, node, *, node_path: str | None = None) -> "FitGraph":
+        """The graph of a FIT scene node (anything with ``get(field name)``)."""
+        return cls.from_fields(node.get("FAPs"), node.get("Graph"), {k: node.get(k) for k in FIT_FUNCTION_FIELDS},
+                               node_path=node_path)
+
+    @classmethod
+    def from_fields(cls, faps, graph, functions=None, *, node_path: str | None = None) -> "FitGraph":
+        """The graph from the FIT node's ``FAPs`` and ``Graph`` fields and its function fields
+        (``functions``: FIT field name -> values, those of :data:`FIT_FUNCTION_FIELDS`; a
+        missing one is empty). Raises :class:`SceneError` naming the field and the rule."""
         p = (node_path + ".") if node_path else ""
 
         def err(msg, fld, rule):
             return SceneError(msg, rule=rule, node_path=p + fld)
 
-        faps = [int(x) for x in faps]
-        nodes: list[list[int]] = [[]]
-        for x in faps:
-            if x == -1:
-                nodes.append([])
-            elif 1 <= x <= NUM_FAPS:
-                nodes[-1].append(x)
-            else:
-                raise err(f"FAP number {x} out of range (-1 separator or 1..68)", "FAPs", "fit-fap-range")
-        if nodes and not nodes[-1]:
-            nodes.pop()
-        for i, nd in enumerate(nodes):
-            if not nd:
-                raise err(f"FIT node {i} has no FAPs", "FAPs", "fit-empty-node")
-            if len(set(nd)) != len(nd):
-                raise err(f"FIT node {i} lists a FAP twice", "FAPs", "fit-duplicate-fap")
-        graph = [int(x) for x in graph]
-        if len(graph) % 2:
-            raise err("Graph must hold (parent, child) pairs", "Graph", "fit-graph-pairs")
-        pairs = list(zip(graph[0::2], graph[1::2]))
-        for a, b in pairs:
-            if not (0 <= a < len(nodes) and 0 <= b < len(nodes)):
-                raise err(f"link ({a}, {b}) names a node that does not exist ({len(nodes)} nodes)", "Graph",
-                          "fit-missing-node")
-            if a == b:
-                raise err(f"link ({a}, {b}) is a self-loop", "Graph", "fit-cycle")
-            if any(f in (1, 2) for f in nodes[b]):
-                raise err(f"node {b} is a child but holds FAP 1/2 (high-level FAPs cannot be interpolated)",
-                          "Graph", "fit-high-level-child")
-        if len(set(pairs)) != len(pairs):
-            raise err("a link appears twice", "Graph", "fit-duplicate-link")
-        cursors = {k: 0 for k in ("nt", "dt", "nc", "dc", "ne", "de", "ni")}
-        lists = {"nt": [int(x) for x in numerator_terms], "dt": [int(x) for x in denominator_terms],
-                 "nc": [float(x) for x in numerator_coefs], "dc": [float(x) for x in denominator_coefs],
-                 "ne": [int(x) for x in numerator_exp], "de": [int(x) for x in denominator_exp],
-                 "ni": [int(x) for x in numerator_impulse]}
-        names = {"nt": "numeratorTerms", "dt": "denominatorTerms", "nc": "numeratorCoefs",
-                 "dc": "denominatorCoefs", "ne": "numeratorExp", "de": "denominatorExp", "ni": "numeratorImpulse"}
-
-        def take(key, count):
-            c = cursors[key]
-            if c + count > len(lists[key]):
-                raise err(f"{names[key]} has {len(lists[key])} entries, more are needed "
-                          f"(function layout: see docs/animation.md)", names[key], "fit-field-count")
-            cursors[key] = c + count
-            return lists[key][c:c + count]
-
-        use_impulse = len(lists["ni"]) > 0
-        links = []
-        for a, b in pairs:
-            n = len(nodes[a])
-            funcs = []
-            for _ in nodes[b]:
-                K, P = take("nt", 1)[0], take("dt", 1)[0]
-                if K < 0 or P < 0:
-                    raise err("term counts must be >= 0", "numeratorTerms", "fit-field-count")
-                nc = np.array(take("nc", K), dtype=np.float64)
-                ne = np.array(take("ne", K * n), dtype=np.float64).reshape(K, n)
-                ni = np.array(take("ni", K) if use_impulse else [0] * K, dtype=np.int64)
-                if np.any((ni < 0) | (ni > n)):
-                    raise err(f"numeratorImpulse entries must be 0..{n}", "numeratorImpulse", "fit-impulse")
-                dc = np.array(take("dc", P), dtype=np.float64)
-                de = np.array(take("de", P * n), dtype=np.float64).reshape(P, n)
-                if np.any(ne < 0) or np.any(de < 0):
-                    raise err("exponents must be >= 0", "numeratorExp", "fit-exponent")
-                if not (np.all(np.isfinite(nc)) and np.all(np.isfinite(dc))):
-                    raise err("coefficients must be finite", "numeratorCoefs", "fit-coef-finite")
-                if P > 0 and not np.any(dc != 0):
-                    raise err(f"link ({a}, {b}): denominator is identically 0", "denominatorCoefs",
-                              "fit-division-by-zero")
-                funcs.append(RationalFunction(nc, ne, ni, dc, de))
-            links.append(FitLink(a, b, funcs))
-        for key, c in cursors.items():
-            if c != len(lists[key]):
-                raise err(f"{names[key]} has {len(lists[key])} entries but the graph uses {c}", names[key],
-                          "fit-field-count")
+        nodes = _fit_nodes([int(x) for x in faps], err)
+        pairs = _fit_pairs([int(x) for x in graph], nodes, err)
+        given = functions or {}
+        fields = _FieldCursor({k: [_FIELD_TYPE[k](x) for x in (() if given.get(k) is None else given[k])]
+                               for k in FIT_FUNCTION_FIELDS}, err)
+        use_impulse = len(fields.lists["numeratorImpulse"]) > 0
+        links = [FitLink(a, b, [_fit_function(fields, (a, b), len(nodes[a]), use_impulse, err) for _ in nodes[b]])
+                 for a, b in pairs]
+        fields.check_used()
         g = cls(nodes, links)
         g.order = g._topological(err)
         return g
@@ -261,3 +201,93 @@ class FitGraph:
                     status[w, fap_idx] = DERIVED
                 need &= ~avail
         return values, status
+
+
+# The FIT node's function fields (ISO/IEC 14496-2 FIT; layout in docs/animation.md) and their types.
+FIT_FUNCTION_FIELDS = ("numeratorExp", "denominatorExp", "numeratorImpulse", "numeratorTerms", "denominatorTerms",
+                       "numeratorCoefs", "denominatorCoefs")
+_FIELD_TYPE = {"numeratorExp": int, "denominatorExp": int, "numeratorImpulse": int, "numeratorTerms": int,
+               "denominatorTerms": int, "numeratorCoefs": float, "denominatorCoefs": float}
+
+
+def _fit_nodes(faps: list[int], err) -> list[list[int]]:
+    """The FAPs field split at -1 into nodes, each non-empty and without a FAP twice."""
+    nodes: list[list[int]] = [[]]
+    for x in faps:
+        if x == -1:
+            nodes.append([])
+        elif 1 <= x <= NUM_FAPS:
+            nodes[-1].append(x)
+        else:
+            raise err(f"FAP number {x} out of range (-1 separator or 1..68)", "FAPs", "fit-fap-range")
+    if nodes and not nodes[-1]:
+        nodes.pop()
+    for i, nd in enumerate(nodes):
+        if not nd:
+            raise err(f"FIT node {i} has no FAPs", "FAPs", "fit-empty-node")
+        if len(set(nd)) != len(nd):
+            raise err(f"FIT node {i} lists a FAP twice", "FAPs", "fit-duplicate-fap")
+    return nodes
+
+
+def _fit_pairs(graph: list[int], nodes: list[list[int]], err) -> list[tuple[int, int]]:
+    """The Graph field's (parent, child) links, each between two existing nodes, no self-loop,
+    no high-level FAP in a child, no link twice."""
+    if len(graph) % 2:
+        raise err("Graph must hold (parent, child) pairs", "Graph", "fit-graph-pairs")
+    pairs = list(zip(graph[0::2], graph[1::2]))
+    for a, b in pairs:
+        if not (0 <= a < len(nodes) and 0 <= b < len(nodes)):
+            raise err(f"link ({a}, {b}) names a node that does not exist ({len(nodes)} nodes)", "Graph",
+                      "fit-missing-node")
+        if a == b:
+            raise err(f"link ({a}, {b}) is a self-loop", "Graph", "fit-cycle")
+        if any(f in (1, 2) for f in nodes[b]):
+            raise err(f"node {b} is a child but holds FAP 1/2 (high-level FAPs cannot be interpolated)",
+                      "Graph", "fit-high-level-child")
+    if len(set(pairs)) != len(pairs):
+        raise err("a link appears twice", "Graph", "fit-duplicate-link")
+    return pairs
+
+
+class _FieldCursor:
+    """Reads the function fields in order, each from where the last read stopped."""
+
+    def __init__(self, lists: dict[str, list], err) -> None:
+        self.lists, self.err = lists, err
+        self.at = dict.fromkeys(lists, 0)
+
+    def take(self, name: str, count: int) -> list:
+        c = self.at[name]
+        if c + count > len(self.lists[name]):
+            raise self.err(f"{name} has {len(self.lists[name])} entries, more are needed "
+                           f"(function layout: see docs/animation.md)", name, "fit-field-count")
+        self.at[name] = c + count
+        return self.lists[name][c:c + count]
+
+    def check_used(self) -> None:
+        for name, c in self.at.items():
+            if c != len(self.lists[name]):
+                raise self.err(f"{name} has {len(self.lists[name])} entries but the graph uses {c}", name,
+                               "fit-field-count")
+
+
+def _fit_function(fields: _FieldCursor, link: tuple[int, int], n: int, use_impulse: bool, err) -> RationalFunction:
+    """The next rational function of ``link`` (its parent node has ``n`` FAPs)."""
+    K, P = fields.take("numeratorTerms", 1)[0], fields.take("denominatorTerms", 1)[0]
+    if K < 0 or P < 0:
+        raise err("term counts must be >= 0", "numeratorTerms", "fit-field-count")
+    nc = np.array(fields.take("numeratorCoefs", K), dtype=np.float64)
+    ne = np.array(fields.take("numeratorExp", K * n), dtype=np.float64).reshape(K, n)
+    ni = np.array(fields.take("numeratorImpulse", K) if use_impulse else [0] * K, dtype=np.int64)
+    if np.any((ni < 0) | (ni > n)):
+        raise err(f"numeratorImpulse entries must be 0..{n}", "numeratorImpulse", "fit-impulse")
+    dc = np.array(fields.take("denominatorCoefs", P), dtype=np.float64)
+    de = np.array(fields.take("denominatorExp", P * n), dtype=np.float64).reshape(P, n)
+    if np.any(ne < 0) or np.any(de < 0):
+        raise err("exponents must be >= 0", "numeratorExp", "fit-exponent")
+    if not (np.all(np.isfinite(nc)) and np.all(np.isfinite(dc))):
+        raise err("coefficients must be finite", "numeratorCoefs", "fit-coef-finite")
+    if P > 0 and not np.any(dc != 0):
+        raise err(f"link {link}: denominator is identically 0", "denominatorCoefs", "fit-division-by-zero")
+    return RationalFunction(nc, ne, ni, dc, de)

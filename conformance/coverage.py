@@ -487,9 +487,7 @@ def _transform_depth(scene, graph) -> int:
 
 
 def _fit_points(fit) -> set[str]:
-    g = FitGraph.from_fields(fit.get("FAPs"), fit.get("Graph"), fit.get("numeratorExp"), fit.get("denominatorExp"),
-                             fit.get("numeratorImpulse"), fit.get("numeratorTerms"), fit.get("denominatorTerms"),
-                             fit.get("numeratorCoefs"), fit.get("denominatorCoefs"))
+    g = FitGraph.from_node(fit)
     hits = {"fit.link"} if g.links else set()
     children: dict[int, set] = {}
     parents: dict[int, set] = {}

@@ -10,6 +10,12 @@ from fbaconf.errors import SceneError
 from fbaconf.scenes import bt
 
 
+def _fit(faps, graph, ne=(), de=(), ni=(), nt=(), dt=(), nc=(), dc=()):
+    """FitGraph.from_fields with the function fields in the order the FIT node lists them."""
+    return FitGraph.from_fields(faps, graph, {"numeratorExp": ne, "denominatorExp": de, "numeratorImpulse": ni,
+                                              "numeratorTerms": nt, "denominatorTerms": dt, "numeratorCoefs": nc,
+                                              "denominatorCoefs": dc})
+
 def blank(n=1):
     return np.zeros((n, 68)), np.zeros((n, 68), np.uint8), np.zeros((n, 10), np.int64)
 
@@ -87,7 +93,7 @@ def figure7_fit():
     ne = [1, 0, 1, 1, 1, 2, 1, 1]
     dc = [2.0, 2.0]
     de = [0, 0, 0]
-    return FitGraph.from_fields(faps, graph, ne, de, [], nt, dt, nc, dc)
+    return _fit(faps, graph, ne, de, [], nt, dt, nc, dc)
 
 
 def test_fit_figure7():
@@ -129,19 +135,19 @@ def test_fit_second_parent_when_first_unavailable():
 
 def test_fit_errors():
     with pytest.raises(SceneError) as e:
-        FitGraph.from_fields([3, -1, 4], [0, 1, 1, 0], [1, 1], [], [], [1, 1], [0, 0], [1, 1], [])
+        _fit([3, -1, 4], [0, 1, 1, 0], [1, 1], [], [], [1, 1], [0, 0], [1, 1], [])
     assert e.value.rule == "fit-cycle"
     with pytest.raises(SceneError) as e:
-        FitGraph.from_fields([3, -1, 4], [0, 5], [], [], [], [], [], [], [])
+        _fit([3, -1, 4], [0, 5], [], [], [], [], [], [], [])
     assert e.value.rule == "fit-missing-node"
     with pytest.raises(SceneError) as e:
-        FitGraph.from_fields([3, -1, 4], [0, 1], [1], [], [], [1], [0], [], [])
+        _fit([3, -1, 4], [0, 1], [1], [], [], [1], [0], [], [])
     assert e.value.rule == "fit-field-count"
     with pytest.raises(SceneError) as e:
-        FitGraph.from_fields([3, -1, 4], [0, 1], [1], [0], [], [1], [1], [1], [0.0])
+        _fit([3, -1, 4], [0, 1], [1], [0], [], [1], [1], [1], [0.0])
     assert e.value.rule == "fit-division-by-zero"
     # denominator = F3 : zero when F3 == 0 -> typed error naming the frame, never NaN
-    g = FitGraph.from_fields([3, -1, 4], [0, 1], [0], [1], [], [1], [1], [1.0], [1.0])
+    g = _fit([3, -1, 4], [0, 1], [0], [1], [], [1], [1], [1.0], [1.0])
     v, s, h = blank(2)
     s[:, 2] = SET
     v[0, 2] = 2
@@ -149,7 +155,7 @@ def test_fit_errors():
         g.apply(v, s, h)
     assert "frame 1" in str(e.value)
     with pytest.raises(SceneError):
-        FitGraph.from_fields([3, -1, 1], [0, 1], [0], [], [], [1], [0], [1.0], [])
+        _fit([3, -1, 1], [0, 1], [0], [], [], [1], [0], [1.0], [])
 
 
 def test_fit_from_scene_in_engine():
