@@ -263,12 +263,22 @@ def expand(template: list, job: Job, manifest_path: Path | None) -> list[str]:
     return out
 
 
-def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
+def _check_manifest(data: dict, path: Path | None) -> None:
+    """Every rule of a manifest's schema (docs/harness.md); raises :class:`ManifestError` naming
+    the file and the rule broken."""
     where = str(path) if path else "<manifest>"
 
     def bad(msg: str, rule: str) -> ManifestError:
         return ManifestError(msg if len(msg) <= 400 else msg[:400] + "…", rule=rule, file=where)
 
+    _check_keys(data, bad)
+    _check_values(data, bad)
+    if "python" not in data:
+        _check_commands(data, bad)
+
+
+def _check_keys(data: dict, bad) -> None:
+    """Required keys present, no unknown or [sandbox] key, each value of its type."""
     for key in ("name", "claims", "inputs", "outputs"):
         if key not in data:
             raise bad(f"missing required key {key!r}", "manifest-key")
@@ -289,6 +299,10 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
             raise bad(f"{key} must be {what}, not {type(data[key]).__name__}", _KEY_RULE.get(key, "manifest-key"))
     if "tools" in data and not all(isinstance(t, str) for t in data["tools"]):
         raise bad("tools must be a list of tool names (strings)", "manifest-tools")
+
+
+def _check_values(data: dict, bad) -> None:
+    """The values: limits, env, python target, exit codes, name, claims, forms, tools."""
     for key in data.get("limits", {}) if isinstance(data.get("limits"), dict) else ():
         if key not in LIMIT_KEYS:
             raise bad(f"[limits]: unknown key {key!r}{_did_you_mean(key, LIMIT_KEYS)}", "manifest-limits")
@@ -327,8 +341,11 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
         unknown = [t for t in data["tools"] if t not in known]
         if unknown:
             raise bad(f"unknown tool(s) {_quote(unknown)} (known: {', '.join(known)})", "manifest-tools")
-    if "python" in data:
-        return
+
+
+def _check_commands(data: dict, bad) -> None:
+    """[commands]: decode given, known commands, argv lists of strings, known placeholders (the
+    persistent ``serve`` only its own), every output's placeholder named by decode."""
     cmds = data.get("commands")
     if not isinstance(cmds, dict) or "decode" not in cmds:
         raise bad("[commands] must define decode (an argv list), or give python = \"module:Class\"",
@@ -339,25 +356,27 @@ def _check_manifest(data: dict, path: Path | None) -> None:  # noqa: C901
         if not isinstance(argv, list) or not argv or not isinstance(argv[0], str):
             raise bad(f"[commands] {cname} must be an argv list starting with the program", "manifest-commands")
         for item in argv:
-            parts = item if isinstance(item, list) else [item]
-            for s in parts:
+            for s in item if isinstance(item, list) else [item]:
                 if not isinstance(s, str):
                     raise bad(f"[commands] {cname}: argv items must be strings or lists of strings",
                               "manifest-commands")
-                for n in _PH.findall(s):
-                    if cname == "serve" and n not in SERVE_PLACEHOLDERS:
-                        usable = ", ".join("{" + p + "}" for p in SERVE_PLACEHOLDERS)
-                        raise bad(f"[commands] serve: {{{n}}} has no value for a persistent decoder, which gets "
-                                  f"each input on stdin (usable: {usable})",
-                                  "manifest-placeholder")
-                    if n not in PLACEHOLDERS:
-                        raise bad(f"[commands] {cname}: unknown placeholder {_quote(n)} (known: "
-                                  f"{', '.join('{' + p + '}' for p in PLACEHOLDERS)})", "manifest-placeholder")
+                _check_placeholders(cname, s, bad)
     text = " ".join(str(x) for x in _flatten(cmds["decode"]))
     for out in data["outputs"]:
         ph = "{" + OUTPUT_PLACEHOLDER[out] + "}"
         if ph not in text:
             raise bad(f"outputs lists {out!r} but [commands] decode never names {ph}", "manifest-outputs")
+
+
+def _check_placeholders(cname: str, s: str, bad) -> None:
+    for n in _PH.findall(s):
+        if cname == "serve" and n not in SERVE_PLACEHOLDERS:
+            usable = ", ".join("{" + p + "}" for p in SERVE_PLACEHOLDERS)
+            raise bad(f"[commands] serve: {{{n}}} has no value for a persistent decoder, which gets "
+                      f"each input on stdin (usable: {usable})", "manifest-placeholder")
+        if n not in PLACEHOLDERS:
+            raise bad(f"[commands] {cname}: unknown placeholder {_quote(n)} (known: "
+                      f"{', '.join('{' + p + '}' for p in PLACEHOLDERS)})", "manifest-placeholder")
 
 
 MANIFEST_KEYS = ("name", "description", "claims", "tools", "inputs", "outputs", "faps_format", "commands", "limits",
