@@ -17,7 +17,7 @@ an xfail if it keeps failing, a listed case that passes now fails ("fixed": remo
 unless ``--fbaconf-allow-fixed``, and anything else that fails is new and fails. A provisional
 difference (harness/provisional.py) is an xfail unless ``--fbaconf-strict``, as in ``fbaconf run``.
 The run ends with ``fbaconf: N new, N known, N fixed, N flaky`` and the new failures by name,
-before pytest's own failure sections. Options:
+before pytest's own failure sections (with ``--junitxml``, the file's ``baseline`` property). Options:
 
   --fbaconf-decoder D.toml|NAME   decoder manifest or bundled adapter name
   --fbaconf-claim P@L             claim under test (default: the decoder's highest claim)
@@ -315,21 +315,40 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     return (yield)
 
 
+def _seen(tr) -> dict[str, str]:
+    """Each item's class against the baseline (new, known, fixed, flaky, provisional, pass), from its reports."""
+    return {rep.nodeid: v for reports in tr.stats.values() for rep in reports
+            for name, v in getattr(rep, "user_properties", None) or [] if name == _PROPERTY}
+
+
+def _line(seen: dict[str, str]) -> str:
+    count = {k: sum(1 for v in seen.values() if v == k) for k in ("new", "known", "fixed", "flaky", "provisional")}
+    line = f"{count['new']} new, {count['known']} known, {count['fixed']} fixed, {count['flaky']} flaky"
+    return line + (f" ({count['provisional']} provisional difference(s): xfail)" if count["provisional"] else "")
+
+
 def _baseline_summary(tr) -> None:
-    seen: dict[str, str] = {}
-    for reports in tr.stats.values():
-        for rep in reports:
-            for name, value in getattr(rep, "user_properties", None) or []:
-                if name == _PROPERTY:
-                    seen[rep.nodeid] = value
+    seen = _seen(tr)
     if not seen:
         return
-    count = {k: sum(1 for v in seen.values() if v == k) for k in ("new", "known", "fixed", "flaky", "provisional")}
-    line = f"fbaconf: {count['new']} new, {count['known']} known, {count['fixed']} fixed, {count['flaky']} flaky"
-    if count["provisional"]:
-        line += f" ({count['provisional']} provisional difference(s): xfail)"
     tr.write_sep("=", "fbaconf baseline", bold=True)
-    tr.write_line(line)
+    tr.write_line(f"fbaconf: {_line(seen)}")
     for what in ("new", "fixed"):
         for nodeid in sorted(n for n, v in seen.items() if v == what):
             tr.write_line(f"  {what.upper():5}  {nodeid}", red=True)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionfinish(session) -> None:
+    """With ``--junitxml``, the line is the JUnit file's ``baseline`` property, as in ``fbaconf run``'s."""
+    config = session.config
+    tr = config.pluginmanager.get_plugin("terminalreporter")
+    if config.stash.get(_STATE, None) is None or tr is None:
+        return
+    try:
+        from _pytest.junitxml import xml_key  # noqa: PLC0415 (pytest's internal: the file's global properties)
+    except ImportError:
+        return
+    xml, seen = config.stash.get(xml_key, None), _seen(tr)
+    if xml is not None and seen:
+        xml.add_global_property("baseline", _line(seen))

@@ -120,9 +120,11 @@ def test_a_fixed_case_and_a_new_bug_fail_and_are_named_first(repo, tmp_path):
     try:
         both = ["fbaconf::simple-l1-core/arith-q1-all-faps", "fbaconf::simple-l1-core/arith-q31-timecodes"]
         r = pytest_in(repo, "--fbaconf-baseline", "ci/baseline.txt", "--fbaconf-keep-workdirs", "--fbaconf-out",
-                      str(tmp_path / "out"), *both)
+                      str(tmp_path / "out"), "--junitxml", str(tmp_path / "junit.xml"), *both)
         out = r.stdout
         assert r.returncode == 1 and "fbaconf: 1 new, 0 known, 1 fixed, 0 flaky" in out, out
+        junit = (tmp_path / "junit.xml").read_text()
+        assert '<property name="baseline" value="1 new, 0 known, 1 fixed, 0 flaky"' in junit
         assert out.index("NEW    fbaconf::simple-l1-core/arith-q31-timecodes") < \
             out.index("FIXED  fbaconf::simple-l1-core/arith-q1-all-faps") < out.index("= FAILURES =")
         assert "lists it as Fail,faps:3: remove its line (or --fbaconf-allow-fixed)" in out
