@@ -13,6 +13,8 @@ Tiers, by folder (each test is marked with its folder's name, so ``-m unit`` wor
 """
 from __future__ import annotations
 
+import fcntl
+import json
 import os
 import shutil
 import subprocess
@@ -23,6 +25,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 
 from fbaconf.certification import certify
+from fbaconf.certification.package import load_key, seal
 
 # ci: deterministic (derandomised) so a CI run is reproducible; dev: random exploration.
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True,
@@ -69,13 +72,27 @@ def _certify(out: Path, *extra: str) -> subprocess.CompletedProcess:
 
 @pytest.fixture(scope="session")
 def _packages(tmp_path_factory):
-    """``certify --decoder reference-inprocess --claim simple@1 --no-speed``, made once per session
-    (per worker under xdist): unsigned, and signed with a fresh key."""
-    root = tmp_path_factory.mktemp("packages")
-    unsigned = _certify(root / "unsigned")
-    certify.keygen(root / "keys")
-    signed = _certify(root / "signed", "--key", str(root / "keys" / certify.KEY_FILE))
-    return root, unsigned, signed
+    """``certify --decoder reference-inprocess --claim simple@1 --no-speed``, made once per
+    session and shared by the xdist workers (the first to take the lock makes it): unsigned, and
+    that package sealed with a fresh key as ``certify --key`` seals it (``seal(out, key)``; the
+    end-to-end ``certify --key`` runs in tests/attacks/test_lab.py)."""
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # the session's folder, above each worker's
+    root = base / "fbaconf-packages"
+    root.mkdir(exist_ok=True)
+    with open(root / "lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (root / "made.json").is_file():
+            unsigned = _certify(root / "unsigned")
+            key, _pub = certify.keygen(root / "keys")
+            shutil.copytree(root / "unsigned", root / "signed", symlinks=True)
+            seal(root / "signed", load_key(key, private=True))
+            (root / "made.json").write_text(json.dumps({"returncode": unsigned.returncode,
+                                                        "output": unsigned.stdout + unsigned.stderr}))
+    made = json.loads((root / "made.json").read_text())
+    run = subprocess.CompletedProcess(["certify"], made["returncode"], made["output"], "")
+    return root, run, run
 
 
 @pytest.fixture

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from fbaconf.certification import package
-from fbaconf.certification.certify import KEY_FILE, PUB_FILE, keygen, verify
+from fbaconf.certification.certify import PUB_FILE, keygen, verify
 
 
 def cli(*args):
@@ -240,12 +240,3 @@ def test_non_regular_files_are_refused_unopened(certified_package):
     assert {p.split(":")[0] for p in v.problems} == {"'fifo'", "'link'"}
 
 
-def test_the_key_file_is_never_in_the_package(signed_package, _packages):
-    root, _, _ = _packages
-    key = (root / "keys" / KEY_FILE).read_bytes()
-    body = b"".join(key.splitlines()[1:-1])
-    pkg, _pub = signed_package
-    for p in pkg.rglob("*"):
-        if p.is_file():
-            data = p.read_bytes()
-            assert body not in data and body[:24] not in data, p
