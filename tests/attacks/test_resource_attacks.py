@@ -6,6 +6,7 @@ from the host's user, ``memory_kind = "rss"`` sampling the decoder's tree (not t
 from __future__ import annotations
 
 import os
+import resource
 import sys
 import textwrap
 import time
@@ -111,24 +112,31 @@ def test_a_disk_flood_is_stopped_at_the_output_limit_while_it_writes(tmp_path):
     assert time.perf_counter() - t0 < 60
 
 
-def test_a_50000_level_tree_with_338_mb_below_a_25000_level_chain_is_counted_and_removed(tmp_path):
-    """Before: one descriptor per level — the 50,000-level tree stayed in the run folder, and
-    338 MB below a 25,000-level chain were neither counted nor removed."""
+def test_a_6000_level_tree_with_338_mb_below_a_3000_level_chain_is_counted_and_removed(tmp_path):
+    """Before: one descriptor per level — a tree deeper than the descriptor limit (50,000 levels
+    against 20,000) stayed in the run folder, and 338 MB below a chain longer than PATH_MAX were
+    neither counted nor removed. Here the harness's descriptor limit is lowered to 1,024 so 6,000
+    levels are as deep (and 3,000 levels of "d/" are 6,000 bytes, over PATH_MAX's 4,096)."""
     body = '''
         fd = os.open(".", os.O_RDONLY)
-        for i in range(50000):
+        for i in range(6000):
             os.mkdir("d", dir_fd=fd)
             nfd = os.open("d", os.O_RDONLY, dir_fd=fd)
             os.close(fd)
             fd = nfd
-            if i == 25000:
+            if i == 3000:
                 for k in range(2):  # 2 x 169 MB (sparse: each under the per-file limit)
                     f = os.open("hidden%d" % k, os.O_WRONLY | os.O_CREAT, 0o644, dir_fd=fd)
                     os.ftruncate(f, 169 << 20)
                     os.close(f)
         honest()
         '''
-    r = run_one(tmp_path, decoder(tmp_path, "deep", body, "timeout_s = 120\noutput_mb = 256\n"))
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    resource.setrlimit(resource.RLIMIT_NOFILE, (min(1024, soft), hard))
+    try:
+        r = run_one(tmp_path, decoder(tmp_path, "deep", body, "timeout_s = 120\noutput_mb = 256\n"))
+    finally:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
     assert r.outcome != Outcome.PASS and "output limit" in r.message, r.message
     assert not (tmp_path / "run" / "work").exists()  # the whole run folder's work tree is gone
 
