@@ -206,7 +206,7 @@ def check_fap_text(text: str, *, file: str | None = None
     return sorted(found, key=lambda w: (w.line, w.column)), frames, header
 
 
-def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:  # noqa: C901
+def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:  # noqa: C901 (one pass)
     if text.startswith("\ufeff"):  # byte order mark: read as whitespace (keeps columns)
         text = " " + text[1:]
     lines = _LINE_BREAK.split(text)
