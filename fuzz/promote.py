@@ -21,7 +21,8 @@ REGRESSION_HEADER = f"""# fbaconf regression suite: fuzz findings promoted by `f
 #
 # Each case is a committed input under conformance/data/regression/ (generator = "file"). With
 # `expect` (the error diagnostics fbaconf check gives for it) it is an error case: a decoder must
-# terminate cleanly within its limits (reject or conceal) — a crash, hang or memory blow-up fails.
+# reject it with one of its documented reject exit codes, within its limits — decoding it without
+# complaint, a crash, a hang or a memory blow-up fails.
 # Without `expect` the input is a valid stream whose reference output becomes the golden.
 # Appended by the tool; edit descriptions freely, keep ids stable.
 
