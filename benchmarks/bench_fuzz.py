@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -88,6 +89,18 @@ def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False
     return fz.stats.rate, mode, fz.stats.execs
 
 
+def _timed(fn, *args, **kw):
+    """``fn``'s result and the CPU seconds it took, this process's and its children's: on a
+    shared machine a rate far below an earlier one with CPU seconds far below the wall time is
+    the machine's load, not the harness."""
+    def cpu() -> float:
+        me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+        return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+    c0 = cpu()
+    out = fn(*args, **kw)
+    return out, cpu() - c0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=8.0)
@@ -107,20 +120,24 @@ def main() -> int:
         (suite,) = load_suites(names=["simple-l1-core"])
         stream.write_bytes(suite.cases[0].input_path("fba").read_bytes())
         s = args.seconds
-        rows = [("bare spawn (posix_spawn loop)", bare_spawn(exe, stream, s), "")]
+        load0 = os.getloadavg()[0]
+        rows = [("bare spawn (posix_spawn loop)", *_timed(bare_spawn, exe, stream, s), "")]
         for label, manifest, one_shot, c_server in (("fuzz --spawn", spawn, True, True),
                                                     ("fuzz (fork server, default)", spawn, False, True),
                                                     ("fuzz (fork server in Python)", spawn, False, False),
                                                     ("fuzz (persistent, [commands] serve)", serve, False, True),
                                                     ("fuzz (fork server), bug fixed", fixed, False, True),
                                                     ("fuzz (persistent), bug fixed", fixed_serve, False, True)):
-            rate, mode, execs = fuzz_rate(manifest, s, tmp / f"work-{len(rows)}", spawn=one_shot, c_server=c_server)
-            rows.append((label, rate, f"{execs} inputs, mode {mode}"))
-        rows.append(("bare persistent (pipe round trip)", bare_persistent(exe, stream, s), ""))
-        print(f"fuzzing throughput, {s:g} s each, one decoder at a time, {os.cpu_count()} CPUs")
-        for label, rate, note in rows:
-            print(f"  {label:<40} {rate:9,.0f} execs/s  {note}")
-        r = {label: rate for label, rate, _ in rows}
+            (rate, mode, execs), cpu = _timed(fuzz_rate, manifest, s, tmp / f"work-{len(rows)}", spawn=one_shot,
+                                              c_server=c_server)
+            rows.append((label, rate, cpu, f"{execs} inputs, mode {mode}"))
+        rows.append(("bare persistent (pipe round trip)", *_timed(bare_persistent, exe, stream, s), ""))
+        print(f"fuzzing throughput, {s:g} s each, one decoder at a time, {os.cpu_count()} CPUs, "
+              f"load average {load0:.1f} -> {os.getloadavg()[0]:.1f}")
+        print(f"  {'':<40} {'execs/s':>9}  {'CPU s':>6}  (this process and its children: a share of the machine)")
+        for label, rate, cpu, note in rows:
+            print(f"  {label:<40} {rate:9,.0f}  {cpu:6.1f}  {note}")
+        r = {label: rate for label, rate, _, _ in rows}
         bare = r["bare spawn (posix_spawn loop)"]
         fork = r["fuzz (fork server, default)"]
         pers = r["fuzz (persistent, [commands] serve)"]
