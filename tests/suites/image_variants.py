@@ -6,7 +6,10 @@ pixel: ordered grids of 2 x 2 to 4 x 4 samples, a rotated grid of 4 (RGSS, the u
 pattern) and an 8-sample pattern (D3D's standard 8x MSAA positions), each averaged in linear
 light. Sample patterns are rendered as one image per sample with the projection offset by the
 sample's position, then averaged — exactly what a multisampling renderer computes for a pixel
-fully covered by one triangle, and coverage-weighted at edges.
+fully covered by one triangle, and coverage-weighted at edges. ``float32`` (FLOAT_PIPELINE) is
+faithful too, a GPU's float pipeline: the 2 x 2 image in float32, encoded to sRGB in float32 (a
+background component on a rounding tie, e.g. 0.30 x 255 = 76.5, comes out one code below the
+reference's).
 
 Wrong renderers change one thing a player could get wrong: the lights (mirrored, one missing,
 specular dropped), the camera (field of view, a 1 px shift), the geometry on screen (one region
@@ -15,6 +18,12 @@ sRGB applied twice), culling, the shading mode.
 
 ``python tests/suites/image_variants.py`` prints the matrix of verdicts and metrics over every image
 case of the built suites (the measurement behind harness/data/tolerances.toml [images]).
+
+Dropped FAPs (issue 33): ``drop-fap-N`` renders geometry animated without FAP N — its effective
+value held at 0 after FIT, left/right fill and visemes/expressions (FAP 1/2: the visemes or
+expressions ignored) — so the vertices a player reports may be right while its picture is not.
+``python tests/suites/image_variants.py --drop`` lists, per image case, the FAPs that move its
+geometry and whether dropping each fails the case.
 """
 from __future__ import annotations
 
@@ -27,7 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fbaconf.animation.engine import animate
+from fbaconf.animation import engine
+from fbaconf.animation.engine import animate_model, compile_scene, load_scene
+from fbaconf.bitstreams.frames import FREE
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness.compare import ImageTolerances, compare_images
 from fbaconf.pipeline import load_stream
@@ -42,6 +53,7 @@ D3D8 = [(0.5625, 0.3125), (0.4375, 0.6875), (0.8125, 0.5625), (0.3125, 0.1875),
         (0.1875, 0.8125), (0.0625, 0.4375), (0.6875, 0.9375), (0.9375, 0.0625)]
 
 FAITHFUL = ("ss2", "ss3", "ss4", "rgss4", "msaa8")
+FLOAT_PIPELINE = "float32"  # faithful too: the ss2 image with its linear light and encoding in float32
 WRONG = ("lights-mirrored", "light-missing", "specular-off", "fov-wrong", "camera-shift", "region-displaced",
          "texture-flipped", "texture-clamp", "gamma22", "gamma-twice", "cull-backfaces", "wrong-shading",
          "ss1")
@@ -116,12 +128,70 @@ def _displaced(state, sc, k, scene_dir):
     return dataclasses.replace(state, vertices=V)
 
 
+@contextlib.contextmanager
+def _fap_dropped(fap: int):
+    """Animation that ignores FAP ``fap``: its effective value 0 (FAP 1/2: visemes/expressions off)."""
+    orig_eff, orig_w = engine.effective_faps, engine.high_level_weights
+
+    def effective_faps(frames, model):
+        if fap <= 2:
+            frames = frames.copy()
+            st = frames.status.copy()
+            st[:, fap - 1] = FREE
+            frames.status = st
+        values, status = orig_eff(frames, model)
+        if fap >= 3:
+            values = values.copy()
+            values[:, fap - 1] = 0.0
+        return values, status
+
+    def high_level_weights(high, status):
+        wv, we = orig_w(high, status)
+        return (np.zeros_like(wv) if fap == 1 else wv), (np.zeros_like(we) if fap == 2 else we)
+    engine.effective_faps, engine.high_level_weights = effective_faps, high_level_weights
+    try:
+        yield
+    finally:
+        engine.effective_faps, engine.high_level_weights = orig_eff, orig_w
+
+
+def _key(case) -> tuple:
+    return case.suite, str(case.input_path("scene")), str(case.input_path("fba"))
+
+
+def case_state(case, cache: dict, drop: int | None = None):
+    """The animated state of ``case`` (FAP ``drop`` ignored), sharing its stream and compiled scene."""
+    key = _key(case)
+    if (key, "model") not in cache:
+        scene = compile_scene(load_scene(case.input_path("scene")))
+        cache[(key, "model")] = (load_stream(case.input_path("fba")), scene)
+    if (key, drop) not in cache:
+        frames, model = cache[(key, "model")]
+        with _fap_dropped(drop) if drop is not None else contextlib.nullcontext():
+            cache[(key, drop)] = animate_model(frames, model)
+    return cache[(key, drop)]
+
+
+def animated_faps(case, cache: dict, eps: float = 1e-9, only=None) -> list[int]:
+    """The FAPs (of ``only``, default all) whose dropping moves the case's geometry in some frame."""
+    base = case_state(case, cache).vertices
+    out = []
+    for fap in only or range(1, 69):
+        v = case_state(case, cache, fap).vertices
+        if v.shape != base.shape or np.abs(v - base).max() > eps:
+            out.append(fap)
+        cache.pop((_key(case), fap))
+    return out
+
+
 def render_variant(state, sc, k: int, variant: str, scene_dir=None) -> np.ndarray:
     """Frame k as the renderer ``variant`` makes it: linear float[H, W, 3], except the encoding
     variants, which return sRGB-encoded values (see :func:`encoded`)."""
     n = sc.supersample
     if variant.startswith("ss"):
         return _render(state, sc.with_(supersample=int(variant[2:])), k, scene_dir)
+    if variant.startswith("drop-fap-"):  # the state passed is already the one without the FAP
+        return _render(state, sc, k, scene_dir)
     if variant == "rgss4":
         return _pattern(state, sc, k, scene_dir, RGSS4)
     if variant == "msaa8":
@@ -151,12 +221,19 @@ def render_variant(state, sc, k: int, variant: str, scene_dir=None) -> np.ndarra
         return _render(state, sc.with_(shading="flat" if sc.shading == "gouraud" else "gouraud"), k, scene_dir)
     if variant in ("gamma22", "gamma-twice"):
         return _render(state, sc, k, scene_dir)
+    if variant == "float32":  # a GPU's float pipeline: linear light and its encoding in float32
+        return _render(state, sc, k, scene_dir).astype(np.float32)
     raise ValueError(f"unknown variant {variant}")
 
 
 def encoded(linear: np.ndarray, variant: str) -> np.ndarray:
     """8-bit encoded pixels as the variant writes them."""
     x = np.clip(linear, 0.0, 1.0)
+    if variant == "float32":  # the exact sRGB encode (IEC 61966-2-1), every step in float32
+        x = x.astype(np.float32)
+        e = np.where(x <= np.float32(0.0031308), np.float32(12.92) * x,
+                     np.float32(1.055) * x ** np.float32(1.0 / 2.4) - np.float32(0.055)).astype(np.float32)
+        return np.floor(e * np.float32(255.0) + np.float32(0.5)).astype(np.uint8)
     if variant == "gamma22":
         return np.floor(x ** (1.0 / 2.2) * 255.0 + 0.5).astype(np.uint8)
     if variant == "gamma-twice":
@@ -169,18 +246,18 @@ def image_cases():
     return [c for s in load_suites() for c in s.cases if "images" in c.stages]
 
 
-def run_variant(case, variant: str, out: Path, state_cache: dict | None = None):
-    """The image stage's result for ``variant`` rendering ``case``'s compared frames."""
+def run_variant(case, variant: str, out: Path, state_cache: dict | None = None, only: list[int] | None = None):
+    """The image stage's result for ``variant`` rendering ``case``'s compared frames (``only``: just
+    these of them)."""
 
     scene = case.input_path("scene")
-    key = (case.suite, str(scene), str(case.input_path("fba")))
     cache = state_cache if state_cache is not None else {}
-    if key not in cache:
-        cache[key] = animate(load_stream(case.input_path("fba")), scene=scene)
-    state = cache[key]
+    state = case_state(case, cache, int(variant.rsplit("-", 1)[1]) if variant.startswith("drop-fap-") else None)
     sc = Scenario.load(case.input_path("scenario"))
     names = case.goldens["images"]
     frames = [int(re.fullmatch(r"frame_(\d+)\.png", n).group(1)) for n in names]
+    if only is not None:
+        names, frames = [n for n, k in zip(names, frames) if k in only], [k for k in frames if k in only]
     out.mkdir(parents=True, exist_ok=True)
     oiio = openimageio()
     got = []
@@ -196,8 +273,40 @@ def run_variant(case, variant: str, out: Path, state_cache: dict | None = None):
     return compare_images([gdir / n for n in names], got, ImageTolerances.defaults(), out / "art", frames=frames)
 
 
+def drop_matrix(cases=None, log=print, faps=None) -> dict:
+    """Per decode case (its scenario views together): FAP -> the first view whose image stage fails
+    with that FAP dropped, or None when every view passes (``faps``: only these FAPs)."""
+    cases = cases if cases is not None else image_cases()
+    groups: dict = {}
+    for c in cases:
+        groups.setdefault((c.suite, str(c.input_path("fba"))), []).append(c)
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for views in groups.values():
+            cache: dict = {}
+            row = {}
+            for fap in animated_faps(views[0], cache, only=faps):
+                row[fap] = None
+                for c in views:
+                    r = run_variant(c, f"drop-fap-{fap}", Path(tmp) / c.suite / c.id / str(fap), cache)
+                    if r.outcome.value == "Fail":
+                        row[fap] = c.id
+                        break
+                cache.pop((_key(views[0]), fap), None)
+            out[f"{views[0].suite}/{views[0].id}"] = row
+            log(f"{views[0].suite}/{views[0].id}: {len(row)} FAPs move it; survive dropped: "
+                f"{sorted(f for f, v in row.items() if v is None)}")
+    return out
+
+
 def main(argv: list[str]) -> int:
-    variants = argv or list(FAITHFUL + WRONG)
+    if argv[:1] == ["--drop"]:  # --drop [--faps N,N,...] [CASE_ID_PREFIX ...]
+        faps = None
+        if argv[1:2] == ["--faps"]:
+            faps, argv = [int(x) for x in argv[2].split(",")], argv[:1] + argv[3:]
+        drop_matrix([c for c in image_cases() if not argv[1:] or c.id.startswith(tuple(argv[1:]))], faps=faps)
+        return 0
+    variants = argv or list(FAITHFUL + (FLOAT_PIPELINE,) + WRONG)
     cases = image_cases()
     cache: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
