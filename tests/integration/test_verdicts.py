@@ -19,6 +19,8 @@ from fbaconf.fuzz.targets import DecoderTarget, FuzzSetupError
 from fbaconf.harness import adapters
 from fbaconf.harness.results import Outcome
 from fbaconf.harness.runner import run_cases
+from fbaconf.harness.selection import select_cases
+from fbaconf.harness.session import RunOptions, execute
 
 ERROR_CASE = "simple-l1-error/truncated"
 VALID_CASE = "simple-l1-core/arith-q8-visemes-expressions"
@@ -137,12 +139,21 @@ def test_decoder_that_supports_nothing_fails_the_claim(tmp_path):
 
 
 def test_arithmetic_only_decoder_fails_the_claim(tmp_path):
-    """The reference decoder declared without the DCT tool: the DCT cases are NotSupported."""
-    m = manifest(tmp_path, "arith-only", ["{python}", "-m", "fbaconf.harness.refdecoder", "decode", "{input}",
-                                          "--faps-out", "{faps_out}"], tools=("arithmetic", "high_level_faps"))
-    assert certify_exit(tmp_path, m) == 1
-    statement = (tmp_path / "cert" / "statement.md").read_text()
-    assert "dct" in statement
+    """The reference decoder declared without the DCT tool fails simple@1: the DCT cases are
+    required and NotSupported. In-process through the session certify runs (the claim policy is
+    the point, not the sandbox; certify refuses in-process adapters other than the bundled one)."""
+    m = tmp_path / "arith-only.toml"
+    m.write_text('name = "arith-only"\npython = "fbaconf.harness.refdecoder:ReferenceAdapter"\n'
+                 'claims = ["simple@1"]\ntools = ["arithmetic", "high_level_faps"]\ninputs = ["fba"]\n'
+                 'outputs = ["faps"]\nfaps_format = "npz"\n')
+    a = adapters.resolve(m)
+    suites = load_suites(names=["simple-l1-core", "simple-l1-error"])
+    cases = select_cases(suites, "simple@1", [], [], only_required=True, adapter=a)
+    record = execute(a, "simple@1", cases, suites, tmp_path / "run", RunOptions(jobs=2, speed=False))
+    assert record.exit_code == 1
+    (line,) = record.missing
+    dct = [c for c in cases if "dct" in (c.tools or [])]
+    assert dct and line.startswith(f"{len(dct)} required case(s)") and "dct" in line, line
 
 
 def test_worked_text_example_is_a_player():
