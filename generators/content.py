@@ -7,12 +7,50 @@ import numpy as np
 
 from fbaconf.bitstreams import tables
 from fbaconf.bitstreams.encoder import EncoderOptions
-from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS
+from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS, SET, FapFrames
 from fbaconf.bitstreams.synth import synthetic_sequence
+
+
+def sweep_content(groups: list[list[int]], scale: dict, rate: float = 25.0):
+    """FapFrames that show every FAP in turn (issue 33): frame 0 neutral (nothing sent), then one
+    frame per group of ``groups``. A group's low-level FAPs (negative = the negative direction)
+    take ``scale[fap]`` (else ``scale["default"]``) times their default intra range, in whole
+    quantiser steps; every other low-level FAP is sent as 0 from the first low-level group on.
+    FAP 1 / 2 in a group: viseme 10 / expression 1 (joy) at full weight, with the low-level FAPs
+    unsent (FREE) in that frame so that the high-level table drives them — so a group holding 1 or
+    2 must come before any low-level group. Each FAP is pushed far enough in its frame that a
+    player ignoring it moves the part by several pixels in some scenario (the amplitudes are
+    measured: ``python tests/suites/image_variants.py --drop``)."""
+    out = FapFrames.empty(len(groups) + 1, frame_rate=rate)
+    ft = tables.fap_table()
+    low_started = False
+    for k, group in enumerate(groups, 1):
+        if any(abs(s) >= 3 for s in group):
+            low_started = True
+        if low_started:
+            out.status[k, 2:] = SET
+        for s in group:
+            fap = abs(int(s))
+            if fap == 1:
+                out.status[k, 0] = SET
+                for name, v in (("viseme_select1", 10), ("viseme_select2", 1), ("viseme_blend", 63)):
+                    out.hl(name)[k] = v
+            elif fap == 2:
+                out.status[k, 1] = SET
+                for name, v in (("expression_select1", 1), ("expression_intensity1", 63),
+                                ("expression_select2", 1), ("expression_intensity2", 0)):
+                    out.hl(name)[k] = v
+            else:
+                f = ft[fap - 1]
+                steps = int(round(float(scale.get(str(fap), scale["default"])) * f.intra_range))
+                out.values[k, fap - 1] = (1 if int(s) > 0 else -1) * steps * int(f.quant_step)
+    return out
 
 
 def make_content(c: dict):
     """Procedural FapFrames for a case's ``content`` table."""
+    if "sweep" in c:
+        return sweep_content(c["sweep"], c.get("sweep_scale", {"default": 0.2}), float(c.get("rate", 25.0)))
     frames = synthetic_sequence(int(c.get("frames", 30)), float(c.get("rate", 25.0)),
                                 visemes=bool(c.get("visemes", True)), expressions=bool(c.get("expressions", True)),
                                 faps=c.get("faps"), seed=int(c.get("seed", 0)))

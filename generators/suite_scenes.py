@@ -28,7 +28,7 @@ def make_scene(name: str):
     if name == "logo":
         return models.logo_scene(), {}
     if name.startswith("calibration:"):
-        return _calibration_scene(name.split(":", 1)[1]), {}
+        return _calibration_scene(name.split(":", 1)[1])
     if name.startswith("fit:"):
         return _fit_scene(name.split(":", 1)[1]), {}
     if name.startswith("grid:"):
@@ -43,6 +43,9 @@ CALIBRATION_SUBSETS = {
                "4.4", "4.5", "4.6", "8.1", "8.2", "8.3", "8.4", "9.3", "9.15", "10.9", "10.10", "11.1"],
     "few": ["3.5", "3.6", "2.1"],
 }
+
+
+CALIBRATION_TEXTURE = "calibration-texture64.png"
 
 
 def _calibration_scene(subset: str):
@@ -63,12 +66,19 @@ def _calibration_scene(subset: str):
         target = np.round(target, 4)
         target[~keep] = UNSENT
     fdp = {"featurePointsCoord": bt.Node("Coordinate", {"point": np.round(target, 4) if subset == "all" else target})}
+    nodes, files = [], {}
     if texture:
         lo, hi = fps.min(0), fps.max(0)
         uv = np.round((fps[:, :2] - lo[:2]) / (hi[:2] - lo[:2]), 4)
         fdp["textureCoord"] = bt.Node("TextureCoordinate", {"point": uv})
         fdp["useOrthoTexture"] = True
-    return bt.Scene([bt.Node("Face", {"fdp": bt.Node("FDP", fdp)}, "FACE")])
+        # the texture image the calibrated texture coordinates map (the first ImageTexture of the
+        # scene, docs/animation.md), in a Shape without geometry that draws nothing; 64 x 64 texels
+        # over a face about 100 px high: magnified, never minified
+        files[CALIBRATION_TEXTURE] = _pattern_png(64, 64)
+        nodes.append(bt.Node("Shape", {"appearance": bt.Node("Appearance", {
+            "texture": bt.Node("ImageTexture", {"url": [CALIBRATION_TEXTURE]})})}))
+    return bt.Scene([bt.Node("Face", {"fdp": bt.Node("FDP", fdp)}, "FACE")] + nodes), files
 
 
 def _fit_scene(which: str):

@@ -71,8 +71,11 @@ def scenario_names(sc_spec: dict) -> list[str]:
 
 def compared_frames(frames, rule: str) -> list[int]:
     """The frames an image case compares: ``"ends"`` = first, middle and last; ``"ends+extreme"``
-    adds the frame whose FAP values are largest in magnitude (the animation's extreme)."""
+    adds the frame whose FAP values are largest in magnitude (the animation's extreme); ``"all"``:
+    every frame (a case whose frames each show other FAPs, e.g. a sweep)."""
     n = len(frames)
+    if rule == "all":
+        return list(range(n))
     out = {0, n // 2, n - 1}
     if rule == "ends+extreme" and n:
         mag = np.where(frames.status != 0, np.abs(frames.values.astype(np.float64)), 0.0).sum(axis=1)
@@ -257,8 +260,11 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
         if c.get("vertices_key"):
             case.tolerances.setdefault("vertices", {})["key"] = c["vertices_key"]
     if "images" in case.stages:
+        if c.get("image_frames"):  # the case's own rule for the frames its images compare
+            sc_spec = dict(sc_spec, frames=c["image_frames"])
         _image_goldens(case, d, _scenario_toml(sc_spec, scenario_names(sc_spec)[0], decoded))
-        views += [_view(case, d, _scenario_toml(sc_spec, n, decoded), n) for n in scenario_names(sc_spec)[1:]]
+        views += [_view(case, d, _scenario_toml(sc_spec, n, decoded), n)
+                  for n in scenario_names(sc_spec)[1:] + list(c.get("extra_scenarios", []))]
     return case
 
 
