@@ -154,18 +154,27 @@ def _value_eq(a, b) -> bool:
 
 @dataclass(eq=False)
 class Scene:
+    """A scene as read (or built): not changed once a reader or builder returns it — its DEF
+    table is computed at the first :meth:`defs` or :meth:`resolve` and kept (a USE resolved
+    per lookup walked the whole tree: quadratic on the level-limit scenes)."""
     nodes: list = field(default_factory=list)  # top-level Node / Use
     file: str | None = None
+    _defs: dict | None = field(default=None, init=False, repr=False)
+    _defs_of: tuple = field(default=(), init=False, repr=False)
 
     def __eq__(self, other) -> bool:
         return isinstance(other, Scene) and _value_eq(self.nodes, other.nodes)
 
     def defs(self) -> dict[str, Node]:
-        out: dict[str, Node] = {}
-        for node, _ in self.walk():
-            if node.def_name and node.def_name not in out:
-                out[node.def_name] = node
-        return out
+        """DEF name -> the first node written with it (read-only: the table is kept)."""
+        key = (id(self.nodes), len(self.nodes), *map(id, self.nodes))  # a top-level change is seen
+        if self._defs is None or self._defs_of != key:
+            out: dict[str, Node] = {}
+            for node, _ in self.walk():
+                if node.def_name and node.def_name not in out:
+                    out[node.def_name] = node
+            self._defs, self._defs_of = out, key
+        return self._defs
 
     def resolve(self, v):
         """Node for a Node/Use value (None for None)."""
