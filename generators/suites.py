@@ -148,6 +148,18 @@ def _write_scene(d: Path, case: Case, spec: str) -> None:
     _write(d, f"{case.id}.bifs", bifs.encode(scene), case, "bifs")
 
 
+def _share_scene(d: Path, case: Case, other: str) -> None:
+    """The scene files (BT and BIFS) of ``other``, a case of the same suite built before: named,
+    not copied (a large scene ships once)."""
+    for key, ext in (("scene", "bt"), ("bifs", "bifs")):
+        name = f"{other}.{ext}"
+        if not (d / name).is_file():
+            raise SuiteError(f"case {case.id}: scene_of names {other!r}, which has no {name} (it must come first "
+                             "in its suite)", rule="suite-spec")
+        case.inputs[key] = name
+        case.sha256[name] = sha256_file(d / name)
+
+
 def _error_expect(c: dict) -> dict:
     """An error case's expectation: the checker's diagnostics, and whether a decoder may
     decode (conceal) instead of rejecting (``conceal = true`` in suites.toml)."""
@@ -255,6 +267,8 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
     case.goldens = {"faps": "faps.npz"}
     if "scene" in c:
         _write_scene(d, case, c["scene"])
+    elif "scene_of" in c:
+        _share_scene(d, case, c["scene_of"])
     if "vertices" in case.stages:
         case.goldens["vertices"] = "vertices.npz"
         if c.get("vertices_key"):
