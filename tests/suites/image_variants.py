@@ -299,6 +299,20 @@ def drop_matrix(cases=None, log=print, faps=None) -> dict:
     return out
 
 
+def shared_cases(variants, variant: str, cases: list) -> list:
+    """The image cases ``variant`` renders in a faithful-renderer matrix: the first of
+    ``variants`` (the coarsest sampling, the farthest from the goldens' 8 x 8) renders every
+    case; each other one every (n-1)-th case, in turn — so every case is rendered by the
+    coarsest and by one other sampling pattern, and every pattern meets every kind of case
+    (the full matrix, every variant on every case, with each cell's numbers: ``python
+    tests/suites/image_variants.py ss2 ss3 ss4 rgss4 msaa8``)."""
+    if variant == variants[0]:
+        return list(cases)
+    others = list(variants[1:])
+    k = others.index(variant)
+    return [c for i, c in enumerate(cases) if i % len(others) == k]
+
+
 def main(argv: list[str]) -> int:
     if argv[:1] == ["--drop"]:  # --drop [--faps N,N,...] [CASE_ID_PREFIX ...]
         faps = None
@@ -324,3 +338,4 @@ def main(argv: list[str]) -> int:
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))
+
