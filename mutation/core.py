@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import sys
 import textwrap
 from dataclasses import dataclass
 from typing import Callable
@@ -70,6 +71,20 @@ def source_patch(where: str, old: str, new: str) -> None:
     if isinstance(raw, staticmethod) and not isinstance(obj, staticmethod):
         obj = staticmethod(obj)
     setattr(owner, attr, obj)
+    if owner is mod:
+        _rebind(raw, obj)
+
+
+def _rebind(old, new) -> None:
+    """Point every fbaconf module's name for ``old`` at ``new``: a module that did ``from m import
+    f`` holds its own reference to ``f``, which a patch of ``m.f`` alone leaves unchanged (imports
+    sit at the top of modules, so the caller is loaded before any mutant is applied)."""
+    for name, module in list(sys.modules.items()):
+        if module is None or not (name == "fbaconf" or name.startswith("fbaconf.")):
+            continue
+        for key, value in list(vars(module).items()):
+            if value is old:
+                setattr(module, key, new)
 
 
 def pure_decoder() -> None:

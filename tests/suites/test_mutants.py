@@ -3,6 +3,9 @@ every required case and a handful of mutants are each killed by a case (the full
 `fbaconf suites mutants`, or benchmarks/bench_mutants.py)."""
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import pytest
 
 from fbaconf.conformance.suite import load_suites
@@ -49,11 +52,30 @@ def test_score_leaves_equivalent_mutants_out():
     assert measure.score(rows, "independent")[0] == len(ind) - len(eq) - (0 if ind[0].equivalent else 1)
 
 
+def test_a_source_mutant_reaches_the_modules_that_imported_its_function():
+    """engine.py does ``from .faceparams import fapu_from_feature_points`` at import time: the
+    mutant of faceparams' function must replace that name too, or the mutant never runs (it
+    survived every case until core._rebind)."""
+    code = ("from fbaconf.mutation import measure\n"
+            "from fbaconf.mutation.core import apply_mutant\n"
+            "from fbaconf.animation import calibrate, engine, faceparams\n"
+            "old = faceparams.fapu_from_feature_points\n"
+            "apply_mutant(measure.MUTANTS['wrong-fapu'])\n"
+            "new = faceparams.fapu_from_feature_points\n"
+            "import sys\n"
+            "left = [n for n, m in sys.modules.items() if n.startswith('fbaconf') and m is not None\n"
+            "        and any(v is old for v in vars(m).values())]\n"
+            "print(new is not old, engine.fapu_from_feature_points is new, calibrate.fapu_from_feature_points is new,"
+            " left)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.stdout.split() == ["True", "True", "True", "[]"], r.stdout + r.stderr
+
+
 def test_reference_passes_and_mutants_are_killed():
     """Three mutants are killed; the unmutated reference, run the way the mutants run (its own
     process, both output formats), passes one case of every suite — every case of every suite
     is run through the harness by tests/integration/test_harness.py."""
-    res = measure.run_all(["prediction-sign", "ignore-retained", "fit-parent-order"], jobs=2)
+    res = measure.run_all(["prediction-sign", "ignore-retained", "wrong-fapu"], jobs=2)
     assert all(r["killed"] for r in res), res
     picked = [s.cases[0] for s in load_suites()]
     out = measure.run_mutant(None, stop_at_first=False, cases=picked)  # None: the reference, unmutated
