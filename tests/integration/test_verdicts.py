@@ -132,7 +132,7 @@ def test_copying_decoder_never_sees_the_fap_form(tmp_path):
 
 
 def test_decoder_that_supports_nothing_fails_the_claim(tmp_path):
-    m = pydec(tmp_path, "nothing", "sys.exit(69)")
+    m = manifest(tmp_path, "nothing", ["/bin/sh", "-c", "exit 69", "{input}", "{faps_out}"])
     assert certify_exit(tmp_path, m) == 1
     statement = (tmp_path / "cert" / "statement.md").read_text()
     assert "could not take" in statement
