@@ -213,11 +213,13 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
         how = f"killed by {res.signal}" if res.signal else f"exit code {rc}"
         kind = ("whole-process-tree" if "tree-memory-limit" in res.notes else
                 "resident-set" if limits.memory_kind == "rss" else "address-space")
-        return Ending(EndingKind.MEMORY, f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; "
-                                f"peak RSS {res.maxrss_mb:.0f} MB)")
+        peak = (f"its process tree's resident set sampled at {res.rss_sampled_mb:.0f} MB" if res.rss_sampled_mb
+                else f"peak RSS {res.maxrss_mb:.0f} MB")
+        return Ending(EndingKind.MEMORY,
+                      f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; {peak})")
     if "supervisor-lost" in res.notes:
-        return Ending(EndingKind.UNEXPECTED, f"the fork server running {cmd} died during this input (the decoder killed "  # noqa: E501
-                                    f"its parent process, or a process-tree limit did): its ending is unknown — "
+        return Ending(EndingKind.UNEXPECTED, f"the fork server running {cmd} died during this input (the decoder "
+                                    f"killed its parent process, or a process-tree limit did): its ending is unknown — "
                                     f"a decoder must not signal processes it did not start{_last_line(err)}")
     if "protocol-error" in res.notes:
         return Ending(EndingKind.UNEXPECTED, f"{cmd}: {res.detail or 'protocol error'}{_last_line(err)}")

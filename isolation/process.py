@@ -36,7 +36,8 @@ class ProcResult:
     timed_out: bool = False
     elapsed_s: float = 0.0
     cpu_s: float = 0.0
-    maxrss_mb: float = 0.0
+    maxrss_mb: float = 0.0  # the waited process's own peak (the launcher's when a tree was killed)
+    rss_sampled_mb: float = 0.0  # the largest resident set of the decoder's tree the harness sampled
     stdout_tail: str = ""
     stderr_tail: str = ""
     output_limit_hit: bool = False
@@ -61,6 +62,7 @@ class Finish:
     out_hit: bool = False  # output limit, while it ran
     oom: bool = False  # the cgroup's OOM events
     pids_hit: bool = False
+    rss_sampled_mb: float = 0.0  # the watch's largest sample of the tree's resident set
     bwrap_status: bool = False  # the status is bubblewrap's (a signal N reads as exit 128 + N)
     notes: tuple[str, ...] = ()
 
@@ -84,8 +86,8 @@ def result(argv: list[str], limits, fin: Finish, *, stdout_tail: str, stderr_tai
     res = ProcResult(argv, None if killed else (rc if rc >= 0 else None), elapsed_s=fin.elapsed,
                      timed_out=fin.timed_out, memory_limit_hit=fin.mem_hit or fin.oom,
                      output_limit_hit=fin.out_hit, cpu_s=(ru[0] + ru[1]) if ru else 0.0,
-                     maxrss_mb=(ru[2] / 1024.0) if ru else 0.0, stdout_tail=stdout_tail, stderr_tail=stderr_tail,
-                     notes=list(fin.notes))
+                     maxrss_mb=(ru[2] / 1024.0) if ru else 0.0, rss_sampled_mb=fin.rss_sampled_mb,
+                     stdout_tail=stdout_tail, stderr_tail=stderr_tail, notes=list(fin.notes))
     if fin.pids_hit:
         res.notes.append("process-limit")
     if fin.oom:

@@ -388,7 +388,8 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
         if not ran and hit is None and not oom and not stopping():
             notes.append("sandbox-failed")  # bubblewrap never saw the program run: its set-up or exec failed
         fin = Finish(status, rusage, time.perf_counter() - t0, timed_out=hit == "timeout", mem_hit=hit == "memory",
-                     out_hit=hit == "output", oom=oom, pids_hit=pids_hit, bwrap_status=sandboxed, notes=tuple(notes))
+                     out_hit=hit == "output", oom=oom, pids_hit=pids_hit, rss_sampled_mb=watch.rss_peak_mb,
+                     bwrap_status=sandboxed, notes=tuple(notes))
         return result(argv, limits, fin, stdout_tail=read_tail(out_path), stderr_tail=read_tail(err_path),
                       measure_dirs=measure)
     finally:

@@ -77,6 +77,7 @@ class Watch:
         self.next_output = t0 + FIRST_S
         self.next_rss = t0 + RSS_EVERY_S if self.rss_limit else float("inf")
         self.bytes = 0
+        self.rss_peak_mb = 0.0  # the largest resident set of the tree sampled so far
 
     def next_in(self, now: float) -> float:
         return max(0.0, min(self.next_output, self.next_rss) - now)
@@ -85,7 +86,9 @@ class Watch:
         if now >= self.next_rss:
             self.next_rss = now + RSS_EVERY_S
             pids = (self.procs() if self.procs else []) or (descendants(self.pid) if self.pid else [])
-            if rss_mb(pids) > self.rss_limit:
+            rss = rss_mb(pids)
+            self.rss_peak_mb = max(self.rss_peak_mb, rss)
+            if rss > self.rss_limit:
                 return "memory"
         if now >= self.next_output and self.dirs:
             t = time.perf_counter()

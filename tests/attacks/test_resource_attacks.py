@@ -176,6 +176,8 @@ def test_rss_is_sampled_over_the_decoders_tree_not_the_launcher(tmp_path, monkey
     ending = endings.classify(res, lim)
     assert ending.kind == "memory" and "resident-set" in ending.message, ending.message
     assert res.elapsed_s < 8 and "ran free" not in res.stdout_tail
+    # the message names what was sampled (over 150 MB), not the launcher's own small peak
+    assert res.rss_sampled_mb > 150 and f"sampled at {res.rss_sampled_mb:.0f} MB" in ending.message, ending.message
 
 
 def test_isolation_report_names_what_is_missing(monkeypatch):
