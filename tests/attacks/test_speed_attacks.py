@@ -83,7 +83,9 @@ def test_a_fast_serve_beside_a_slow_decode_is_timed_as_decode(tmp_path):
     """Before: the fast serve was timed (5,049 fps) while the certified decode ran at 23 fps."""
     r = _decode_result(_manifest(tmp_path, HONEST, serve=SERVE))
     assert "persistent protocol" not in r.message, r.message
-    assert not r.passed and 15 < r.rate_fps < 30, r.message  # 23 fps, below simple@1's 30
+    # every timed run took at least its frames' sleep (1/23 s each): the sleeping decode was timed,
+    # not the serve that answers in milliseconds (a lower bound only load cannot break)
+    assert r.samples and all(x["seconds"] >= x["frames"] / 23.0 * 0.99 for x in r.samples), r.samples
 
 
 def test_serve_declared_equivalent_is_checked_against_decode(tmp_path):
