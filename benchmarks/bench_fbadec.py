@@ -3,7 +3,8 @@
 Builds fbadec from source into a temporary folder and measures, in one run:
 
 * decode speed through the harness's speed measurement (start-up fitted away), frames/s:
-  fbadec, the reference as a subprocess, the reference in-process;
+  fbadec, the reference as a subprocess, the reference in-process; fbadec through its
+  persistent ``serve`` against one process per sample (per-frame ratio, short-run times);
 * per-input cost when fuzzing (fork server, one input at a time, 20 s each, the same seed):
   fbadec and the reference as decoders under test.
 
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -51,6 +53,17 @@ def main() -> int:
             print(f"  {label:<34} {r.rate_fps:12,.0f} frames/s  ({r.per_frame_s * 1e3:.4f} ms/frame, "
                   f"start-up {r.startup_s:+.3f} s)")
         print(f"  fbadec / reference in-process  {rates[decoders[0][0]] / rates[decoders[2][0]]:10.1f}x")
+        fb = resolve(decoders[0][1])
+        lengths = [2000, 10000, 20000]
+        pers = speed.measure(fb, "simple@2", "decode", lengths=lengths, repeats=3)
+        spawn = speed.measure(fb, "simple@2", "decode", lengths=lengths, repeats=3, persistent=False)
+        short = [speed.measure(fb, "simple@2", "decode", lengths=[100, 200], repeats=3, persistent=p)
+                 for p in (True, False)]
+        t_pers, t_spawn = (statistics.median(s["seconds"] for s in r.samples) for r in short)
+        print(f"fbadec through [commands] serve against one process per sample: per-frame cost "
+              f"{pers.per_frame_s / spawn.per_frame_s:.2f}x (expected near 1); a 100-200 frame run "
+              f"{t_pers * 1e3:.1f} ms against {t_spawn * 1e3:.1f} ms ({t_pers / t_spawn:.2f}x: a pipe round trip "
+              f"against a sandboxed process start)")
         print(f"fuzzing, one input at a time (fork server), {args.seconds:g} s each, seed 3")
         fz_rates = {}
         for label, d in decoders[:2]:
