@@ -262,7 +262,8 @@ def fbaconf(*args, cwd=None):
 
 def test_run_cli_exit_codes_and_reports(tmp_path):
     ok = fbaconf("run", "--decoder", str(dummy_manifest(tmp_path, "ok")), "--claim", "simple@1",
-                 "--suite", "simple-l1-core", "-o", str(tmp_path / "ok"), "--no-progress", "-j", "2")
+                 "--suite", "simple-l1-core", "--case", "arith-*", "--case", "dct-q4", "-o", str(tmp_path / "ok"),
+                 "--no-progress", "-j", "2")
     assert ok.returncode == 0, ok.stdout + ok.stderr
     assert "result: PASS" in ok.stdout
     for f in ("report.json", "junit.xml", "index.html", "results.jsonl"):
