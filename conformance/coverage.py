@@ -16,6 +16,7 @@ from __future__ import annotations
 import re
 import tomllib
 from dataclasses import dataclass, field
+from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 
@@ -379,6 +380,19 @@ def frames_points(frames) -> set[str]:
 # ------------------------------------------------------------------ scene extractors
 
 
+def _compiled(scene_path: Path):
+    """A scene and its compiled model, read once per file version (the views of a case, and the
+    cases that share a scene, read the same file; neither result is changed by its readers)."""
+    st = Path(scene_path).stat()
+    return _compiled_at(str(Path(scene_path).resolve()), st.st_mtime_ns, st.st_size)
+
+
+@lru_cache(maxsize=16)
+def _compiled_at(path: str, _mtime_ns: int, _size: int):
+    scene = bt.read(path)
+    return scene, compile_scene(scene)
+
+
 def scene_points(scene_path: Path | None, frames) -> set[str]:  # noqa: C901
     """Points of a case's scene, with the case's decoded frames (for value-dependent points)."""
     hits: set[str] = set()
@@ -389,7 +403,7 @@ def scene_points(scene_path: Path | None, frames) -> set[str]:  # noqa: C901
     if scene_path is None:
         hits.add("model.default")
         return hits
-    scene = bt.read(scene_path)
+    scene, model = _compiled(scene_path)
     faces = scene.find("Face")
     face = faces[0][0]
     fdp = scene.resolve(face.get("fdp"))
@@ -419,7 +433,6 @@ def scene_points(scene_path: Path | None, frames) -> set[str]:  # noqa: C901
     fit = scene.resolve(face.get("fit"))
     if fit is not None:
         hits |= _fit_points(fit)
-    model = compile_scene(scene)
     if graph and model.fp_vertices is None:
         hits.add("model.nonhuman")
     for t in model.mesh_tables:
