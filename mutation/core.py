@@ -3,7 +3,8 @@
 
 A :class:`Mutant` names the place it changes (``module:qualname``) and how: a source mutation
 (one exact snippet of the reference function replaced, the function recompiled in its module's
-namespace and installed) or a custom ``patch`` function. ``pure_decoder`` switches the C fast
+namespace and installed — in its module and under every fbaconf module's name for it, since
+callers import functions by name at the top) or a custom ``patch`` function. ``pure_decoder`` switches the C fast
 path of the arithmetic decoder off, so that a change of the Python block decoder takes effect.
 Applying a mutant changes the whole process and is never undone.
 """
