@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import pytest
+from test_attacks import decoder  # tests/attacks: the Python decoder with honest()
 
 import fbaconf
 from fbaconf.conformance.suite import load_suites
@@ -38,23 +39,6 @@ def needs_cgroups():
         if os.environ.get("CI") and os.geteuid() == 0:
             pytest.fail("no writable memory cgroup in CI (running as root)")
         pytest.skip("no writable memory cgroup here (not root?): no whole-tree memory limit")
-
-
-def decoder(tmp_path: Path, name: str, body: str, limits: str) -> Path:
-    """A decoder written in Python ({python} SCRIPT {input} {faps_out}); ``honest()`` decodes
-    with the reference."""
-    script = tmp_path / f"{name}.py"
-    script.write_text(textwrap.dedent('''\
-        import os, sys, time
-        IN, OUT = sys.argv[1], sys.argv[2]
-        def honest():
-            from fbaconf.pipeline import reference_outputs
-            reference_outputs(IN, faps_out=OUT)
-        ''') + textwrap.dedent(body))
-    m = tmp_path / f"{name}.toml"
-    m.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
-                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{faps_out}}"]\n[limits]\n{limits}')
-    return m
 
 
 def run_one(tmp_path: Path, m: Path):
@@ -83,7 +67,8 @@ def test_an_honest_decoder_with_400_mb_of_scratch_files_passes(tmp_path):
             os.unlink(p)
         honest()
         '''
-    r = run_one(tmp_path, decoder(tmp_path, "scratch", body, "timeout_s = 60\nmemory_mb = 256\noutput_mb = 256\n"))
+    lim = "timeout_s = 60\nmemory_mb = 256\noutput_mb = 256\n"
+    r = run_one(tmp_path, decoder(tmp_path, "scratch", body, limits=lim))
     assert r.outcome == Outcome.PASS, r.message
 
 
@@ -134,7 +119,7 @@ def test_a_6000_level_tree_with_338_mb_below_a_3000_level_chain_is_counted_and_r
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (min(1024, soft), hard))
     try:
-        r = run_one(tmp_path, decoder(tmp_path, "deep", body, "timeout_s = 120\noutput_mb = 256\n"))
+        r = run_one(tmp_path, decoder(tmp_path, "deep", body, limits="timeout_s = 120\noutput_mb = 256\n"))
     finally:
         resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
     assert r.outcome != Outcome.PASS and "output limit" in r.message, r.message
