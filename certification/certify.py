@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fbaconf._atomic import atomic_write_text
-from fbaconf.conformance.coverage import case_points
+from fbaconf.conformance.coverage_table import points_of
 from fbaconf.conformance.golden import MANIFEST
 from fbaconf.conformance.suite import golden_root, load_suites
 from fbaconf.errors import FbaconfInputError
@@ -200,7 +200,7 @@ def claim_basis(record, cases, claim: str) -> dict:
     ok = {r.case_id for r in record.results if r.outcome.ok}
     exercised, possible = set(), set()
     for case in cases:
-        pts = case_points(case).points
+        pts = points_of(case)  # stored with the suites when the case is as committed, else computed
         possible |= pts
         if case.full_id in ok:
             exercised |= pts

@@ -29,6 +29,9 @@ def register(sub) -> None:
                                    "of the coverage model (conformance/data/coverage.toml) they hit.")
     cv.add_argument("--json", action="store_true", help="the full report as JSON")
     cv.add_argument("--cases", action="store_true", help="also list the points of each case")
+    cv.add_argument("--write", action="store_true",
+                    help="also write each case's points to the package's conformance/data/case-points.json "
+                         "(what certify reads instead of decoding every case again; conformance/coverage_table.py)")
     cv.set_defaults(func=cmd_coverage)
     mu = ss.add_parser("mutants", help="run every mutant decoder against the suites (mutation score)",
                        description="Run each mutant decoder (the reference with one realistic bug, "
@@ -136,8 +139,13 @@ def cmd_margins(args) -> int:
 
 
 def cmd_coverage(args) -> int:
-    from . import coverage
-    rep = coverage.compute()
+    from . import coverage, coverage_table
+    computed = coverage.case_coverages()
+    rep = coverage.compute(computed=computed)
+    if args.write:
+        path = coverage_table.write(computed)
+        print(f"wrote the points of {len(coverage_table.table(computed)['cases'])} case(s) to {path}",
+              file=sys.stderr)
     if args.json:
         print(json.dumps(rep, indent=1))
         return 0

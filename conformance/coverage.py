@@ -646,23 +646,28 @@ def case_points(case) -> CaseCoverage:
     return cc
 
 
-def compute(suites=None, model: list[Point] | None = None) -> dict:
-    """{"points": [...], "cases": [...], "covered": K, "total": N, "unknown": {...}}."""
+def case_coverages(suites=None) -> list[tuple]:
+    """(case, CaseCoverage) of every case of the suites (default: the built ones)."""
     suites = suites if suites is not None else load_suites()
+    return [(c, case_points(c)) for s in suites for c in s.cases]
+
+
+def compute(suites=None, model: list[Point] | None = None, computed: list[tuple] | None = None) -> dict:
+    """{"points": [...], "cases": [...], "covered": K, "total": N, "unknown": {...}} (of ``computed``,
+    the pairs of :func:`case_coverages`, when given)."""
+    computed = computed if computed is not None else case_coverages(suites)
     model = model or load_model()
     ids = {p.id for p in model}
     by_point: dict[str, list[str]] = {p.id: [] for p in model}
     cases = []
     unknown: dict[str, list[str]] = {}
-    for s in suites:
-        for c in s.cases:
-            cc = case_points(c)
-            cases.append(cc)
-            for pid in sorted(cc.points):
-                if pid in ids:
-                    by_point[pid].append(cc.case)
-                else:
-                    unknown.setdefault(pid, []).append(cc.case)
+    for _, cc in computed:
+        cases.append(cc)
+        for pid in sorted(cc.points):
+            if pid in ids:
+                by_point[pid].append(cc.case)
+            else:
+                unknown.setdefault(pid, []).append(cc.case)
     covered = sum(1 for v in by_point.values() if v)
     return {"format": "fbaconf.coverage-report/1", "total": len(model), "covered": covered,
             "points": [{"id": p.id, "clause": p.clause, "description": p.description, "cases": by_point[p.id]}
@@ -691,4 +696,5 @@ def format_table(rep: dict, width: int = 100) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["Point", "load_model", "case_points", "compute", "format_table", "stream_points", "scene_points"]
+__all__ = ["Point", "load_model", "case_points", "case_coverages", "compute", "format_table", "stream_points",
+           "scene_points"]

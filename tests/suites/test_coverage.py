@@ -1,11 +1,16 @@
 """The coverage model (conformance/data/coverage.toml) and its extractors."""
 from __future__ import annotations
 
+import copy
+import json
+import shutil
+
 import pytest
 
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.cli import main
-from fbaconf.conformance import coverage
+from fbaconf.conformance import coverage, coverage_table
+from fbaconf.conformance.suite import load_suites
 from fbaconf.generators.content import make_content
 
 
@@ -34,9 +39,14 @@ def test_stream_extractor_reads_the_content_not_labels():
 
 
 @pytest.fixture(scope="module")
-def report():
-    """The coverage of the committed suites, computed once for the module (it reads every case)."""
-    return coverage.compute()
+def computed():
+    """(case, coverage) of every committed case, computed once for the module (it reads every case)."""
+    return coverage.case_coverages()
+
+
+@pytest.fixture(scope="module")
+def report(computed):
+    return coverage.compute(computed=computed)
 
 
 def test_every_emitted_point_is_defined(report):
@@ -55,9 +65,56 @@ def test_committed_suites_cover_every_point(report):
     assert text.splitlines()[-1] == f"coverage: {rep['total']}/{rep['total']} points"
 
 
-def test_coverage_verb(capsys, monkeypatch, report):
-    """The verb prints the table of what ``coverage.compute`` found (computed once here)."""
-    monkeypatch.setattr(coverage, "compute", lambda *a, **k: report)
-    assert main(["suites", "coverage"]) == 0
-    out = capsys.readouterr().out
+def test_coverage_verb(capsys, monkeypatch, tmp_path, computed, report):
+    """The verb prints the table of what ``coverage.compute`` found (computed once here), and
+    ``--write`` writes the stored points."""
+    monkeypatch.setattr(coverage, "case_coverages", lambda *a, **k: computed)
+    monkeypatch.setattr(coverage_table, "TABLE_PATH", tmp_path / "case-points.json")
+    assert main(["suites", "coverage", "--write"]) == 0
+    out, err = capsys.readouterr()
     assert out.rstrip().splitlines()[-1] == f"coverage: {report['total']}/{report['total']} points"
+    assert f"wrote the points of {len(computed)} case(s)" in err
+    written = json.loads((tmp_path / "case-points.json").read_text("utf-8"))["cases"]
+    assert {k: set(v["points"]) for k, v in written.items()} == {c.full_id: cc.points for c, cc in computed}
+
+
+def test_the_stored_points_are_what_a_fresh_computation_gives(tmp_path, computed):
+    """``data/case-points.json`` (what certify reads) is byte for byte what ``suites coverage
+    --write`` writes now: every committed case, its key, its points. Stale after a change to the
+    extractors? Run ``fbaconf suites coverage --write``."""
+    fresh = coverage_table.write(computed, tmp_path / "case-points.json")
+    committed = coverage_table.TABLE_PATH.read_text("utf-8")
+    assert fresh.read_text("utf-8") == committed, "stale: run `fbaconf suites coverage --write`"
+    assert len(json.loads(committed)["cases"]) == len(computed) > 150
+    for case, cc in computed:
+        assert coverage_table.stored_points(case) == cc.points, case.full_id
+
+
+def test_a_case_not_as_committed_is_computed_not_looked_up(tmp_path):
+    """The key covers the bytes of every input, the case's kind and stages and the model: a changed
+    stream, another kind, or a table whose key does not match all fall back to computing."""
+    suite = next(s for s in load_suites() if s.name == "simple-l1-core")
+    case = next(c for c in suite.cases if c.id == "arith-q1-all-faps")
+    assert coverage_table.stored_points(case) is not None  # as committed: looked up
+    shutil.copytree(suite.path, tmp_path / suite.name)
+    moved = copy.copy(case)
+    moved.suite_dir = tmp_path / suite.name
+    assert coverage_table.stored_points(moved) == coverage_table.stored_points(case)  # same bytes, same key
+    other = next(c for c in suite.cases if c.id == "arith-q31-timecodes")
+    (tmp_path / suite.name / case.inputs["fba"]).write_bytes(other.input_path("fba").read_bytes())
+    assert coverage_table.stored_points(moved) is None
+    got = coverage_table.points_of(moved)
+    assert got == coverage.case_points(moved).points
+    assert "fap_quant.31" in got and "fap_quant.1" not in got  # the timecodes stream's, not the stored ones
+    relabelled = copy.copy(case)
+    relabelled.stages = [*case.stages, "vertices"]
+    assert coverage_table.stored_points(relabelled) is None
+    # a table read: its points are used when the key matches, ignored when it does not
+    key = coverage_table.case_key(case)
+    table = tmp_path / "t.json"
+    for k, expect in ((key, {"planted"}), ("0" * 64, None)):
+        table.write_text(json.dumps({"format": coverage_table.TABLE_FORMAT,
+                                     "cases": {case.full_id: {"key": k, "points": ["planted"]}}}))
+        assert coverage_table.stored_points(case, table) == expect
+    table.write_text("{not json")
+    assert coverage_table.stored_points(case, table) is None
