@@ -63,33 +63,51 @@ def real_files() -> list[Path]:
     return files
 
 
-# ------------------------------------------------------------------ one certified package per session
+# ------------------------------------------------------------------ made once per session, for every worker
+@pytest.fixture(scope="session")
+def made_once(tmp_path_factory):
+    """``made_once(name, make) -> folder``: a folder shared by the session's xdist workers, made
+    by ``make(folder)`` by the first worker to take its lock (the others wait, then use it). For
+    what is expensive and read-only once made (a certified package, the wheel in a venv), and
+    for what must not be made twice at once (two wheel builds collide in setuptools' ``build/``)."""
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # the session's folder, above each worker's
+
+    def once(name: str, make) -> Path:
+        root = base / name
+        root.mkdir(exist_ok=True)
+        with open(root / ".lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not (root / ".made").is_file():
+                make(root)
+                (root / ".made").write_text("")
+        return root
+    return once
+
+
 def _certify(out: Path, *extra: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", "reference-inprocess",
                            "--claim", "simple@1", "--no-speed", "-o", str(out), *extra],
                           capture_output=True, text=True, timeout=600)
 
 
+def _make_packages(root: Path) -> None:
+    unsigned = _certify(root / "unsigned")
+    key, _pub = certify.keygen(root / "keys")
+    shutil.copytree(root / "unsigned", root / "signed", symlinks=True)
+    seal(root / "signed", load_key(key, private=True))
+    (root / "made.json").write_text(json.dumps({"returncode": unsigned.returncode,
+                                                "output": unsigned.stdout + unsigned.stderr}))
+
+
 @pytest.fixture(scope="session")
-def _packages(tmp_path_factory):
+def _packages(made_once):
     """``certify --decoder reference-inprocess --claim simple@1 --no-speed``, made once per
-    session and shared by the xdist workers (the first to take the lock makes it): unsigned, and
-    that package sealed with a fresh key as ``certify --key`` seals it (``seal(out, key)``; the
-    end-to-end ``certify --key`` runs in tests/attacks/test_lab.py)."""
-    base = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        base = base.parent  # the session's folder, above each worker's
-    root = base / "fbaconf-packages"
-    root.mkdir(exist_ok=True)
-    with open(root / "lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (root / "made.json").is_file():
-            unsigned = _certify(root / "unsigned")
-            key, _pub = certify.keygen(root / "keys")
-            shutil.copytree(root / "unsigned", root / "signed", symlinks=True)
-            seal(root / "signed", load_key(key, private=True))
-            (root / "made.json").write_text(json.dumps({"returncode": unsigned.returncode,
-                                                        "output": unsigned.stdout + unsigned.stderr}))
+    session and shared by the xdist workers: unsigned, and that package sealed with a fresh key
+    as ``certify --key`` seals it (``seal(out, key)``; the end-to-end ``certify --key`` runs in
+    tests/attacks/test_lab.py)."""
+    root = made_once("fbaconf-packages", _make_packages)
     made = json.loads((root / "made.json").read_text())
     run = subprocess.CompletedProcess(["certify"], made["returncode"], made["output"], "")
     return root, run, run

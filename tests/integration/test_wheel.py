@@ -51,12 +51,7 @@ def _tree_differences(a: Path, b: Path) -> list[str]:
     return sorted(fa ^ fb) + [r for r in sorted(fa & fb) if not filecmp.cmp(a / r, b / r, shallow=False)]
 
 
-@pytest.fixture(scope="module")
-def wheel_venv(tmp_path_factory):
-    """(venv folder, its installed package folder): the wheel of this tree in a fresh venv."""
-    if importlib.util.find_spec("wheel") is None:
-        pytest.fail("the 'wheel' package is part of the test extras; reinstall with .[test]")
-    tmp = tmp_path_factory.mktemp("wheel")
+def _make_wheel_venv(tmp: Path) -> None:
     venv = tmp / "venv"
     build = subprocess.Popen([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
                               "-w", str(tmp / "wheels"), str(ROOT)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
@@ -72,8 +67,17 @@ def wheel_venv(tmp_path_factory):
     ours = sysconfig.get_paths()
     (Path(paths["purelib"]) / "zz-fbaconf-test-deps.pth").write_text(
         "\n".join(dict.fromkeys([ours["purelib"], ours["platlib"]])) + "\n")
-    where = subprocess.run([str(py), "-c", "import fbaconf; print(fbaconf.__file__)"], capture_output=True,
-                           text=True, check=True, cwd="/").stdout.strip()
+
+
+@pytest.fixture(scope="module")
+def wheel_venv(made_once):
+    """(venv folder, its installed package folder): the wheel of this tree in a fresh venv, built
+    once per session (the module's tests may run on two workers; two builds in one tree collide)."""
+    if importlib.util.find_spec("wheel") is None:
+        pytest.fail("the 'wheel' package is part of the test extras; reinstall with .[test]")
+    venv = made_once("fbaconf-wheel", _make_wheel_venv) / "venv"
+    where = subprocess.run([str(venv / "bin" / "python"), "-c", "import fbaconf; print(fbaconf.__file__)"],
+                           capture_output=True, text=True, check=True, cwd="/").stdout.strip()
     assert Path(where).is_relative_to(venv), where  # the wheel, not the source tree
     return venv, Path(where).parent
 
