@@ -7,7 +7,6 @@ import re
 import subprocess
 import sys
 import tomllib
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -94,10 +93,10 @@ def check_vector(name: str, decoder, exact_error: bool = True) -> None:
             assert int(fr.high[i, HIGH_LEVEL_FIELDS.index(field)]) == value, f"frame {i}: {field}"
 
 
-def failing() -> list[str]:
-    """The vectors the current reference decoder gets wrong (used under a mutant)."""
+def failing(names: list[str] | None = None) -> list[str]:
+    """The vectors (of ``names``, default all) the current reference decoder gets wrong (used under a mutant)."""
     bad = []
-    for name in NAMES:
+    for name in NAMES if names is None else names:
         try:
             test_vector(name)
         except (AssertionError, Exception, pytest.fail.Exception):  # noqa: BLE001 - any failure counts
@@ -142,20 +141,61 @@ def test_there_are_corner_vectors_for_every_tie_and_position():
         list(TIE_MUTANTS.values()) + [f"lookahead-{r}-at-{p}" for r in ("rewind", "error") for p in range(1, 15)])
 
 
-def test_each_corner_vector_kills_its_mutant():
-    """Under its mutant (a process of its own) the corner vector fails; the reference passes it."""
-    code = ("import json, runpy, sys\nfrom fbaconf.mutation.measure import apply\napply(sys.argv[1])\n"
-            f"ns = runpy.run_path({str(Path(__file__).resolve())!r})\n"
-            "try:\n    ns['test_vector'](sys.argv[2])\n    print('passed')\n"
-            "except BaseException:\n    print('failed')\n")
+# Under a mutant, in a process of its own: one driver process imports fbaconf and the mutants once,
+# then forks a child per mutant (two at a time) that applies it, loads this file (after the mutant,
+# so this module's own ``decode`` is the mutated one) and reports the vectors that fail as JSON —
+# the same state as a fresh interpreter per mutant, without paying the imports 59 times.
+DRIVER = """
+import json, os, runpy, sys
+from fbaconf.mutation.measure import apply
+test_file, jobs = sys.argv[1], json.loads(sys.argv[2])
+results, running = {}, {}
 
-    def run(name):
-        r = subprocess.run([sys.executable, "-c", code, corner_mutant(name), name], capture_output=True, text=True,
-                           timeout=300)
-        assert r.returncode == 0, r.stderr[-1500:]
-        return name, r.stdout.strip().splitlines()[-1]
-    with ThreadPoolExecutor(2) as pool:
-        survived = [n for n, out in pool.map(run, CORNERS) if out != "failed"]
+def reap():
+    pid, _status = os.wait()
+    mutant, r = running.pop(pid)
+    with os.fdopen(r) as f:
+        text = f.read()
+    results[mutant] = json.loads(text) if text else None  # None: the child died before reporting
+
+for mutant, names in jobs:
+    if len(running) == 2:
+        reap()
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(r)
+        try:
+            apply(mutant)
+            out = json.dumps(runpy.run_path(test_file)["failing"](names))
+        except BaseException as e:
+            out = json.dumps({"error": repr(e)})
+        os.write(w, out.encode())
+        os._exit(0)
+    os.close(w)
+    running[pid] = (mutant, r)
+while running:
+    reap()
+print(json.dumps(results))
+"""
+
+
+def failing_under(jobs: list[tuple[str, list[str] | None]]) -> dict[str, list[str] | None]:
+    """{mutant: the vectors of its ``names`` (None: all) that fail under it} for each (mutant, names)."""
+    r = subprocess.run([sys.executable, "-c", DRIVER, str(Path(__file__).resolve()), json.dumps(jobs)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-1500:]
+    out = json.loads(r.stdout.strip().splitlines()[-1])
+    assert not [m for m, v in out.items() if not isinstance(v, list)], out  # every child reported its vectors
+    return out
+
+
+def test_each_corner_vector_kills_its_mutant():
+    """Under its mutant the corner vector fails; the reference passes it."""
+    assert failing(CORNERS) == []
+    out = failing_under([(corner_mutant(n), [n]) for n in CORNERS])
+    assert len(out) == len(CORNERS)
+    survived = [n for n in CORNERS if out[corner_mutant(n)] != [n]]
     assert survived == []
 
 
@@ -163,13 +203,6 @@ def test_each_vector_fails_when_its_rule_is_broken():
     """Every listed mutant of the reference (one rule broken, in a process of its own) fails
     at least one vector; the unmutated reference fails none."""
     assert failing() == []
-    code = ("import json, runpy, sys\nfrom fbaconf.mutation.measure import apply\napply(sys.argv[1])\n"
-            f"ns = runpy.run_path({str(Path(__file__).resolve())!r})\nprint(json.dumps(ns['failing']()))\n")
-
-    def run(m):
-        r = subprocess.run([sys.executable, "-c", code, m], capture_output=True, text=True, timeout=120)
-        assert r.returncode == 0, r.stderr[-1500:]
-        return m, json.loads(r.stdout.strip().splitlines()[-1])
-    with ThreadPoolExecutor(2) as pool:
-        survived = [m for m, bad in pool.map(run, KILLED) if not bad]
+    out = failing_under([(m, None) for m in KILLED])
+    survived = [m for m in KILLED if not out[m]]
     assert survived == []
