@@ -188,7 +188,11 @@ def inverse(levels, ac_step: int, t: DctTables) -> list[int]:
     """Normative inverse: x[n] = rdiv(sum_k M[k][n] Y[k], 2^s * den), exact integers."""
     y = dequantise(levels, ac_step, t)
     D = (1 << t.scale_bits) * t.dc_ratio[1]
-    return [rdiv(sum(m * v for m, v in zip(col, y)), D) for col in t.columns]
+    acc = [0] * len(t.columns)
+    for k, v in enumerate(y):  # the same exact sums, over the non-zero coefficients only (most are zero)
+        if v:
+            acc = [a + m * v for a, m in zip(acc, t.matrix[k])]
+    return [rdiv(a, D) for a in acc]
 
 
 def error_bound(fap: int, index: int, max_abs: int, t: DctTables | None = None) -> float:
@@ -472,23 +476,27 @@ class StuffingReader:
     """A BitReader seen through the DCT payload's stuffing rule: stuffing bits are read,
     checked ('1', else rule ``dct-stuffing``) and dropped."""
 
+    __slots__ = ("r", "err", "run")
+
     def __init__(self, r, err) -> None:
-        object.__setattr__(self, "r", r)
-        object.__setattr__(self, "err", err)
+        self.r = r
+        self.err = err
         run, at = 0, r.pos - 1
         while at >= 0 and run < STUFF_AFTER and r.peek(1, at) == 0:
             run += 1
             at -= 1
-        object.__setattr__(self, "run", run)
+        self.run = run
 
-    def __getattr__(self, name):
+    def __getattr__(self, name):  # anything else is the underlying reader's (read-only through here)
         return getattr(self.r, name)
 
-    def __setattr__(self, name, value):
-        if name == "run":
-            object.__setattr__(self, name, value)
-        else:
-            setattr(self.r, name, value)
+    @property
+    def pos(self) -> int:
+        return self.r.pos
+
+    @pos.setter
+    def pos(self, value: int) -> None:
+        self.r.pos = value
 
     def _stuffing(self) -> None:
         at = self.r.pos

@@ -255,6 +255,6 @@ MUTANTS_LIST: list[Mutant] = [
        "if self.run == STUFF_AFTER:", "if self.run > STUFF_AFTER:", "D9 DCT payload stuffing after 22 zeros"),
     _m("ind-syn-dct-stuffing-run-from-payload", f"{DCT}:StuffingReader.__init__",
        "the DCT zero run is counted from the payload start (header zeros before it ignored)",
-       'object.__setattr__(self, "run", run)', 'object.__setattr__(self, "run", 0)',
+       "self.run = run", "self.run = 0",
        "D9 zero run counted from the last '1' of the stream"),
 ]
