@@ -55,8 +55,13 @@ def states():
 
 
 def _faithful_params():
-    return [pytest.param(v, marks=pytest.mark.xfail(reason=KNOWN_FAITHFUL_FAILS[v], strict=False))
-            if v in KNOWN_FAITHFUL_FAILS else v for v in glrender.FAITHFUL]
+    """(variant, part, parts): the first (coarsest) renders every case, in two parts the workers share."""
+    out = []
+    for v in glrender.FAITHFUL:
+        n = 2 if v == glrender.FAITHFUL[0] else 1
+        marks = [pytest.mark.xfail(reason=KNOWN_FAITHFUL_FAILS[v], strict=False)] if v in KNOWN_FAITHFUL_FAILS else []
+        out += [pytest.param(v, p, n, marks=marks, id=f"{v}-{p + 1}of{n}") for p in range(n)]
+    return out
 
 
 def test_camera_fit_is_the_documented_one(ctx, cases, states):
@@ -71,12 +76,12 @@ def test_camera_fit_is_the_documented_one(ctx, cases, states):
         assert near == pytest.approx(ref.near) and far == pytest.approx(ref.far)
 
 
-@pytest.mark.parametrize("variant", _faithful_params())
-def test_faithful_gl_renderers_pass_the_image_cases(variant, ctx, cases, states, tmp_path):
+@pytest.mark.parametrize(("variant", "part", "parts"), _faithful_params())
+def test_faithful_gl_renderers_pass_the_image_cases(variant, part, parts, ctx, cases, states, tmp_path):
     """ssaa2 passes every image case; the other faithful GL renderers a share each, in turn
     (image_variants.shared_cases): every case by two sampling patterns."""
     bad = {}
-    for c in shared_cases(glrender.FAITHFUL, variant, cases):
+    for c in shared_cases(glrender.FAITHFUL, variant, cases)[part::parts]:
         try:
             r = matrix.run_case(c, variant, tmp_path / c.suite / c.id, states)
         except glrender.NotSupported as e:
