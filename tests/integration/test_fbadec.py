@@ -14,6 +14,7 @@ import random
 import runpy
 import shutil
 import subprocess
+import threading
 from pathlib import Path
 
 import pytest
@@ -75,7 +76,41 @@ def _mutations(data: bytes, rng: random.Random, n: int):
         yield bytes(b)
 
 
+def _serve_each(binary: Path, inputs: list[bytes], out: Path, log: Path) -> tuple[list[int], int | None]:
+    """Every input through one ``--serve`` process (the persistent protocol, docs/fuzzing.md):
+    (the answer code of each input answered, the exit status). A sanitizer report ends the
+    process at the input that caused it; stderr goes to ``log`` (a pipe would fill)."""
+    codes: list[int] = []
+    with open(log, "wb") as err:
+        p = subprocess.Popen([str(binary), "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=err)
+        watchdog = threading.Timer(300, p.kill)
+        watchdog.start()
+        try:
+            for i, data in enumerate(inputs):
+                try:
+                    p.stdin.write(f"{i} {len(data)} {out}\n".encode() + data)
+                    p.stdin.flush()
+                except BrokenPipeError:
+                    break
+                line = p.stdout.readline().split()
+                if len(line) != 2 or line[0] != str(i).encode():
+                    break
+                codes.append(int(line[1]))
+            p.stdin.close()
+            rc = p.wait(timeout=60)
+        finally:
+            watchdog.cancel()
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+                rc = None
+    return codes, rc
+
+
 def test_no_sanitizer_report_on_any_suite_stream_or_mutation(fbadec, tmp_path):
+    """Each distinct suite stream through the command line, one process each; then those and six
+    mutations of each through one ``--serve`` process (the same decoder core, 25 ms of
+    sanitizer start-up saved per input)."""
     d, built = fbadec
     if not built:
         pytest.skip("the compiler cannot build with -fsanitize=address,undefined here")
@@ -83,13 +118,31 @@ def test_no_sanitizer_report_on_any_suite_stream_or_mutation(fbadec, tmp_path):
     # each distinct stream once (a case's image-only views share its input file)
     streams = list(dict.fromkeys(p.read_bytes() for s in load_suites() for c in s.cases for p in
                                  ([c.input_path("fba")] if c.input_path("fba") else [])))
-    inputs = streams + [m for s in streams for m in _mutations(s, rng, 6)]
     fin, out = tmp_path / "in.fba", tmp_path / "out.npz"
-    for data in inputs:
+    for data in streams:
         fin.write_bytes(data)
         r = subprocess.run([str(d / "fbadec-asan"), str(fin), str(out)], capture_output=True, text=True, timeout=30)
         assert r.returncode in (0, 1) and "Sanitizer" not in r.stderr and "runtime error" not in r.stderr, \
             (r.returncode, r.stderr[-800:])
+    inputs = streams + [m for s in streams for m in _mutations(s, rng, 6)]
+    codes, rc = _serve_each(d / "fbadec-asan", inputs, out, tmp_path / "serve.log")
+    report = (tmp_path / "serve.log").read_text(errors="replace")
+    assert "Sanitizer" not in report and "runtime error" not in report, \
+        (f"input {len(codes)} of {len(inputs)}", report[-1500:])
+    assert rc == 0 and len(codes) == len(inputs) and set(codes) <= {0, 1}, (rc, len(codes), report[-800:])
+    assert codes.count(0) >= len(streams) // 2 and codes.count(1) > 0  # both valid and invalid inputs were decoded
+
+
+def test_a_sanitizer_report_in_serve_mode_is_seen_and_placed(tmp_path):
+    """The serve sweep's own check: a --serve process that aborts with a report on its third input
+    is seen (the report, and the input it stopped at)."""
+    fake = tmp_path / "fake-serve"
+    fake.write_text("#!/bin/sh\nn=0\nwhile read -r id size out; do\n  head -c \"$size\" >/dev/null\n"
+                    "  if [ \"$n\" = 2 ]; then echo 'ERROR: AddressSanitizer: heap-buffer-overflow' >&2; exit 1; fi\n"
+                    "  echo \"$id 0\"; n=$((n+1))\ndone\n")
+    fake.chmod(0o755)
+    codes, rc = _serve_each(fake, [b"abc", b"", b"xyz", b"0123"], tmp_path / "o.npz", tmp_path / "log")
+    assert codes == [0, 0] and rc == 1 and "AddressSanitizer" in (tmp_path / "log").read_text()
 
 
 def test_differential_fuzz_short(fbadec, tmp_path):
