@@ -72,30 +72,20 @@ def cmd_run(args) -> int:
 
     from . import baseline as bl
     from . import reports
+    from . import session as ss
     from .adapters import resolve
     from .selection import select_cases
-    from .session import (
-        RunOptions,
-        UsageError,
-        check_suites,
-        execute,
-        preflight,
-        resolve_claim,
-        use_color,
-        write_reports,
-    )
     adapter = resolve(args.decoder)
-    claim = resolve_claim(args.claim, adapter)
+    claim = ss.resolve_claim(args.claim, adapter)
     if args.sandbox_ro and hasattr(adapter, "lab_read_only"):
-        from .session import lab_folders
-        adapter.lab_read_only = lab_folders(args.sandbox_ro)
+        adapter.lab_read_only = ss.lab_folders(args.sandbox_ro)
     suites = load_suites()
-    check_suites(suites, args.suite)
+    ss.check_suites(suites, args.suite)
     if args.retries < 0:
-        raise UsageError("--retries must be >= 0")
+        raise ss.UsageError("--retries must be >= 0")
     cases = select_cases(suites, claim, args.suite, args.case, args.only_required, adapter)
     if not cases:
-        raise UsageError("no case selected (check --case and --only-required)")
+        raise ss.UsageError("no case selected (check --case and --only-required)")
     # the baseline files are checked before any case runs (a bad line is a usage error now, not after the run)
     if args.baseline is not None:
         ids = {c.full_id for s in suites for c in s.cases}
@@ -106,14 +96,14 @@ def cmd_run(args) -> int:
         bl.load_flakes(args.flakes)
     if args.write_baseline is not None:
         bl.check_writable(args.write_baseline)
-    preflight(adapter)
+    ss.preflight(adapter)
     out_dir = (args.output or Path("fbaconf-run") / adapter.name).resolve()
-    options = RunOptions(jobs=args.jobs, cluster=args.cluster, resume=args.resume, keep_workdirs=args.keep_workdirs,
-                         progress=False if args.no_progress else None, baseline=args.baseline, flakes=args.flakes,
-                         retries=args.retries, allow_fixed=args.allow_fixed, speed=args.speed, strict=args.strict)
-    record = execute(adapter, claim, cases, suites, out_dir, options)
-    paths = write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
-    print(reports.terminal_summary(record, color=use_color(sys.stdout)))
+    options = ss.RunOptions(jobs=args.jobs, cluster=args.cluster, resume=args.resume, keep_workdirs=args.keep_workdirs,
+                            progress=False if args.no_progress else None, baseline=args.baseline, flakes=args.flakes,
+                            retries=args.retries, allow_fixed=args.allow_fixed, speed=args.speed, strict=args.strict)
+    record = ss.execute(adapter, claim, cases, suites, out_dir, options)
+    paths = ss.write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
+    print(reports.terminal_summary(record, color=ss.use_color(sys.stdout)))
     if args.write_baseline:
         print(bl.write(record.results, args.write_baseline).line())
     if record.baseline_summary:

@@ -439,7 +439,7 @@ GOOD_COMMANDS = '[commands]\ndecode = ["/bin/true", "{input}", "{faps_out}"]\n'
     BASE_MANIFEST + "reject_exit_codes = [69]\n" + GOOD_COMMANDS,
     BASE_MANIFEST + "env = [1]\n" + GOOD_COMMANDS,
     BASE_MANIFEST + "python = 1\n" + GOOD_COMMANDS,
-    BASE_MANIFEST + 'python = "fbaconf.harness.refdecoder:ReferenceAdapter"\n[options]\nnope = 1\n',
+    BASE_MANIFEST + 'python = "fbaconf.harness.refadapter:ReferenceAdapter"\n[options]\nnope = 1\n',
     BASE_MANIFEST + "sandbox = 1\n" + GOOD_COMMANDS,
     BASE_MANIFEST + "[commands]\ndecode = [1]\n",
     BASE_MANIFEST + '[commands]\ndecode = ["/bin/true", "{nope}"]\n',

@@ -87,7 +87,7 @@ def test_python_targets_must_be_dotted_names(tmp_path, target):
 
 
 def test_certify_refuses_an_in_process_adapter_it_does_not_ship(tmp_path):
-    m = write(tmp_path, BASE + 'python = "fbaconf.harness.refdecoder:ReferenceAdapter"\n')
+    m = write(tmp_path, BASE + 'python = "fbaconf.harness.refadapter:ReferenceAdapter"\n')
     with pytest.raises(adapters.ManifestError, match="bundled"):
         adapters.resolve(m, untrusted=True)
     assert adapters.resolve(m).name == "x"  # `run` takes it (trusted use)

@@ -143,7 +143,7 @@ def test_arithmetic_only_decoder_fails_the_claim(tmp_path):
     required and NotSupported. In-process through the session certify runs (the claim policy is
     the point, not the sandbox; certify refuses in-process adapters other than the bundled one)."""
     m = tmp_path / "arith-only.toml"
-    m.write_text('name = "arith-only"\npython = "fbaconf.harness.refdecoder:ReferenceAdapter"\n'
+    m.write_text('name = "arith-only"\npython = "fbaconf.harness.refadapter:ReferenceAdapter"\n'
                  'claims = ["simple@1"]\ntools = ["arithmetic", "high_level_faps"]\ninputs = ["fba"]\n'
                  'outputs = ["faps"]\nfaps_format = "npz"\n')
     a = adapters.resolve(m)
