@@ -185,7 +185,7 @@ def test_speed_is_measured_through_the_persistent_protocol_or_by_spawning(fbadec
     a benchmark's (benchmarks/bench_fbadec.py prints the ratio and the start-ups), not a test's."""
     d, _ = fbadec
     a = adapters.resolve(str(d / "fbadec.toml"))
-    lengths = [200, 1000]
+    lengths = [1000, 20000]  # 19,000 frames apart: ~0.3 s of decoding against milliseconds of start-up noise
     pers = speed.measure(a, "simple@2", "decode", lengths=lengths, repeats=1, work_dir=tmp_path / "p")
     spawn = speed.measure(a, "simple@2", "decode", lengths=lengths, repeats=1, work_dir=tmp_path / "s",
                           persistent=False)
