@@ -120,15 +120,21 @@ def test_what_cases_rest_on_is_derived_from_their_tools_and_streams():
 # ------------------------------------------------------------------ a decoder on other DCT tables
 
 
-@pytest.fixture(scope="module")
-def altvlc_package(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("altvlc")
+def _certify_altvlc(tmp: Path) -> None:
     m = decoder(tmp, "altvlc", ALTVLC, fmt="npz")
-    out = tmp / "pkg"
     r = subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", str(m), "--claim", "simple@1",
-                        "--no-speed", "-j", "2", "-o", str(out), "--allow-unisolated"],  # the verdict is not bwrap's
+                        "--no-speed", "-j", "2", "-o", str(tmp / "pkg"), "--allow-unisolated"],  # not bwrap's verdict
                        capture_output=True, text=True, timeout=900)
-    return m, out, r
+    (tmp / "run.json").write_text(json.dumps({"returncode": r.returncode, "stdout": r.stdout, "stderr": r.stderr}))
+
+
+@pytest.fixture(scope="module")
+def altvlc_package(made_once):
+    """The altvlc decoder certified once per session (its two tests may run on two workers)."""
+    tmp = made_once("fbaconf-altvlc", _certify_altvlc)
+    run = json.loads((tmp / "run.json").read_text())
+    return (tmp / "altvlc" / "altvlc.toml", tmp / "pkg",
+            subprocess.CompletedProcess(["certify"], run["returncode"], run["stdout"], run["stderr"]))
 
 
 def test_other_dct_tables_give_a_provisional_pass_that_says_so(altvlc_package):

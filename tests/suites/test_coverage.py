@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import copy
 import json
+import pickle
 import shutil
 
 import pytest
@@ -39,9 +40,12 @@ def test_stream_extractor_reads_the_content_not_labels():
 
 
 @pytest.fixture(scope="module")
-def computed():
-    """(case, coverage) of every committed case, computed once for the module (it reads every case)."""
-    return coverage.case_coverages()
+def computed(made_once):
+    """(case, coverage) of every committed case, computed once per session (it reads every case)
+    and shared by the workers that run this module's tests."""
+    def make(root):
+        (root / "computed.pickle").write_bytes(pickle.dumps(coverage.case_coverages()))
+    return pickle.loads((made_once("fbaconf-coverage", make) / "computed.pickle").read_bytes())
 
 
 @pytest.fixture(scope="module")
