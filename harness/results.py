@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 from dataclasses import asdict, dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -191,6 +192,9 @@ class RunRecord:
                    provisional_differences=d.get("provisional_differences", []), strict=d.get("strict", False))
 
 
+_APPEND_LOCK = threading.Lock()
+
+
 class ResultLog:
     """Append-only JSON-lines log of case results: written and flushed per case (``--resume``).
 
@@ -215,18 +219,21 @@ class ResultLog:
 
     def append(self, result: CaseResult) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        line = json.dumps(result.to_json(), sort_keys=True) + "\n"
-        try:  # a line cut short by an interruption must not swallow the next record
-            with open(self.path, "rb") as f:
-                f.seek(-1, os.SEEK_END)
-                if f.read(1) != b"\n":
-                    line = "\n" + line
-        except OSError:
-            pass
-        with open(self.path, "a", encoding="utf-8") as f:
-            f.write(line)
-            f.flush()
-            os.fsync(f.fileno())
+        data = (json.dumps(result.to_json(), sort_keys=True) + "\n").encode("utf-8")
+        # one appender at a time (the runner's threads finish cases together): checking the last
+        # byte and writing must not interleave with another line's write, which left blank and
+        # spliced lines when a long line went out in several writes
+        with _APPEND_LOCK:
+            fd = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o644)
+            try:
+                end = os.lseek(fd, 0, os.SEEK_END)
+                if end and os.pread(fd, 1, end - 1) != b"\n":  # a line cut short by an interruption
+                    data = b"\n" + data  # must not swallow the next record
+                while data:
+                    data = data[os.write(fd, data):]
+                os.fsync(fd)
+            finally:
+                os.close(fd)
 
     def __iter__(self) -> Iterator[CaseResult]:
         return iter(self.read().values())
