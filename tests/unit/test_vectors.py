@@ -149,7 +149,7 @@ def test_there_are_corner_vectors_for_every_tie_and_position():
 # so this module's own ``decode`` is the mutated one) and reports the vectors that fail as JSON —
 # the same state as a fresh interpreter per mutant, without paying the imports 59 times.
 DRIVER = """
-import json, os, runpy, sys
+import json, os, runpy, signal, sys
 from fbaconf.mutation.measure import apply
 test_file, jobs, first = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3] == "first"
 results, running = {}, {}
@@ -168,6 +168,7 @@ for mutant, names in jobs:
     pid = os.fork()
     if pid == 0:
         os.close(r)
+        signal.alarm(120)  # a mutant that hangs the decoder dies here, and reports nothing
         try:
             apply(mutant)
             out = json.dumps(runpy.run_path(test_file)["failing"](names, first))
