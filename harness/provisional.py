@@ -136,13 +136,14 @@ def is_provisional_difference(r: CaseResult | dict) -> bool:
 
 def provisional_differences(results: list) -> list[dict]:
     """``[{"case_id", "rests_on"}]`` of the provisional differences among ``results``
-    (:class:`CaseResult` objects or their JSON form)."""
+    (:class:`CaseResult` objects or their JSON form), by case id: the same list whatever order the
+    cases finished in (certify writes it from the run, verify re-derives it from results.jsonl)."""
     out = []
     for r in results:
         if is_provisional_difference(r):
             d = r.to_json() if isinstance(r, CaseResult) else r
             out.append({"case_id": d["case_id"], "rests_on": list(d["rests_on"])})
-    return out
+    return sorted(out, key=lambda d: d["case_id"])
 
 
 def agreement(results: list[CaseResult]) -> dict[str, dict[str, int]]:

@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from fbaconf.certification import certify
+from fbaconf.certification import certify, package
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness import adapters
 from fbaconf.harness.provisional import CAN_CHANGE, decision_of_code, rests_on
@@ -152,6 +153,21 @@ def test_other_dct_tables_give_a_provisional_pass_that_says_so(altvlc_package):
     assert "result: PASS (provisional differences" in r.stdout
     v = certify.verify(pkg)
     assert v.problems == []
+
+
+def test_the_provisional_differences_do_not_depend_on_the_order_cases_finished_in(altvlc_package, tmp_path):
+    """results.jsonl is written as cases finish (two at a time here); verify re-derives the list
+    the certificate holds from it whatever the order of its lines (seen: mode-switch logged
+    before dct-q4 failed verify when the list kept the order of the lines)."""
+    _m, pkg, _r = altvlc_package
+    copy = Path(shutil.copytree(pkg, tmp_path / "pkg", symlinks=True))
+    res = copy / "results.jsonl"
+    res.write_text("".join(reversed(res.read_text().splitlines(keepends=True))))
+    package.seal(copy)  # no key: the sums over the reordered log
+    assert certify.verify(copy).problems == []
+    cert = json.loads((copy / "certificate.json").read_text())
+    ids = [d["case_id"] for d in cert["provisional_differences"]]
+    assert ids == sorted(ids) and len(ids) >= 3
 
 
 def test_other_dct_tables_fail_under_strict(altvlc_package, tmp_path):
