@@ -188,7 +188,7 @@ def inverse(levels, ac_step: int, t: DctTables) -> list[int]:
     """Normative inverse: x[n] = rdiv(sum_k M[k][n] Y[k], 2^s * den), exact integers."""
     y = dequantise(levels, ac_step, t)
     D = (1 << t.scale_bits) * t.dc_ratio[1]
-    acc = [0] * len(t.columns)
+    acc = [0] * t.length
     for k, v in enumerate(y):  # the same exact sums, over the non-zero coefficients only (most are zero)
         if v:
             acc = [a + m * v for a, m in zip(acc, t.matrix[k])]

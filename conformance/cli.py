@@ -143,9 +143,8 @@ def cmd_coverage(args) -> int:
     computed = coverage.case_coverages()
     rep = coverage.compute(computed=computed)
     if args.write:
-        path = coverage_table.write(computed)
-        print(f"wrote the points of {len(coverage_table.table(computed)['cases'])} case(s) to {path}",
-              file=sys.stderr)
+        path, n = coverage_table.write(computed)
+        print(f"wrote the points of {n} case(s) to {path}", file=sys.stderr)
     if args.json:
         print(json.dumps(rep, indent=1))
         return 0

@@ -31,6 +31,17 @@ def _sha(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def _model_digest() -> str:
+    """The coverage model's sha256, read once per file version (every case's key holds it)."""
+    st = MODEL_PATH.stat()
+    return _model_digest_at(st.st_mtime_ns, st.st_size)
+
+
+@lru_cache(maxsize=2)
+def _model_digest_at(_mtime_ns: int, _size: int) -> str:
+    return _sha(MODEL_PATH)
+
+
 def case_key(case) -> str | None:
     """The digest of everything ``case_points`` reads of a case (None when an input cannot be read:
     the case is then computed, and the computation reports the problem)."""
@@ -44,7 +55,7 @@ def case_key(case) -> str | None:
             else:
                 files[role] = rel
         doc = {"kind": str(case.kind), "group": case.group, "stages": sorted(case.stages), "inputs": files,
-               "model": _sha(MODEL_PATH)}
+               "model": _model_digest()}
     except (OSError, TypeError):
         return None
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
@@ -103,15 +114,16 @@ def table(computed: list[tuple[object, CaseCoverage]]) -> dict:
             "cases": dict(sorted(cases.items()))}
 
 
-def write(computed: list[tuple[object, CaseCoverage]], path: Path | None = None) -> Path:
-    """Write the table (default: the package's ``data/case-points.json``); one case per line."""
+def write(computed: list[tuple[object, CaseCoverage]], path: Path | None = None) -> tuple[Path, int]:
+    """Write the table (default: the package's ``data/case-points.json``), one case per line;
+    returns (the file, how many cases it holds)."""
     path = path or TABLE_PATH
     doc = table(computed)
     body = ",\n".join(f" {json.dumps(k)}: {json.dumps(v, sort_keys=True)}" for k, v in doc["cases"].items())
     head = {k: v for k, v in doc.items() if k != "cases"}
     text = json.dumps(head, indent=1)[:-2] + ',\n "cases": {\n' + body + "\n }\n}\n"
     path.write_text(text, "utf-8")
-    return path
+    return path, len(doc["cases"])
 
 
 __all__ = ["TABLE_FORMAT", "TABLE_PATH", "case_key", "points_of", "stored_points", "table", "write"]

@@ -86,7 +86,8 @@ def test_the_stored_points_are_what_a_fresh_computation_gives(tmp_path, computed
     """``data/case-points.json`` (what certify reads) is byte for byte what ``suites coverage
     --write`` writes now: every committed case, its key, its points. Stale after a change to the
     extractors? Run ``fbaconf suites coverage --write``."""
-    fresh = coverage_table.write(computed, tmp_path / "case-points.json")
+    fresh, n = coverage_table.write(computed, tmp_path / "case-points.json")
+    assert n == len(computed)
     committed = coverage_table.TABLE_PATH.read_text("utf-8")
     assert fresh.read_text("utf-8") == committed, "stale: run `fbaconf suites coverage --write`"
     assert len(json.loads(committed)["cases"]) == len(computed) > 150
