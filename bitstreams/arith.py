@@ -19,6 +19,7 @@ from bisect import bisect_left
 
 import numpy as np
 
+from . import readings
 from . import syntax as _syntax
 from . import tables as _tables
 from .bitio import BitReader, BitWriter
@@ -340,6 +341,8 @@ class ArithDecoder:
                 r.pos = at
                 raise r.error(MSG_STUFFING, "stuffing")
         end = self.start + used + sum(1 for c in self.stuffing if c <= used)
+        if readings.active(readings.REWIND_14):  # the other reading of D7 (S1): 14 stream bits back
+            end = self.pos - LOOKAHEAD
         if end > r.nbits:
             r.pos = r.nbits
             raise r.error(MSG_TRUNCATED, "truncated")
@@ -382,7 +385,8 @@ def native():
 def native_decoder():
     """The extension for the decoder, or None (also when ArithDecoder was replaced or patched)."""
     mod = native()
-    if mod is None or any(ArithDecoder.__dict__.get(k) is not v for k, v in _PURE_DECODER.items()):
+    if mod is None or readings.pure_required() or any(ArithDecoder.__dict__.get(k) is not v
+                                                      for k, v in _PURE_DECODER.items()):
         return None
     return mod
 

@@ -38,11 +38,11 @@ from . import tables
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET
 from .syntax import (
     CODING_DCT,
-    DEFAULT_FRAME_RATE,
     EXPRESSION_SELECT_MAX,
     INTENSITY_MAX,
     MASK_INTERPOLATE,
     VISEME_SELECT_MAX,
+    default_frame_rate,
 )
 from .tables import NUM_FAPS
 
@@ -413,7 +413,7 @@ def decode_group(d, info) -> None:
         samples[f] = x[:L]
         info.blocks.append((f"dct FAP {f}", start, r.pos - start))
     r.end()
-    rate = d.rate if d.rate is not None else DEFAULT_FRAME_RATE
+    rate = d.rate if d.rate is not None else default_frame_rate()
     fn, tm = d.frame_number, d.time_ms
     cur = d.cur
     for j in range(L):

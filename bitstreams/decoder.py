@@ -19,7 +19,7 @@ import numpy as np
 
 from fbaconf.errors import BitstreamError
 
-from . import arith, dct, tables
+from . import arith, dct, readings, tables
 from .arith import MSG_ARITH_STATE, MSG_STUFFING, MSG_TRUNCATED, ArithDecoder, NativeSegment, UniformModel, make_model
 from .bitio import (
     FACE_OBJECT_PLANE_START_CODE,
@@ -31,7 +31,6 @@ from .bitio import (
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .syntax import (
     CODING_DCT,
-    DEFAULT_FRAME_RATE,
     EXPRESSION_SELECT_MAX,
     FAPS_MASK,
     LIST_ORDER,
@@ -40,10 +39,13 @@ from .syntax import (
     VISEME_SELECT_MAX,
     FrameRateCode,
     PlaneInfo,
+    _tdiv,
     alphabet,
+    default_frame_rate,
     intensity_bound,
     intensity_step,
     low_level_step,
+    quant_div,
 )
 from .tables import NUM_FAPS, RANGE_DELTA
 
@@ -89,6 +91,7 @@ class _Decoder:
         self.rows_high: list[list[int]] = []
         self.rows_meta: list[tuple] = []
         self.seen_intra = False
+        self.scaling_div: int | None = None  # D4:keep-scaling only: the divisor the bounds are scaled by
         self.dct_dc: dict[int, int] = {}  # DCT mode: DC level of the previous segment per FAP
         # native fast path (arith.py, _fastarith.c): the module, or None for the pure-Python coder
         self.native = arith.native_decoder()
@@ -148,7 +151,7 @@ class _Decoder:
             high=high.astype(np.int32),
             frame_number=np.array([m[0] for m in meta], dtype=np.int64),
             time_ms=np.array([m[1] for m in meta], dtype=np.float64),
-            frame_rate=self.first_rate if self.first_rate is not None else DEFAULT_FRAME_RATE,
+            frame_rate=self.first_rate if self.first_rate is not None else default_frame_rate(),
             is_intra=np.array([m[2] for m in meta], dtype=bool),
             fap_quant=np.array([m[3] for m in meta], dtype=np.int16),
             coding_type=np.array([m[4] for m in meta], dtype=np.int8),
@@ -192,7 +195,7 @@ class _Decoder:
         if r.bit("skip_frames"):  # 4-bit chunks: 15 continues the chain, the first chunk < 15 ends it
             info.skip = r.skip_chain("number_of_frames_to_skip")
         # timing (D6)
-        rate = self.rate if self.rate is not None else DEFAULT_FRAME_RATE
+        rate = self.rate if self.rate is not None else default_frame_rate()
         self.frame_number = self.frame_number + info.skip + 1
         if info.time_code is not None:
             h, m, _, s = info.time_code
@@ -260,6 +263,8 @@ class _Decoder:
                         values[fap] = v
                         self.bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
             info.new_lists[name] = values
+        if readings.active(readings.KEEP_SCALING):
+            self._keep_scaling(info)
         # segment state: status template, coded list, P alphabets (models created lazily)
         self._mask_state(types, coded)
         q = self.fap_quant
@@ -271,12 +276,30 @@ class _Decoder:
         self.p_alphabets = {f: alphabet(int(self.bounds[f - 1, 3]), int(self.bounds[f - 1, 2]), q)
                             for f in self.coded_low}
 
+    def _keep_scaling(self, info: PlaneInfo) -> None:
+        """The other reading of D4 (S1): alphabets are not recomputed when fap_quant changes. A
+        bound no new list replaced is restated in the new fap_quant's units so that it keeps the
+        symbol alphabet it had (the defaults keep the first intra plane's scaling)."""
+        d_new = quant_div(self.fap_quant)
+        d_old = self.scaling_div
+        self.scaling_div = d_new
+        if d_old is None or d_old == d_new:
+            return
+        for li, name in enumerate(LIST_ORDER):
+            renewed = info.new_lists.get(name, {})
+            for f in range(3, NUM_FAPS + 1):
+                if f not in renewed:
+                    self.bounds[f - 1, li] = _tdiv(int(self.bounds[f - 1, li]), d_old) * d_new
+
     def _mask_state(self, types, coded) -> None:
         """Status template (D3) and coded low-level FAPs of the planes that follow an intra header."""
         group_of = tables.group_of_fap()
         types_arr = np.array(types)[group_of - 1]
         self.ever_set |= coded
-        tmpl = np.where(coded, SET, np.where((types_arr == MASK_INTERPOLATE) | ~self.ever_set, FREE, RETAINED))
+        free = (types_arr == MASK_INTERPOLATE) | ~self.ever_set
+        if readings.active(readings.TYPE10_KEEPS):  # the other reading of D3: type 10 holds like 01
+            free = ~self.ever_set
+        tmpl = np.where(coded, SET, np.where(free, FREE, RETAINED))
         self.status_template = tmpl.astype(np.uint8)
         self.coded_low = [f for f in range(3, NUM_FAPS + 1) if coded[f - 1]]
 

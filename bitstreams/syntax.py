@@ -18,7 +18,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from . import tables
+from . import readings, tables
 
 FAPS_MASK = 0b01  # D1: fba_object_mask, second bit = FAPs
 MASK_NONE, MASK_RETAIN, MASK_INTERPOLATE, MASK_ALL = 0, 1, 2, 3
@@ -34,6 +34,12 @@ INTENSITY_MAX = 63
 LIST_ORDER = ("i_max", "i_min", "p_max", "p_min")
 
 DEFAULT_FRAME_RATE = 25.0  # D6: a stream that never signals a frame rate
+OTHER_DEFAULT_FRAME_RATE = 30.0  # the other reading of D6 (S1's decoder)
+
+
+def default_frame_rate() -> float:
+    """The rate of a stream that never signals one (D6; 30 Hz under ``D6:default-30hz``)."""
+    return OTHER_DEFAULT_FRAME_RATE if readings.active(readings.DEFAULT_30HZ) else DEFAULT_FRAME_RATE
 
 
 def quant_div(q: int) -> int:
@@ -60,6 +66,8 @@ def low_level_step(fap: int, q: int) -> int:
 def intensity_bound(q: int) -> int:
     """D5: viseme_blend / expression intensity alphabet 0..floor((63 + floor(q/2)) / q)."""
     d = quant_div(q)
+    if readings.active(readings.BLEND_CEIL):  # the other reading of D5: ceil(63/q)
+        return -(-INTENSITY_MAX // d)
     return (INTENSITY_MAX + d // 2) // d
 
 

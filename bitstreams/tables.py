@@ -12,6 +12,8 @@ from importlib import resources
 
 import numpy as np
 
+from . import readings
+
 NUM_FAPS = 68
 NUM_GROUPS = 10
 RANGE_DELTA = 60  # unit of the new min/max lists (spec notes 1.4)
@@ -125,14 +127,20 @@ def quant_steps() -> np.ndarray:
     return np.array([f.quant_step for f in fap_table()], dtype=np.int64)
 
 
-@lru_cache(maxsize=1)
 def default_bounds() -> np.ndarray:
-    """int64[68, 4]: initial (i_max, i_min, p_max, p_min) in fap_quant = 1 units (decision D4).
+    """int64[68, 4]: initial (i_max, i_min, p_max, p_min) in fap_quant = 1 units (decision D4;
+    the table's values as listed under the other reading ``D4:defaults-unrounded``).
 
     Rows 0 and 1 (FAP 1/2) are unused (their alphabets are fixed by decision D5)."""
+    return _default_bounds(readings.active(readings.DEFAULTS_UNROUNDED))
+
+
+@lru_cache(maxsize=2)
+def _default_bounds(unrounded: bool) -> np.ndarray:
+    rnd = (lambda v: v) if unrounded else round_up_range
     b = np.zeros((NUM_FAPS, 4), dtype=np.int64)
     for f in fap_table()[2:]:
-        i, p = round_up_range(f.intra_range), round_up_range(f.pred_range)
+        i, p = rnd(f.intra_range), rnd(f.pred_range)
         b[f.number - 1] = (i, -i, p, -p)
     return b
 

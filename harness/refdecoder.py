@@ -3,8 +3,12 @@
 As a program (what ``adapters/reference.toml`` runs in a subprocess)::
 
     python -m fbaconf.harness.refdecoder decode IN.fba|IN.fap [--scene S.bt|S.bifs] [--scenario SC.toml]
-        [--faps-out F.npz|F.fap] [--vertices-out V.npz] [--images-dir DIR]
-    python -m fbaconf.harness.refdecoder decode-multi --out-dir DIR IN1.fba IN2.fba ...
+        [--faps-out F.npz|F.fap] [--vertices-out V.npz] [--images-dir DIR] [--reading ID ...]
+    python -m fbaconf.harness.refdecoder decode-multi --out-dir DIR [--reading ID ...] IN1.fba IN2.fba ...
+
+``--reading D7:rewind-14`` decodes by another reading of a provisional decision
+(``bitstreams/data/readings.toml``): what a decoder that follows it writes, and declares in its
+manifest (``readings = [...]``).
 
 Exit codes: 0 done, 2 the input was rejected (a typed error on stderr), 69 not supported.
 The chain itself is :mod:`fbaconf.pipeline`, which also makes the goldens, so the reference passes
@@ -17,6 +21,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from fbaconf.bitstreams import readings
 from fbaconf.errors import FbaconfInputError
 from fbaconf.pipeline import multi_outputs, reference_outputs
 
@@ -38,17 +43,21 @@ def main(argv: list[str] | None = None) -> int:
     d.add_argument("--faps-out", type=Path)
     d.add_argument("--vertices-out", type=Path)
     d.add_argument("--images-dir", type=Path)
+    d.add_argument("--reading", action="append", default=[])
     m = sub.add_parser("decode-multi")
+    m.add_argument("--reading", action="append", default=[])
     m.add_argument("--out-dir", type=Path, required=True)
     m.add_argument("--format", choices=("npz", "fap"), default="npz")
     m.add_argument("inputs", type=Path, nargs="+")
     a = ap.parse_args(argv)
     try:
-        if a.cmd == "decode":
-            reference_outputs(a.input, scene=a.scene, scenario=a.scenario, faps_out=a.faps_out,
-                              vertices_out=a.vertices_out, images_dir=a.images_dir, player_state=_is_text(a.input))
-        else:
-            multi_outputs(a.inputs, a.out_dir, a.format)
+        with readings.using(*a.reading):
+            if a.cmd == "decode":
+                reference_outputs(a.input, scene=a.scene, scenario=a.scenario, faps_out=a.faps_out,
+                                  vertices_out=a.vertices_out, images_dir=a.images_dir,
+                                  player_state=_is_text(a.input))
+            else:
+                multi_outputs(a.inputs, a.out_dir, a.format)
     except FbaconfInputError as e:
         print(f"fbaconf-refdecoder: error: {e}", file=sys.stderr)
         return 2
