@@ -3,8 +3,12 @@
 Goldens are written only here, from the reference pipeline (``fbaconf.pipeline``, the same code
 the bundled reference decoder ``harness/refdecoder.py`` runs):
 ``golden/<suite>/<case>/faps.npz`` (decoded FapFrames), ``vertices.npz`` (FaceState),
-``frame_NNNNN.png`` (images), ``face<i>.npz`` (multi-face cases). ``golden/MANIFEST.json``
-lists every file with its sha256 and the digest of the suite manifest it was made from.
+``frame_NNNNN.png`` (images), ``face<i>.npz`` (multi-face cases). Beside them, for every other
+reading of a provisional decision (``bitstreams/data/readings.toml``) that changes what the
+case's streams decode to: ``readings/<slug>/`` with the same outputs under that reading, or
+``reject.json`` when that reading rejects a stream fbaconf decodes (error cases: ``faps.npz``
+when the reading decodes what fbaconf rejects). ``golden/MANIFEST.json`` lists every file with
+its sha256 and the digest of the suite manifest it was made from.
 
 ``.npz`` files are rewritten in a canonical form (fixed zip timestamps, sorted members,
 deflate) so that regeneration is bit-identical; ``verify`` proves (1) every golden file
@@ -26,7 +30,10 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
-from fbaconf.pipeline import multi_outputs, reference_outputs
+from fbaconf.bitstreams import readings
+from fbaconf.bitstreams.frames import FapFrames
+from fbaconf.errors import FbaconfInputError
+from fbaconf.pipeline import load_stream, multi_outputs, reference_outputs
 
 from .precision import ROUNDED, round_array, within_tolerance
 from .suite import CaseKind, Suite, SuiteError, digest_problems, golden_root, load_suites, sha256_file
@@ -38,6 +45,8 @@ MANIFEST = "MANIFEST.json"
 # rotated grids and MSAA roughly halves compared with goldens made by one 2 x 2 sampler.
 GOLDEN_SUPERSAMPLE = 8
 FORMAT = "fbaconf.golden/1"
+READINGS = "readings"  # a case's goldens under the other readings: <case>/readings/<slug>/
+REJECT = "reject.json"  # in a reading's folder: that reading rejects the stream
 
 
 def canonical_npz(path: Path, keep: list[str] | None = None) -> None:
@@ -100,6 +109,73 @@ def generate_case(case, out: Path) -> list[Path]:
     return written
 
 
+def _decodings(case) -> list[FapFrames] | FbaconfInputError | None:
+    """What the reference decodes the case's stream(s) to, or the error that rejects one; None
+    for a case without a binary stream (a player's .fap text)."""
+    streams = case.face_paths() if case.kind == CaseKind.MULTI else [case.input_path("fba")]
+    if not streams or any(s is None for s in streams):
+        return None
+    try:
+        return [load_stream(s) for s in streams]
+    except FbaconfInputError as e:
+        return e
+
+
+_COMPARED = ("values", "status", "high", "frame_number", "time_ms")
+
+
+def _same(a, b) -> bool:
+    """Whether two decodings are the same for every comparison the harness makes (a reading
+    that only moves bit offsets or intra flags changes no verdict)."""
+    if isinstance(a, FbaconfInputError) or isinstance(b, FbaconfInputError):
+        return isinstance(a, FbaconfInputError) and isinstance(b, FbaconfInputError)
+    return len(a) == len(b) and all(
+        x.frame_rate == y.frame_rate and all(np.array_equal(getattr(x, k), getattr(y, k)) for k in _COMPARED)
+        for x, y in zip(a, b))
+
+
+def reading_goldens(case, root: Path | None = None) -> dict[str, Path]:
+    """The other readings that change ``case``'s result, by id, with their folders (what
+    :func:`generate_readings` wrote for the case)."""
+    d = case.golden_dir(root or golden_root()) / READINGS
+    if not d.is_dir():
+        return {}
+    out = {}
+    for sub in sorted(d.iterdir()):
+        r = readings.by_slug(sub.name)
+        if r is not None and sub.is_dir():
+            out[r.id] = sub
+    return out
+
+
+def generate_readings(case, out: Path) -> list[Path]:
+    """For each other reading that changes what ``case``'s streams decode to: the case's goldens
+    under that reading in ``out/readings/<slug>/`` (``reject.json`` where it rejects a stream);
+    returns the files written."""
+    base = _decodings(case)
+    if base is None:
+        return []
+    written: list[Path] = []
+    for r in readings.catalogue().values():
+        with readings.using(r.id):
+            alt = _decodings(case)
+            if _same(alt, base):
+                continue
+            d = out / READINGS / r.slug
+            d.mkdir(parents=True, exist_ok=True)
+            if isinstance(alt, FbaconfInputError):
+                doc = {"reading": r.id, "rule": alt.rule, "message": alt.message[:300]}
+                atomic_write_text(d / REJECT, json.dumps(doc, indent=1, sort_keys=True) + "\n")
+                written.append(d / REJECT)
+            elif case.kind == CaseKind.ERROR:  # fbaconf rejects it; this reading decodes it
+                alt[0].save_npz(d / "faps.npz")
+                canonical_npz(d / "faps.npz")
+                written.append(d / "faps.npz")
+            else:
+                written += generate_case(case, d)
+    return written
+
+
 def regenerate(suites: list[Suite], root: Path | None = None, log=print) -> dict:
     root = root or golden_root()
     for s in suites:
@@ -109,7 +185,7 @@ def regenerate(suites: list[Suite], root: Path | None = None, log=print) -> dict
     files: dict[str, str] = {}
     for s in suites:
         for c in s.cases:
-            for p in generate_case(c, c.golden_dir(root)):
+            for p in generate_case(c, c.golden_dir(root)) + generate_readings(c, c.golden_dir(root)):
                 files[p.relative_to(root).as_posix()] = sha256_file(p)
         log(f"goldens for {s.name}: {sum(1 for k in files if k.startswith(s.name + '/'))} file(s)")
     manifest = {"format": FORMAT, "suites": {s.name: {"version": s.version, "manifest_sha256": s.digest()}
