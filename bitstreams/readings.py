@@ -92,12 +92,13 @@ def pure_required() -> bool:
 
 @contextlib.contextmanager
 def using(*reading_ids: str) -> Iterator[None]:
-    """Decode by ``reading_ids`` inside the block (process-wide; not for concurrent decoding)."""
+    """Decode by ``reading_ids`` (as well as any already on) inside the block (process-wide; not for
+    concurrent decoding)."""
     global _active
     for r in reading_ids:
         get(r)
     old = _active
-    _active = frozenset(reading_ids)
+    _active = old | frozenset(reading_ids)
     try:
         yield
     finally:

@@ -34,7 +34,6 @@ from fbaconf.conformance.suite import golden_root, load_suites
 from fbaconf.errors import FbaconfInputError
 from fbaconf.harness import reports
 from fbaconf.harness.adapters import CommandAdapter, resolve
-from fbaconf.harness.provisional import agreement
 from fbaconf.harness.selection import claim_covers, select_cases
 from fbaconf.harness.session import (
     RunOptions,
@@ -45,6 +44,7 @@ from fbaconf.harness.session import (
     resolve_claim,
     write_reports,
 )
+from fbaconf.harness.verdict import describe
 from fbaconf.isolation import cgroups, sandbox
 from fbaconf.profiles.model import Claim, load_profiles
 from fbaconf.safefs import read_regular, remove_tree
@@ -140,7 +140,8 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
         return record.exit_code
     results = [r.to_json() for r in record.results]
     speed = [s.to_json() for s in record.speed] if o.speed else None
-    verdict, code, differences = derive_verdict(results, strict=o.strict, speed=speed)
+    cv = derive_verdict(results, strict=o.strict, speed=speed, declared=adapter.readings)
+    verdict, code = cv.verdict, cv.exit_code
     if code != record.exit_code:  # one rule: the session's exit code and the package's verdict agree
         raise RuntimeError(f"certify: the run's exit code {record.exit_code} and the verdict {verdict} disagree")
     basis = claim_basis(record, cases, claim)
@@ -158,11 +159,12 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
         shutil.copyfile(adapter.manifest_path, out / "decoder.toml")
     summary = reports.terminal_summary(record, color=False)
     atomic_write_text(out / "summary.txt", summary + "\n")
-    atomic_write_text(out / "statement.md", _statement(record, verdict, o.speed, basis))
+    atomic_write_text(out / "statement.md", _statement(record, cv, o.speed, basis))
     counts = {k: n for k, n in record.counts().items() if n}
     cert = {"format": FORMAT, "decoder": adapter.name, "decoder_manifest_sha256": adapter.digest(),
             "claim": claim, "verdict": verdict, "exit_code": code, "strict": o.strict,
-            "provisional_differences": differences, "cases": len(results), "counts": counts,
+            "readings": list(adapter.readings), "provisional_differences": cv.differences,
+            "unverified": cv.unverified, "cases": len(results), "counts": counts,
             "speed": speed if speed is not None else "not measured",
             "suites": record.suites, "provisional": record.provisional, "issued": record.finished,
             "rests_on": basis}
@@ -210,10 +212,10 @@ def claim_basis(record, cases, claim: str) -> dict:
             "cases_not_taken": list(record.missing)}
 
 
-def _statement(record, verdict: str, speed: bool, basis: dict) -> str:
+def _statement(record, cv, speed: bool, basis: dict) -> str:
     c = record.counts()
     lines = [f"# fbaconf certification: {record.decoder['name']} — {record.claim}", "",
-             f"**Verdict: {verdict}**", "",
+             f"**Verdict: {cv.verdict}**", "",
              f"- decoder manifest sha256: `{record.decoder.get('manifest_sha256')}`",
              f"- cases run: {len(record.results)} (" + ", ".join(f"{k} {v}" for k, v in c.items() if v) + ")",
              "- suites: " + ", ".join(f"{s['name']} {s['version']}" for s in record.suites),
@@ -236,12 +238,13 @@ def _statement(record, verdict: str, speed: bool, basis: dict) -> str:
         lines.append(f"- not exercised (their cases did not pass): {', '.join(basis['not_exercised'][:40])}"
                      + (" …" if len(basis["not_exercised"]) > 40 else ""))
     if basis["cases_not_taken"]:
-        lines += ["- required cases the decoder could not take (each fails the claim):"]
+        lines += ["- required cases the decoder could not take (each fails the claim, unless its tool is named "
+                  "unverified below):"]
         lines += [f"  - {m}" for m in basis["cases_not_taken"]]
     else:
         lines.append("- the decoder took every required case")
     lines += _timing_lines(basis.get("timing") or {})
-    lines += _provisional_lines(record)
+    lines += _provisional_lines(record, cv)
     lines += ["", "## Provisional rules and limits", "",
               "The ISO/IEC 14496 text was not available to fbaconf. This verdict rests on these provisional "
               "decisions and limits:", ""]
@@ -263,20 +266,21 @@ def _timing_lines(timing: dict) -> list[str]:
     return out
 
 
-def _provisional_lines(record) -> list[str]:
-    out = ["", "## Provisional requirements", "",
-           "Cases whose expected output rests on a provisional decision (harness/provisional.py): a failure there is a "
-           "provisional difference, which fails the claim only under --strict" +
-           (" (this certificate was made with --strict)." if record.strict else "."), ""]
-    agree = agreement(record.results)
-    if not agree:
-        return out + ["- none of the claim's cases rests on a provisional decision"]
-    for d, n in agree.items():
-        word = "agrees with" if n["failed"] == 0 and n["passed"] == n["cases"] else "differs from"
-        out.append(f"- {word} {d}: {n['passed']} of {n['cases']} case(s) resting on it pass")
-    if record.provisional_differences:
-        out += ["", f"Provisional differences ({len(record.provisional_differences)}):"]
-        out += [f"- {d['case_id']} (rests on {', '.join(d['rests_on'])})" for d in record.provisional_differences]
+def _provisional_lines(record, cv) -> list[str]:
+    declared = list(record.decoder.get("readings") or [])
+    out = ["", "## Tools and provisional decisions", "",
+           "Per tool and per decision: verified, differs (judged by a reading the decoder declared), declined, "
+           "unverified, or fails (docs/harness.md, \"Provisional requirements\"). A difference counts as "
+           "provisional only where the decoder declared the other reading and its result is that reading's, value "
+           "for value; a tool whose every case rests on an open decision (D8) and that the decoder does not decode "
+           "as fbaconf does is named unverified. --strict fails both" +
+           (" (this certificate was made with --strict)." if record.strict else "."), "",
+           f"- other readings the decoder declares: {', '.join(declared) if declared else 'none'}"]
+    out += [f"- {line}" for line in describe(cv.to_json())]
+    if cv.differences:
+        out += ["", f"Provisional differences ({len(cv.differences)}):"]
+        out += [f"- {d['case_id']} (rests on {', '.join(d['rests_on'])}; judged by the declared reading "
+                f"{d['reading']})" for d in cv.differences]
     return out
 
 

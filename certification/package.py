@@ -23,15 +23,18 @@ import hashlib
 import json
 import os
 import re
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
 from fbaconf._atomic import atomic_write_text
+from fbaconf.bitstreams import readings
 from fbaconf.conformance.suite import Case, load_suites
 from fbaconf.errors import FbaconfInputError
-from fbaconf.harness.provisional import provisional_differences, rests_on
+from fbaconf.harness.provisional import rests_on
 from fbaconf.harness.selection import required_for
+from fbaconf.harness.verdict import ClaimVerdict, claim_verdict
 from fbaconf.safefs import confined, read_regular
 
 CERTIFICATE = "certificate.json"
@@ -49,7 +52,6 @@ NOT_CHECKED = "signed, but the signature was not checked"
 INVALID = "signature INVALID"
 SIGNED = "signed, signature checked"
 _SUMS_LINE = re.compile(r"([0-9a-f]{64})  (\S(?:.*\S)?)")
-_OK = ("Pass", "QualityWarning")
 
 
 class SignatureError(FbaconfInputError):
@@ -115,21 +117,12 @@ def seal(pkg: Path, key=None) -> bytes:
 
 
 # ------------------------------------------------------------------ the verdict, from the results
-def derive_verdict(results: list[dict], *, strict: bool, speed: list[dict] | None) -> tuple[str, int, list[dict]]:
-    """(verdict, exit code, provisional differences) of a claim from its required cases'
-    result lines (the :mod:`.provisional` rule) and the speed results (None: not measured).
-    The one rule ``certify`` writes and ``verify`` re-derives."""
-    required = [r for r in results if r.get("required")]
-    differences = provisional_differences(required)
-    provisional = {d["case_id"] for d in differences}
-    hard = [r for r in required if r.get("outcome") not in _OK and (strict or r.get("case_id") not in provisional)]
-    if hard:
-        return "FAIL", 1, differences
-    if speed is not None and any(not s.get("passed") for s in speed):
-        return "SPEED FAIL", 3, differences
-    if differences:
-        return f"PASS (provisional differences: {len(differences)})", 0, differences
-    return "PASS", 0, differences
+def derive_verdict(results: list[dict], *, strict: bool, speed: list[dict] | None,
+                   declared: list[str] | tuple[str, ...] = ()) -> ClaimVerdict:
+    """A claim's verdict from its required cases' result lines, the speed results (None: not
+    measured) and the decoder's declared other readings (:mod:`fbaconf.harness.verdict`): the
+    one rule ``certify`` writes and ``verify`` re-derives."""
+    return claim_verdict(results, strict=strict, speed=speed, declared=declared)
 
 
 def counts(results: list[dict]) -> dict[str, int]:
@@ -304,20 +297,28 @@ def _check_verdict(files: dict[str, bytes], cert: dict, problems: list[str]) -> 
     if required is None:
         return
     by_id = {r["case_id"]: r for r in results}
-    for cid in sorted(required - set(by_id)):
+    for cid in sorted(set(required) - set(by_id)):
         problems.append(f"results.jsonl: no result for {_quote(cid)}, which {claim} requires")
-    for cid in sorted(set(by_id) - required):
+    for cid in sorted(set(by_id) - set(required)):
         problems.append(f"results.jsonl: {_quote(cid)} is not a case {claim} requires")
-    for cid in sorted(required & set(by_id)):
+    for cid in sorted(set(required) & set(by_id)):
         if by_id[cid].get("required") is not True:
             problems.append(f"results.jsonl: {_quote(cid)} is marked not required; {claim} requires it")
     _check_rests_on(by_id, files, problems)
+    _check_cases(by_id, required, problems)
+    declared = _declared_readings(files, report, problems)
     speed = report.get("speed") if cert.get("speed") != "not measured" else None
     if speed is not None and not isinstance(speed, list):
         problems.append("report.json: speed is not a list")
         return
-    verdict, code, diffs = derive_verdict(list(by_id.values()), strict=bool(cert.get("strict")), speed=speed)
-    for key, want in (("verdict", verdict), ("exit_code", code), ("provisional_differences", diffs),
+    for cid, r in sorted(by_id.items()):
+        if r.get("reading") is not None and r.get("reading") not in declared:
+            problems.append(f"results.jsonl: {_quote(cid)} was judged by the reading {_quote(r.get('reading'))}, "
+                            f"which the decoder does not declare")
+    cv = derive_verdict(list(by_id.values()), strict=bool(cert.get("strict")), speed=speed, declared=declared)
+    verdict, code = cv.verdict, cv.exit_code
+    for key, want in (("verdict", verdict), ("exit_code", code), ("provisional_differences", cv.differences),
+                      ("unverified", cv.unverified),
                       ("counts", counts(list(by_id.values()))), ("cases", len(by_id))):
         got = cert.get(key)
         if key == "counts" and isinstance(got, dict):
@@ -331,15 +332,44 @@ def _check_verdict(files: dict[str, bytes], cert: dict, problems: list[str]) -> 
             problems.append(f"{name}: does not state the verdict the results give ({verdict})")
 
 
-def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) -> set[str] | None:
-    """The case ids the certificate's claim requires, from the packaged suite manifests
+def _declared_readings(files: dict[str, bytes], report: dict, problems: list[str]) -> list[str]:
+    """The other readings the decoder declared (report.json), each a listed one and each the
+    packaged manifest's when the package holds it."""
+    declared = (report.get("decoder") or {}).get("readings") or []
+    if not isinstance(declared, list) or not all(isinstance(r, str) and r in readings.catalogue() for r in declared):
+        problems.append(f"report.json: the decoder's readings {_quote(declared)} are not listed readings")
+        return []
+    if "decoder.toml" in files:
+        try:
+            manifest = tomllib.loads(files["decoder.toml"].decode("utf-8"))
+        except (UnicodeDecodeError, tomllib.TOMLDecodeError):
+            problems.append("decoder.toml: not TOML")
+            return declared
+        if list(manifest.get("readings", [])) != declared:
+            problems.append(f"report.json: the decoder's readings {_quote(declared)} are not decoder.toml's "
+                            f"{_quote(manifest.get('readings', []))}")
+    return declared
+
+
+def _check_cases(by_id: dict[str, dict], required: dict[str, Case], problems: list[str]) -> None:
+    """What a result says of its case (kind, tools) must be the packaged suite's: the verdict
+    sets a tool's cases aside by them."""
+    for cid in sorted(set(by_id) & set(required)):
+        r, case = by_id[cid], required[cid]
+        if r.get("kind") != case.kind.value or sorted(r.get("tools") or []) != sorted(case.tools):
+            problems.append(f"results.jsonl: {_quote(cid)} says kind {_quote(r.get('kind'))}, tools "
+                            f"{_quote(r.get('tools'))}; its suite says {case.kind.value}, {sorted(case.tools)}")
+
+
+def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) -> dict[str, Case] | None:
+    """The cases the certificate's claim requires, by id, from the packaged suite manifests
     (each must be one the certificate names, by digest)."""
     claim = cert.get("claim")
     named = cert.get("suites")
     if not isinstance(claim, str) or not isinstance(named, list):
         problems.append(f"{CERTIFICATE}: claim or suites missing")
         return None
-    out: set[str] = set()
+    out: dict[str, Case] = {}
     decoder = SimpleNamespace(is_player=False)  # certify refuses players
     for s in named:
         name = s.get("name") if isinstance(s, dict) else None
@@ -356,7 +386,7 @@ def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) ->
             for c in doc["cases"]:
                 case = Case.from_json(c, doc["name"], None)
                 if required_for(claim, case, decoder):
-                    out.add(case.full_id)
+                    out[case.full_id] = case
         except (FbaconfInputError, KeyError, TypeError, ValueError, AttributeError) as e:
             problems.append(f"{rel}: unusable suite manifest ({type(e).__name__})")
             return None
@@ -364,24 +394,23 @@ def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) ->
 
 
 def _check_rests_on(by_id: dict[str, dict], files: dict[str, bytes], problems: list[str]) -> None:
-    """What a failing case rests on must be what this fbaconf derives from the same suite's
-    streams (when the installed suite is the packaged one, by digest)."""
-    failing = [cid for cid, r in by_id.items() if r.get("outcome") == "Fail" and r.get("rests_on")]  # all it trusts
-    if not failing:
-        return
+    """What a case rests on must be what this fbaconf derives from the same suite's goldens and
+    tools (when the installed suite is the packaged one, by digest): the verdict sets cases aside
+    and names provisional differences by it."""
     try:
-        local = {s.name: s for s in load_suites()}
+        suites = load_suites()
     except FbaconfInputError:
         return
-    for cid in failing:
-        suite, _, _ = cid.partition("/")
-        s = local.get(suite)
-        packaged = files.get(f"suites/{suite}.json")
-        if s is None or packaged is None or hashlib.sha256(packaged).hexdigest() != s.digest():
+    same = {s.name for s in suites
+            if hashlib.sha256(files.get(f"suites/{s.name}.json", b"")).hexdigest() == s.digest()}
+    local = {c.full_id: c for s in suites if s.name in same for c in s.cases}
+    for cid in sorted(by_id):
+        case = local.get(cid)
+        if case is None:
             continue
-        case = next((c for c in s.cases if c.full_id == cid), None)
-        if case is not None and rests_on(case) != list(by_id[cid].get("rests_on") or []):
-            problems.append(f"results.jsonl: {_quote(cid)} rests on {rests_on(case)} (from its streams), "
+        derived = rests_on(case)
+        if derived != list(by_id[cid].get("rests_on") or []):
+            problems.append(f"results.jsonl: {_quote(cid)} rests on {derived} (from its goldens and tools), "
                             f"not {_quote(by_id[cid].get('rests_on'))}")
 
 

@@ -6,6 +6,7 @@ Manifest (docs/harness.md, "Write a manifest")::
     description = "..."
     claims = ["simple@1"]                 # profile@level claimed
     tools = ["arithmetic", "dct"]         # optional: tools supported (default: all of the claimed profile)
+    readings = ["D7:rewind-14"]           # optional: other readings of provisional decisions it follows
     inputs = ["fba", "fap", "scene", "bifs"]
     outputs = ["faps", "vertices", "images"]
     faps_format = "fap"                   # or "npz": the FAP output file the decoder writes
@@ -46,6 +47,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fbaconf.bitstreams import readings
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation.endings import DEFAULT_REJECT_EXIT_CODES
 from fbaconf.isolation.sandbox import Limits, default_view, python_view, view_problem
@@ -97,6 +99,7 @@ class Adapter:
     description: str = ""
     claims: list[str]
     tools: list[str] | None = None
+    readings: tuple[str, ...] = ()  # other readings of provisional decisions the decoder follows
     inputs: list[str]
     outputs: list[str]
     faps_format: str = "npz"
@@ -119,7 +122,8 @@ class Adapter:
 
     def describe(self) -> dict:
         return {"name": self.name, "kind": self.kind, "description": self.description, "claims": list(self.claims),
-                "tools": self.tools, "inputs": list(self.inputs), "outputs": list(self.outputs),
+                "tools": self.tools, "readings": list(self.readings), "inputs": list(self.inputs),
+                "outputs": list(self.outputs),
                 "faps_format": self.faps_format, "manifest": str(self.manifest_path) if self.manifest_path else None,
                 "reject_exit_codes": sorted(self.reject_exit_codes),
                 "manifest_sha256": self.digest(),
@@ -164,6 +168,7 @@ class CommandAdapter(Adapter):
         self.description = data.get("description", "")
         self.claims = list(data["claims"])
         self.tools = list(data["tools"]) if "tools" in data else None
+        self.readings = tuple(data.get("readings", ()))
         self.inputs = list(data["inputs"])
         self.outputs = list(data["outputs"])
         self.faps_format = data.get("faps_format", "fap")
@@ -291,6 +296,7 @@ def _check_keys(data: dict, bad) -> None:
             raise bad(f"unknown key {_quote(key)}{_did_you_mean(str(key), MANIFEST_KEYS)}", "manifest-key")
     for key, kind, what in (("name", str, "a string"), ("description", str, "a string"),
                             ("claims", list, "a list"), ("tools", list, "a list of tool names"),
+                            ("readings", list, "a list of reading ids"),
                             ("inputs", list, "a list"), ("outputs", list, "a list"), ("faps_format", str, "a string"),
                             ("commands", dict, "a table"), ("limits", dict, "a table"), ("env", dict, "a table"),
                             ("python", str, "a string"), ("options", dict, "a table"),
@@ -341,6 +347,10 @@ def _check_values(data: dict, bad) -> None:
         unknown = [t for t in data["tools"] if t not in known]
         if unknown:
             raise bad(f"unknown tool(s) {_quote(unknown)} (known: {', '.join(known)})", "manifest-tools")
+    unknown = [r for r in data.get("readings", []) if not isinstance(r, str) or r not in readings.catalogue()]
+    if unknown:
+        raise bad(f"readings: unknown reading(s) {_quote(unknown)} (known: {', '.join(readings.catalogue())}; "
+                  f"docs/harness.md, \"Provisional requirements\")", "manifest-readings")
 
 
 def _check_commands(data: dict, bad) -> None:
@@ -379,10 +389,11 @@ def _check_placeholders(cname: str, s: str, bad) -> None:
                       f"{', '.join('{' + p + '}' for p in PLACEHOLDERS)})", "manifest-placeholder")
 
 
-MANIFEST_KEYS = ("name", "description", "claims", "tools", "inputs", "outputs", "faps_format", "commands", "limits",
-                 "env", "python", "options", "reject_exit_codes", "serve_equivalent")
+MANIFEST_KEYS = ("name", "description", "claims", "tools", "readings", "inputs", "outputs", "faps_format", "commands",
+                 "limits", "env", "python", "options", "reject_exit_codes", "serve_equivalent")
 LIMIT_KEYS = ("timeout_s", "memory_mb", "memory_kind", "output_mb", "processes")
 _KEY_RULE = {"name": "manifest-name", "claims": "manifest-claims", "tools": "manifest-tools",
+             "readings": "manifest-readings",
              "inputs": "manifest-inputs", "outputs": "manifest-outputs", "faps_format": "manifest-faps-format",
              "commands": "manifest-commands", "limits": "manifest-limits", "env": "manifest-env",
              "python": "manifest-python", "options": "manifest-options", "reject_exit_codes": "manifest-reject-codes"}
@@ -482,6 +493,7 @@ def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
     adapter.description = data.get("description", getattr(adapter, "description", ""))
     adapter.claims = list(data["claims"])
     adapter.tools = list(data["tools"]) if "tools" in data else None
+    adapter.readings = tuple(data.get("readings", ()))
     adapter.inputs = list(data["inputs"])
     adapter.outputs = list(data["outputs"])
     adapter.faps_format = data.get("faps_format", getattr(adapter, "faps_format", "npz"))

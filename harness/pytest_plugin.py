@@ -47,7 +47,7 @@ from fbaconf.errors import FbaconfInputError
 
 from . import baseline as bl
 from .adapters import resolve
-from .provisional import is_provisional_difference
+from .provisional import open_decisions
 from .reports.common import clean_text, format_difference, reproduce_line
 from .results import Outcome
 from .runner import RunContext, run_case
@@ -136,10 +136,17 @@ class FbaconfItem(pytest.Item):
                 r.baseline = "flake"
                 r.message = f"{bl.RETRY_PASSED} {attempt}; first run: {r.message}"
                 break
-        if not st.strict and is_provisional_difference(r):
+        if r.reading and r.outcome.ok:
             self.user_properties.append((_PROPERTY, "provisional"))
-            pytest.xfail(f"provisional difference (rests on {', '.join(r.rests_on)}; --fbaconf-strict fails it): "
-                         f"{r.outcome.value}: {clean_text(r.message)}")
+            if st.strict:
+                pytest.fail(f"provisional difference (judged by the declared reading {r.reading}; --fbaconf-strict "
+                            f"fails it): {clean_text(r.message)}", pytrace=False)
+        opened = sorted(set(r.rests_on) & set(open_decisions()))
+        if not st.strict and opened and r.outcome.value in ("Fail", "NotSupported"):
+            self.user_properties.append((_PROPERTY, "unverified"))
+            pytest.xfail(f"rests on the open decision {', '.join(opened)}: the claim names its tool unverified when "
+                         f"none of the tool's cases passes (--fbaconf-strict fails it): {r.outcome.value}: "
+                         f"{clean_text(r.message)}")
         summary = bl.classify([r], st.baseline, st.flakes)
         self._judge(r, summary)
 

@@ -96,6 +96,11 @@ class CaseResult:
     crash_kind: str | None = None  # the crash report found (sanitizer, panic, uncaught exception), if any
     baseline: str | None = None  # "known-failure", "flake", "fixed" (listed failing, passes now), "new"
     rests_on: list[str] = field(default_factory=list)  # provisional decisions the expected output rests on (D3-D8)
+    kind: str = "decode"  # the case's kind: decode, multi or error (an invalid stream)
+    tools: list[str] = field(default_factory=list)  # the coding tools the case's streams use
+    ending: str | None = None  # how the decoder's process ended (isolation.endings.EndingKind), when it ran
+    reading: str | None = None  # the declared other reading the case was judged by (a provisional difference)
+    other_reading: str | None = None  # an undeclared other reading the decoder's result equals (a hint, no excuse)
 
     @property
     def first_difference(self) -> dict | None:
@@ -157,10 +162,11 @@ class RunRecord:
     missing: list[str] = field(default_factory=list)  # required cases the decoder could not take, by reason
     baseline_summary: str = ""  # "N new, N known, N fixed, N flaky" when a baseline/flakes/retries applied
     exit_code: int = 0
-    # required cases failing only on provisional decisions ({"case_id", "rests_on"}); they fail the claim
-    # only under --strict (harness/provisional.py)
+    # required cases judged by a declared other reading ({"case_id", "rests_on", "reading"}); they fail the
+    # claim only under --strict (harness/verdict.py)
     provisional_differences: list[dict] = field(default_factory=list)
     strict: bool = False
+    verdict: dict = field(default_factory=dict)  # the claim's verdict: words, tools and decisions (verdict.py)
 
     def counts(self, results: Iterable[CaseResult] | None = None) -> dict[str, int]:
         c = {o.value: 0 for o in OUTCOME_ORDER}
@@ -176,6 +182,7 @@ class RunRecord:
             "counts": self.counts(), "exit_code": self.exit_code, "provisional": self.provisional,
             "missing": self.missing, "baseline_summary": self.baseline_summary,
             "provisional_differences": self.provisional_differences, "strict": self.strict,
+            "verdict": self.verdict,
             "results": [r.to_json() for r in self.results],
             "speed": [s.to_json() for s in self.speed],
         }
@@ -189,7 +196,8 @@ class RunRecord:
                    duration_s=d.get("duration_s", 0.0), provisional=d.get("provisional", []),
                    missing=d.get("missing", []), baseline_summary=d.get("baseline_summary",
                                                                         ""), exit_code=d.get("exit_code", 0),
-                   provisional_differences=d.get("provisional_differences", []), strict=d.get("strict", False))
+                   provisional_differences=d.get("provisional_differences", []), strict=d.get("strict", False),
+                   verdict=d.get("verdict", {}))
 
 
 _APPEND_LOCK = threading.Lock()

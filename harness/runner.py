@@ -29,6 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from fbaconf.bitstreams import readings
+from fbaconf.conformance.golden import REJECT, reading_goldens
 from fbaconf.conformance.suite import Case, CaseKind, golden_root, suites_root
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import endings, sandbox
@@ -38,7 +40,7 @@ from . import cluster as cl
 from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
 from .compare.base import worst
 from .compare.ladder import compare_outputs, outcome_for
-from .provisional import rests_on
+from .provisional import readings_for, rests_on
 from .results import CaseResult, Outcome, ResultLog
 from .selection import capability, required_for
 
@@ -141,7 +143,7 @@ def run_case(ctx: RunContext, case: Case) -> CaseResult:
     t0 = time.perf_counter()
     required = required_for(ctx.claim, case, ctx.adapter)
     base = dict(case_id=case.full_id, suite=case.suite, claim=case.claim, required=required,
-                rests_on=rests_on(case))
+                rests_on=rests_on(case, ctx.golden), kind=case.kind.value, tools=list(case.tools))
     why = capability(ctx.adapter, case)
     if why:
         return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED, message=why)
@@ -178,19 +180,72 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
                     stderr_tail=_stderr_kept(res.stderr_tail, ending))
     else:
         ending, proc = _run_python(a, job)
-    verdict = outcome_for(ending, invalid_stream=case.kind == CaseKind.ERROR,
-                                conceal_allowed=bool(case.expect.get("conceal")))
+    proc["ending"] = ending.kind.value
     if ending.report is not None:
         proc["crash_kind"] = ending.report.kind
+    fields = dict(base, **proc)
+    declared = readings_for(case, a.readings, ctx.golden)
+    if declared:
+        return _judge_by_declared(ctx, case, job, ending, fields, declared)
+    result = _judge(ctx, case, job, ending, fields)
+    if result.outcome == Outcome.FAIL:
+        _hint_other_reading(ctx, case, job, ending, fields, result)
+    return result
+
+
+def _judge(ctx: RunContext, case: Case, job: Job, ending, fields: dict, reading_dir: Path | None = None
+           ) -> CaseResult:
+    """The case's result from the decoder's ending and outputs: against the case's goldens, or
+    against what another reading gives (``reading_dir``: its outputs, or reject.json)."""
+    if reading_dir is None:
+        invalid, conceal, stages_of_case = case.kind == CaseKind.ERROR, bool(case.expect.get("conceal")), None
+    else:  # that reading rejects the stream, or decodes it (an invalid stream's FAPs)
+        invalid, conceal = (reading_dir / REJECT).is_file(), False
+        stages_of_case = ["faps"] if case.kind == CaseKind.ERROR else None
+    verdict = outcome_for(ending, invalid_stream=invalid, conceal_allowed=conceal)
     if verdict is not None:
         outcome, msg = verdict
-        return CaseResult(**base, outcome=outcome, message=msg, **proc)
-    stages = compare_outputs(case, job, golden=ctx.golden, outputs=a.outputs, out_dir=ctx.out_dir)
+        return CaseResult(**fields, outcome=outcome, message=msg)
+    stages = compare_outputs(case, job, golden=ctx.golden, outputs=ctx.adapter.outputs, out_dir=ctx.out_dir,
+                             gdir=reading_dir, stages_of_case=stages_of_case)
     outcome = worst(s.outcome for s in stages)
     failing = [s for s in stages if s.outcome != Outcome.PASS]
     msg = "; ".join(f"{s.stage}: {s.message}" for s in failing) if failing else \
         f"{', '.join(s.stage for s in stages)} match"
-    return CaseResult(**base, outcome=outcome, message=msg, stages=stages, **proc)
+    return CaseResult(**fields, outcome=outcome, message=msg, stages=stages)
+
+
+def _judge_by_declared(ctx: RunContext, case: Case, job: Job, ending, fields: dict,
+                       declared: dict[str, Path]) -> CaseResult:
+    """A case that a reading the decoder declared changes: judged by what that reading gives (the
+    first declared one that the result equals; a decoder follows one reading)."""
+    first = None
+    for rid, rdir in declared.items():
+        r = _judge(ctx, case, job, ending, dict(fields, reading=rid), rdir)
+        if r.outcome.ok:
+            r.message = f"judged by the declared reading {rid}: {r.message}"
+            return r
+        first = first or r
+    assert first is not None
+    if _judge(ctx, case, job, ending, dict(fields)).outcome.ok:
+        first.message = (f"decoded by fbaconf's reading, not the declared {', '.join(declared)} (which changes "
+                         f"this case): a decoder follows the reading it declares; {first.message}")
+    else:
+        first.message = f"judged by the declared reading {', '.join(declared)}: {first.message}"
+    first.reading = None  # not a provisional difference: a failure
+    return first
+
+
+def _hint_other_reading(ctx: RunContext, case: Case, job: Job, ending, fields: dict, result: CaseResult) -> None:
+    """A failing result that equals what another (undeclared) reading gives says so: the vendor
+    learns which reading the decoder follows and how to declare it; it stays a failure."""
+    for rid, rdir in reading_goldens(case, ctx.golden).items():
+        if _judge(ctx, case, job, ending, fields, rdir).outcome.ok:
+            result.other_reading = rid
+            result.message += (f" — this is what the other reading {rid} gives ({readings.get(rid).text}); a "
+                               f"decoder that follows it declares readings = [\"{rid}\"] in its manifest")
+            return
+
 
 
 def _stderr_kept(err: str, ending) -> str:

@@ -24,11 +24,11 @@ from fbaconf.profiles.model import Claim, load_profiles
 from . import baseline as bl
 from . import reports
 from .adapters import CommandAdapter, highest_claim
-from .provisional import is_provisional_difference, provisional_differences
 from .results import RunRecord
 from .runner import hidden_from_decoders, run_cases
 from .speed import measure_claim
 from .sysinfo import system_info
+from .verdict import claim_verdict, speed_block
 
 
 def provisional_statements(claim: str | None) -> list[str]:
@@ -73,8 +73,9 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
 
     Exit code: 1 when a required case fails or could not be taken (a claim means all of it),
     counting only new failures (and fixed cases, unless ``allow_fixed``) when a baseline or
-    flakes file is given — a provisional difference (:mod:`.provisional`) only under
-    ``strict``; 3 only when every required case passed and only speed was missed; else 0."""
+    flakes file is given; the claim's verdict otherwise (:mod:`.verdict`: what a declared reading
+    gives and an unverified tool fail only under ``strict``); 3 only when every required case
+    passed and only speed was missed; else 0."""
     o = options or RunOptions()
     jobs, baseline, flakes, retries, speed = o.jobs, o.baseline, o.flakes, o.retries, o.speed
     # read (and check) the baseline and flakes files before any case: a bad line stops the run at once
@@ -90,23 +91,27 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
         return _interrupted_record(adapter, claim, suites, cases, results, started, t0, stop.signum)
     if retries:
         _retry(adapter, cases, results, claim, out_dir, jobs, retries)
-    differences = provisional_differences(results)
-    judged = results if o.strict else [r for r in results if not is_provisional_difference(r)]
-    summary = bl.classify(judged, known, flaky)
     speed_results = []
     if speed:
         speed_results = [s for s in measure_claim(adapter, claim) if s is not None]
+    speed_json = [s.to_json() for s in speed_results] if speed else None
+    cv = claim_verdict([r.to_json() for r in results], strict=o.strict, speed=speed_json, declared=adapter.readings)
     record = _record(adapter, claim, suites, cases, results, started, t0)
     record.speed = speed_results
     record.missing = missing_summary(results)
-    record.baseline_summary = summary.line() if (baseline is not None or flakes is not None or retries) else ""
-    record.provisional_differences, record.strict = differences, o.strict
-    if summary.failing(o.allow_fixed):
-        record.exit_code = 1
-    elif any(not s.passed for s in speed_results):
-        record.exit_code = 3
-    else:
-        record.exit_code = 0
+    record.provisional_differences, record.strict = cv.differences, o.strict
+    record.verdict = cv.to_json()
+    record.exit_code = cv.exit_code
+    if baseline is not None or flakes is not None or retries:
+        # a CI gate: only new failures (and fixed cases) fail; what the claim sets aside is not judged
+        judged = results if o.strict else [r for r in results if r.case_id not in cv.set_aside]
+        summary = bl.classify(judged, known, flaky)
+        record.baseline_summary = summary.line()
+        if summary.failing(o.allow_fixed) or (o.strict and cv.differences):
+            record.exit_code = 1
+        else:
+            blocked = speed_block(speed_json)
+            record.exit_code = blocked[1] if blocked else 0
     return record
 
 

@@ -194,7 +194,7 @@ MUTANTS_LIST = [
     Mutant("time-code-minutes-as-seconds", f"{D}.plane", "time code minutes counted as seconds",
            "(3600.0 * h + 60.0 * m + s) * 1000.0", "(3600.0 * h + m + s) * 1000.0", pure_decoder=True),
     Mutant("default-rate-30", f"{D}.plane", "30 Hz (not 25 Hz, D6) when no frame rate is signalled",
-           "rate = self.rate if self.rate is not None else DEFAULT_FRAME_RATE",
+           "rate = self.rate if self.rate is not None else default_frame_rate()",
            "rate = self.rate if self.rate is not None else 30.0", pure_decoder=True),
     Mutant("skip-not-in-time", f"{D}.plane", "skipped frames not counted in the plane times",
            "self.time_ms = self.time_ms + (info.skip + 1) * 1000.0 / rate",

@@ -63,10 +63,13 @@ def outcome_for(ending: Ending, *, invalid_stream: bool = False, conceal_allowed
     return None
 
 
-def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], out_dir: Path) -> list[StageResult]:
+def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], out_dir: Path,  # noqa: PLR0913
+                    gdir: Path | None = None, stages_of_case: list[str] | None = None) -> list[StageResult]:
     """Each stage the case compares and the decoder outputs, judged against the goldens under
-    ``golden``; failing images leave artefacts under ``out_dir``."""
-    gdir = case.golden_dir(golden)
+    ``golden`` (or in ``gdir``: what another reading gives, conformance/golden.py); failing images
+    leave artefacts under ``out_dir``. ``stages_of_case``: the stages to compare instead of the
+    case's (an invalid stream that another reading decodes compares its FAPs)."""
+    gdir = gdir if gdir is not None else case.golden_dir(golden)
     stages: list[StageResult] = []
     if case.kind == CaseKind.MULTI:
         outd = job.path("faps_out_dir")
@@ -81,11 +84,11 @@ def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], o
                 continue
             stages.append(_faps_stage(expected, got_path, f"faps[face {i}]"))
         return stages
-    for stage in case.stages:
+    for stage in case.stages if stages_of_case is None else stages_of_case:
         if stage not in outputs:
             continue
         if stage == "faps":
-            gp = gdir / case.goldens["faps"]
+            gp = gdir / case.goldens.get("faps", "faps.npz")
             if not gp.is_file():
                 stages.append(StageResult("faps", Outcome.ERROR,
                                           f"golden missing: {gp} (run fbaconf golden regenerate)"))

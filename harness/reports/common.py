@@ -13,7 +13,7 @@ from fbaconf.harness.results import OUTCOME_ORDER, CaseResult, Outcome, RunRecor
 # Column order of the outcome tables (as the Outcome enum: Pass first, then the bad ones).
 COLUMNS = tuple(Outcome)
 
-VERDICTS = {0: "PASS", 1: "FAIL", 2: "SETUP ERROR", 3: "SPEED FAIL"}
+VERDICTS = {0: "PASS", 1: "FAIL", 2: "SETUP ERROR", 3: "SPEED FAIL", 4: "SPEED INCONCLUSIVE"}
 
 # Non-finite floats are not JSON; they are written as these strings and read back.
 _NONFINITE = {"Infinity": math.inf, "-Infinity": -math.inf, "NaN": math.nan}
@@ -46,10 +46,12 @@ def profile_of(claim: str | None) -> str:
 
 
 def verdict(record: RunRecord) -> str:
-    """``PASS`` / ``PASS (provisional differences: N)`` / ``FAIL`` / ``SPEED FAIL`` / ``SETUP ERROR``
-    from the record's exit code and its provisional differences (harness/provisional.py)."""
-    if record.exit_code == 0 and record.provisional_differences:
-        return f"PASS (provisional differences: {len(record.provisional_differences)})"
+    """The claim's verdict words (harness/verdict.py: ``PASS``, ``PASS (unverified: dct;
+    provisional differences: N)``, ``FAIL``, ``SPEED FAIL`` …); from the exit code when the run
+    was judged by a baseline or stopped before a verdict."""
+    words = (record.verdict or {}).get("verdict")
+    if words and record.exit_code == record.verdict.get("exit_code"):
+        return words
     return VERDICTS.get(record.exit_code, f"EXIT {record.exit_code}")
 
 

@@ -7,7 +7,7 @@ spec notes and the reference source only; each is one plausible misreading.
 """
 from __future__ import annotations
 
-from fbaconf.bitstreams import dct, decoder, syntax
+from fbaconf.bitstreams import syntax
 from fbaconf.mutation.core import Mutant
 
 DEC = "fbaconf.bitstreams.decoder:_Decoder"
@@ -59,8 +59,7 @@ def _patch_rate_seconds_tenths() -> None:
 
 def _patch_default_rate_30() -> None:
     """S1 decoder's default: 30 Hz when no frame rate was ever signalled (D6 says 25)."""
-    decoder.DEFAULT_FRAME_RATE = 30.0
-    dct.DEFAULT_FRAME_RATE = 30.0
+    syntax.DEFAULT_FRAME_RATE = 30.0
 
 
 MUTANTS_LIST: list[Mutant] = [
@@ -80,7 +79,7 @@ MUTANTS_LIST: list[Mutant] = [
     _p("ind-time-rate-seconds-tenths", "fbaconf.bitstreams.syntax:FrameRateCode",
        "the 4-bit seconds field is taken as tenths of a Hz (frame_rate + seconds/10)", _patch_rate_seconds_tenths,
        "D6 frame_rate + seconds/16"),
-    _p("ind-time-default-rate-30", "fbaconf.bitstreams.decoder:DEFAULT_FRAME_RATE",
+    _p("ind-time-default-rate-30", "fbaconf.bitstreams.syntax:DEFAULT_FRAME_RATE",
        "a stream that never signals a frame rate is timed at 30 Hz (S1's decoder) instead of 25 Hz",
        _patch_default_rate_30, "D6 default 25 Hz"),
     _m("ind-time-rate-first-only", f"{DEC}.plane",

@@ -330,11 +330,13 @@ def test_pytest_plugin_gives_one_item_per_case(tmp_path):
     # fdp-all-points and its two image-only views (-three-quarter, -flat-culled) are outside the claim
     assert "1 failed" in out and "3 skipped" in out
     assert "first difference" in out
-    # the case rests on decision D5: without --fbaconf-strict its difference is provisional (as in `fbaconf run`)
+    # no known reading changes that case: without --fbaconf-strict too, its difference fails; a case of the DCT
+    # tool (open decision D8) is expected to fail unless --fbaconf-strict (the claim names the tool unverified)
     r = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-rx", "--fbaconf-decoder",
-                        str(m), "fbaconf::" + SIMPLE, str(tmp_path)], capture_output=True, text=True, cwd=tmp_path,
-                       timeout=600)
-    assert r.returncode == 0 and "provisional difference (rests on D5; --fbaconf-strict fails it)" in r.stdout
+                        str(m), "fbaconf::" + SIMPLE, "fbaconf::simple-l1-core/dct-q4", str(tmp_path)],
+                       capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    assert r.returncode == 1 and "1 failed" in r.stdout and "1 xfailed" in r.stdout, r.stdout
+    assert "rests on the open decision D8" in r.stdout
 
 
 # ----------------------------------------------------------------------------- worked example

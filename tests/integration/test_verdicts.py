@@ -138,10 +138,12 @@ def test_decoder_that_supports_nothing_fails_the_claim(tmp_path):
     assert "could not take" in statement
 
 
-def test_arithmetic_only_decoder_fails_the_claim(tmp_path):
-    """The reference decoder declared without the DCT tool fails simple@1: the DCT cases are
-    required and NotSupported. In-process through the session certify runs (the claim policy is
-    the point, not the sandbox; certify refuses in-process adapters other than the bundled one)."""
+def test_arithmetic_only_decoder_passes_with_dct_unverified(tmp_path):
+    """The reference decoder declared without the DCT tool: the DCT cases are required and
+    NotSupported, and every one rests on D8 (fbaconf's own tables), so the claim passes with the
+    tool named unverified and the statement's "could not take" lists them (harness/verdict.py;
+    tests/integration/test_verdict_policy.py for the rule itself). In-process through the session
+    certify runs (the claim policy is the point, not the sandbox)."""
     m = tmp_path / "arith-only.toml"
     m.write_text('name = "arith-only"\npython = "fbaconf.harness.refadapter:ReferenceAdapter"\n'
                  'claims = ["simple@1"]\ntools = ["arithmetic", "high_level_faps"]\ninputs = ["fba"]\n'
@@ -150,7 +152,7 @@ def test_arithmetic_only_decoder_fails_the_claim(tmp_path):
     suites = load_suites(names=["simple-l1-core", "simple-l1-error"])
     cases = select_cases(suites, "simple@1", [], [], only_required=True, adapter=a)
     record = execute(a, "simple@1", cases, suites, tmp_path / "run", RunOptions(jobs=2, speed=False))
-    assert record.exit_code == 1
+    assert record.exit_code == 0 and record.verdict["verdict"] == "PASS (unverified: dct)"
     (line,) = record.missing
     dct = [c for c in cases if "dct" in (c.tools or [])]
     assert dct and line.startswith(f"{len(dct)} required case(s)") and "dct" in line, line
