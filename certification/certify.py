@@ -134,7 +134,7 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
     prepare_output(out, o.force)
     record = execute(adapter, claim, cases, suites, out,
                      RunOptions(jobs=o.jobs, speed=o.speed, cluster=o.cluster, strict=o.strict))
-    write_reports(record, out)
+    write_reports(record, out, heading="fbaconf certification")
     if record.exit_code >= 128:
         print(f"fbaconf certify: interrupted: no certificate written; partial report in {out}", file=sys.stderr)
         return record.exit_code

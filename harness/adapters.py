@@ -126,6 +126,7 @@ class Adapter:
                 "outputs": list(self.outputs),
                 "faps_format": self.faps_format, "manifest": str(self.manifest_path) if self.manifest_path else None,
                 "reject_exit_codes": sorted(self.reject_exit_codes),
+                "env": dict(getattr(self, "env", None) or {}),
                 "manifest_sha256": self.digest(),
                 "limits": {"timeout_s": self.limits.timeout_s, "memory_mb": self.limits.memory_mb,
                            "memory_kind": self.limits.memory_kind, "output_mb": self.limits.output_mb}}

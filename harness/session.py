@@ -133,13 +133,14 @@ def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) ->
         todo = [r for r in todo if r.case_id not in passed]
 
 
-def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None) -> dict[str, Path]:
+def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None,  # noqa: PLR0913
+                  heading: str = "fbaconf run") -> dict[str, Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": json_path or out_dir / "report.json", "junit": junit_path or out_dir / "junit.xml",
              "html": (html_dir or out_dir) / "index.html"}
     reports.write_json(record, paths["json"])
     reports.write_junit(record, paths["junit"])
-    paths["html"] = reports.write_html(record, html_dir or out_dir, base_dir=out_dir)
+    paths["html"] = reports.write_html(record, html_dir or out_dir, base_dir=out_dir, heading=heading)
     return paths
 
 

@@ -11,7 +11,6 @@ from fbaconf.harness.baseline import signature
 from fbaconf.harness.results import OUTCOME_ORDER, CaseResult, Outcome, RunRecord, SpeedResult
 
 # Column order of the outcome tables (as the Outcome enum: Pass first, then the bad ones).
-COLUMNS = tuple(Outcome)
 
 VERDICTS = {0: "PASS", 1: "FAIL", 2: "SETUP ERROR", 3: "SPEED FAIL", 4: "SPEED INCONCLUSIVE"}
 
@@ -114,17 +113,52 @@ def _suite_names(record: RunRecord) -> list[str]:
     return names
 
 
+# The count tables' columns: a required case the decoder could not take is counted apart from an
+# informative one (it fails the claim unless its tool is set aside as unverified; harness/verdict.py).
+NS_REQUIRED = "RequiredNotSupported"
+DISPLAY_COLUMNS = ("Pass", "Fail", "QualityWarning", NS_REQUIRED, "NotSupported", "Timeout", "Crash", "Error",
+                   "Skipped")
+
+
+def display_counts(results) -> dict[str, int]:
+    """Counts by :data:`DISPLAY_COLUMNS` (outcomes, required NotSupported apart)."""
+    c = dict.fromkeys(DISPLAY_COLUMNS, 0)
+    for r in results:
+        c[NS_REQUIRED if r.outcome is Outcome.NOT_SUPPORTED and r.required else r.outcome.value] += 1
+    return c
+
+
 def _by(record: RunRecord, key) -> dict[str, dict[str, int]]:
     groups: dict[str, list[CaseResult]] = {}
     for r in record.results:
         groups.setdefault(key(r), []).append(r)
-    return {k: record.counts(v) for k, v in groups.items()}
+    return {k: display_counts(v) for k, v in groups.items()}
 
 
 def _summary_counts(counts: dict[str, int]) -> str:
     n = sum(counts.values())
-    parts = [f"{counts[o.value]} {o.value}" for o in COLUMNS if counts.get(o.value)]
+    parts = [f"{counts[c]} {c}" for c in DISPLAY_COLUMNS if counts.get(c)]
     return f"{n} case{'s' if n != 1 else ''}" + (": " + ", ".join(parts) if parts else "")
+
+
+def verdict_reason(record: RunRecord) -> str:
+    """Why the claim's verdict is what it is, in one line beside it: the required cases that fail
+    it, or what a qualified pass leaves out."""
+    v = record.verdict or {}
+    unverified = set(v.get("unverified") or ())
+    required = [r for r in record.results if r.required]
+    hard = [r for r in required if not r.outcome.ok and not unverified & set(r.tools)]
+    if hard:
+        return "required case(s) not passed: " + _summary_counts(display_counts(hard)).split(": ", 1)[-1]
+    out = []
+    for tool in sorted(unverified):
+        t = (v.get("tools") or {}).get(tool, {})
+        out.append(f"{tool} {t.get('state', 'unverified')} ({t.get('note', '')}): its {t.get('cases', '?')} required "
+                   f"case(s) set aside; --strict fails them")
+    if record.provisional_differences:
+        how = sorted({str(d.get("reading")) for d in record.provisional_differences})
+        out.append(f"{len(record.provisional_differences)} case(s) judged by the declared reading {', '.join(how)}")
+    return clean_text("; ".join(out))
 
 
 def _speed_summary(speed: list[SpeedResult]) -> str:
@@ -177,10 +211,11 @@ def baseline_lines(record: RunRecord, limit: int = 30) -> list[str]:
 _CASE_FOLDER = re.compile(r"/\S*/work/case-[A-Za-z0-9_]+(?=/)")
 
 
-def reproduce_line(r: CaseResult, keep_option: str = "--keep-workdirs") -> str:
-    """The command of a case: as run when its work folder was kept (``keep_option``), else with
-    the deleted folder named for what it was."""
-    cmd = " ".join(shlex.quote(str(c)) for c in r.command)
+def reproduce_line(r: CaseResult, keep_option: str = "--keep-workdirs", env: dict | None = None) -> str:
+    """The command of a case, with the manifest's ``[env]`` before it (``env K=V …``): as run when its
+    work folder was kept (``keep_option``), else with the deleted folder named for what it was."""
+    pre = ["env"] + [f"{k}={v}" for k, v in sorted((env or {}).items())] if env else []
+    cmd = " ".join(shlex.quote(str(c)) for c in pre + list(r.command))
     folders = set(_CASE_FOLDER.findall(cmd))
     if folders and all(Path(f).is_dir() for f in folders):
         return clean_text(cmd)
@@ -192,10 +227,13 @@ def _speed_rows(speed: list[SpeedResult]) -> list[list[str]]:
              s.provenance] for s in speed]
 
 
-def _normalised(message: str) -> str:
-    """A message with what differs between identical failures masked: paths, addresses
-    (``0x7ffd…``, ``+0x1c``), process ids, numbers."""
-    m = re.sub(r"/\S+", "<path>", message or "")
+def _normalised(message: str, case_id: str = "") -> str:
+    """A message with what differs between identical failures masked: the case's own name (a
+    decoder's error names its input file), paths, addresses (``0x7ffd…``, ``+0x1c``), process ids,
+    numbers."""
+    own = case_id.rsplit("/", 1)[-1]
+    m = (message or "").replace(own, "<case>") if own else (message or "")
+    m = re.sub(r"/\S+", "<path>", m)
     m = re.sub(r"0x[0-9a-fA-F]+", "0x?", m)
     return re.sub(r"[-+]?\d+(\.\d+)?", "N", m)[:160]
 
@@ -206,7 +244,7 @@ def failure_groups(record: RunRecord) -> list[tuple[str, list[CaseResult]]]:
     cases, then the worst and largest groups."""
     groups: dict[tuple, list[CaseResult]] = {}
     for r in _problem_cases(record):
-        key = (r.outcome.value, signature(r), r.crash_kind or "", _normalised(r.message), r.baseline or "")
+        key = (r.outcome.value, signature(r), r.crash_kind or "", _normalised(r.message, r.case_id), r.baseline or "")
         groups.setdefault(key, []).append(r)
     rank = {o.value: i for i, o in enumerate(OUTCOME_ORDER)}
     out = sorted(groups.items(), key=lambda kv: (_BASELINE_ORDER.get(kv[0][4], 2), rank[kv[0][0]], -len(kv[1]),

@@ -6,7 +6,6 @@ import html
 import math
 import os
 import re
-import shlex
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -15,9 +14,11 @@ from urllib.parse import quote
 from fbaconf import __version__
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
+from fbaconf.harness.verdict import describe
 
 from .common import (
-    COLUMNS,
+    DISPLAY_COLUMNS,
+    NS_REQUIRED,
     _by,
     _fmt_value,
     _speed_rows,
@@ -26,9 +27,12 @@ from .common import (
     _summary_counts,
     baseline_changes,
     clean_text,
+    display_counts,
     failure_groups,
     profile_of,
+    reproduce_line,
     verdict,
+    verdict_reason,
 )
 
 
@@ -194,7 +198,7 @@ def _diff_table(d: dict) -> str:
     return "<table class='diff'><caption class='muted'>first difference</caption>" + "".join(rows) + "</table>"
 
 
-def _case_html(r: CaseResult, out_dir: Path, base_dir: Path) -> str:
+def _case_html(r: CaseResult, out_dir: Path, base_dir: Path, env: dict | None = None) -> str:
     o = r.outcome.value
     h = [f"<section class='case k-{o}' id='case-{_e(_anchor(r.case_id))}'>",
          f"<h3><span class='badge o-{o}'>{_e(o)}</span> <span class='mono'>{_e(r.case_id)}</span>"]
@@ -239,7 +243,7 @@ def _case_html(r: CaseResult, out_dir: Path, base_dir: Path) -> str:
                      + "</div>")
     extra = []
     if r.command:
-        extra.append(f"<tr><th>command</th><td class='mono'>{_e(shlex.join(str(a) for a in r.command))}</td></tr>")
+        extra.append(f"<tr><th>reproduce</th><td class='mono'>{_e(reproduce_line(r, env=env))}</td></tr>")
     if r.exit_code is not None or r.signal:
         extra.append(f"<tr><th>exit</th><td class='mono'>{_e(r.exit_code)}"
                      + (f", signal {_e(r.signal)}" if r.signal else "") + "</td></tr>")
@@ -258,13 +262,14 @@ def _anchor(case_id: str) -> str:
 
 def _counts_table_html(title: str, groups: dict[str, dict[str, int]], order: list[str], total: dict[str, int]) -> str:
     h = [f"<table class='counts'><tr><th>{_e(title)}</th>"]
-    h += [f"<th class='num'>{_e(o.value)}</th>" for o in COLUMNS] + ["<th class='num'>total</th></tr>"]
+    h += [f"<th class='num'>{_e(c)}</th>" for c in DISPLAY_COLUMNS] + ["<th class='num'>total</th></tr>"]
 
     def row(name, c, cls=""):
         cells = [f"<tr{cls}><td>{_e(name)}</td>"]
-        for o in COLUMNS:
-            n = c.get(o.value, 0)
-            cells.append(f"<td class='num {'c-' + o.value if n else 'zero'}'>{n}</td>")
+        for col in DISPLAY_COLUMNS:
+            n = c.get(col, 0)
+            css = "c-NotSupportedRequired" if col == NS_REQUIRED else f"c-{col}"
+            cells.append(f"<td class='num {css if n else 'zero'}'>{n}</td>")
         cells.append(f"<td class='num'>{sum(c.values())}</td></tr>")
         return "".join(cells)
     for name in order:
@@ -303,31 +308,42 @@ def _provisional_differences_html(record: RunRecord) -> str:
         return ""
     how = ("they fail the claim (--strict)" if record.strict else
            "the claim passes with them; --strict fails them")
-    return (f"<div class='card'><b>Provisional differences ({len(diffs)})</b>: failing cases whose expected "
-            f"output rests on a provisional decision (harness/data/provisional.toml); {_e(how)}<ul>"
-            + "".join(f"<li><a class='mono' href='#case-{_e(_anchor(str(d.get('case_id', ''))))}'>"
-                      f"{_e(d.get('case_id', ''))}</a> rests on {_e(', '.join(map(str, d.get('rests_on', []))))}</li>"
+    return (f"<div class='card'><b>Provisional differences ({len(diffs)})</b>: cases judged by an other reading "
+            f"the decoder declares (bitstreams/data/readings.toml); {_e(how)}<ul>"
+            + "".join(f"<li><span class='mono'>{_e(d.get('case_id', ''))}</span> rests on "
+                      f"{_e(', '.join(map(str, d.get('rests_on', []))))}; judged by {_e(d.get('reading'))}</li>"
                       for d in diffs) + "</ul></div>")
 
 
-def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
+def _badge_class(v: str) -> str:
+    """PASS green, a pass with what it leaves out (unverified tools, provisional differences) and
+    the speed verdicts amber, FAIL and SETUP ERROR red."""
+    if v.startswith("PASS ("):
+        return "v-PASSQ"
+    return f"v-{v.split()[0]}"
+
+
+def html_report(record: RunRecord, out_dir, *, base_dir=None, heading: str = "fbaconf run") -> str:
     """The page written by :func:`write_html` (artefacts outside ``out_dir`` are copied as a side effect)."""
     out_dir = Path(out_dir)
     base_dir = Path(base_dir) if base_dir is not None else out_dir
     dec = record.decoder or {}
     v = verdict(record)
-    title = f"fbaconf run: {clean_text(dec.get('name', '?'))}" + (f" ({clean_text(record.claim)})" if record.claim else "")  # noqa: E501
+    title = f"{heading}: {clean_text(dec.get('name', '?'))}" + (f" ({clean_text(record.claim)})"
+                                                                  if record.claim else "")
     h = ["<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>",
          "<meta name='viewport' content='width=device-width, initial-scale=1'>",
          "<meta http-equiv='Content-Security-Policy' content=\"default-src 'none'; style-src 'unsafe-inline'; "
          "img-src 'self' file: data:\">",
          "<link rel='icon' href='data:,'>",
          f"<title>{_e(title)}</title><style>{_css()}</style></head><body>"]
-    h.append(f"<h1>{_e(title)} <span class='badge verdict v-{v.split()[0]}'>{_e(v)}</span></h1>")
-    h.append(f"<p class='muted'>{_e(_summary_counts(record.counts()) + _speed_summary(record.speed))}; "
-             f"exit code {_e(record.exit_code)}</p>")
+    reason = verdict_reason(record)
+    h.append(f"<h1>{_e(title)}</h1><p class='verdict-line'><span class='badge verdict {_badge_class(v)}'>{_e(v)}"
+             f"</span>" + (f" <span class='reason'>{_e(reason)}</span>" if reason else "") + "</p>")
+    h.append(f"<p class='muted'>{_e(_summary_counts(display_counts(record.results)) + _speed_summary(record.speed))}"
+             f"; exit code {_e(record.exit_code)}</p>")
     # the summary table first, then what fails the run against its baseline, then the failures
-    total = record.counts()
+    total = display_counts(record.results)
     h.append("<h2>Summary</h2>")
     h.append(_counts_table_html("suite", _by(record, lambda r: r.suite), _suite_names(record), total))
     by_profile = _by(record, lambda r: profile_of(r.claim))
@@ -335,8 +351,14 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
         h.append(_counts_table_html("profile", by_profile, sorted(by_profile), total))
     h.append(_baseline_html(record))
     if record.missing:
-        h.append("<div class='card'><b>Claim not met</b>: required cases the decoder could not take:<ul>"
+        h.append("<div class='card'><b>Required cases the decoder could not take</b> (each fails the claim, unless "
+                 "its tool is set aside as unverified below):<ul>"
                  + "".join(f"<li>{_e(m)}</li>" for m in record.missing) + "</ul></div>")
+    detail = describe(record.verdict or {})
+    if detail and record.claim:
+        h.append("<div class='card'><b>Tools and provisional decisions</b> (harness/verdict.py: verified, differs, "
+                 "declined, unverified or fails)<ul class='tools'>"
+                 + "".join(f"<li>{_e(x)}</li>" for x in detail) + "</ul></div>")
     h.append(_provisional_differences_html(record))
     # identical failures grouped (one card, the other cases listed), new failures first
     groups = failure_groups(record)
@@ -345,7 +367,7 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
         h.append(f"<h2>Failures and warnings ({len(problems)} case(s) in {len(groups)} group(s) of identical "
                  f"failures)</h2>")
         for _o, rs in groups:
-            h.append(_case_html(rs[0], out_dir, base_dir))
+            h.append(_case_html(rs[0], out_dir, base_dir, dec.get("env")))
             if len(rs) > 1:
                 h.append(f"<p class='muted'>The same failure in {len(rs) - 1} more case(s): "
                          + ", ".join(f"<span class='mono' id='case-{_e(_anchor(r.case_id))}'>{_e(r.case_id)}</span>"
@@ -409,7 +431,7 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None) -> str:
     return "\n".join(h)
 
 
-def write_html(record: RunRecord, out_dir, *, base_dir=None) -> Path:
+def write_html(record: RunRecord, out_dir, *, base_dir=None, heading: str = "fbaconf run") -> Path:
     """Write ``out_dir/index.html``, one self-contained page (inline CSS and SVG, no script).
 
     Artefact paths are relative to ``base_dir`` (default ``out_dir``, the run's output
@@ -418,5 +440,5 @@ def write_html(record: RunRecord, out_dir, *, base_dir=None) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     page = out_dir / "index.html"
-    atomic_write_text(page, html_report(record, out_dir, base_dir=base_dir))
+    atomic_write_text(page, html_report(record, out_dir, base_dir=base_dir, heading=heading))
     return page

@@ -4,10 +4,12 @@ from __future__ import annotations
 from typing import Iterable
 
 from fbaconf.harness.results import Outcome, RunRecord
+from fbaconf.harness.verdict import describe
 from fbaconf.isolation.endings import crash_report
 
 from .common import (
-    COLUMNS,
+    DISPLAY_COLUMNS,
+    NS_REQUIRED,
     _by,
     _speed_rows,
     _speed_summary,
@@ -15,18 +17,22 @@ from .common import (
     _summary_counts,
     baseline_lines,
     clean_text,
+    display_counts,
     failure_groups,
     format_difference,
     profile_of,
     provisional_line,
     reproduce_line,
     verdict,
+    verdict_reason,
 )
 
 _ANSI_COLOURS = {
     Outcome.PASS: "32", Outcome.QUALITY_WARNING: "33", Outcome.NOT_SUPPORTED: "36", Outcome.SKIPPED: "2",
     Outcome.FAIL: "31", Outcome.TIMEOUT: "35", Outcome.CRASH: "1;31", Outcome.ERROR: "1;35",
 }
+_ANSI_COLOURS.update({o.value: c for o, c in list(_ANSI_COLOURS.items())})
+_ANSI_COLOURS[NS_REQUIRED] = "1;33"
 
 
 def _table(header: list[str], rows: list[list[str]], right: set[int], colour=None) -> list[str]:
@@ -83,20 +89,20 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
     if record.provisional:
         lines.append(f"  provisional: {provisional_line(record)}")
 
-    header_cols = [o.value for o in COLUMNS] + ["total"]
+    header_cols = list(DISPLAY_COLUMNS) + ["total"]
 
     def colour_counts(_r, ci, text):
-        if ci == 0 or ci > len(COLUMNS) or not text.strip() or text.strip() == "0":
+        if ci == 0 or ci > len(DISPLAY_COLUMNS) or not text.strip() or text.strip() == "0":
             return text
-        return paint(_ANSI_COLOURS[COLUMNS[ci - 1]], text)
+        return paint(_ANSI_COLOURS[DISPLAY_COLUMNS[ci - 1]], text)
 
     def count_table(title: str, groups: dict[str, dict[str, int]], order: Iterable[str]):
         rows = []
         for name in order:
-            c = groups.get(name, {o.value: 0 for o in COLUMNS})
-            rows.append([clean_text(name)] + [str(c[o.value]) for o in COLUMNS] + [str(sum(c.values()))])
-        tot = record.counts()
-        rows.append(["total"] + [str(tot[o.value]) for o in COLUMNS] + [str(sum(tot.values()))])
+            c = groups.get(name, dict.fromkeys(DISPLAY_COLUMNS, 0))
+            rows.append([clean_text(name)] + [str(c[k]) for k in DISPLAY_COLUMNS] + [str(sum(c.values()))])
+        tot = display_counts(record.results)
+        rows.append(["total"] + [str(tot[k]) for k in DISPLAY_COLUMNS] + [str(sum(tot.values()))])
         lines.append("")
         lines.extend(_table([title] + header_cols, rows, set(range(1, len(header_cols) + 1)), colour_counts))
 
@@ -145,7 +151,7 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
                     lines.append(f"      stderr ({label}):")
                     lines.extend("        " + t for t in tail)
             if r.command:
-                lines.append("      reproduce: " + reproduce_line(r))
+                lines.append("      reproduce: " + reproduce_line(r, env=dec.get("env")))
         if len(shown) < len(groups):
             lines.append(f"  ... and {len(groups) - len(shown)} more group(s) (see the JSON/HTML report)")
 
@@ -164,15 +170,23 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
             if s.message:
                 lines.append(f"  {clean_text(s.operation)}: {clean_text(s.message)}")
 
+    detail = describe(record.verdict or {})
+    if detail and record.claim:
+        lines += ["", f"tools and provisional decisions of {clean_text(record.claim)} (harness/verdict.py):"]
+        lines += [f"  {clean_text(x)}" for x in detail]
     if record.provisional_differences:
         how = "they fail the claim (--strict)" if record.strict else "the claim passes with them; --strict fails them"
-        lines += ["", f"provisional differences ({how}): failing cases whose expected output rests on a provisional "
-                  f"decision (harness/data/provisional.toml)"]
-        lines += [f"  {clean_text(d['case_id'])}  rests on {', '.join(d['rests_on'])}"
+        lines += ["", f"provisional differences ({how}): cases judged by an other reading the decoder declares"]
+        lines += [f"  {clean_text(d['case_id'])}  rests on {', '.join(d['rests_on'])}; judged by {d.get('reading')}"
                   for d in record.provisional_differences]
 
     v = verdict(record)
     lines.append("")
-    code = "32" if record.exit_code == 0 else ("33" if record.exit_code == 3 else "31")
-    lines.append(f"result: {paint('1;' + code, v)} ({_summary_counts(record.counts())}{_speed_summary(record.speed)})")
+    code = ("33" if record.exit_code in (3, 4) or (record.exit_code == 0 and v != "PASS") else
+            "32" if record.exit_code == 0 else "31")
+    reason = verdict_reason(record)
+    if reason:
+        lines.append(f"why: {reason}")
+    lines.append(f"result: {paint('1;' + code, v)} "
+                 f"({_summary_counts(display_counts(record.results))}{_speed_summary(record.speed)})")
     return "\n".join(lines) + "\n"

@@ -100,12 +100,13 @@ def ci_record(tmp_path) -> RunRecord:
                    command=["/opt/dec", f"{kept}/in/a.fba", f"{kept}/out/faps.npz"]),
         CaseResult("s/no-multi", "s", "simple@1", Outcome.NOT_SUPPORTED, "no decode_multi command", baseline="new"),
         CaseResult("s/fixed", "s", "simple@1", Outcome.PASS, "faps match", baseline="fixed"),
-        CaseResult("s/prov", "s", "simple@1", Outcome.FAIL, "faps: FAP 3 differs", rests_on=["D5"]),
+        CaseResult("s/prov", "s", "simple@1", Outcome.PASS, "judged by the declared reading D7:rewind-14: faps match",
+                   rests_on=["D7"], reading="D7:rewind-14"),
         CaseResult("s/ok", "s", "simple@1", Outcome.PASS, "faps match"),
     ]
     return RunRecord(decoder={"name": "acme"}, claim="simple@1", suites=[], system={}, results=rs, exit_code=1,
                      baseline_summary="2 new, 1 known, 1 fixed, 0 flaky",
-                     provisional_differences=[{"case_id": "s/prov", "rests_on": ["D5"]}])
+                     provisional_differences=[{"case_id": "s/prov", "rests_on": ["D7"], "reading": "D7:rewind-14"}])
 
 
 def test_a_ci_log_names_what_fails_the_run_first(tmp_path):
@@ -128,7 +129,7 @@ def test_html_puts_the_summary_first_with_the_baseline_line_and_provisional_diff
     assert h2[0] == "Summary" and h2[1].startswith("Failures and warnings")
     assert page.index("Baseline</b>: 2 new, 1 known, 1 fixed, 0 flaky") < page.index("<h2>Failures")
     assert page.index("Provisional differences (1)") < page.index("<h2>Failures")
-    assert re.search(r"<a class='mono' href='#case-s-prov-[0-9a-f]+'>s/prov</a> rests on D5", page)
+    assert "<span class='mono'>s/prov</span> rests on D7; judged by D7:rewind-14" in page
     assert "{&#x27;" not in page and "{'" not in page
 
 

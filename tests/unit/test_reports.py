@@ -24,6 +24,7 @@ from junitparser import Failure, JUnitXml, Skipped
 
 from fbaconf.harness import reports
 from fbaconf.harness.reports import read_json, terminal_summary, write_html, write_json, write_junit
+from fbaconf.harness.reports.common import failure_groups
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord, SpeedResult, StageResult
 from fbaconf.harness.sysinfo import system_info
 
@@ -144,10 +145,12 @@ def test_terminal_tables_and_verdict():
     text = terminal_summary(rec)
     assert "\x1b" not in text and "\x00" not in text
     header = _row(text, "suite")
-    assert header[1:] == [o.value for o in Outcome] + ["total"]
+    # a required case the decoder could not take has a column of its own (it fails the claim)
+    assert header[1:] == ["Pass", "Fail", "QualityWarning", "RequiredNotSupported", "NotSupported", "Timeout",
+                          "Crash", "Error", "Skipped", "total"]
     basic = dict(zip(header[1:], map(int, _row(text, "basic")[1:])))
-    assert basic == {"Pass": 2, "Fail": 1, "QualityWarning": 0, "NotSupported": 1, "Timeout": 0, "Crash": 0,
-                     "Error": 1, "Skipped": 0, "total": 5}
+    assert basic == {"Pass": 2, "Fail": 1, "QualityWarning": 0, "RequiredNotSupported": 0, "NotSupported": 1,
+                     "Timeout": 0, "Crash": 0, "Error": 1, "Skipped": 0, "total": 5}
     render = dict(zip(header[1:], map(int, _row(text, "render")[1:])))
     assert render["total"] == 4 and render["Crash"] == 1 and render["Timeout"] == 1
     pheader = _row(text, "profile")
@@ -438,3 +441,58 @@ def test_html_artefacts_relative_to_base_dir(tmp_path):
     (src,) = re.findall(r"<img src='([^']+)'", text)
     assert src.startswith("artefacts/") and (out / src).is_file()
     assert "missing" in write_html(rec, tmp_path / "other").read_text("utf-8")  # not under out_dir itself
+
+
+# ------------------------------------------------------------------ what the user reads is what happened
+
+
+def _qualified_record() -> RunRecord:
+    """A decoder that declines dct: every other required case passes (harness/verdict.py sets the
+    tool aside: PASS (unverified: dct))."""
+    rs = [case("s/a", Outcome.PASS, tools=["arithmetic"]), case("s/b", Outcome.PASS, tools=["arithmetic"])]
+    rs += [case(f"s/d{i}", Outcome.NOT_SUPPORTED, message="case uses tool(s) dct the decoder does not declare",
+                tools=["dct"], rests_on=["D8"]) for i in range(3)]
+    verdict = {"verdict": "PASS (unverified: dct)", "exit_code": 0, "unverified": ["dct"],
+               "tools": {"arithmetic": {"tool": "arithmetic", "state": "verified", "cases": 2, "passed": 2,
+                                        "provisional": False, "note": ""},
+                         "dct": {"tool": "dct", "state": "declined", "cases": 3, "passed": 0, "provisional": True,
+                                 "note": "not taken (3 valid stream(s) NotSupported)"}},
+               "decisions": {"D8": {"decision": "D8", "state": "declined", "cases": 3, "passed": 0, "readings": []}}}
+    return RunRecord(decoder={"name": "honest", "env": {"JAVA_OPTS": "-Xss4m"}}, claim="simple@1", suites=[],
+                     system={}, results=rs, exit_code=0, verdict=verdict,
+                     missing=["3 required case(s): case uses tool(s) dct the decoder does not declare"])
+
+
+def test_a_qualified_pass_reads_declined_with_its_reason_beside_an_amber_badge(tmp_path):
+    page = write_html(_qualified_record(), tmp_path, heading="fbaconf certification").read_text()
+    assert "<title>fbaconf certification: honest (simple@1)</title>" in page
+    badge = re.search(r"<span class='badge verdict ([^']+)'>([^<]*)</span> <span class='reason'>([^<]*)</span>", page)
+    assert badge and badge.group(1) == "v-PASSQ" and badge.group(2) == "PASS (unverified: dct)"
+    assert "dct declined" in badge.group(3) and "set aside" in badge.group(3)
+    body = page.split("</style>", 1)[1]  # the inlined style sheet names every class
+    assert "v-FAIL" not in body and "c-Fail" not in body
+    assert "tool dct: declined" in page
+    # the required NotSupported cases have their own column and colour, not the informative one's
+    assert page.count("<td class='num c-NotSupportedRequired'>3</td>") == 2  # the suite row and the total
+    text = terminal_summary(_qualified_record())
+    assert text.rstrip().splitlines()[-1].startswith("result: PASS (unverified: dct) (5 cases: 2 Pass, "
+                                                      "3 RequiredNotSupported)")
+    assert "  tool dct: declined" in text
+
+
+def test_identical_failures_that_name_their_own_input_are_one_group():
+    rs = [case(f"s/dct-{n}", Outcome.FAIL, tools=["dct"], exit_code=1, message=(
+        f"acme-java exited with code 1, a reject; stderr: Exception in thread main: in/dct-{n}.fba: DCT segment "
+        f"mode not implemented: a valid stream was rejected")) for n in ("q4", "skips", "mode-switch", "short")]
+    rec = RunRecord(decoder={"name": "acme-java"}, claim="simple@1", suites=[], system={}, results=rs, exit_code=1)
+    groups = failure_groups(rec)
+    assert len(groups) == 1 and len(groups[0][1]) == 4
+
+
+def test_reproduce_lines_carry_the_manifests_env(tmp_path):
+    r = case("s/a", Outcome.FAIL, message="x", command=["/opt/acme/dec", "/run/work/case-ab12/in/a.fba"])
+    rec = RunRecord(decoder={"name": "acme", "env": {"ACME_LICENSE": "ci", "B": "two words"}}, claim="simple@1",
+                    suites=[], system={}, results=[r], exit_code=1)
+    line = next(x for x in terminal_summary(rec).splitlines() if "reproduce:" in x)
+    assert line.split("reproduce: ")[1].startswith("env ACME_LICENSE=ci 'B=two words' /opt/acme/dec ")
+    assert "env ACME_LICENSE=ci &#x27;B=two words&#x27; /opt/acme/dec" in write_html(rec, tmp_path).read_text()
