@@ -225,17 +225,18 @@ def pytest_load_initial_conftests(early_config, parser, args) -> None:
     """Node ids pasted back (``fbaconf::suite/case``) select cases; they are no paths. Taken out of
     the arguments before pytest looks for conftest files under them — with fbaconf checked out
     at ``./fbaconf`` it would load fbaconf's own ``tests/conftest.py`` — and the rootdir and ini
-    file decided again without them."""
+    file decided again from the paths named: pytest takes every argument that names a file for
+    one, the manifest after ``--fbaconf-decoder`` too, and a rootdir there printed the node ids as
+    ``../../the/manifest/folder/fbaconf::suite/case``, which do not paste back."""
     ns = early_config.known_args_namespace
     if not getattr(ns, "fbaconf_decoder", None):
         return
     given = [str(a) for a in (getattr(ns, "file_or_dir", None) or [])]
     picked = [a for a in given if a.startswith(PREFIX)]
-    if not picked:
-        return
-    early_config.option.fbaconf_selected = [a[len(PREFIX):] for a in picked]  # an option: xdist workers get it
-    ns.file_or_dir = [a for a in given if a not in picked]
-    args[:] = [a for a in args if a not in picked]
+    if picked:
+        early_config.option.fbaconf_selected = [a[len(PREFIX):] for a in picked]  # an option: xdist workers get it
+        ns.file_or_dir = [a for a in given if a not in picked]
+        args[:] = [a for a in args if a not in picked]
     _reroot(early_config, ns.file_or_dir)
 
 

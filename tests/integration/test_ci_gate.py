@@ -115,6 +115,23 @@ def test_pasted_node_ids_are_cases_not_the_fbaconf_folder(repo):
     assert "collected 1 item" in out and f"rootdir: {repo}\n" in out and "hypothesis_is_not_installed_here" not in out
 
 
+def test_node_ids_of_a_decoder_elsewhere_paste_back_from_the_repository_root(repo, tmp_path):
+    """pytest takes every argument naming a file for a path, the manifest after --fbaconf-decoder
+    too: a manifest outside the repository made its folder the rootdir, and the summary printed
+    ``../../that/folder/fbaconf::suite/case``, which does not run when pasted."""
+    elsewhere = tmp_path / "decoders"
+    elsewhere.mkdir()
+    for name in ("acme.toml", "acme.py"):
+        (elsewhere / name).write_text((repo / "ci" / name).read_text())
+    cmd = [sys.executable, "-P", "-m", "pytest", "-p", "no:cacheprovider", "-p", "no:hypothesispytest",
+           "--fbaconf-decoder", str(elsewhere / "acme.toml"), "--fbaconf-suite", "simple-l1-core", "-rf"]
+    r = subprocess.run(cmd + ["-k", "arith-q1-all-faps"], cwd=repo, capture_output=True, text=True, timeout=600)
+    failed = [line.split()[1] for line in r.stdout.splitlines() if line.startswith("FAILED ")]
+    assert failed == ["fbaconf::simple-l1-core/arith-q1-all-faps"], r.stdout[-2000:]
+    again = subprocess.run(cmd + failed, cwd=repo, capture_output=True, text=True, timeout=600)
+    assert "collected 1 item" in again.stdout and "1 failed" in again.stdout, again.stdout[-2000:]
+
+
 def test_a_fixed_case_and_a_new_bug_fail_and_are_named_first(repo, tmp_path):
     set_bugs(repo, "B")  # bug A fixed, bug B new
     try:
