@@ -83,6 +83,7 @@ class _Decoder:
         self.frame_number = -1
         self.time_ms: float | None = None
         self.planes: list[PlaneInfo] = []
+        self.current: PlaneInfo | None = None  # the plane being read (after an error: how far it got)
         # output rows
         self.rows_values: list[list[int]] = []
         self.rows_status: list[np.ndarray] = []
@@ -161,7 +162,7 @@ class _Decoder:
         idx = len(self.planes)
         r.plane = idx
         r.frame = len(self.rows_values)  # output row (= plane index unless DCT groups came before)
-        info = PlaneInfo(index=idx, bit_offset=start, header_offset=r.pos, start_code=has_sc)
+        info = self.current = PlaneInfo(index=idx, bit_offset=start, header_offset=r.pos, start_code=has_sc)
         info.is_intra = bool(r.bit("is_intra"))
         at = r.pos
         info.object_mask = r.read(2, "fba_object_mask")
@@ -208,16 +209,19 @@ class _Decoder:
         else:
             info.fap_quant = self.fap_quant
             info.coding_type = self.coding_type
+            info.coding_known = True
             info.coded = self.coded
             info.group_types = self.group_types
         if self.coding_type == CODING_DCT:  # one plane group: up to 16 frames (dct.py)
             dct.decode_group(self, info)
             info.end_offset = r.pos
             self.planes.append(info)
+            self.current = None
             return
         self.payload(info)
         info.end_offset = r.pos
         self.planes.append(info)
+        self.current = None
         self.rows_values.append(list(self.cur))
         self.rows_status.append(self.status_template.copy())
         self.rows_high.append(list(self.high))
@@ -243,6 +247,7 @@ class _Decoder:
         self.coded = info.coded = coded
         self.gender = info.gender = r.bit("suggested_gender")
         self.coding_type = info.coding_type = r.bit("coding_type")
+        info.coding_known = True
         if self.coding_type == CODING_DCT:
             self._mask_state(types, coded)
             return
