@@ -330,9 +330,10 @@ def test_pytest_plugin_gives_one_item_per_case(tmp_path):
     # fdp-all-points and its two image-only views (-three-quarter, -flat-culled) are outside the claim
     assert "1 failed" in out and "3 skipped" in out
     assert "first difference" in out
-    # the case rests on decision D5: without --fbaconf-strict its difference is provisional (as in `fbaconf run`)
+    # a case resting on decision D5: without --fbaconf-strict its difference is provisional (as in `fbaconf run`)
     r = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-rx", "--fbaconf-decoder",
-                        str(m), "fbaconf::" + SIMPLE, str(tmp_path)], capture_output=True, text=True, cwd=tmp_path,
+                        str(m), "fbaconf::simple-l1-core/high-level-quant-d5", str(tmp_path)], capture_output=True,
+                       text=True, cwd=tmp_path,
                        timeout=600)
     assert r.returncode == 0 and "provisional difference (rests on D5; --fbaconf-strict fails it)" in r.stdout
 
