@@ -85,6 +85,7 @@ class _Decoder:
         self.frame_number = -1
         self.time_ms: float | None = None
         self.planes: list[PlaneInfo] = []
+        self.current: PlaneInfo | None = None  # the plane being read (after an error: how far it got)
         # output rows
         self.rows_values: list[list[int]] = []
         self.rows_status: list[np.ndarray] = []
@@ -164,7 +165,7 @@ class _Decoder:
         idx = len(self.planes)
         r.plane = idx
         r.frame = len(self.rows_values)  # output row (= plane index unless DCT groups came before)
-        info = PlaneInfo(index=idx, bit_offset=start, header_offset=r.pos, start_code=has_sc)
+        info = self.current = PlaneInfo(index=idx, bit_offset=start, header_offset=r.pos, start_code=has_sc)
         info.is_intra = bool(r.bit("is_intra"))
         at = r.pos
         info.object_mask = r.read(2, "fba_object_mask")
@@ -211,16 +212,19 @@ class _Decoder:
         else:
             info.fap_quant = self.fap_quant
             info.coding_type = self.coding_type
+            info.coding_known = True
             info.coded = self.coded
             info.group_types = self.group_types
         if self.coding_type == CODING_DCT:  # one plane group: up to 16 frames (dct.py)
             dct.decode_group(self, info)
             info.end_offset = r.pos
             self.planes.append(info)
+            self.current = None
             return
         self.payload(info)
         info.end_offset = r.pos
         self.planes.append(info)
+        self.current = None
         self.rows_values.append(list(self.cur))
         self.rows_status.append(self.status_template.copy())
         self.rows_high.append(list(self.high))
@@ -246,6 +250,7 @@ class _Decoder:
         self.coded = info.coded = coded
         self.gender = info.gender = r.bit("suggested_gender")
         self.coding_type = info.coding_type = r.bit("coding_type")
+        info.coding_known = True
         if self.coding_type == CODING_DCT:
             self._mask_state(types, coded)
             return
@@ -290,6 +295,15 @@ class _Decoder:
             for f in range(3, NUM_FAPS + 1):
                 if f not in renewed:
                     self.bounds[f - 1, li] = _tdiv(int(self.bounds[f - 1, li]), d_old) * d_new
+
+    def _in_intra_range(self, f: int, v: int, step: int, at: int) -> None:
+        """The other reading of D4's range rule (``D4:value-range-enforced``): the intra range is
+        the range of every value, so a predicted value outside what the intra alphabet codes is an
+        error (fbaconf's reading: it is decoded)."""
+        lo, hi = alphabet(int(self.bounds[f - 1, 1]), int(self.bounds[f - 1, 0]), self.fap_quant)
+        if not lo * step <= v <= hi * step:
+            raise self.err(f"FAP {f} value {v} outside the intra range {lo * step}..{hi * step} (read as the "
+                           f"value range: D4:value-range-enforced)", "pred-value-range", at=at, fap=f)
 
     def _mask_state(self, types, coded) -> None:
         """Status template (D3) and coded low-level FAPs of the planes that follow an intra header."""
@@ -382,6 +396,7 @@ class _Decoder:
         else:
             alph = self.p_alphabets
             models = self.p_models
+            enforced = readings.active(readings.VALUE_RANGE)
             for f in self.coded_low:
                 m = models.get(f)
                 lo, hi = alph[f]
@@ -392,6 +407,8 @@ class _Decoder:
                 v = cur[f - 1] + s * steps[f - 1]
                 if not -INT32_MAX <= v <= INT32_MAX:
                     raise self.err(f"FAP {f} value {v} overflows 32 bits", "value-overflow", at=start, fap=f)
+                if enforced:
+                    self._in_intra_range(f, v, steps[f - 1], start)
                 cur[f - 1] = v
         info.blocks.append(("low-level", start, dec.finish()))
 

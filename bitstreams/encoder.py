@@ -188,8 +188,9 @@ class _Plan:
             self.levels[k] = self.recon[k] // steps_by_q[int(quants[k])]
         for a, b in self.segments:
             d = quant_div(int(quants[a]))
-            # the intra range is the value range: it covers every value of the segment, also those
-            # reached by prediction (a decoded value outside it is a semantic violation)
+            # the intra range covers every value of the segment, also those reached by prediction:
+            # a predicted value outside it is valid (D4's range rule) but warned (FAP-DECISION-008),
+            # and the encoder keeps its streams off that reading
             lv = np.where(coded[a:b], self.levels[a:b], 0)
             need = np.zeros((NUM_FAPS, 4), dtype=np.int64)
             need[:, 0] = np.maximum(lv.max(axis=0), 0) * d

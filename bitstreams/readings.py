@@ -7,6 +7,7 @@ decision, off unless :func:`using` turns it on:
 * ``D3:type10-keeps`` — :meth:`fbaconf.bitstreams.decoder._Decoder._mask_state`;
 * ``D4:keep-scaling`` — :meth:`fbaconf.bitstreams.decoder._Decoder.intra_header`;
 * ``D4:defaults-unrounded`` — :func:`fbaconf.bitstreams.tables.default_bounds`;
+* ``D4:value-range-enforced`` — :meth:`fbaconf.bitstreams.decoder._Decoder.payload` (pure-Python path);
 * ``D5:blend-ceil`` — :func:`fbaconf.bitstreams.syntax.intensity_bound`;
 * ``D6:default-30hz`` — :func:`fbaconf.bitstreams.syntax.default_frame_rate`;
 * ``D7:rewind-14`` — :meth:`fbaconf.bitstreams.arith.ArithDecoder.finish` (pure-Python path).
@@ -73,6 +74,7 @@ def get(reading_id: str) -> Reading:
 TYPE10_KEEPS = "D3:type10-keeps"
 KEEP_SCALING = "D4:keep-scaling"
 DEFAULTS_UNROUNDED = "D4:defaults-unrounded"
+VALUE_RANGE = "D4:value-range-enforced"
 BLEND_CEIL = "D5:blend-ceil"
 DEFAULT_30HZ = "D6:default-30hz"
 REWIND_14 = "D7:rewind-14"

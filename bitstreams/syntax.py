@@ -8,7 +8,8 @@ decision id of ../shared/spec/fap-bitstream.md (D1-D7):
   interpolate (FREE), 3 all FAPs of the group.
 - D4 ranges in "fap_quant = 1" units, lists in multiples of 60, alphabets from truncating
   division by q = max(fap_quant, 1) at each intra plane.
-- D5 high-level alphabets.
+- D5 high-level alphabets (and the other reading of the blend/intensity alphabet, to tell where
+  a stream depends on D5).
 - D6 timing.
 """
 from __future__ import annotations
@@ -64,11 +65,27 @@ def low_level_step(fap: int, q: int) -> int:
 
 
 def intensity_bound(q: int) -> int:
-    """D5: viseme_blend / expression intensity alphabet 0..floor((63 + floor(q/2)) / q)."""
+    """D5: viseme_blend / expression intensity alphabet 0..floor((63 + floor(q/2)) / q)
+    (0..ceil(63/q) under the other reading ``D5:blend-ceil``)."""
+    if readings.active(readings.BLEND_CEIL):
+        return intensity_bound_ceil(q)
     d = quant_div(q)
-    if readings.active(readings.BLEND_CEIL):  # the other reading of D5: ceil(63/q)
-        return -(-INTENSITY_MAX // d)
     return (INTENSITY_MAX + d // 2) // d
+
+
+def intensity_bound_ceil(q: int) -> int:
+    """The other plausible reading of D5's blend/intensity alphabet: the smallest alphabet whose
+    top level still reaches 63 after dequantisation, 0..ceil(63 / q). It agrees with
+    :func:`intensity_bound` except where 63/q has a fractional part below one half."""
+    d = quant_div(q)
+    return -(-INTENSITY_MAX // d)
+
+
+def d5_alphabet_differs(q: int) -> bool:
+    """Whether the blend/intensity alphabet at fap_quant ``q`` depends on D5 (the two readings
+    differ: q = 10, 12, 15, 19, 20, 26..31); elsewhere both give the same alphabet. Asked with
+    no reading on (the checker)."""
+    return intensity_bound(q) != intensity_bound_ceil(q)
 
 
 def intensity_step(q: int) -> int:
@@ -153,6 +170,8 @@ class PlaneInfo:
     coded: np.ndarray | None = None  # bool[68]
     gender: int = 0
     coding_type: int = CODING_ARITHMETIC
+    coding_known: bool = False  # coding_type read (intra) or inherited (predicted): a plane an error cut
+    # short may stop before it, and then says nothing of its coding mode
     new_lists: dict[str, dict[int, int]] = field(default_factory=dict)  # list name -> {fap: v}
     marker_offsets: list[tuple[int, int]] = field(default_factory=list)  # (bit offset, value)
     blocks: list[tuple[str, int, int]] = field(default_factory=list)  # (name, start bit, length)

@@ -116,17 +116,22 @@ SEM_TIME_BACKWARDS = _define(
     "FAP-SEM-003", "warning", f"{NOTES} §1.2 (time code); decision D6 (plane times)",
     "A time code is earlier than the whole second in which the previous plane lies (time goes backwards).")
 SEM_VISEME_SELECT = _define(
-    "FAP-SEM-004", "error", "decision D5 (viseme_select 0..14)",
-    "A decoded viseme_select1/2 is outside 0..14.")
+    "FAP-SEM-004", "error", "spec notes §2.2 (the 15 visemes: viseme_select 0..14)",
+    "A decoded viseme_select1/2 is outside 0..14 (the viseme table's size: an error whatever the D5 reading).")
 SEM_EXPRESSION_SELECT = _define(
-    "FAP-SEM-005", "error", "decision D5 (expression_select 0..6)",
-    "A decoded expression_select1/2 is outside 0..6.")
+    "FAP-SEM-005", "error", "spec notes §2.2 (the 7 expressions: expression_select 0..6)",
+    "A decoded expression_select1/2 is outside 0..6 (the expression table's size: an error whatever the D5 reading).")
 SEM_INTENSITY = _define(
-    "FAP-SEM-006", "error", "decision D5; spec notes §2.2 (blend/intensity 0..63)",
-    "A decoded viseme_blend or expression_intensity1/2 is outside 0..63 (or above the top of its D5 intra alphabet when that exceeds 63).")
+    "FAP-SEM-006", "error", "spec notes §2.2 (blend/intensity 0..63), §2.3 (intra alphabet x fap_quant)",
+    "A decoded viseme_blend or expression_intensity1/2 is outside 0..63 (or above the top of its intra alphabet when "
+    "that exceeds 63) under both readings of the blend/intensity alphabet.")
 SEM_VALUE_OVERFLOW = _define(
     "FAP-SEM-007", "error", f"{NOTES} §3.4 (reconstruction)",
     "A reconstructed FAP value overflows 32 bits.")
+SEM_INTENSITY_D5 = _define(
+    "FAP-SEM-009", "error", "decision D5 (blend/intensity alphabet 0..floor((63 + floor(q/2))/q), not 0..ceil(63/q))",
+    "A decoded viseme_blend or expression_intensity1/2 is above 63 and above the top of D5's intra alphabet, but within "
+    "the top of the other reading's (0..ceil(63/q), x q): out of range only under D5.")
 SEM_SINGLE_SYMBOL = _define(
     "FAP-SEM-008", "info", "decision D4 (alphabets from the signalled ranges)",
     "A coded FAP's intra or predicted alphabet has a single symbol (e.g. a list value 0): it carries no information.")
@@ -151,8 +156,16 @@ DECISION_MASK_INTERPOLATE = _define(
     "FAP-DECISION-006", "warning", "decision D3 (mask types 01 keep / 10 may interpolate)",
     "Mask type 10 leaves a previously set FAP uncoded: D3 frees it, S1 keeps its value.")
 DECISION_HIGH_LEVEL_QUANT = _define(
-    "FAP-DECISION-007", "warning", "decision D5 (blend/intensity alphabets divided by fap_quant)",
-    "Visemes or expressions are coded with fap_quant > 1: their alphabet depends on D5.")
+    "FAP-DECISION-007", "warning",
+    "decision D5 (blend/intensity alphabet 0..floor((63 + floor(q/2))/q); 0..ceil(63/q) is the other reading)",
+    "Visemes or expressions are coded where the blend/intensity alphabet depends on D5: at a fap_quant where "
+    "floor((63 + floor(q/2))/q) and ceil(63/q) differ (10, 12, 15, 19, 20, 26-31), or at fap_quant 0 after an intra "
+    "plane with fap_quant >= 2 (S1 recomputes the alphabet only for fap_quant > 0 and keeps that plane's).")
+DECISION_PRED_OUTSIDE_INTRA = _define(
+    "FAP-DECISION-008", "warning", "decision D4 (a predicted value may leave the range the intra alphabet codes)",
+    "A predicted plane decodes a FAP (previous value + difference, notes §3.4) to a value outside the range its intra "
+    "alphabet can code: valid under D4, as S1's encoder writes it and S1's decoder adds without a check; a decoder "
+    "that takes the intra range as the value range rejects the stream.")
 
 # ---------------------------------------------------------------------------- profile / level / claim
 PROFILE_TOOL = _define(
@@ -338,7 +351,7 @@ _rule("calibration-transform", "animation", "calibration supports translation-on
 _rule("coefficient-overflow", "bitstreams", "DC level … of FAP … exceeds …", code=SYNTAX_DCT)
 _rule("dct-prediction", "bitstreams", "predicted segment of FAP … without an intra segment", code=SYNTAX_DCT)
 _rule("empty", "bitstreams", "no frames to encode")
-_rule("expression-select-range", "bitstreams", "expression_select outside 0..6 (intra) or the predicted value leaves it (spec notes D5)", code=SEM_EXPRESSION_SELECT)
+_rule("expression-select-range", "bitstreams", "expression_select outside 0..6 (intra) or the predicted value leaves it (spec notes §2.2: 7 expressions)", code=SEM_EXPRESSION_SELECT)
 _rule("facedef-borders-finite", "animation", "intervalBorders must be finite")
 _rule("facedef-borders-unsorted", "animation", "intervalBorders must be strictly increasing: border … (…) <= border … (…)")
 _rule("facedef-borders-zero", "animation", "with more than one interval, one of the intervalBorders must be 0")
@@ -389,6 +402,7 @@ _rule("high-level-range", "bitstreams", "a viseme/expression field to encode is 
 _rule("internal", "bitstreams", "internal decoder failure on malformed input: …: …")
 _rule("invalid-vlc", "bitstreams", "a DCT-mode variable-length code (Exp-Golomb or run/level Huffman) is invalid", code=SYNTAX_DCT)
 _rule("io", "bitstreams", "a file cannot be read or written")
+_rule("pred-value-range", "bitstreams", "a predicted value outside the intra range (only under the other reading D4:value-range-enforced)")
 _rule("reading", "bitstreams", "a reading of a provisional decision that bitstreams/data/readings.toml does not list")
 _rule("manifest-claims", "harness", "a decoder manifest's claims are missing or not profile@level")
 _rule("manifest-commands", "harness", "a decoder manifest's [commands] are missing or not argv lists")
@@ -464,7 +478,7 @@ _rule("truncated", "bitstreams", "stream ends inside … (… bits needed, … l
 _rule("usage", "bitstreams", "--trace is for .bifs scenes")
 _rule("value-overflow", "bitstreams", "FAP … value … overflows 32 bits", code=SEM_VALUE_OVERFLOW)
 _rule("value-range", "bitstreams", "DC level … of FAP … in the segment at frame … is not codable (limit …)")
-_rule("viseme-select-range", "bitstreams", "viseme_select outside 0..14 (intra) or the predicted value leaves it (spec notes D5)", code=SEM_VISEME_SELECT)
+_rule("viseme-select-range", "bitstreams", "viseme_select outside 0..14 (intra) or the predicted value leaves it (spec notes §2.2: 15 visemes)", code=SEM_VISEME_SELECT)
 _rule("fap-text-header", "fap-text", "header line missing or malformed: needs 'version name frame_rate count', frame_rate a positive finite number, count a non-negative integer", code=TEXT_HEADER, severity="error")
 _rule("fap-text-version", "fap-text", "version is not 2.0, 2.1 or 2.2", code=TEXT_VERSION, severity="warning")
 _rule("fap-text-name", "fap-text", "name field contains whitespace (Greta) or is empty", code=TEXT_NAME, severity="warning")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.bitedit import end_stream, splice
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.bitstreams.frames import HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
@@ -179,6 +180,41 @@ def blend_64() -> bytes:
     return data
 
 
+def pred_beyond_intra_range() -> bytes:
+    """The range rule (D4): predicted planes take FAP 4 above and FAP 19 below the values their
+    intra alphabets code (i_max / i_min list value 1: levels -60..60 at fap_quant 1), by
+    differences inside the predicted alphabet (+40 and -30 levels a plane; lists of 600). Valid:
+    decoded as previous + difference (notes §3.4), as S1's encoder writes such planes and its
+    decoder adds without a check. fbaconf's encoder sizes the intra range to every value of the
+    segment, so the stream is spliced: the intra plane of one encoding (narrow intra lists) and
+    the predicted planes of another (wide intra lists, the same predicted lists, the same values):
+    the predicted planes decode alike after either intra plane, their models and alphabets
+    starting afresh from the same predicted lists."""
+    n = 8
+    qp = tables.quant_steps()
+    fr = FapFrames.empty(n, 25.0)
+    k = np.arange(n)
+    for f, levels in ((4, 60 + 40 * k), (19, -60 - 30 * k)):
+        fr.status[:, f - 1] = SET
+        fr.values[:, f - 1] = levels * qp[f - 1]
+    narrow = np.tile(np.array([1860, -1860, 600, -600]), (68, 1))
+    narrow[[3, 18], :2] = (60, -60)
+    wide = narrow.copy()
+    wide[[3, 18], :2] = (1860, -1860)
+    a = _encode(fr.select(slice(0, 1)), fap_quant=1, bounds=narrow, plane_start_codes="none")
+    b = _encode(fr, fap_quant=1, bounds=wide, plane_start_codes="none")
+    pa, pb = decode(a).planes, decode(b).planes
+    _need(pb[0].is_intra and not any(p.is_intra for p in pb[1:]), "pred-beyond-intra-range", "one intra plane in B")
+    joined = splice((a, 0, pa[0].end_offset), (b, pb[1].bit_offset, pb[-1].end_offset))
+    data = end_stream(joined, pa[0].end_offset + pb[-1].end_offset - pb[1].bit_offset)
+    out = decode(data).frames
+    _need(bool((out.values[:, 3] == fr.values[:, 3]).all() and (out.values[:, 18] == fr.values[:, 18]).all()),
+          "pred-beyond-intra-range", "the spliced stream decodes to the encoded values")
+    _need(int(out.values[-1, 3]) > 60 * qp[3] and int(out.values[-1, 18]) < -60 * qp[18],
+          "pred-beyond-intra-range", "FAPs 4 and 19 end outside their intra ranges")
+    return data
+
+
 RECIPES = {
     "blend-64": blend_64,
     "high-level-held": high_level_held,
@@ -191,4 +227,5 @@ RECIPES = {
     "dct-header-zeros": dct_header_zeros,
     "block-end-stuffing": block_end_stuffing,
     "halving-random": halving_random,
+    "pred-beyond-intra-range": pred_beyond_intra_range,
 }

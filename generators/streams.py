@@ -5,11 +5,12 @@ import random
 
 import numpy as np
 
-from fbaconf.bitstreams import bitedit
+from fbaconf.bitstreams import bitedit, tables
 from fbaconf.bitstreams.bitedit import end_stream, splice
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.bitstreams.frames import SET, FapFrames
+from fbaconf.bitstreams.syntax import LIST_ORDER
 from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.conformance.suite import SuiteError
 from fbaconf.errors import BitstreamError
@@ -17,6 +18,8 @@ from fbaconf.profiles.sample_streams import stuffing_positions, value_overflow_s
 
 from .content import make_content
 from .recipes import RECIPES
+
+LIST_MARKERS = sum((len(g.faps) + 3) // 4 for g in tables.groups()[1:])  # 18 per new min/max list
 
 
 def _hl_stream(n: int, fap: int, fields: dict[int, list[int]]) -> bytes:
@@ -32,6 +35,11 @@ def _intra_then_p(a: bytes, b: bytes) -> bytes:
     pa, pb = decode(a).planes, decode(b).planes
     joined = splice((a, 0, pa[0].end_offset), (b, pb[1].bit_offset, pb[1].end_offset))
     return end_stream(joined, pa[0].end_offset + pb[1].end_offset - pb[1].bit_offset)
+
+
+# a predicted high-level field leaves its range: (FAP, the intra plane's fields, the predicted planes' fields)
+_HIGH_LEVEL = {"viseme-select": (1, {0: [14]}, {0: [0, 5]}), "expression-select": (2, {4: [6]}, {4: [0, 4]}),
+               "intensity": (1, {2: [63]}, {2: [0, 30]})}
 
 
 def mutate(data: bytes, mutation: str, seed: int) -> bytes:
@@ -72,6 +80,8 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
         p = planes[1]
         assert p.start_code
         return bitedit.flip_bit(data, p.bit_offset)
+    if mutation.startswith("list-marker:"):
+        return list_marker(data, mutation)
     if mutation == "time-code-hours":
         assert planes[0].time_code is not None
         return bitedit.set_bits(data, hdr + 18, 5, 24)
@@ -90,15 +100,27 @@ def mutate(data: bytes, mutation: str, seed: int) -> bytes:
                     if e.rule in ("invalid-vlc", "run-overflow", "segment-length", "coefficient-overflow"):
                         return bad
         raise SuiteError("no single-bit corruption of the DCT data found", rule="suite-spec")
-    if mutation == "viseme-select":
-        return _intra_then_p(_hl_stream(1, 1, {0: [14]}), _hl_stream(2, 1, {0: [0, 5]}))
-    if mutation == "expression-select":
-        return _intra_then_p(_hl_stream(1, 2, {4: [6]}), _hl_stream(2, 2, {4: [0, 4]}))
-    if mutation == "intensity":
-        return _intra_then_p(_hl_stream(1, 1, {2: [63]}), _hl_stream(2, 1, {2: [0, 30]}))
+    if mutation in _HIGH_LEVEL:
+        fap, intra, pred = _HIGH_LEVEL[mutation]
+        return _intra_then_p(_hl_stream(1, fap, intra), _hl_stream(2, fap, pred))
     if mutation == "value-overflow":
         return value_overflow_stream()
     raise SuiteError(f"unknown mutation {mutation!r}", rule="suite-spec")
+
+
+def list_marker(data: bytes, mutation: str) -> bytes:
+    """``list-marker:<list>:<k>:<m>``: the m-th of the 18 marker bits (notes §1.4: one before every
+    fourth FAP of groups 2-10, masked or not) of new-min/max list ``<list>`` (i_max, i_min, p_max,
+    p_min) in the k-th intra plane that sends that list, set to 0."""
+    _, name, k, m = mutation.split(":")
+    if name not in LIST_ORDER or not 0 <= int(m) < LIST_MARKERS:
+        raise SuiteError(f"bad mutation {mutation!r}", rule="suite-spec")
+    p = [p for p in decode(data).planes if p.is_intra and name in p.new_lists][int(k)]
+    # the plane's markers in stream order: the time code's (if any), one per group mask, then the lists sent
+    first = (1 if p.time_code is not None else 0) + len(p.group_types)
+    at, bit = p.marker_offsets[first + LIST_MARKERS * list(p.new_lists).index(name) + int(m)]
+    assert bit == 1
+    return bitedit.flip_bit(data, at)
 
 
 def first_predicted_decodable() -> bytes:

@@ -121,6 +121,21 @@ def _faces_share_lists() -> None:
     pipeline.multi_outputs = refdecoder.multi_outputs = multi_outputs
 
 
+def _hl_alphabet_first_quant() -> None:
+    orig_header, orig_bound = decoder._Decoder.intra_header, syntax.intensity_bound
+    first: dict = {}
+
+    def intra_header(self, info):  # the blend/intensity alphabet fixed by the first intra plane's fap_quant
+        orig_header(self, info)
+        first["q"] = self.__dict__.setdefault("_first_q", self.fap_quant)
+    decoder._Decoder.intra_header = intra_header
+    decoder.intensity_bound = lambda q: orig_bound(first.get("q", q))
+
+
+def _hl_alphabet(bound) -> None:
+    decoder.intensity_bound = bound
+
+
 # ------------------------------------------------------------------ the mutants
 
 D = "fbaconf.bitstreams.decoder:_Decoder"
@@ -183,6 +198,36 @@ MUTANTS_LIST = [
     Mutant("init-face-def-swapped", f"{D}.payload", "init_face and expression_def bits swapped",
            'hl[8] = r.bit("init_face")\n        hl[9] = r.bit("expression_def")',
            'hl[9] = r.bit("init_face")\n        hl[8] = r.bit("expression_def")', pure_decoder=True),
+    # --- the blend/intensity alphabet across fap_quant changes and where D5's readings differ (issue 37)
+    Mutant("hl-alphabet-first-quant", f"{D}.payload",
+           "blend/intensity alphabet computed once, from the first intra plane's fap_quant (values still x the "
+           "current one)", patch=_hl_alphabet_first_quant, pure_decoder=True),
+    Mutant("hl-alphabet-floor", f"{D}.payload", "blend/intensity alphabet 0..floor(63/q) (S1's encoder, EPF tag FQU)",
+           patch=lambda: _hl_alphabet(lambda q: syntax.INTENSITY_MAX // syntax.quant_div(q)), pure_decoder=True),
+    Mutant("hl-alphabet-ceil", f"{D}.payload", "blend/intensity alphabet 0..ceil(63/q) (D5's other reading)",
+           patch=lambda: _hl_alphabet(syntax.intensity_bound_ceil), pure_decoder=True),
+    Mutant("viseme-select-unchecked", f"{D}.payload", "a decoded viseme_select outside 0..14 accepted",
+           "if not 0 <= hl[k] <= mx:", "if False:", pure_decoder=True),
+    # --- a marker bit of one new min/max list read but not checked (issue 37)
+    *[Mutant(f"list-marker-unchecked-{name.replace('_', '-')}", f"{D}.intra_header",
+             f"a 0 marker bit in the {name} list accepted (the other lists' markers checked)",
+             'self.marker(info, f"marker_bit in {name} list (group {g.group})")',
+             f'(r.bit if name == "{name}" else lambda w: self.marker(info, w))'
+             '(f"marker_bit in {name} list (group {g.group})")') for name in syntax.LIST_ORDER],
+    # --- the range rule (D4): a predicted value outside the range the intra alphabet codes (issue 37)
+    Mutant("pred-clamped-to-intra-range", f"{D}.payload",
+           "a predicted value clamped to the range its intra alphabet codes",
+           "cur[f - 1] = v\n",
+           "lo_i, hi_i = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)\n"
+           "            cur[f - 1] = min(max(v, lo_i * steps[f - 1]), hi_i * steps[f - 1])\n", pure_decoder=True),
+    Mutant("pred-outside-intra-rejected", f"{D}.payload",
+           "a predicted value outside the range its intra alphabet codes rejected (the intra range read as the "
+           "value range)", "cur[f - 1] = v\n",
+           "lo_i, hi_i = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)\n"
+           "            if not lo_i * steps[f - 1] <= v <= hi_i * steps[f - 1]:\n"
+           "                raise self.err(f'FAP {f} value {v} outside the intra range', 'value-overflow', "
+           "at=start, fap=f)\n"
+           "            cur[f - 1] = v\n", pure_decoder=True),
     # --- timing (D6)
     Mutant("skip-not-counted", f"{D}.plane", "skipped frames not counted in frame_number",
            "self.frame_number = self.frame_number + info.skip + 1", "self.frame_number = self.frame_number + 1"),

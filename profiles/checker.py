@@ -28,23 +28,19 @@ from fbaconf.animation.facedef import validate_borders
 from fbaconf.animation.faceparams import NUM_FEATURE_POINTS, fdp_point_rows
 from fbaconf.bitstreams import decoder as dec
 from fbaconf.bitstreams import tables
-from fbaconf.bitstreams.arith import LOOKAHEAD, ZERO_RUN_LIMIT
 from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE
 from fbaconf.bitstreams.emulation import find_emulations
 from fbaconf.bitstreams.syntax import (
     CODING_DCT,
     INTENSITY_MAX,
-    LIST_ORDER,
-    MASK_INTERPOLATE,
-    _tdiv,
-    alphabet,
     intensity_bound,
+    intensity_bound_ceil,
     intensity_step,
-    quant_div,
 )
-from fbaconf.bitstreams.tables import NUM_FAPS, RANGE_DELTA
+from fbaconf.bitstreams.tables import NUM_FAPS
 from fbaconf.errors import BitstreamError, SceneError
 
+from .decisions import ARITH_BLOCKS, check_decisions, lookahead_stuffing
 from .diagnostics import Diagnostic, diag
 from .model import Claim, ProfileSet, load_profiles
 
@@ -67,7 +63,6 @@ LIMIT_CODES = {
 # Unit of a limit in the data file -> factor to the checker's measure.
 UNIT_FACTORS = {"kbit/s": 1000.0}
 
-ARITH_BLOCKS = frozenset({"viseme", "expression", "low-level"})  # PlaneInfo.blocks of the arithmetic mode
 UNREADABLE_CODES = frozenset({R.INPUT_UNREADABLE, R.SYNTAX_TOO_SHORT, R.SYNTAX_NOT_FACE})
 UNIDIRECTIONAL = tuple(f.number for f in tables.fap_table() if f.direction == "U")
 WINDOW_MS = 1000.0
@@ -346,7 +341,7 @@ def _analyse(data: bytes, scene, claim, file, profiles, want_smallest: bool, rep
     planes = st.planes
     _syntax(st, out)
     _semantics(st, out)
-    _decisions(st, out)
+    check_decisions(st, _rows(st), out)
     tools = _tools(st)
     measures = _measures(st, summary)
     sc = _load_scene(scene, out)
@@ -455,15 +450,22 @@ def _semantics(st: _Stream, out: list[Diagnostic]) -> None:
     rp = [p for _, p in rows]
     coded = np.array([p.coded if p.coded is not None else np.zeros(NUM_FAPS, bool) for p in rp])
     high = fr.high[ks]
-    top = np.array([max(INTENSITY_MAX, intensity_bound(int(p.fap_quant)) * intensity_step(int(p.fap_quant)))
-                    if p.coding_type != CODING_DCT else INTENSITY_MAX for p in rp])
+    # the top under D5 and under the other reading (0..ceil(63/q)): a value between the two is out of
+    # range only under D5 (FAP-SEM-009); beyond both, or negative, under every reading (FAP-SEM-006)
+    top, top_other = (np.array([max(INTENSITY_MAX, bound(int(p.fap_quant)) * intensity_step(int(p.fap_quant)))
+                                if p.coding_type != CODING_DCT else INTENSITY_MAX for p in rp])
+                      for bound in (intensity_bound, intensity_bound_ceil))
     for col, fap, name in ((2, 0, "viseme_blend"), (5, 1, "expression_intensity1"),
                            (7, 1, "expression_intensity2")):
-        bad = np.nonzero(coded[:, fap] & ((high[:, col] < 0) | (high[:, col] > top)))[0]
-        for j in bad:
-            p = rp[j]
-            out.append(diag(R.SEM_INTENSITY, f"{name} = {int(high[j, col])} outside 0..{int(top[j])}",
-                            bit_offset=p.bit_offset, plane=p.index, frame=int(fr.frame_number[ks[j]]), fap=fap + 1))
+        v = high[:, col]
+        for code, bad, shown in ((R.SEM_INTENSITY, (v < 0) | (v > top_other), top),
+                                 (R.SEM_INTENSITY_D5, (v > top) & (v <= top_other), top)):
+            for j in np.nonzero(coded[:, fap] & bad)[0]:
+                p = rp[j]
+                other = f" (0..{int(top_other[j])} under the other reading)" if top_other[j] != top[j] else ""
+                out.append(diag(code, f"{name} = {int(v[j])} outside 0..{int(shown[j])}{other}",
+                                bit_offset=p.bit_offset, plane=p.index, frame=int(fr.frame_number[ks[j]]),
+                                fap=fap + 1))
     # negative values of unidirectional FAPs (D4 warning)
     vals = fr.values[ks]
     for f in UNIDIRECTIONAL:
@@ -487,106 +489,6 @@ def _rows(st: _Stream) -> list[tuple[int, Any]]:
         if p is not None:
             out.append((k, p))
     return out
-
-
-# ---------------------------------------------------------------------------- decisions
-def _bits(data: bytes, at: int, n: int) -> int | None:
-    end = at + n
-    if at < 0 or end > len(data) * 8:
-        return None
-    first, last = at >> 3, (end + 7) >> 3
-    return (int.from_bytes(data[first:last], "big") >> ((last << 3) - end)) & ((1 << n) - 1)
-
-
-def lookahead_stuffing(data: bytes, start: int, length: int) -> int | None:
-    """Stream offset of a stuffing position inside the 14-bit look-ahead after an arithmetic
-    block [start, start+length), or None. There the D7 reading (next field right after the
-    block) and a plain 14-bit rewind (S1) disagree: the decoder removed (or, for a '0',
-    rejected) a stuffing bit among the look-ahead bits that belong to the next field."""
-    end = start + length
-    n = min(length, ZERO_RUN_LIMIT)
-    tail = _bits(data, end - n, n) if n else 0
-    if tail is None:
-        return None
-    z = n if tail == 0 else (tail & -tail).bit_length() - 1  # zero run at the block end (< 22)
-    k = ZERO_RUN_LIMIT - z  # look-ahead zeros needed to complete a run of 22
-    if k > LOOKAHEAD or k <= 0:
-        return None
-    nxt = _bits(data, end, k)
-    if nxt is None or nxt != 0:
-        return None
-    return end + k
-
-
-def _decisions(st: _Stream, out: list[Diagnostic]) -> None:
-    planes = st.planes
-    data = st.data
-    if planes and all(p.frame_rate is None for p in planes):
-        out.append(diag(R.DECISION_NO_FRAME_RATE, "no plane signals a frame rate: timed at 25 Hz (D6)",
-                        bit_offset=planes[0].bit_offset, plane=0))
-    bounds = tables.default_bounds().copy()
-    replaced = np.zeros((NUM_FAPS, 4), dtype=bool)
-    raw = np.zeros((NUM_FAPS, 4), dtype=np.int64)
-    for f in tables.fap_table()[2:]:
-        raw[f.number - 1] = (f.intra_range, -f.intra_range, f.pred_range, -f.pred_range)
-    ever = np.zeros(NUM_FAPS, dtype=bool)
-    prev_q = None
-    for i, p in enumerate(planes):
-        for name, start, length in getattr(p, "blocks", ()):
-            if name not in ARITH_BLOCKS:
-                continue
-            at = lookahead_stuffing(data, start, length)
-            if at is not None:
-                out.append(diag(R.DECISION_LOOKAHEAD_STUFFING,
-                                f"{name} block ending at bit {start + length}: a stuffing position (bit {at}) lies "
-                                "in the 14-bit look-ahead; D7 and a plain 14-bit rewind read the next field "
-                                "differently", bit_offset=at, plane=p.index, frame=p.frame_number))
-        if not p.is_intra or p.coded is None:
-            continue
-        coded = np.asarray(p.coded, dtype=bool)
-        q = int(p.fap_quant)
-        loc = dict(bit_offset=p.bit_offset, plane=p.index, frame=p.frame_number)
-        low = [f for f in range(3, NUM_FAPS + 1) if coded[f - 1]]
-        has_p = i + 1 < len(planes) and not planes[i + 1].is_intra
-        if p.coding_type != CODING_DCT:
-            if prev_q is not None and q != prev_q and low and len(p.new_lists) < 4:
-                missing = [n for n in LIST_ORDER if n not in p.new_lists]
-                out.append(diag(R.DECISION_QUANT_NO_LISTS, f"fap_quant changes {prev_q} -> {q} without new "
-                                f"{', '.join(missing)} lists (D4 recomputes the alphabets; S1 would not)", **loc))
-            for li, name in enumerate(LIST_ORDER):
-                for fap, v in p.new_lists.get(name, {}).items():
-                    bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
-                    replaced[fap - 1, li] = True
-            d = quant_div(q)
-            for f in low:
-                for kind, (ih, il) in (("intra", (0, 1)), ("predicted", (2, 3))):
-                    if kind == "predicted" and not has_p:
-                        continue
-                    lo, hi = alphabet(int(bounds[f - 1, il]), int(bounds[f - 1, ih]), q)
-                    if lo == hi:
-                        out.append(diag(R.SEM_SINGLE_SYMBOL, f"FAP {f}: {kind} alphabet is the single symbol {lo} "
-                                        f"(bounds {int(bounds[f - 1, il])}..{int(bounds[f - 1, ih])}, fap_quant {q})",
-                                        fap=f, **loc))
-                    for li in (ih, il):
-                        moved = _tdiv(int(raw[f - 1, li]), d) != _tdiv(int(bounds[f - 1, li]), d)
-                        if not replaced[f - 1, li] and moved:
-                            out.append(diag(R.DECISION_DEFAULT_ROUNDING,
-                                            f"FAP {f} uses the default {LIST_ORDER[li]} bound {int(raw[f - 1, li])}, "
-                                            f"rounded to {int(bounds[f - 1, li])} by D4 (alphabet differs)",
-                                            fap=f, **loc))
-            prev_q = q
-        types = tuple(p.group_types)
-        for gi, g in enumerate(tables.groups()):
-            if gi < len(types) and types[gi] == MASK_INTERPOLATE:
-                freed = [f for f in g.faps if not coded[f - 1] and ever[f - 1]]
-                if freed:
-                    out.append(diag(R.DECISION_MASK_INTERPOLATE, f"group {g.group} mask type 10 leaves FAP(s) "
-                                    f"{', '.join(map(str, freed))} uncoded after they were set: FREE under D3, "
-                                    "retained under S1's reading", fap=freed[0], **loc))
-        if (coded[0] or coded[1]) and q > 1 and p.coding_type != CODING_DCT:
-            out.append(diag(R.DECISION_HIGH_LEVEL_QUANT, f"visemes/expressions coded with fap_quant {q}: blend/"
-                            f"intensity alphabet 0..{intensity_bound(q)} per D5", fap=1 if coded[0] else 2, **loc))
-        ever |= coded
 
 
 # ---------------------------------------------------------------------------- tools and measures
@@ -680,5 +582,5 @@ def _claim_violations(ps: ProfileSet, claim: Claim, tools: dict, measures: dict)
     return out
 
 
-__all__ = ["Report", "SceneSummary", "analyse", "check_stream", "lookahead_stuffing", "summarize_scene",
+__all__ = ["ARITH_BLOCKS", "Report", "SceneSummary", "analyse", "check_stream", "lookahead_stuffing", "summarize_scene",
            "LIMIT_CODES"]

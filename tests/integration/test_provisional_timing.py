@@ -154,7 +154,7 @@ def test_other_dct_tables_leave_dct_unverified_and_say_so(altvlc_package):
     assert cert["provisional_differences"] == []  # no declared reading: nothing judged by one
     statement = (pkg / "statement.md").read_text()
     assert "**Verdict: PASS (unverified: dct)**" in statement
-    assert "- tool dct: unverified (2 of 6 case(s) passed; 2 of its 6 valid stream(s) decoded as fbaconf" in statement
+    assert "- tool dct: unverified (3 of 7 case(s) passed; 2 of its 6 valid stream(s) decoded as fbaconf" in statement
     assert "- decision D8: unverified" in statement
     assert "result: PASS (unverified: dct)" in r.stdout
     v = certify.verify(pkg)

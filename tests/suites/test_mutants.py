@@ -90,3 +90,45 @@ def test_mutant_adapter_manifest(tmp_path):
                                                                                 'mutant = "no-such"'))
     with pytest.raises(ManifestError):
         resolve(bad)
+
+
+# The rules the issue-37 cases guard, each with a mutant that breaks it and the case that must kill it.
+_RUN = ("import json, sys\n"
+        "from fbaconf.conformance.suite import load_suites\n"
+        "from fbaconf.mutation import measure\n"
+        "ids = sys.argv[2:]\n"
+        "cases = [c for s in load_suites() for c in s.cases if c.full_id in ids]\n"
+        "assert sorted(c.full_id for c in cases) == sorted(ids), ids\n"
+        "name = None if sys.argv[1] == 'reference' else sys.argv[1]\n"
+        "print(json.dumps(measure.run_mutant(name, cases=cases, stop_at_first=False)))\n")
+MARKERS = [f"simple-l1-error/list-marker-{x}" for x in ("i-max", "i-min", "p-max", "p-min")]
+GUARDS = {
+    "hl-alphabet-first-quant": ["simple-l1-core/high-level-quant-change"],
+    "hl-alphabet-floor": ["simple-l1-core/high-level-quant-change"],
+    "hl-alphabet-ceil": ["simple-l1-core/high-level-quant-d5"],
+    "viseme-select-unchecked": ["simple-l1-error/viseme-select-range"],
+    "pred-clamped-to-intra-range": ["simple-l1-core/pred-beyond-intra-range"],
+    "pred-outside-intra-rejected": ["simple-l1-core/pred-beyond-intra-range"],
+    **{f"list-marker-unchecked-{c.rsplit('list-marker-', 1)[1]}": [c] for c in MARKERS},
+}
+
+
+def _run(name: str, ids: list[str]) -> dict:
+    r = subprocess.run([sys.executable, "-c", _RUN, name, *ids], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return __import__("json").loads(r.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("name", sorted(GUARDS))
+def test_each_new_rule_has_a_mutant_its_case_kills(name):
+    """The mutant fails exactly its case(s); a list-marker mutant is run on all four marker cases
+    and fails only its own list's (so each of the four cases is needed)."""
+    ids = MARKERS if name.startswith("list-marker-") else GUARDS[name]
+    out = _run(name, ids)
+    failed = {f["case"].removesuffix(" (fap)") for f in out["failing"]}  # in either output format
+    assert out["killed"] and sorted(failed) == GUARDS[name], out
+
+
+def test_the_reference_passes_the_new_cases():
+    out = _run("reference", sorted({c for ids in GUARDS.values() for c in ids} | set(MARKERS)))
+    assert not out["killed"] and out["ran"] == out["total"], out

@@ -48,7 +48,8 @@ def test_the_catalogue_names_known_decisions_and_checker_codes():
     decisions = {r["id"] for r in tomllib.loads(resources.files("fbaconf.harness").joinpath(
         "data/provisional.toml").read_text("utf-8"))["rule"]}
     cat = readings.catalogue()
-    assert set(cat) == {"D3:type10-keeps", "D4:keep-scaling", "D4:defaults-unrounded", "D5:blend-ceil",
+    assert set(cat) == {"D3:type10-keeps", "D4:keep-scaling", "D4:defaults-unrounded", "D4:value-range-enforced",
+                        "D5:blend-ceil",
                         "D6:default-30hz", "D7:rewind-14"}
     for r in cat.values():
         assert r.id.startswith(r.decision + ":") and r.decision in decisions
