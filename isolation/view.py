@@ -15,8 +15,10 @@ holds any of
   ``.json``) — a copy made under another name.
 
 A folder of more than :data:`MAX_ENTRIES` entries is refused too (the lab cannot check it in
-reasonable time). Each folder is judged once per process: the sandbox shows it read-only,
-so no decoder can change it between cases.
+reasonable time). What the sandbox empties inside a folder (``hidden``: the run folder, the
+goldens, the suites) is not walked: the decoder never sees it. Each folder is judged once per
+process and set of such folders: the sandbox shows it read-only, so no decoder can change it
+between cases.
 
 :func:`named_paths` says which absolute paths a command's arguments name: an argument itself,
 the part after a ``=`` (``--model=/opt/m.bin``), each part of a ``:`` list (``-cp a.jar:b.jar``)
@@ -94,24 +96,26 @@ def _marker(d: Path) -> str | None:
     return None
 
 
-_CACHE: dict[Path, str | None] = {}
+_CACHE: dict[tuple, str | None] = {}
 _LOCK = threading.Lock()
 
 
-def folder_problem(folder: Path) -> str | None:
+def folder_problem(folder: Path, hidden=()) -> str | None:
     """Why ``folder`` must not be shown to a decoder, judged by content (see the module doc),
-    or None. Cached per folder for the process."""
+    or None; the folders in ``hidden`` (emptied in the sandbox) are not walked. Cached."""
     folder = Path(os.path.abspath(folder))
+    skip = tuple(sorted({Path(os.path.abspath(h)) for h in hidden} | {Path(h).resolve() for h in hidden}))
+    key = (folder, tuple(h for h in skip if _under(h, [folder, folder.resolve()])))
     with _LOCK:
-        if folder in _CACHE:
-            return _CACHE[folder]
-    why = _judge(folder)
+        if key in _CACHE:
+            return _CACHE[key]
+    why = _judge(folder, key[1])
     with _LOCK:
-        _CACHE[folder] = why
+        _CACHE[key] = why
     return why
 
 
-def _judge(folder: Path) -> str | None:
+def _judge(folder: Path, skip: tuple[Path, ...]) -> str | None:
     try:
         real = folder.resolve()
     except OSError as e:
@@ -121,10 +125,10 @@ def _judge(folder: Path) -> str | None:
             why = _marker(a)
             if why:
                 return why if a == q else f"it lies inside {a}: " + why.split(" is ", 1)[1]
-    return _walk(real)
+    return _walk(real, set(skip))
 
 
-def _walk(top: Path) -> str | None:
+def _walk(top: Path, skip: set[Path]) -> str | None:
     known = _known()
     seen = 0
     todo = [top]
@@ -148,6 +152,8 @@ def _walk(top: Path) -> str | None:
                     is_file = not is_dir and e.is_file(follow_symlinks=False)
                 except OSError:
                     continue
+                if is_dir and p in skip:
+                    continue  # emptied in the sandbox
                 if is_dir:
                     why = _marker(p)
                     if why:
@@ -206,7 +212,7 @@ def checked(shown: list[tuple[Path, str]], hidden=(), trusted=()) -> tuple[list[
     for p, what in shown:
         if _under(p, SYSTEM_TOPS) or p in out:
             continue
-        why = view_problem(p, hidden) or (None if p in trusted else folder_problem(p))
+        why = view_problem(p, hidden) or (None if p in trusted else folder_problem(p, hidden))
         if why:
             return out, (p, what, why)
         out.append(p)

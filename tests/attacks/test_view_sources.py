@@ -230,3 +230,21 @@ def test_named_paths_reads_the_forms_a_command_names_files_in(tmp_path):
     got = view.named_paths(["-cp", f"{tmp_path}/a.jar:{tmp_path}/b.jar", f"@{tmp_path}/args.txt",
                             f"--model={tmp_path}/m.bin", "relative/x", f"{tmp_path}/missing", str(tmp_path)])
     assert got == [tmp_path / "a.jar", tmp_path / "b.jar", tmp_path / "args.txt", tmp_path / "m.bin", tmp_path]
+
+
+def test_what_the_sandbox_empties_is_not_held_against_a_folder(tmp_path):
+    """A vendor folder holding the run folder (a player's case folder holds a suite's .fap as its
+    input): the sandbox empties the run folder, so the walk skips it; the same copy anywhere else
+    in the folder is refused."""
+    case = the_case()
+    m = thief_manifest(tmp_path, tmp_path / "vendor" / "thief.py")
+    run = tmp_path / "vendor" / "run" / "work" / "case-x" / "in"
+    run.mkdir(parents=True)
+    shutil.copyfile(case.input_path("fap"), run / f"{CASE[1]}.fap")
+    a = adapters.resolve(m)
+    argv = [sys.executable, str(tmp_path / "vendor" / "thief.py")]
+    assert a.sandbox_view(argv, tmp_path / "case", hidden=[tmp_path / "vendor" / "run"]).read_only
+    shutil.copyfile(case.input_path("fap"), tmp_path / "vendor" / "kept.fap")
+    view._CACHE.clear()  # a folder is judged once per process: this one changed under the test
+    with pytest.raises(ViewError, match="kept.fap, a copy of suites/simple-l1-core/dct-q4.fap"):
+        a.sandbox_view(argv, tmp_path / "case", hidden=[tmp_path / "vendor" / "run"])
