@@ -2,9 +2,10 @@
 and — where bubblewrap is installed — its own sandbox.
 
 Isolation (``bwrap``, Debian package ``bubblewrap``): the decoder sees the system's
-``/usr`` and ``/etc`` read-only, its own program's folder and manifest folder read-only,
-its case folder (inputs read-only, outputs writable), an empty ``/tmp`` — and nothing of the
-project: not the goldens, the suites, the run folder, the venv or the harness's code
+``/usr`` and ``/etc`` read-only, the folders of its program and of the files its command
+names and its manifest's folder read-only (each judged by content first, :mod:`.view`), its
+case folder (inputs read-only, outputs writable, :mod:`.staging`), an empty ``/tmp`` — and
+nothing of the project: not the goldens, the suites, the run folder, the venv or the harness's code
 (decoders started through ``{python}`` see the Python installation and the fbaconf package
 read-only, with the goldens, suites and run folder hidden). It gets its own PID, network,
 IPC and UTS namespaces: no network, and every process it starts dies with the case.
@@ -20,15 +21,16 @@ Limits per invocation:
   address-space rlimit per process (the fallback, :func:`isolation_report` says so);
   ``"address-space"`` — the rlimit per process always (and the cgroup limit too);
   ``"rss"`` — the resident set of the whole tree, sampled every 10 ms (and the cgroup limit);
-  ``"none"``. ``processes`` caps the number of processes (pids.max). A runtime that dies
-  reserving its address space under an address-space limit is a set-up problem
-  (:mod:`.endings` names the runtime's message and the fix);
+  ``"none"`` (the harness's own use: a manifest may not ask for it, :mod:`.bounds`).
+  ``processes`` caps the number of processes (pids.max). A runtime that dies reserving its
+  address space under an address-space limit is a set-up problem (:mod:`.endings` names the
+  runtime's message and the fix; :mod:`.setup` proves it before a run's cases);
 * output: ``output_mb`` per file (RLIMIT_FSIZE: a write beyond it raises SIGXFSZ in the
   decoder) and in total over the working directory, measured while the decoder runs
   (:mod:`.watch`: the tree is killed once past the limit) and after;
 * CPU seconds (RLIMIT_CPU, a backstop at twice the timeout); 1024 descriptors per process;
-  no core dumps; no inotify or fanotify instances (:mod:`.seccomp`: a decoder cannot take
-  the host user's).
+  no core dumps; no inotify or fanotify instances and no new namespaces (:mod:`.seccomp`: a
+  decoder cannot take the host user's).
 
 The limits are applied by a launcher, so nothing runs between fork and exec in this
 (threaded) process: util-linux's ``prlimit`` (about 1.5 ms), which sets the rlimits and execs
