@@ -189,15 +189,20 @@ def _under(p: Path, roots) -> bool:
     return any(p == r or r in p.parents for r in map(Path, roots))
 
 
+_OWN = [Path(t) for t in ("/dev", "/proc", "/sys", "/run")]
+
+
 def command_folders(argv: list[str], workdir: Path, program_dirs: list[Path], *,
                     through_python: bool) -> list[tuple[Path, str]]:
     """The folders a command's files would show (the program's — unless it is fbaconf's own
     ``{python}`` —, and each named file's or folder's, as given and with links resolved), each
-    with the words that say why; not the case's own files."""
+    with the words that say why; not the case's own files, and not what the sandbox has of its
+    own (``/``, ``/tmp``, ``/dev/null``, ``/proc/self/…``) or never shows (``/sys``, ``/run``)."""
     out = [] if through_python else [(p, f"the folder of the program {argv[0]}") for p in program_dirs]
     for p in named_paths(argv[1:]):
-        if _under(p, [workdir]) or (through_python and p.resolve() == Path(argv[0]).resolve()):
-            continue
+        if _under(p, [workdir, *_OWN]) or p in (Path("/"), Path("/tmp")) or \
+                (through_python and p.resolve() == Path(argv[0]).resolve()):
+            continue  # the case's own files; what the sandbox has of its own (/, /tmp, /dev, /proc) or never shows
         what = f"the folder {p}, which [commands] names" if p.is_dir() else f"the folder of {p}, which [commands] names"
         out += [(f, what) for f in dict.fromkeys([p, p.resolve()] if p.is_dir() else [p.parent, p.resolve().parent])]
     return out

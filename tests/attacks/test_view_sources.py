@@ -248,3 +248,11 @@ def test_what_the_sandbox_empties_is_not_held_against_a_folder(tmp_path):
     view._CACHE.clear()  # a folder is judged once per process: this one changed under the test
     with pytest.raises(ViewError, match="kept.fap, a copy of suites/simple-l1-core/dct-q4.fap"):
         a.sandbox_view(argv, tmp_path / "case", hidden=[tmp_path / "vendor" / "run"])
+
+
+def test_what_the_sandbox_has_of_its_own_is_not_a_named_file(tmp_path):
+    """`--log /dev/null`, `--tmp /tmp`, `/proc/self/fd/1`: the sandbox has its own; nothing to show."""
+    m = thief_manifest(tmp_path, tmp_path / "vendor" / "thief.py")
+    argv = ["/bin/true", "--log", "/dev/null", "--tmp", "/tmp", "/proc/self/fd/1", "--root=/", "/sys/kernel"]
+    v = adapters.resolve(m).sandbox_view(argv, tmp_path / "case")
+    assert v.read_only == [tmp_path / "vendor"]  # the manifest's folder alone (/bin is a system folder)
