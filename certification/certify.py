@@ -46,6 +46,7 @@ from fbaconf.harness.session import (
 )
 from fbaconf.harness.verdict import describe
 from fbaconf.isolation import cgroups, sandbox
+from fbaconf.isolation.bounds import DEFAULT_CEILINGS, Ceilings
 from fbaconf.profiles.model import Claim, load_profiles
 from fbaconf.safefs import read_regular, remove_tree
 
@@ -82,6 +83,7 @@ class CertifyOptions:
     cluster: str | None = None
     strict: bool = False
     sandbox_ro: list[Path] = field(default_factory=list)
+    ceilings: Ceilings = DEFAULT_CEILINGS  # the most a manifest's [limits] may ask for (--max-*)
 
 
 def isolation_gaps(adapter) -> list[str]:
@@ -106,7 +108,7 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
     if o.key is not None:  # read first, hidden from every decoder from here on
         key = load_key(Path(o.key), private=True)
         sandbox.keep_secret(Path(o.key))
-    adapter = resolve(decoder, untrusted=True)
+    adapter = resolve(decoder, untrusted=True, ceilings=o.ceilings)
     claim = resolve_claim(claim, adapter)
     if not any(claim_covers(c, claim) for c in adapter.claims):
         print(f"fbaconf certify: error: the decoder does not claim {claim} (claims: {', '.join(adapter.claims)})",
@@ -114,7 +116,7 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
         return 2
     if isinstance(adapter, CommandAdapter):
         adapter.lab_read_only = lab_folders(o.sandbox_ro)
-    preflight(adapter)
+    preflight(adapter, claim)
     if adapter.is_player:
         print(f"fbaconf certify: error: {adapter.name} reads only the .fap text form (inputs: "
               f"{', '.join(adapter.inputs)}): it is a FAP player, not a decoder. An MPEG-4 profile certificate "

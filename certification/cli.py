@@ -14,6 +14,7 @@ from pathlib import Path
 from fbaconf.harness.cli import lab_options
 from fbaconf.harness.reports import clean_text
 from fbaconf.harness.session import UsageError
+from fbaconf.isolation.bounds import ceilings_from
 
 from . import certify
 from .package import NOT_CHECKED, SIGNED, UNSIGNED, verify
@@ -63,7 +64,7 @@ def cmd_certify(args) -> int:
         raise UsageError("--decoder and -o/--output are required")
     options = certify.CertifyOptions(jobs=args.jobs, speed=not args.no_speed, key=args.key, force=args.force,
                                      allow_unisolated=args.allow_unisolated, cluster=args.cluster, strict=args.strict,
-                                     sandbox_ro=args.sandbox_ro)
+                                     sandbox_ro=args.sandbox_ro, ceilings=ceilings_from(args))
     return certify.certify(args.decoder, args.claim, args.output.resolve(), options)
 
 

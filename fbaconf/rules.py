@@ -414,6 +414,7 @@ _rule("manifest-outputs", "harness", "a decoder manifest's outputs are not a lis
 _rule("manifest-placeholder", "harness", "a decoder manifest's command uses an unknown placeholder")
 _rule("manifest-reject-codes", "harness", "a decoder manifest's reject_exit_codes are not exit codes 1..255 (other than 69, 126, 127)")
 _rule("manifest-sandbox", "harness", "a decoder manifest has a [sandbox] table: the lab, not the manifest, sets what a decoder sees (--sandbox-ro)")
+_rule("decoder-setup", "harness", "the decoder does not decode the claim's simplest valid stream, or every case ended the same way without a decoding: a set-up error (its stdout and stderr, the limits, the fix)")
 _rule("sandbox-view", "harness", "a folder the sandbox would show a decoder shows too much (/, a top-level folder, the fbaconf project, /proc…)")
 _rule("certificate-json", "harness", "a certification package's JSON file is not JSON, or is nested too deeply")
 _rule("cluster", "harness", "--cluster is not local[:N] or tls://HOST:PORT, Dask is missing, the lab's TLS certificates are not given, or the scheduler cannot be reached")

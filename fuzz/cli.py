@@ -20,6 +20,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+from fbaconf.isolation.bounds import add_ceiling_options, ceilings_from
+
 
 def register(sub) -> None:
     p = sub.add_parser("fuzz", help="fuzz a decoder's (or fbaconf's own) bitstream and scene parsers",
@@ -70,6 +72,7 @@ def register(sub) -> None:
     p.add_argument("--data-dir", type=Path, help="(--promote) conformance data folder (default: the package's)")
     p.add_argument("--no-progress", action="store_true", help="no live status line")
     p.add_argument("--json", action="store_true", help="print the run summary as JSON")
+    add_ceiling_options(p)
     p.set_defaults(func=cmd_fuzz)
 
 
@@ -127,7 +130,7 @@ def _campaign(args, expected: set[int] | None) -> int:
     from fbaconf.harness.adapters import resolve
 
     from .campaign import ShardSpec, run_campaign
-    adapter = resolve(args.decoder)  # a bad manifest fails here, not in every worker
+    adapter = resolve(args.decoder, ceilings=ceilings_from(args))  # a bad manifest fails here, not in every worker
     manifest = str(Path(args.decoder).resolve()) if Path(args.decoder).is_file() else args.decoder
     if args.replay is not None:
         print("fbaconf fuzz: error: --replay runs one input here; drop --cluster", file=sys.stderr)
@@ -218,7 +221,7 @@ def _decoder(args, expected: set[int]) -> int:
     from .engine import FuzzConfig, Fuzzer
     from .findings import replay
     from .targets import DecoderTarget
-    adapter = resolve(args.decoder)
+    adapter = resolve(args.decoder, ceilings=ceilings_from(args))
     if args.output is None:
         args.output = Path("fbaconf-fuzz") / adapter.name
     out: Path = args.output.resolve()

@@ -1,26 +1,7 @@
 """Decoder adapters: a TOML manifest for command-line decoders (any language) or a Python class.
 
-Manifest (docs/harness.md, "Write a manifest")::
-
-    name = "example"
-    description = "..."
-    claims = ["simple@1"]                 # profile@level claimed
-    tools = ["arithmetic", "dct"]         # optional: tools supported (default: all of the claimed profile)
-    readings = ["D7:rewind-14"]           # optional: other readings of provisional decisions it follows
-    inputs = ["fba", "fap", "scene", "bifs"]
-    outputs = ["faps", "vertices", "images"]
-    faps_format = "fap"                   # or "npz": the FAP output file the decoder writes
-    python = "package.module:Class"       # optional: an in-process adapter instead of commands
-    [commands]                            # argv lists, {placeholders} filled by the harness
-    decode = ["exampledec", "{input}", ["--scene", "{scene}"], "--out", "{faps_out}"]
-    decode_multi = ["exampledec", "--out-dir", "{faps_out_dir}", "{inputs}"]
-    [limits]
-    timeout_s = 30
-    memory_mb = 2048
-    memory_kind = "tree"                  # the whole tree; or "address-space", "rss" (sampled), "none"
-    output_mb = 256
-    [env]                                 # extra environment variables for the decoder
-    EXAMPLE_MODE = "strict"
+The manifest's keys, limits, ``[env]`` rule and reserved names: docs/harness.md, "Write a
+manifest" (``[limits]``: :mod:`fbaconf.isolation.bounds`; ``[env]``: :mod:`fbaconf.isolation.environ`).
 
 Placeholders: ``{input}`` (the stream the decoder gets: ``.fba`` when it accepts ``fba``,
 else the ``.fap`` text), ``{fba}``, ``{fap}``, ``{scene}`` (BT, or BIFS when the decoder
@@ -49,8 +30,10 @@ from pathlib import Path
 
 from fbaconf.bitstreams import readings
 from fbaconf.errors import FbaconfInputError
+from fbaconf.isolation import bounds, view
 from fbaconf.isolation.endings import DEFAULT_REJECT_EXIT_CODES
-from fbaconf.isolation.sandbox import Limits, default_view, python_view, view_problem
+from fbaconf.isolation.environ import env_problem
+from fbaconf.isolation.sandbox import Limits, default_view, python_view
 from fbaconf.profiles.model import Claim, load_profiles
 from fbaconf.safefs import read_regular
 
@@ -162,7 +145,8 @@ class NotSupportedError(Exception):
 class CommandAdapter(Adapter):
     kind = "command"
 
-    def __init__(self, data: dict, path: Path | None, text: str) -> None:
+    def __init__(self, data: dict, path: Path | None, text: str,
+                 ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> None:
         self.manifest_path = path
         self.manifest_text = text
         self.name = data["name"]
@@ -175,7 +159,7 @@ class CommandAdapter(Adapter):
         self.faps_format = data.get("faps_format", "fap")
         self.commands = data["commands"]
         self.env = {str(k): str(v) for k, v in data.get("env", {}).items()}
-        self.limits = _limits(data.get("limits", {}), path)
+        self.limits = _limits(data.get("limits", {}), path, ceilings)
         self.reject_exit_codes = frozenset(data.get("reject_exit_codes", DEFAULT_REJECT_EXIT_CODES))
         # serve answers what decode writes: speed may be measured through it (checked on a sample, harness/speed.py)
         self.serve_equivalent = bool(data.get("serve_equivalent", False)) and "serve" in self.commands
@@ -186,32 +170,28 @@ class CommandAdapter(Adapter):
         return expand(self.commands[command], job, self.manifest_path)
 
     def sandbox_view(self, argv: list[str], workdir: Path, hidden=()):
-        """What this decoder sees in the sandbox (docs/harness.md, "What a decoder sees"): its
-        program's folder (a ``{python}`` command's script's) and manifest's folder read-only,
-        the folders the lab gave with ``--sandbox-ro`` read-only, its case folder (inputs
-        read-only), and — when started
-        through ``{python}`` — the Python installation and the fbaconf package read-only; with
-        ``hidden`` (goldens, suites, the run folder, a signing key) emptied wherever they would
-        show. No manifest key widens it. Raises :class:`ViewError` for a folder that would
-        show too much (``/``, a top-level folder, the fbaconf project, /proc...)."""
+        """What this decoder sees in the sandbox (docs/harness.md, "What a decoder sees"): the
+        folder of its program and of every other file its command names, its manifest's folder,
+        the lab's ``--sandbox-ro`` folders — read-only, each judged by place and by content
+        (:mod:`fbaconf.isolation.view`) —, its case folder (inputs read-only), and through
+        ``{python}`` the Python installation and the fbaconf package read-only; ``hidden``
+        (goldens, suites, the run folder, a key) and every installed fbaconf's data emptied
+        wherever they would show. Raises :class:`ViewError` for a folder that would show too much."""
         v = default_view(argv, workdir)
-        shown = list(v.read_only)
         through_python = argv[0] == sys.executable or Path(argv[0]).resolve() == Path(sys.executable).resolve()
-        if through_python and len(argv) > 1 and Path(argv[1]).is_file():
-            shown.append(Path(argv[1]).resolve().parent)  # `{python} script.py`: the script is the program
+        shown = view.command_folders(argv, Path(workdir), v.read_only, through_python=through_python)
         if self.manifest_path is not None:
-            shown.append(Path(self.manifest_path).resolve().parent)
-        shown += [Path(p) for p in self.lab_read_only]
-        for p in shown:
-            why = view_problem(p, hidden)
-            if why:
-                raise ViewError(f"the sandbox would show the decoder {p}: {why}. Put the decoder (and its manifest) "
-                                f"in a folder of its own", rule="sandbox-view",
-                                file=str(self.manifest_path or self.name))
-        v.read_only = shown
+            shown.append((Path(self.manifest_path).resolve().parent, "the manifest's folder"))
+        shown += [(Path(p), "a folder the lab gave (--sandbox-ro)") for p in self.lab_read_only]
+        v.read_only, bad = view.checked(shown, hidden, trusted=[BUNDLED_DIR])
+        if bad:
+            raise ViewError(f"the sandbox would show the decoder {bad[1]} ({bad[0]}): {bad[2]}. Put the decoder's "
+                            f"files in a folder of their own", rule="sandbox-view",
+                            file=str(self.manifest_path or self.name))
+        v.hidden += [Path(h) for h in hidden]
         if through_python:
             v.read_only += python_view()
-        v.hidden += [Path(h) for h in hidden]
+            v.hidden += view.installed_data(python_view())
         return v
 
     def program(self) -> str | None:
@@ -230,15 +210,20 @@ class CommandAdapter(Adapter):
         return str(p.resolve()) if p.is_file() else None
 
 
-def _limits(d: dict, path) -> Limits:
+def _limits(d: dict, path, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> Limits:
+    """The manifest's [limits], each a real limit within the lab's ``ceilings`` (isolation/bounds.py)."""
     if not isinstance(d, dict):
         raise ManifestError("[limits] must be a table", rule="manifest-limits", file=str(path))
     try:
-        return Limits(timeout_s=d.get("timeout_s", 60), memory_mb=d.get("memory_mb", 2048),
-                      memory_kind=str(d.get("memory_kind", Limits.memory_kind)), output_mb=d.get("output_mb", 256),
-                      processes=d.get("processes", 64))
+        lim = Limits(timeout_s=d.get("timeout_s", 60), memory_mb=d.get("memory_mb", 2048),
+                     memory_kind=str(d.get("memory_kind", Limits.memory_kind)), output_mb=d.get("output_mb", 256),
+                     processes=d.get("processes", 64))
     except (TypeError, ValueError, OverflowError) as e:
         raise ManifestError(f"[limits]: {e}", rule="manifest-limits", file=str(path)) from None
+    problems = bounds.problems(lim, ceilings)
+    if problems:
+        raise ManifestError(f"[limits]: {'; '.join(problems)}", rule="manifest-limits", file=str(path))
+    return lim
 
 
 def expand(template: list, job: Job, manifest_path: Path | None) -> list[str]:
@@ -316,6 +301,10 @@ def _check_values(data: dict, bad) -> None:
     env = data.get("env", {})
     if not isinstance(env, dict) or not all(isinstance(v, (str, int, float, bool)) for v in env.values()):
         raise bad("[env] must be a table of NAME = value", "manifest-env")
+    for k, v in env.items():
+        why = env_problem(str(k), str(v))
+        if why:
+            raise bad(f"[env] {why}", "manifest-env")
     if "python" in data and not _PYTHON_TARGET.fullmatch(data["python"]):
         raise bad('python must be "package.module:Class" (dotted names)', "manifest-python")
     if "options" in data and not isinstance(data["options"], dict):
@@ -436,11 +425,13 @@ def _flatten(argv):
             yield x
 
 
-def load_manifest(path: Path, *, untrusted: bool = False) -> Adapter:
+def load_manifest(path: Path, *, untrusted: bool = False,
+                  ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> Adapter:
     """The adapter a manifest describes. Any problem is a :class:`ManifestError` naming the file,
     the key and the rule — never another exception. ``untrusted`` (``certify``): an in-process
     ``python =`` adapter is accepted only from the bundled manifests (it runs inside the
-    harness's own process, unsandboxed)."""
+    harness's own process, unsandboxed). ``ceilings``: the most its [limits] may ask for (the
+    lab's, :mod:`fbaconf.isolation.bounds`)."""
     path = Path(path)
     try:
         raw = read_regular(path, MAX_MANIFEST_BYTES)
@@ -461,16 +452,21 @@ def load_manifest(path: Path, *, untrusted: bool = False) -> Adapter:
         raise ManifestError(f"nested more than {MAX_MANIFEST_DEPTH} tables/arrays deep", rule="manifest-toml",
                             file=str(path))
     _check_manifest(data, path)
+    owner = reserved_names().get(data["name"].lower())
+    if owner is not None and path.resolve() != owner.resolve():
+        raise ManifestError(f"name {_quote(data['name'])} is reserved: a bundled adapter of fbaconf uses it, and a "
+                            f"report or a certificate must never pass one decoder for another", rule="manifest-name",
+                            file=str(path))
     if "python" in data:
         if untrusted and path.resolve().parent != BUNDLED_DIR:
             raise ManifestError("python = adapters run inside the harness's own process, unsandboxed: certify "
                                 "accepts them only from the bundled manifests; describe the decoder with "
                                 "[commands] (docs/harness.md)", rule="manifest-python", file=str(path))
-        return _python_adapter(data, path, text)
-    return CommandAdapter(data, path, text)
+        return _python_adapter(data, path, text, ceilings)
+    return CommandAdapter(data, path, text, ceilings)
 
 
-def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
+def _python_adapter(data: dict, path: Path | None, text: str, ceilings: bounds.Ceilings) -> Adapter:
     target = data["python"]
     mod_name, _, cls_name = target.partition(":")
     try:
@@ -498,11 +494,24 @@ def _python_adapter(data: dict, path: Path | None, text: str) -> Adapter:
     adapter.inputs = list(data["inputs"])
     adapter.outputs = list(data["outputs"])
     adapter.faps_format = data.get("faps_format", getattr(adapter, "faps_format", "npz"))
-    adapter.limits = _limits(data.get("limits", {}), path)
+    adapter.limits = _limits(data.get("limits", {}), path, ceilings)
     adapter.reject_exit_codes = frozenset(data.get("reject_exit_codes", DEFAULT_REJECT_EXIT_CODES))
     adapter.manifest_path = path
     adapter.manifest_text = text
     return adapter
+
+
+def reserved_names() -> dict[str, Path]:
+    """The names the bundled adapters use (their files' and manifests' ``name``, lower-cased) ->
+    the manifest: no other may take one, so nothing printed can pass for them."""
+    out = {}
+    for stem, p in bundled().items():
+        name = _NAME_LINE.search(p.read_text("utf-8"))
+        out.update({stem.lower(): p, **({name.group(1).lower(): p} if name else {})})
+    return out
+
+
+_NAME_LINE = re.compile(r'^name\s*=\s*"([^"]+)"', re.M)
 
 
 def highest_claim(adapter: Adapter) -> str:
@@ -514,14 +523,15 @@ def bundled() -> dict[str, Path]:
     return {p.stem: p for p in sorted(BUNDLED_DIR.glob("*.toml"))}
 
 
-def resolve(spec: str | Path, *, untrusted: bool = False) -> Adapter:
+def resolve(spec: str | Path, *, untrusted: bool = False,
+            ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> Adapter:
     """``--decoder`` value: a manifest path, or the name of a bundled adapter (``reference``,
-    ``reference-inprocess``, ``dummy``...). ``untrusted``: see :func:`load_manifest`."""
+    ``reference-inprocess``, ``dummy``...). ``untrusted``, ``ceilings``: see :func:`load_manifest`."""
     p = Path(spec)
     if p.suffix == ".toml" or p.exists():
-        return load_manifest(p.resolve(), untrusted=untrusted)
+        return load_manifest(p.resolve(), untrusted=untrusted, ceilings=ceilings)
     names = bundled()
     if str(spec) in names:
-        return load_manifest(names[str(spec)], untrusted=untrusted)
+        return load_manifest(names[str(spec)], untrusted=untrusted, ceilings=ceilings)
     raise ManifestError(f"no decoder manifest {_quote(str(spec))}: give a .toml path or one of the bundled adapters "
                         f"({', '.join(names)})", rule="manifest-missing", file=str(spec)[:QUOTE_CHARS])

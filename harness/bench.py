@@ -6,6 +6,8 @@ import json
 import math
 import sys
 
+from fbaconf.isolation.bounds import ceilings_from
+
 from .adapters import resolve
 from .reports.jsonreport import jsonable
 from .session import preflight, resolve_claim
@@ -30,7 +32,7 @@ def _usage(msg: str) -> int:
 def run(args) -> int:
     """``fbaconf bench``: exit 0 every measured rate meets its minimum; 1 a decoder run failed (exit
     code, crash, timeout, missing output); 2 usage or setup error; 3 a speed requirement is missed."""
-    adapter = resolve(args.decoder)  # ManifestError -> exit 2 (cli.main)
+    adapter = resolve(args.decoder, ceilings=ceilings_from(args))  # ManifestError -> exit 2 (cli.main)
     claim = resolve_claim(args.claim, adapter)
     preflight(adapter)
     if args.work_dir:

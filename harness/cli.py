@@ -10,6 +10,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from fbaconf.isolation.bounds import add_ceiling_options, ceilings_from
+
 
 def register(sub) -> None:
     r = sub.add_parser("run", help="run conformance suites against a decoder",
@@ -54,11 +56,12 @@ def _common(p) -> None:
 
 
 def lab_options(p) -> None:
-    """What the lab, not the decoder's manifest, decides: the sandbox's extra read-only folders
-    and whether provisional differences fail the claim."""
+    """What the lab, not the decoder's manifest, decides: the sandbox's extra read-only folders,
+    the ceilings of the decoder's limits and whether provisional differences fail the claim."""
     p.add_argument("--sandbox-ro", action="append", type=Path, default=[], metavar="PATH",
                    help="show the decoder this folder read-only too (its runtime, e.g. a JVM); repeatable; "
                         "certify records it in the statement")
+    add_ceiling_options(p)
     p.add_argument("--strict", action="store_true",
                    help="a failing case that rests on a provisional decision fails the claim (default: the verdict "
                         "is PASS (provisional differences: N))")
@@ -75,7 +78,7 @@ def cmd_run(args) -> int:
     from . import session as ss
     from .adapters import resolve
     from .selection import select_cases
-    adapter = resolve(args.decoder)
+    adapter = resolve(args.decoder, ceilings=ceilings_from(args))
     claim = ss.resolve_claim(args.claim, adapter)
     if args.sandbox_ro and hasattr(adapter, "lab_read_only"):
         adapter.lab_read_only = ss.lab_folders(args.sandbox_ro)
@@ -96,7 +99,7 @@ def cmd_run(args) -> int:
         bl.load_flakes(args.flakes)
     if args.write_baseline is not None:
         bl.check_writable(args.write_baseline)
-    ss.preflight(adapter)
+    ss.preflight(adapter, claim)
     out_dir = (args.output or Path("fbaconf-run") / adapter.name).resolve()
     options = ss.RunOptions(jobs=args.jobs, cluster=args.cluster, resume=args.resume, keep_workdirs=args.keep_workdirs,
                             progress=False if args.no_progress else None, baseline=args.baseline, flakes=args.flakes,
@@ -140,6 +143,7 @@ def _register_bench(sub) -> None:
     p.add_argument("--render-size", default="64x64", help="image size of the render measurement (default 64x64)")
     p.add_argument("--work-dir", type=Path, help="keep the generated content here (default: a temporary folder)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
+    add_ceiling_options(p)
     p.set_defaults(func=cmd_bench)
 
 

@@ -18,7 +18,6 @@ concealment (then the outputs decide); crashes, hangs and blown limits fail as e
 from __future__ import annotations
 
 import os
-import shutil
 import sys
 import tempfile
 import threading
@@ -34,6 +33,7 @@ from fbaconf.conformance.golden import REJECT, reading_goldens
 from fbaconf.conformance.suite import Case, CaseKind, golden_root, suites_root
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import endings, sandbox
+from fbaconf.isolation.staging import stage
 from fbaconf.safefs import remove_tree
 
 from . import cluster as cl
@@ -57,75 +57,10 @@ class RunContext:
     work_root: Path | None = None
 
 
-# Suffixes of the forms a case's expected results come in (or could be mistaken for): an
-# auxiliary file with one of them is never staged, whatever a suite lists.
-_NEVER_AUXILIARY = frozenset({".fap", ".fba", ".npz", ".bt", ".bifs", ".json"})
-
-
-def staged_inputs(adapter: Adapter, case: Case) -> dict[str, Path]:
-    """What a decoder's case folder holds (placeholder -> the suite file copied there): exactly
-    the input forms its manifest accepts — the ``.fba`` when it accepts ``fba`` (never the
-    case's ``.fap``: that text is the reference decoding, i.e. the expected output); the
-    ``.fap`` only for a program that takes the text form and not the binary one (a player);
-    the BT and/or binary BIFS scene when it accepts ``scene``/``bifs``; the rendering
-    scenario; and the files a scene names by relative URL (textures). Nothing derived from
-    the goldens, and no other case's files (docs/harness.md, "What a decoder sees")."""
-    out: dict[str, Path] = {}
-    fba, fap = case.input_path("fba"), case.input_path("fap")
-    if "fba" in adapter.inputs and fba is not None:
-        out["fba"] = out["input"] = fba
-    elif "fap" in adapter.inputs and fap is not None:
-        out["fap"] = out["input"] = fap
-    bt, bifs = case.input_path("scene"), case.input_path("bifs")
-    if "scene" in adapter.inputs and bt is not None:
-        out["scene_bt"] = out["scene"] = bt
-    if "bifs" in adapter.inputs and bifs is not None:
-        out["scene_bifs"] = bifs
-        out.setdefault("scene", bifs)
-    scenario = case.input_path("scenario")
-    if scenario is not None:
-        out["scenario"] = scenario
-    return out
-
-
-def auxiliary_files(case: Case) -> list[Path]:
-    """The files a case lists beside its inputs (a texture its scene names by a relative URL):
-    never one of the case's input or golden forms."""
-    if case.suite_dir is None:
-        return []
-    named = {v for k, v in case.inputs.items() if k != "faces" and isinstance(v, str)}
-    named |= set(case.inputs.get("faces", []))
-    return [case.suite_dir / rel for rel in case.sha256
-            if rel not in named and Path(rel).suffix.lower() not in _NEVER_AUXILIARY]
-
-
-def _prepare(ctx: RunContext, case: Case, workdir: Path) -> Job:
-    ind = workdir / "in"
-    outd = workdir / "out"
-    ind.mkdir(parents=True)
-    outd.mkdir()
-    values: dict[str, str] = {}
-    for key, src in staged_inputs(ctx.adapter, case).items():
-        dst = ind / src.name
-        if not dst.exists():
-            shutil.copyfile(src, dst)
-        values[key] = str(dst)
-    for src in auxiliary_files(case):
-        if src.is_file() and not (ind / src.name).exists():
-            shutil.copyfile(src, ind / src.name)
-    a = ctx.adapter
-    ext = "fap" if a.faps_format == "fap" else "npz"
-    values["faps_out"] = str(outd / f"faps.{ext}")
-    values["vertices_out"] = str(outd / "vertices.npz")
-    values["images_dir"] = str(outd / "images")
-    values["faps_out_dir"] = str(outd / "faces")
-    (outd / "images").mkdir()
-    (outd / "faces").mkdir()
-    faces = []
-    for src in case.face_paths():
-        dst = ind / src.name
-        shutil.copyfile(src, dst)
-        faces.append(str(dst))
+def prepare_job(a: Adapter, case: Case, workdir: Path) -> Job:
+    """A case's folder for ``a`` (:func:`fbaconf.isolation.staging.stage`: ``in/`` with copies of
+    the inputs it accepts, ``out/`` for what it writes), as the :class:`Job` its command is filled from."""
+    values, faces = stage(a, case, workdir)
     compared = set(case.stages) & set(a.outputs)
     unwanted = frozenset(ph for out, ph in OUTPUT_PLACEHOLDER.items() if out not in compared)
     return Job(workdir=workdir, values=values, faces=faces, frames=case.frames, unwanted=unwanted)
@@ -149,7 +84,7 @@ def run_case(ctx: RunContext, case: Case) -> CaseResult:
         return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED, message=why)
     workdir = Path(tempfile.mkdtemp(prefix="case-", dir=ctx.work_root))
     try:
-        job = _prepare(ctx, case, workdir)
+        job = prepare_job(ctx.adapter, case, workdir)
         result = _execute(ctx, case, job, base)
     except Exception as e:  # a harness problem, never the decoder's verdict
         result = CaseResult(**base, outcome=Outcome.ERROR,
@@ -174,10 +109,11 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
                               message=f"[commands] {cmd} needs {{{e.args[0]}}}, which this case does not have")
         hidden = hidden_from_decoders(ctx) + ([case.suite_dir.resolve()] if case.suite_dir else [])
         view = a.sandbox_view(argv, job.workdir, hidden=hidden)
-        res = sandbox.run(argv, job.workdir, a.limits, env=a.env, view=view)
-        ending = endings.classify(res, a.limits, a.reject_exit_codes)
+        res = sandbox.run(argv, job.workdir, a.limits, env=a.env, view=view,
+                          keep_io=job.workdir if ctx.keep_workdirs else None)
+        ending = endings.classify(res, a.limits, a.reject_exit_codes, name=a.name)
         proc = dict(command=argv, exit_code=res.returncode, signal=res.signal,
-                    stderr_tail=_stderr_kept(res.stderr_tail, ending))
+                    stderr_tail=endings.kept_stderr(res.stderr_tail, ending))
     else:
         ending, proc = _run_python(a, job)
     proc["ending"] = ending.kind.value
@@ -246,17 +182,6 @@ def _hint_other_reading(ctx: RunContext, case: Case, job: Job, ending, fields: d
                                f"decoder that follows it declares readings = [\"{rid}\"] in its manifest")
             return
 
-
-
-def _stderr_kept(err: str, ending) -> str:
-    """The 2,000 characters of stderr a result keeps: from the crash report's first line when there is
-    one (a sanitizer's report ends in a long legend that would push out the lines that matter),
-    else the end."""
-    line = ending.report.line if ending.report is not None else ""
-    at = err.find(line) if line else -1
-    if at >= 0:
-        return err[err.rfind("\n", 0, at) + 1:][:2000]
-    return err[-2000:]
 
 
 def hidden_from_decoders(ctx: RunContext | None = None) -> list[Path]:

@@ -7,8 +7,10 @@ from __future__ import annotations
 import datetime as _dt
 import difflib
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 import time
 import tomllib
@@ -17,15 +19,18 @@ from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
+from fbaconf.conformance.suite import CaseKind, load_suites
 from fbaconf.errors import FbaconfInputError
-from fbaconf.isolation import sandbox
+from fbaconf.isolation import bounds, sandbox, setup, view
 from fbaconf.profiles.model import Claim, load_profiles
 
 from . import baseline as bl
 from . import reports
-from .adapters import CommandAdapter, highest_claim
+from .adapters import PLACEHOLDERS, CommandAdapter, Job, highest_claim
+from .provisional import rests_on
 from .results import RunRecord
-from .runner import hidden_from_decoders, run_cases
+from .runner import hidden_from_decoders, prepare_job, run_cases
+from .selection import capability, required_for, select_cases
 from .speed import measure_claim
 from .sysinfo import system_info
 from .verdict import claim_verdict, speed_block
@@ -89,6 +94,9 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
                             keep_workdirs=o.keep_workdirs, progress=o.progress, cluster=o.cluster)
     if stop.signum is not None:
         return _interrupted_record(adapter, claim, suites, cases, results, started, t0, stop.signum)
+    same = setup.identical(adapter.name, adapter.limits, results, {c.full_id for c in cases if c.kind != "error"})
+    if same is not None:  # the decoder never ran as set up: one set-up error, no verdict (exit 2)
+        raise setup.SetupError(same, file=str(adapter.manifest_path or adapter.name))
     if retries:
         _retry(adapter, cases, results, claim, out_dir, jobs, retries)
     speed_results = []
@@ -169,13 +177,14 @@ def resolve_claim(text: str | None, adapter) -> str:
 
 
 def lab_folders(paths: list[Path]) -> list[Path]:
-    """The lab's --sandbox-ro folders, checked: absolute, existing, not too broad (UsageError)."""
+    """The lab's --sandbox-ro folders, checked: absolute, existing, not too broad, holding none of
+    what a decoder never sees (git data, a copy of the goldens or suites: UsageError)."""
     out = []
     for p in paths:
         p = Path(p)
         if not p.is_absolute() or not p.is_dir():
             raise UsageError(f"--sandbox-ro {p}: give an absolute path to an existing folder")
-        why = sandbox.view_problem(p)
+        why = sandbox.view_problem(p) or view.folder_problem(p)
         if why:
             raise UsageError(f"--sandbox-ro {p}: {why}")
         out.append(p)
@@ -193,9 +202,12 @@ def check_suites(suites, names: list[str]) -> None:
 
 
 def isolation_notice(adapter) -> str:
-    """One line: whether decoders are isolated on this machine (``run`` and ``certify`` print it)."""
+    """One line: whether decoders are isolated on this machine and by which limits (``run`` and
+    ``certify`` print it) — never "isolated" where a limit holds per process only."""
     if sandbox.isolation() == "bwrap":
-        here = "decoders run isolated on this machine (bubblewrap sandbox)"
+        rep = sandbox.isolation_report()
+        here = ("decoders run in a bubblewrap sandbox on this machine" +
+                ("" if rep.complete else " — NOT fully isolated: " + "; ".join(rep.missing)))
     else:
         why = ("switched off (FBACONF_SANDBOX=none)" if os.environ.get("FBACONF_SANDBOX") == "none"
                else "not available")
@@ -204,19 +216,25 @@ def isolation_notice(adapter) -> str:
                 "certify refuses to run a decoder without it unless told --allow-unisolated")
     if not isinstance(adapter, CommandAdapter):
         return f"fbaconf: isolation: {adapter.name} runs inside fbaconf (no sandbox applies); {here}"
-    return f"fbaconf: isolation: {here}"
+    return f"fbaconf: isolation: {here}; limits in force: " + "; ".join(bounds.limits_in_force(adapter))
 
 
-def preflight(adapter) -> None:
-    """Before any case: one line saying whether decoders are isolated here; a command decoder's
-    program must exist and be executable."""
+def preflight(adapter, claim: str | None = None) -> float | None:
+    """Before any case: one line saying whether decoders are isolated here and by which limits;
+    a command decoder's program must exist and be executable, and every folder its commands
+    would show must pass the view's checks (ViewError, exit 2). With ``claim``: the canary
+    (:func:`canary`: SetupError, exit 2, when the decoder does not decode the claim's simplest
+    valid stream); returns the seconds it took (None: none ran)."""
     print(isolation_notice(adapter), file=sys.stderr)
     if not isinstance(adapter, CommandAdapter):
-        return
+        return None
     prog = adapter.program()
-    # the folders the sandbox would show it (program, manifest, --sandbox-ro): ViewError (exit 2) if too broad
-    adapter.sandbox_view([prog or str(adapter.commands["decode"][0])], Path("/nonexistent-case"),
-                         hidden=hidden_from_decoders())
+    # the folders its commands would show (program, the files they name, manifest, --sandbox-ro), case files aside
+    at = Path("/nonexistent-case")
+    job = Job(at, {p: str(at / p) for p in PLACEHOLDERS if p not in ("python", "manifest_dir", "workdir", "frames")},
+              faces=[str(at / "face.fba")], frames=1)
+    for name in adapter.commands:
+        adapter.sandbox_view(adapter.argv(name, job), at, hidden=hidden_from_decoders())
     if prog is None:
         first = str(adapter.commands["decode"][0])
         where = Path(adapter.manifest_path).resolve().parent if adapter.manifest_path is not None else None
@@ -226,6 +244,45 @@ def preflight(adapter) -> None:
                             else ""))
     if not os.access(prog, os.X_OK):
         raise UsageError(f"decoder {adapter.name}: program {prog} is not executable")
+    return canary(adapter, claim) if claim is not None else None
+
+
+def canary_case(adapter, claim: str):
+    """The claim's simplest valid stream for ``adapter``: the smallest required ``decode`` case
+    it can take (by the size of the stream it is given) that rests on no provisional decision (a
+    decoder may follow another reading there, and then rejects it rightly), or None."""
+    best = None
+    for c in select_cases(load_suites(), claim, [], [], True, adapter):
+        if c.kind != CaseKind.DECODE or capability(adapter, c) or not required_for(claim, c, adapter) or rests_on(c):
+            continue
+        stream = c.input_path("fba") if "fba" in adapter.inputs else c.input_path("fap")
+        if stream is not None and stream.is_file() and (best is None or (stream.stat().st_size, c.full_id) < best[0]):
+            best = ((stream.stat().st_size, c.full_id), c)
+    return best[1] if best else None
+
+
+def canary(adapter, claim: str) -> float | None:
+    """Run the decoder on :func:`canary_case` exactly as a case runs (:func:`fbaconf.isolation.setup.probe`:
+    SetupError when it does not decode); the seconds it took, or None when there was none to run
+    (an in-process adapter, no case it can take, a command the case cannot fill)."""
+    case = canary_case(adapter, claim) if isinstance(adapter, CommandAdapter) else None
+    if case is None:
+        return None
+    t0, work = time.perf_counter(), Path(tempfile.mkdtemp(prefix="fbaconf-canary-"))
+    try:
+        job = prepare_job(adapter, case, work / "case")
+        try:
+            argv = adapter.argv("decode", job)
+        except KeyError:  # a placeholder the case has no value for: NotSupported, no canary
+            return None
+        hidden = hidden_from_decoders() + ([case.suite_dir.resolve()] if case.suite_dir else [])
+        setup.probe(argv, job.workdir, adapter.limits, name=adapter.name, env=adapter.env,
+                    what=f"the claim's simplest valid stream ({case.full_id})",
+                    file=str(adapter.manifest_path or adapter.name), reject_exit_codes=adapter.reject_exit_codes,
+                    view=adapter.sandbox_view(argv, job.workdir, hidden=hidden))
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return time.perf_counter() - t0
 
 
 class _Stop:

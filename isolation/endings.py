@@ -198,9 +198,11 @@ def _reservation(res, limits, cmd: str, err: str) -> Ending | None:
                   f"or \"rss\"")
 
 
-def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending:
-    """One :class:`Ending` for a finished :class:`~fbaconf.isolation.sandbox.ProcResult`."""
-    cmd = Path(res.argv[0]).name if res.argv else "decoder"
+def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES, *, name: str | None = None) -> Ending:
+    """One :class:`Ending` for a finished :class:`~fbaconf.isolation.sandbox.ProcResult`; its
+    message names the decoder ``name`` (the manifest's) — "acme-java exited with code 1", not
+    the runtime that ran it — or, without one, the program."""
+    cmd = name or (Path(res.argv[0]).name if res.argv else "decoder")
     err = res.stderr_tail or ""
     rc = res.returncode
     known = _setup(res, cmd, err) or _reservation(res, limits, cmd, err)
@@ -245,3 +247,14 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES) -> Ending
     codes = ", ".join(map(str, sorted(reject_exit_codes)))
     return Ending(EndingKind.UNEXPECTED, f"{cmd} exited with code {rc}, not a documented reject code ({codes})"
                                 f"{_last_line(err)}")
+
+
+def kept_stderr(err: str, ending: Ending) -> str:
+    """The 2,000 characters of stderr a result keeps: from the crash report's first line when there is
+    one (a sanitizer's report ends in a long legend that would push out the lines that matter),
+    else the end."""
+    line = ending.report.line if ending.report is not None else ""
+    at = err.find(line) if line else -1
+    if at >= 0:
+        return err[err.rfind("\n", 0, at) + 1:][:2000]
+    return err[-2000:]

@@ -2,9 +2,10 @@
 and — where bubblewrap is installed — its own sandbox.
 
 Isolation (``bwrap``, Debian package ``bubblewrap``): the decoder sees the system's
-``/usr`` and ``/etc`` read-only, its own program's folder and manifest folder read-only,
-its case folder (inputs read-only, outputs writable), an empty ``/tmp`` — and nothing of the
-project: not the goldens, the suites, the run folder, the venv or the harness's code
+``/usr`` and ``/etc`` read-only, the folders of its program and of the files its command
+names and its manifest's folder read-only (each judged by content first, :mod:`.view`), its
+case folder (inputs read-only, outputs writable, :mod:`.staging`), an empty ``/tmp`` — and
+nothing of the project: not the goldens, the suites, the run folder, the venv or the harness's code
 (decoders started through ``{python}`` see the Python installation and the fbaconf package
 read-only, with the goldens, suites and run folder hidden). It gets its own PID, network,
 IPC and UTS namespaces: no network, and every process it starts dies with the case.
@@ -20,15 +21,16 @@ Limits per invocation:
   address-space rlimit per process (the fallback, :func:`isolation_report` says so);
   ``"address-space"`` — the rlimit per process always (and the cgroup limit too);
   ``"rss"`` — the resident set of the whole tree, sampled every 10 ms (and the cgroup limit);
-  ``"none"``. ``processes`` caps the number of processes (pids.max). A runtime that dies
-  reserving its address space under an address-space limit is a set-up problem
-  (:mod:`.endings` names the runtime's message and the fix);
+  ``"none"`` (the harness's own use: a manifest may not ask for it, :mod:`.bounds`).
+  ``processes`` caps the number of processes (pids.max). A runtime that dies reserving its
+  address space under an address-space limit is a set-up problem (:mod:`.endings` names the
+  runtime's message and the fix; :mod:`.setup` proves it before a run's cases);
 * output: ``output_mb`` per file (RLIMIT_FSIZE: a write beyond it raises SIGXFSZ in the
   decoder) and in total over the working directory, measured while the decoder runs
   (:mod:`.watch`: the tree is killed once past the limit) and after;
 * CPU seconds (RLIMIT_CPU, a backstop at twice the timeout); 1024 descriptors per process;
-  no core dumps; no inotify or fanotify instances (:mod:`.seccomp`: a decoder cannot take
-  the host user's).
+  no core dumps; no inotify or fanotify instances and no new namespaces (:mod:`.seccomp`: a
+  decoder cannot take the host user's).
 
 The limits are applied by a launcher, so nothing runs between fork and exec in this
 (threaded) process: util-linux's ``prlimit`` (about 1.5 ms), which sets the rlimits and execs
@@ -330,10 +332,12 @@ def sandbox_argv(view: View, workdir: Path, fds: list[int], *, status: bool = Tr
     return argv[:1] + extra + argv[1:], status_r
 
 
-def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,
-        measure_dirs: list[Path] | None = None, view: View | None = None) -> ProcResult:
+def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,  # noqa: PLR0913
+        measure_dirs: list[Path] | None = None, view: View | None = None, keep_io: Path | None = None) -> ProcResult:
     """Run ``argv`` in ``workdir`` under ``limits`` (sandboxed when :func:`isolation` allows);
-    never raises for the decoder's behaviour."""
+    never raises for the decoder's behaviour. ``keep_io``: a folder to keep the whole stdout and
+    stderr in (``stdout.txt``, ``stderr.txt``; ``--keep-workdirs``), written once the decoder's
+    tree is gone."""
     if not argv or not all(isinstance(a, str) for a in argv):
         raise ValueError("argv must be a non-empty list of strings")
     workdir = Path(workdir).resolve()
@@ -390,12 +394,38 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
         fin = Finish(status, rusage, time.perf_counter() - t0, timed_out=hit == "timeout", mem_hit=hit == "memory",
                      out_hit=hit == "output", oom=oom, pids_hit=pids_hit, rss_sampled_mb=watch.rss_peak_mb,
                      bwrap_status=sandboxed, notes=tuple(notes))
-        return result(argv, limits, fin, stdout_tail=read_tail(out_path), stderr_tail=read_tail(err_path),
-                      measure_dirs=measure)
+        res = result(argv, limits, fin, stdout_tail=read_tail(out_path), stderr_tail=read_tail(err_path),
+                     measure_dirs=measure)
+        if keep_io is not None:
+            for src in (out_path, err_path):
+                keep_file(src, Path(keep_io) / f"{src.name}.txt")
+        return res
     finally:
         if status_r is not None:
             os.close(status_r)
         shutil.rmtree(io_dir, ignore_errors=True)
+
+
+def keep_file(src: Path, dst: Path) -> None:
+    """Copy the harness's file ``src`` to ``dst`` in a folder a decoder wrote: whatever the
+    decoder left at that name (a link, a FIFO, a folder) is replaced, never followed."""
+    try:
+        if dst.is_dir() and not dst.is_symlink():
+            shutil.rmtree(dst, ignore_errors=True)
+        elif os.path.lexists(dst):
+            dst.unlink()
+        fd = os.open(dst, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o644)
+    except OSError:
+        return
+    try:
+        with open(src, "rb") as f, os.fdopen(fd, "wb") as out:
+            fd = -1
+            shutil.copyfileobj(f, out)
+    except OSError:
+        pass
+    finally:
+        if fd >= 0:
+            os.close(fd)
 
 
 def _wait(proc, t0: float, limits: Limits, watch: Watch):

@@ -22,8 +22,9 @@ from fbaconf.conformance.suite import golden_root, load_suites, suites_root
 from fbaconf.harness import adapters
 from fbaconf.harness.adapters import ViewError
 from fbaconf.harness.results import Outcome
-from fbaconf.harness.runner import auxiliary_files, run_cases, staged_inputs
+from fbaconf.harness.runner import run_cases
 from fbaconf.isolation import sandbox
+from fbaconf.isolation.staging import auxiliary_files, staged_inputs
 
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
 # binary cases with a .fap sibling in their suite folder, one with skips, one with a texture

@@ -3,7 +3,10 @@ address space at start, so an address-space limit of 256 MB kills it before it r
 ("fatal error: failed to reserve page summary memory"). The default ``memory_kind = "tree"``
 limits what the process tree uses (a cgroup limit where cgroups are writable): the decoder
 runs, one that really uses more than the limit is a memory ending, and under an explicit
-address-space limit the failure is a set-up problem naming the runtime's message and the fix.
+address-space limit the failure is a set-up problem naming the runtime's message and the fix:
+per process ending (isolation/endings.py: what the fuzzer and the speed phase see), and for a
+whole run one set-up error from the canary (isolation/setup.py), which proves the fix by decoding
+the same stream without the address-space limit — no case counted, never a Fail.
 Skipped where ``go`` is not installed (the build needs no network: the standard library only).
 """
 from __future__ import annotations
@@ -11,6 +14,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -109,3 +113,18 @@ def test_under_an_address_space_limit_the_runtime_is_named_with_the_fix(godec, t
     assert "fatal error: failed to reserve page summary memory" in ending.message
     assert "256 MB address-space limit" in ending.message and "memory_kind" in ending.message
     assert outcome_for(ending)[0] == Outcome.ERROR  # never the decoder's verdict on a stream
+
+
+def test_a_run_under_an_address_space_limit_is_one_set_up_error_naming_gos_words_and_the_fix(godec, tmp_path):
+    if sandbox.isolation() == "none":
+        pytest.skip("bubblewrap (bwrap) is not installed: the canary's retry would run unisolated")
+    m = godec / "godec-as-run.toml"
+    m.write_text((godec / "godec.toml").read_text().replace("memory_mb = 256", 'memory_mb = 256\nmemory_kind = '
+                                                            '"address-space"'))
+    r = subprocess.run([sys.executable, "-m", "fbaconf", "run", "--decoder", str(m), "--case", "simple-l1-core/dct-q4",
+                        "-o", str(tmp_path / "run")], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert r.stderr.count("fbaconf run: error: ") == 1 and "godec cannot run as set up" in r.stderr
+    assert "| fatal error: failed to reserve page summary memory" in r.stderr
+    assert "it decodes the same stream without the address-space limit" in r.stderr
+    assert not (tmp_path / "run" / "results.jsonl").exists()  # no case counted, no Fail

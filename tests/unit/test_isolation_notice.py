@@ -10,7 +10,7 @@ from fbaconf.isolation import sandbox
 
 
 @pytest.mark.parametrize("have,env,words", [
-    ("bwrap", None, "decoders run isolated on this machine (bubblewrap sandbox)"),
+    ("bwrap", None, "decoders run in a bubblewrap sandbox on this machine"),
     ("none", None, "bubblewrap (bwrap) is not available: decoders run UNISOLATED"),
     ("none", "none", "bubblewrap (bwrap) is switched off (FBACONF_SANDBOX=none): decoders run UNISOLATED"),
 ])
