@@ -32,6 +32,7 @@ from fbaconf.conformance.suite import Case, load_suites
 from fbaconf.errors import FbaconfInputError
 from fbaconf.harness.provisional import provisional_differences, rests_on
 from fbaconf.harness.selection import required_for
+from fbaconf.harness.speed import speed_verdict
 from fbaconf.safefs import confined, read_regular
 
 CERTIFICATE = "certificate.json"
@@ -125,8 +126,9 @@ def derive_verdict(results: list[dict], *, strict: bool, speed: list[dict] | Non
     hard = [r for r in required if r.get("outcome") not in _OK and (strict or r.get("case_id") not in provisional)]
     if hard:
         return "FAIL", 1, differences
-    if speed is not None and any(not s.get("passed") for s in speed):
-        return "SPEED FAIL", 3, differences
+    blocked = speed_verdict(speed)
+    if blocked is not None:
+        return blocked[0], blocked[1], differences
     if differences:
         return f"PASS (provisional differences: {len(differences)})", 0, differences
     return "PASS", 0, differences

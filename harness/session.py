@@ -27,7 +27,7 @@ from .adapters import CommandAdapter, highest_claim
 from .provisional import is_provisional_difference, provisional_differences
 from .results import RunRecord
 from .runner import hidden_from_decoders, run_cases
-from .speed import measure_claim
+from .speed import measure_claim, speed_verdict
 from .sysinfo import system_info
 
 
@@ -74,7 +74,9 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
     Exit code: 1 when a required case fails or could not be taken (a claim means all of it),
     counting only new failures (and fixed cases, unless ``allow_fixed``) when a baseline or
     flakes file is given — a provisional difference (:mod:`.provisional`) only under
-    ``strict``; 3 only when every required case passed and only speed was missed; else 0."""
+    ``strict``; when every required case passed, 3 when a speed requirement was missed and 4 when
+    one was missed only on a machine busy with other work (inconclusive, :func:`.speed.speed_verdict`);
+    else 0."""
     o = options or RunOptions()
     jobs, baseline, flakes, retries, speed = o.jobs, o.baseline, o.flakes, o.retries, o.speed
     # read (and check) the baseline and flakes files before any case: a bad line stops the run at once
@@ -103,10 +105,9 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
     record.provisional_differences, record.strict = differences, o.strict
     if summary.failing(o.allow_fixed):
         record.exit_code = 1
-    elif any(not s.passed for s in speed_results):
-        record.exit_code = 3
     else:
-        record.exit_code = 0
+        blocked = speed_verdict([s.to_json() for s in speed_results])
+        record.exit_code = blocked[1] if blocked else 0
     return record
 
 

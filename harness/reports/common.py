@@ -13,7 +13,7 @@ from fbaconf.harness.results import OUTCOME_ORDER, CaseResult, Outcome, RunRecor
 # Column order of the outcome tables (as the Outcome enum: Pass first, then the bad ones).
 COLUMNS = tuple(Outcome)
 
-VERDICTS = {0: "PASS", 1: "FAIL", 2: "SETUP ERROR", 3: "SPEED FAIL"}
+VERDICTS = {0: "PASS", 1: "FAIL", 2: "SETUP ERROR", 3: "SPEED FAIL", 4: "SPEED INCONCLUSIVE"}
 
 # Non-finite floats are not JSON; they are written as these strings and read back.
 _NONFINITE = {"Infinity": math.inf, "-Infinity": -math.inf, "NaN": math.nan}
@@ -46,7 +46,8 @@ def profile_of(claim: str | None) -> str:
 
 
 def verdict(record: RunRecord) -> str:
-    """``PASS`` / ``PASS (provisional differences: N)`` / ``FAIL`` / ``SPEED FAIL`` / ``SETUP ERROR``
+    """``PASS`` / ``PASS (provisional differences: N)`` / ``FAIL`` / ``SPEED FAIL`` / ``SPEED INCONCLUSIVE`` /
+    ``SETUP ERROR``
     from the record's exit code and its provisional differences (harness/provisional.py)."""
     if record.exit_code == 0 and record.provisional_differences:
         return f"PASS (provisional differences: {len(record.provisional_differences)})"
@@ -125,11 +126,18 @@ def _summary_counts(counts: dict[str, int]) -> str:
     return f"{n} case{'s' if n != 1 else ''}" + (": " + ", ".join(parts) if parts else "")
 
 
+def speed_word(s: SpeedResult) -> str:
+    """PASS, FAIL or INCONCLUSIVE (below the minimum on a machine busy with other work)."""
+    return s.verdict.upper()
+
+
 def _speed_summary(speed: list[SpeedResult]) -> str:
     if not speed:
         return ""
-    bad = sum(1 for s in speed if not s.passed)
-    return f"; speed: {len(speed) - bad} of {len(speed)} pass" + (f", {bad} below the level minimum" if bad else "")
+    words = [speed_word(s) for s in speed]
+    bad, unsure = words.count("FAIL"), words.count("INCONCLUSIVE")
+    return (f"; speed: {words.count('PASS')} of {len(speed)} pass" + (f", {bad} below the level minimum" if bad else "")
+            + (f", {unsure} inconclusive (below it on a busy machine)" if unsure else ""))
 
 
 # Baseline classes in the order a CI log shows them: what fails the run first.
@@ -186,8 +194,8 @@ def reproduce_line(r: CaseResult, keep_option: str = "--keep-workdirs") -> str:
 
 
 def _speed_rows(speed: list[SpeedResult]) -> list[list[str]]:
-    return [[s.operation, s.claim, f"{s.rate_fps:.2f}", f"{s.required_fps:.2f}", "PASS" if s.passed else "FAIL",
-             s.provenance] for s in speed]
+    return [[s.operation, s.claim, f"{s.rate_fps:.2f}", f"{s.required_fps:.2f}", speed_word(s), s.provenance]
+            for s in speed]
 
 
 def _normalised(message: str) -> str:

@@ -62,7 +62,7 @@ def _stderr_excerpt(r, n: int = 6) -> tuple[str, list[str]]:
 
 def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: int = 20) -> str:  # noqa: C901
     """A plain-text summary of ``record`` (ANSI colours when ``color``), ending with the verdict line
-    ``result: PASS|FAIL|SPEED FAIL|SETUP ERROR (N cases: a Pass, b Fail, ...)``."""
+    ``result: PASS|FAIL|SPEED FAIL|SPEED INCONCLUSIVE|SETUP ERROR (N cases: a Pass, b Fail, ...)``."""
     def paint(code: str, text: str) -> str:
         return f"\x1b[{code}m{text}\x1b[0m" if color else text
 
@@ -156,7 +156,7 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
         def colour_speed(ri, ci, text):
             if ci != 4:
                 return text
-            return paint("32" if record.speed[ri].passed else "31", text)
+            return paint({"PASS": "32", "INCONCLUSIVE": "33"}.get(text.strip(), "31"), text)
         rows = [[clean_text(c) for c in row] for row in _speed_rows(record.speed)]
         lines.extend(_table(["operation", "claim", "measured fps", "required fps", "verdict", "provenance"],
                             rows, {2, 3}, colour_speed))
@@ -173,6 +173,6 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
 
     v = verdict(record)
     lines.append("")
-    code = "32" if record.exit_code == 0 else ("33" if record.exit_code == 3 else "31")
+    code = "32" if record.exit_code == 0 else ("33" if record.exit_code in (3, 4) else "31")
     lines.append(f"result: {paint('1;' + code, v)} ({_summary_counts(record.counts())}{_speed_summary(record.speed)})")
     return "\n".join(lines) + "\n"

@@ -22,7 +22,7 @@ MAX_LINES = 700
 
 
 NOT_INSTALLED = {"tests", "benchmarks", "examples", "docs", "build", "dist"}
-HARNESS_MAX_LINES = 6000
+HARNESS_MAX_LINES = 6600  # 6000 until the speed phase judged its outputs and the machine (speed_check, speed_load)
 
 
 def _package_dirs() -> dict[str, Path]:
