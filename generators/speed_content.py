@@ -68,8 +68,8 @@ class Content:
 
     def make(self, n: int) -> "Run":
         """An ``n``-frame run (``n`` >= 1) no run of this or any other measurement shares."""
-        if n < 1:
-            raise ContentError(f"a run needs at least one frame, not {n}")
+        if n < 1:  # a caller's mistake, not an input's
+            raise ValueError(f"a run needs at least one frame, not {n}")
         self._runs += 1
         return Run(self, self._runs, int(n))
 
@@ -167,7 +167,7 @@ class Run:
         """Frames ``ks`` of the reference decoding of the stream (decoding only their blocks)."""
         ks = np.asarray(ks, dtype=np.int64)
         if len(ks) and (ks.min() < 0 or ks.max() >= self.n):
-            raise ContentError(f"frames {ks.tolist()} outside the run's {self.n}")
+            raise ValueError(f"frames {ks.tolist()} outside the run's {self.n}")
         rows = [self._block(int(k) // BLOCK_FRAMES).select(np.array([int(k) % BLOCK_FRAMES])) for k in ks]
         first = self._block(0)
         return FapFrames(values=np.concatenate([x.values for x in rows]).reshape(len(ks), -1),
