@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 import os
+import secrets
 import statistics
 import tempfile
 import time
@@ -175,7 +176,7 @@ class _Runner:
             v["scenario"] = str(c.scenario(f"render-{w}x{h}", width=w, height=h, supersample=RENDER_SUPERSAMPLE,
                                            frames=None))
         else:  # two small frames: the first (it places the camera) and one drawn for this run
-            k = int(sample(n, 1)[-1]) if n > 1 else 0
+            k = secrets.SystemRandom().randrange(1, n) if n > 1 else 0
             self._image_frames = sorted({0, k})
             s = DECODE_IMAGE_SIZE
             v["scenario"] = str(c.scenario(f"decode-frames-{'-'.join(map(str, self._image_frames))}", width=s,

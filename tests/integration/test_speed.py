@@ -466,3 +466,35 @@ def test_an_inconclusive_reading_in_the_verdict_reports_and_statement(tmp_path, 
     line = next(x for x in st.splitlines() if x.startswith("- decode:"))
     assert "20.0 frames/s measured, 30 required (provisional) — INCONCLUSIVE: the machine was busy" in line, line
     assert "50.0 fps" in line and "other processes used 80 %" in line, line
+
+
+def test_a_decoder_of_images_only_is_judged_on_the_frames_it_was_asked_to_draw(tmp_path):
+    """A decoder whose only output is images gets two small frames to draw per run (the first and
+    one drawn for the run): judged as images, a faithful drawing passes, a blank one fails."""
+    script = tmp_path / "painter.py"
+    script.write_text(textwrap.dedent("""\
+        import sys
+        from fbaconf.pipeline import reference_outputs
+        from fbaconf.rendering.scenario import Scenario
+        ks = Scenario.load(sys.argv[2]).frames
+        assert len(ks) == 2 and ks[0] == 0, ks  # the first frame and one drawn
+        reference_outputs(sys.argv[1], scenario=sys.argv[2], images_dir=sys.argv[3])
+        if len(sys.argv) > 4:  # blank: every pixel black
+            import numpy as np
+            from fbaconf.rendering.images import write_png
+            for k in ks:
+                write_png(f"{sys.argv[3]}/frame_{k:05d}.png", np.zeros((8, 8, 3)))
+    """))
+    for extra, ok in (("", True), ("blank", False)):
+        m = tmp_path / f"painter{extra}.toml"
+        args = ", ".join(f'"{a}"' for a in ["{python}", str(script), "{input}", "{scenario}", "{images_dir}"]
+                         + ([extra] if extra else []))
+        m.write_text(f'name = "painter"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["images"]\n'
+                     f'[commands]\ndecode = [{args}]\n')
+        a = load_manifest(m)
+        if ok:
+            r = speed.measure(a, "simple@1", "decode", lengths=[6, 30], repeats=1)
+            assert r is not None and len(r.samples) == 2, r.message
+        else:
+            with pytest.raises(speed.SpeedRunError, match="not the rendering of the content"):
+                speed.measure(a, "simple@1", "decode", lengths=[6, 30], repeats=1)
