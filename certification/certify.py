@@ -225,8 +225,9 @@ def _statement(record, cv, speed: bool, basis: dict) -> str:
     if speed:
         lines.append("## Speed")
         for s in record.speed:
+            word = {"pass": "pass", "inconclusive": "INCONCLUSIVE"}.get(s.verdict, "FAIL")
             lines.append(f"- {s.operation}: {s.rate_fps:.1f} frames/s measured, {s.required_fps:g} required "
-                         f"({s.provenance}) — {'pass' if s.passed else 'FAIL'}")
+                         f"({s.provenance}) — {word}" + (f": {s.reason}" if s.reason else ""))
     else:
         lines.append("Speed was not measured (--no-speed): this certificate does not cover the level's minimum rates.")
     lines += ["", "## What this verdict rests on", "",

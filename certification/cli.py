@@ -2,9 +2,9 @@
 verify a package (``certify verify DIR [--pubkey P]``), make a key pair (``certify keygen -o DIR``).
 
 Exit codes of ``certify``: as ``fbaconf run`` (0 pass, 1 fail, 2 set-up error, 3 only speed
-missed). ``certify verify``: 0 when every digest and the verdict hold and the signature was
-checked (``--pubkey``), or the package is unsigned (its line says so), or ``--unsigned-ok``
-accepts a signature left unchecked; 1 otherwise.
+missed, 4 speed inconclusive: missed on a busy machine). ``certify verify``: 0 when every digest
+and the verdict hold and the signature was checked (``--pubkey``), or the package is unsigned (its
+line says so), or ``--unsigned-ok`` accepts a signature left unchecked; 1 otherwise.
 """
 from __future__ import annotations
 

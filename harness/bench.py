@@ -12,6 +12,7 @@ from .adapters import resolve
 from .reports.jsonreport import jsonable
 from .session import preflight, resolve_claim
 from .speed import OPERATIONS, SpeedError, SpeedRunError, failed_result, measure, skip_reason
+from .verdict import speed_verdict
 
 
 def _parse_size(text: str) -> tuple[int, int]:
@@ -31,7 +32,8 @@ def _usage(msg: str) -> int:
 
 def run(args) -> int:
     """``fbaconf bench``: exit 0 every measured rate meets its minimum; 1 a decoder run failed (exit
-    code, crash, timeout, missing output); 2 usage or setup error; 3 a speed requirement is missed."""
+    code, crash, timeout, missing or wrong output); 2 usage or setup error; 3 a speed requirement is
+    missed; 4 a rate missed its minimum on a machine busy with other work (inconclusive)."""
     adapter = resolve(args.decoder, ceilings=ceilings_from(args))  # ManifestError -> exit 2 (cli.main)
     claim = resolve_claim(args.claim, adapter)
     preflight(adapter)
@@ -68,7 +70,8 @@ def run(args) -> int:
         except SpeedError as e:
             return _usage(str(e))
         results.append(r)
-    code = 1 if failed else (3 if any(not r.passed for r in results) else 0)
+    sv = speed_verdict([r.to_json() for r in results])
+    code = 1 if failed else (sv[1] if sv else 0)
     if args.json:
         doc = {"format": "fbaconf.bench/1", "decoder": adapter.describe(), "claim": claim, "exit_code": code,
                "speed": [r.to_json() for r in results],
@@ -83,25 +86,29 @@ def run(args) -> int:
             print(f"{r.operation}: {r.message}")
     verdict = {0: "PASS: every measured rate meets the level minimum",
                1: "ERROR: a decoder run failed during the measurement",
-               3: "FAIL: below the level's minimum rate (speed requirement only)"}[code]
+               3: "FAIL: below the level's minimum rate (speed requirement only)",
+               4: "INCONCLUSIVE: below the level's minimum rate on a machine busy with other work (measure again "
+                  "on an idle machine)"}[code]
     print(f"result: {verdict}")
     return code
 
 
 def render_table(results) -> str:
     """Plain-text table: operation, per-frame ms, start-up, measured/required fps, ratio, verdict,
+    the decoder's CPU time and wait and the share of the CPUs others used over the timed runs,
     provenance (provisional limits marked with ``*``)."""
     header = ["operation", "claim", "per-frame ms", "startup s", "measured fps", "required fps", "ratio",
-              "verdict", "provenance"]
+              "verdict", "cpu s", "wait s", "others %", "provenance"]
     rows = []
     for r in results:
         ratio = (r.rate_fps / r.required_fps) if r.required_fps and r.required_fps > 0 else math.inf
         prov = r.provenance + (" *" if r.provenance == "provisional" else "")
         rows.append([r.operation, r.claim, _num(r.per_frame_s * 1000, 3), _num(r.startup_s, 3),
                      _num(r.rate_fps, 1), _num(r.required_fps, 1), _num(ratio, 2),
-                     "PASS" if r.passed else "FAIL", prov])
+                     (r.verdict or ("pass" if r.passed else "fail")).upper(), _num(r.cpu_s, 2), _num(r.stall_s, 2),
+                     _num(None if r.others_share is None else 100 * r.others_share, 0), prov])
     widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(header)]
-    right = {2, 3, 4, 5, 6}
+    right = {2, 3, 4, 5, 6, 8, 9, 10}
 
     def line(cells):
         return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))

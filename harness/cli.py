@@ -3,7 +3,8 @@
 
 Exit codes (docs/harness.md): 0 every required case passes (and the speed requirements when
 measured); 1 some required case fails (a new failure, when ``--baseline`` is given);
-2 usage or setup error; 3 only speed requirements missed.
+2 usage or setup error; 3 only speed requirements missed; 4 only missed on a machine busy with other work
+(speed inconclusive).
 """
 from __future__ import annotations
 

@@ -125,18 +125,34 @@ class CaseResult:
 
 @dataclass
 class SpeedResult:
-    """Measured per-frame cost of one operation (decode or render) against a level minimum."""
+    """Measured per-frame cost of one operation (decode or render) against a level minimum, and
+    whether the machine gave the decoder its CPU meanwhile (harness/speed.py, speed_load.py)."""
     operation: str  # "decode" | "render"
     claim: str
     per_frame_s: float
     startup_s: float
     rate_fps: float  # 1 / per_frame_s (x faces where the level counts all faces together)
     required_fps: float
-    passed: bool
+    passed: bool  # True only for verdict "pass"
     provenance: str  # provenance of the level minimum (seed / iso-via-implementation / provisional)
-    samples: list[dict] = field(default_factory=list)  # {"frames": n, "seconds": t} per run
+    samples: list[dict] = field(default_factory=list)  # {"frames": n, "seconds": t, "cpu_s", ...} per run
     fit_r2: float = 0.0
     message: str = ""
+    verdict: str = ""  # "pass" | "fail" | "inconclusive" (the rate missed on a busy machine); default: by passed
+    reason: str = ""  # the verdict in words, with the numbers
+    cpu_s: float | None = None  # the decoder's CPU time over the timed runs
+    wall_s: float | None = None  # the timed runs' time
+    stall_s: float | None = None  # time it (or any task: stall_source "machine PSI") waited for a CPU
+    stall_source: str = ""
+    others_share: float | None = None  # share of the CPUs other processes used during the runs
+    others_share_between: float | None = None  # ... and between them
+    load: float | None = None  # the highest 1-minute load average seen
+    cpus: int | None = None  # CPUs usable
+    uncontended_fps: float | None = None  # the rate without the wait other processes explain
+
+    def __post_init__(self) -> None:
+        if not self.verdict:  # a result made (or written) before verdicts: by whether it passed
+            self.verdict = "pass" if self.passed else "fail"
 
     def to_json(self) -> dict:
         return asdict(self)

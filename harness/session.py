@@ -33,7 +33,7 @@ from .runner import hidden_from_decoders, prepare_job, run_cases
 from .selection import capability, required_for, select_cases
 from .speed import measure_claim
 from .sysinfo import system_info
-from .verdict import claim_verdict, speed_block
+from .verdict import claim_verdict, speed_verdict
 
 
 def provisional_statements(claim: str | None) -> list[str]:
@@ -118,7 +118,7 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
         if summary.failing(o.allow_fixed) or (o.strict and cv.differences):
             record.exit_code = 1
         else:
-            blocked = speed_block(speed_json)
+            blocked = speed_verdict(speed_json)
             record.exit_code = blocked[1] if blocked else 0
     return record
 

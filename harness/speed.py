@@ -1,14 +1,15 @@
 """Decoder speed: per-frame decode and render cost, free of process start-up, against the
-claimed level's minimum rates (``decode_rate``, ``render_rate`` in ``profiles.toml``).
+claimed level's minimum rates (``decode_rate``, ``render_rate`` in ``profiles.toml``) — earned
+by the certified command on content it cannot know in advance, and judged only when the
+machine gave the decoder its CPU (docs/harness.md, "Speed").
 
-Method. The decoder runs the same content at several lengths ``n`` (frames); every run is
-timed (wall clock of the whole invocation, or of ``adapter.run(job)`` for in-process
-adapters) and a straight line ``time = startup + n * per_frame`` is fitted by least
-squares. The series of lengths is repeated ``repeats`` times (alternately ascending and
-descending, so slow drift does not bias the slope); the reported per-frame cost and
-start-up are the medians over the repeats, and ``fit_r2`` is the coefficient of
-determination of that median line over every sample. The measured rate is
-``1 / per_frame``; it passes when it is at least the level minimum.
+Method. The decoder runs content at several lengths ``n`` (frames); every run is timed (wall
+clock of the whole invocation, or of ``adapter.run(job)`` for in-process adapters) and a
+straight line ``time = startup + n * per_frame`` is fitted by least squares. The series of
+lengths is repeated ``repeats`` times (alternately ascending and descending, so slow drift does
+not bias the slope); the per-frame cost and start-up are the medians over the repeats, and
+``fit_r2`` is the coefficient of determination of that median line over every sample. The rate
+is ``1 / per_frame``.
 
 Lengths. Unless given, they adapt to the decoder: after one discarded warm-up run, the
 length grows (by the measured slope, at least x2 and at most x8 per step) until the
@@ -16,39 +17,27 @@ frame-dependent part of the largest run (its time minus the smallest run's) reac
 ``target_s`` and the smallest run's time (mostly start-up) — so it dominates start-up
 noise — or a run would pass ``max_run_s`` or the length ``max_frames``. The series is then ``n/10, n/2, n``.
 
-Content. A procedural sequence (all low-level and high-level FAPs, 25 Hz) encoded by the
-reference encoder, in files named at random (``content-<random>.fba``;
-:mod:`fbaconf.generators.speed_content`), whose reference decoding of any length comes from two
-decoded blocks (a 100,000-frame run costs no reference decode).
+Every run gets fresh content (:mod:`fbaconf.generators.speed_content`) and its output is judged
+on a sample (:mod:`.speed_check`); each run's CPU time, wait and the others' CPU are read around
+it (:mod:`.speed_load`), which gives the verdict: pass, fail or inconclusive.
 
 Operations. ``decode``: the adapter's ``decode`` command with the FAP output (outputs a
 command names unconditionally are supplied too and their cost is included; a named
-``{images_dir}`` gets a one-frame 8x8 scenario so rendering stays out of the per-frame
-cost as far as the decoder honours ``{scenario}``). ``render``: the same command with
-``{images_dir}`` and a scenario that renders every frame at ``render_size`` (64x64,
-no supersampling); skipped (``None``, see :func:`skip_reason`) for adapters without the
-``images`` output. A scene is written (the bundled default head; BT, or BIFS for a decoder
-that declares only the ``bifs`` input) only when the command requires ``{scene}``.
+``{images_dir}`` gets an 8x8 scenario of two frames, the first and one drawn per run).
+``render``: the same command with ``{images_dir}`` and a scenario of every frame at
+``render_size`` with 2 x 2 samples per pixel; skipped (``None``, see :func:`skip_reason`) for
+adapters without the ``images`` output. A scene (the bundled default head; BT, or BIFS for a
+decoder that declares only ``bifs``) is written only when the command requires ``{scene}``.
 
-The command measured is the one certified: ``decode``. A manifest may declare its
-``[commands] serve`` (the persistent protocol, docs/fuzzing.md) equivalent
-(``serve_equivalent = true``): a decoder that reads binary streams and writes FAPs is then
-measured through it (``persistent=False`` to spawn instead) — one process decodes every run, so
-each sample is one answer's round trip and the fitted start-up is the protocol's per-input
-cost — after the harness has checked the claim on a sample: the first :data:`EQUIVALENCE_RUNS`
-lengths are decoded by ``decode`` too, and the two outputs must be the same frames. A fast
-``serve`` beside a slow ``decode`` is measured as ``decode``; one that answers differently
-fails. The result's message says which way it was measured.
+The command measured is ``decode``. With ``[commands] serve`` declared equivalent
+(``serve_equivalent = true``) a decoder of binary streams to FAPs is timed through the
+persistent protocol (``persistent=False`` to spawn), then the declaration is proven on the
+speed content (:meth:`_Runner.equivalence`): the same frames, and ``decode`` no slower than
+:data:`EQUIVALENCE_FACTOR` times ``serve`` — else ``decode`` is measured instead.
 
-Output check, on content (issue 29). Every run's FAP output must hold the ``n`` frames it was
-given, and a sample of them (the first, the last and six drawn at random per run) must be the
-reference decoding of the content (:func:`output_problem`); a render must write an
-image per frame, a vertices output must be non-empty — a decoder cannot earn a rate by stopping
-early on long streams or by writing ``n`` lines of anything. A fitted per-frame cost that is not
-positive is an error, never an infinite rate.
-
-A run that fails (non-zero exit, crash, timeout, missing or short output) raises
+A run that fails (non-zero exit, crash, timeout, missing, short or wrong output) raises
 :class:`SpeedRunError`; :func:`measure_claim` turns it into a failed :class:`SpeedResult`.
+:func:`fbaconf.harness.verdict.speed_verdict` turns a run's speed results into the claim's speed verdict.
 """
 from __future__ import annotations
 
@@ -63,29 +52,30 @@ from typing import Callable
 
 import numpy as np
 
-from fbaconf.bitstreams.faptext import read_fap_text
-from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.errors import FbaconfInputError
-from fbaconf.generators.speed_content import BLOCK_FRAMES, Content, content_stream  # noqa: F401 (re-exported)
+from fbaconf.generators.speed_content import BLOCK_FRAMES, Content, Run, content_stream  # noqa: F401 (re-exported)
 from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.persistent import PersistentDecoder
 from fbaconf.profiles.model import Claim, load_profiles
-from fbaconf.safefs import UnsafeFileError, open_regular, read_regular, remove_tree
+from fbaconf.safefs import remove_tree
 
-from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim
+from . import speed_load, sysinfo
+from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim  # noqa: F401
 from .compare.faps import compare_faps
 from .compare.ladder import outcome_for
-from .compare.loaders import OutputError, check_output_file, load_output_faps
+from .compare.loaders import OutputError, load_output_faps
 from .results import Outcome, SpeedResult
 from .runner import hidden_from_decoders
+from .speed_check import RANDOM_IMAGES, faps_problem, images_problem, sample
 
 OPERATIONS = ("decode", "render")
 LIMIT_FOR = {"decode": "decode_rate", "render": "render_rate"}
-EQUIVALENCE_RUNS = 2  # lengths decoded by both serve and decode before serve is timed
-RANDOM_FRAMES = 6  # frames of a run's output compared besides the first and the last
+EQUIVALENCE_FACTOR = 1.5  # decode's per-frame cost may exceed serve's by this much (timing noise)
 START_FRAMES = 8  # first length of the adaptive search
 SERIES = (0.1, 0.5, 1.0)  # the measured lengths, as fractions of the largest
 DEFAULT_RENDER_SIZE = (64, 64)
+RENDER_SUPERSAMPLE = 2  # samples per pixel side the render scenario asks for (the image cases')
+DECODE_IMAGE_SIZE = 8  # the decode operation's images, when its command always writes some
 
 
 class SpeedError(FbaconfInputError):
@@ -120,36 +110,48 @@ def skip_reason(adapter: Adapter, operation: str) -> str | None:
     return None
 
 
+def _spawned_stall(watch: sysinfo.TreeWatch, cpu_s: float, before, after) -> tuple[float | None, str]:
+    """(the time a spawned decoder's tree waited for a CPU, how it is known): its threads' run-queue
+    wait as sampled while they lived, scaled up by the share of its CPU time the samples missed
+    (processes too short to be seen); where they saw less than half of it, the machine's PSI
+    "some" stall over the run — an upper bound — else unknown."""
+    if cpu_s > 0 and watch.cpu_s >= 0.5 * cpu_s:
+        return watch.wait_s * max(1.0, cpu_s / watch.cpu_s), "process tree"
+    if before.pressure_s is not None and after.pressure_s is not None:
+        return after.pressure_s - before.pressure_s, "machine PSI"
+    return None, "none"
+
+
 class _Runner:
     def __init__(self, adapter: Adapter, operation: str, content: Content, runs_dir: Path,
                  render_size: tuple[int, int], persistent: bool = True) -> None:
         self.adapter = adapter
-        self.persistent = (persistent and operation == "decode" and isinstance(adapter, CommandAdapter)
-                           and "serve" in adapter.commands and getattr(adapter, "serve_equivalent", False)
-                           and "fba" in adapter.inputs and "faps" in adapter.outputs)
-        self._server = None  # the persistent decoder, started at the first run
-        self._equivalent: set[int] = set()  # lengths serve's output was checked against decode's on
+        self.serve_declared = (operation == "decode" and isinstance(adapter, CommandAdapter)
+                               and "serve" in adapter.commands and getattr(adapter, "serve_equivalent", False)
+                               and "fba" in adapter.inputs and "faps" in adapter.outputs)
+        self.persistent = persistent and self.serve_declared
+        self._server: PersistentDecoder | None = None  # the persistent decoder, started at the first run
+        self._watch: sysinfo.TreeWatch | None = None
         self.operation = operation
         self.content = content
         self.runs_dir = runs_dir
         self.render_size = render_size
         self.count = 0
-        self.last_cpu_s: float | None = None  # CPU seconds of the last run (command adapters)
         self.extra: set[str] = set()
         self.notes: list[str] = []
-        self._planned = False
+        self._image_frames: list[int] = []  # the frames the current run's scenario asks images of
 
-    def _values(self, n: int, workdir: Path) -> dict[str, str]:
-        a, c = self.adapter, self.content
+    def _values(self, run: Run, workdir: Path) -> dict[str, str]:
+        a, c, n = self.adapter, self.content, run.n
         v: dict[str, str] = {}
         if "fba" in a.inputs:
-            v["fba"] = v["input"] = str(c.fba(n))
+            v["fba"] = v["input"] = str(run.fba())
         else:
-            v["fap"] = v["input"] = str(c.fap(n))
+            v["fap"] = v["input"] = str(run.fap())
         if "fap" in self.extra and "fap" not in v:
-            v["fap"] = str(c.fap(n))
+            v["fap"] = str(run.fap())
         if "fba" in self.extra and "fba" not in v:
-            v["fba"] = str(c.fba(n))
+            v["fba"] = str(run.fba())
         out = workdir / "out"
         out.mkdir(parents=True, exist_ok=True)
         ext = "npz" if a.faps_format == "npz" else "fap"
@@ -170,9 +172,15 @@ class _Runner:
             v["images_dir"] = str(out / "images")
         if self.operation == "render":
             w, h = self.render_size
-            v["scenario"] = str(c.scenario(f"render-{w}x{h}", width=w, height=h, supersample=1, frames=None))
-        else:
-            v["scenario"] = str(c.scenario("decode-one-frame", width=8, height=8, supersample=1, frames=(0,)))
+            self._image_frames = []  # every frame; the sample is drawn after the run
+            v["scenario"] = str(c.scenario(f"render-{w}x{h}", width=w, height=h, supersample=RENDER_SUPERSAMPLE,
+                                           frames=None))
+        else:  # two small frames: the first (it places the camera) and one drawn for this run
+            k = secrets.SystemRandom().randrange(1, n) if n > 1 else 0
+            self._image_frames = sorted({0, k})
+            s = DECODE_IMAGE_SIZE
+            v["scenario"] = str(c.scenario(f"decode-frames-{'-'.join(map(str, self._image_frames))}", width=s,
+                                           height=s, supersample=RENDER_SUPERSAMPLE, frames=tuple(self._image_frames)))
         if "scene" in wanted:
             # the form the decoder reads: BT unless it declares only the binary BIFS input
             kind = "bifs" if "bifs" in a.inputs and "scene" not in a.inputs else "bt"
@@ -199,7 +207,7 @@ class _Runner:
                                      f"measurement cannot supply") from None
                 self.extra.add(name)
                 if name in ("vertices_out", "images_dir") or (name == "faps_out" and self.operation == "render"):
-                    what = {"vertices_out": "vertices", "images_dir": "images (one 8x8 frame requested)",
+                    what = {"vertices_out": "vertices", "images_dir": "images (two 8x8 frames requested)",
                             "faps_out": "FAPs"}[name]
                     self.notes.append(f"the decode command always writes {what}; included in the time")
                 elif name == "scene":
@@ -209,64 +217,87 @@ class _Runner:
         if self._server is not None:
             self._server.close()
             self._server = None
+        if self._watch is not None:
+            self._watch.__exit__()
+            self._watch = None
 
-    def run(self, n: int) -> float:
-        """Time one invocation on ``n`` frames (seconds); raises SpeedRunError on failure."""
-        if self.persistent:
-            return self._run_persistent(n)
+    def run(self, n: int) -> speed_load.Window:
+        """Time one invocation on ``n`` frames of fresh content: its time and accounting;
+        raises SpeedRunError on failure."""
+        run = self.content.make(n)
+        try:
+            if self.persistent:
+                return self._serve(run)[0]
+            return self._once(run)
+        finally:
+            run.remove()
+
+    def _once(self, run: Run) -> speed_load.Window:
+        """One spawned (or in-process) run of ``decode`` on ``run``, its output judged."""
         self.count += 1
         workdir = self.runs_dir / f"run-{self.count:04d}"
         if workdir.exists():
             remove_tree(workdir)
         workdir.mkdir(parents=True)
         try:
-            return self._run(n, workdir)
+            window, job, argv = self._decode(run, workdir)
+            self._check_output(job, run, argv)
+            return window
         finally:
             try:
                 remove_tree(workdir)
             except OSError:
                 pass
 
-    def _run(self, n: int, workdir: Path) -> float:
-        a = self.adapter
+    def _decode(self, run: Run, workdir: Path) -> tuple[speed_load.Window, Job, list[str] | None]:
+        a, n = self.adapter, run.n
 
         def job_for() -> Job:
-            return Job(workdir=workdir, values=self._values(n, workdir), frames=n)
+            return Job(workdir=workdir, values=self._values(run, workdir), frames=n)
 
         if isinstance(a, CommandAdapter):
             argv, job = self._argv(job_for)
             view = a.sandbox_view(argv, workdir, hidden=hidden_from_decoders())
             view.read_only.append(self.content.root)  # the generated content the decoder reads
-            res = sandbox.run(argv, workdir, a.limits, env=a.env or None, view=view)
+            before = sysinfo.machine_sample()
+            with sysinfo.TreeWatch(os.getpid()) as watch:
+                res = sandbox.run(argv, workdir, a.limits, env=a.env or None, view=view)
+            after = sysinfo.machine_sample()
             self._judge(res, n, argv)
-            elapsed = res.elapsed_s
-            self.last_cpu_s = res.cpu_s
-            self.last_output = job.path("faps_out") if "faps_out" in job.values else None
-        elif isinstance(a, PythonAdapter):
-            argv = None
-            job = job_for()
-            t0 = time.perf_counter()
-            try:
-                a.run(job)
-            except NotSupportedError as e:
-                raise SpeedRunError(self.operation, n, Outcome.NOT_SUPPORTED, f"not supported: {e}") from None
-            except MemoryError:
-                raise SpeedRunError(self.operation, n, Outcome.CRASH, "decoder raised MemoryError") from None
-            except Exception as e:  # the decoder's own failure
-                raise SpeedRunError(self.operation, n, Outcome.FAIL,
-                                    f"decoder raised {type(e).__name__}: {e}") from None
-            elapsed = time.perf_counter() - t0
-            if elapsed > a.limits.timeout_s:
-                raise SpeedRunError(self.operation, n, Outcome.TIMEOUT,
-                                    f"in-process decoder took {elapsed:.1f} s, over the {a.limits.timeout_s:g} s limit")
-        else:  # pragma: no cover - no other adapter kinds
+            # the sandbox's rusage misses its inner processes (they are not reaped by a process
+            # the harness waits for): the tree's own readings are the decoder's CPU time
+            cpu = max(res.cpu_s, watch.cpu_s)
+            stall, source = _spawned_stall(watch, cpu, before, after)
+            return speed_load.Window(n, res.elapsed_s, before, after, cpu_s=cpu, stall_s=stall, stall_source=source,
+                                     outside_own_s=cpu - res.cpu_s), job, argv
+        if not isinstance(a, PythonAdapter):  # pragma: no cover - no other adapter kinds
             raise SpeedError(f"unsupported adapter kind {type(a).__name__}")
-        self._check_output(job, n, argv)
-        return elapsed
+        job = job_for()
+        before, th0 = sysinfo.machine_sample(), sysinfo.thread_cpu_wait()
+        t0 = time.perf_counter()
+        try:
+            a.run(job)
+        except NotSupportedError as e:
+            raise SpeedRunError(self.operation, n, Outcome.NOT_SUPPORTED, f"not supported: {e}") from None
+        except MemoryError:
+            raise SpeedRunError(self.operation, n, Outcome.CRASH, "decoder raised MemoryError") from None
+        except Exception as e:  # the decoder's own failure
+            raise SpeedRunError(self.operation, n, Outcome.FAIL,
+                                f"decoder raised {type(e).__name__}: {e}") from None
+        elapsed = time.perf_counter() - t0
+        th1, after = sysinfo.thread_cpu_wait(), sysinfo.machine_sample()
+        if elapsed > a.limits.timeout_s:
+            raise SpeedRunError(self.operation, n, Outcome.TIMEOUT,
+                                f"in-process decoder took {elapsed:.1f} s, over the {a.limits.timeout_s:g} s limit")
+        known = th0 is not None and th1 is not None
+        return speed_load.Window(n, elapsed, before, after, cpu_s=th1[0] - th0[0] if known else None,
+                                 stall_s=th1[1] - th0[1] if known else None,
+                                 stall_source="thread" if known else "none"), job, None
 
-    def _run_persistent(self, n: int) -> float:
-        """One input to the persistent decoder: the time from sending it to its answer."""
-        a = self.adapter
+    def _serve(self, run: Run) -> tuple[speed_load.Window, Path]:
+        """One input to the persistent decoder: the time from sending it to its answer; the
+        output judged (and left at the returned path until the next input)."""
+        a, n = self.adapter, run.n
         root = self.runs_dir / "serve"
         workdir = root / "case"
         if self._server is None:
@@ -275,6 +306,8 @@ class _Runner:
             argv = a.argv("serve", job)
             view = a.sandbox_view(argv, workdir, hidden=hidden_from_decoders())
             self._server = PersistentDecoder(argv, root, workdir, view, a.limits, env=a.env or None)
+            # the serve tree (this process's only children while it runs): its CPU time and wait
+            self._watch = sysinfo.TreeWatch(os.getpid()).__enter__()
             self.notes.append("measured through the persistent protocol ([commands] serve, declared equivalent to "
                               "decode): one process for every run, no process start-up per sample")
         out = workdir / "out"
@@ -282,38 +315,62 @@ class _Runner:
             remove_tree(out)
         out.mkdir(parents=True)
         path = out / f"faps.{'npz' if a.faps_format == 'npz' else 'fap'}"
-        res = self._server.run(self.content.stream_bytes(n), str(path))
+        watch = self._watch
+        watch.poll()
+        tree0, before = (watch.cpu_s, watch.wait_s), sysinfo.machine_sample()
+        res = self._server.run(run.stream_bytes(), str(path))
+        watch.poll()
+        tree1, after = (watch.cpu_s, watch.wait_s), sysinfo.machine_sample()
         self._judge(res, n, self._server.argv)
-        self.last_cpu_s = None
-        self._check_output(Job(workdir=workdir, values={"faps_out": str(path)}, frames=n), n, self._server.argv)
-        if n not in self._equivalent and len(self._equivalent) < EQUIVALENCE_RUNS:
-            self._check_equivalent(n, path)
-        return res.elapsed_s
+        cpu = tree1[0] - tree0[0]
+        window = speed_load.Window(n, res.elapsed_s, before, after, cpu_s=cpu, stall_s=tree1[1] - tree0[1],
+                                   stall_source="process tree", outside_own_s=cpu, tree_before=tree0[0],
+                                   tree_after=tree1[0])
+        self._check_output(Job(workdir=workdir, values={"faps_out": str(path)}, frames=n), run, self._server.argv)
+        return window, path
 
-    def _check_equivalent(self, n: int, serve_out: Path) -> None:
-        """The manifest says serve is decode: decode the same ``n`` frames with ``decode`` and
-        compare the two outputs frame for frame (module doc)."""
-        self._equivalent.add(n)
-        self.count += 1
-        workdir = self.runs_dir / f"equivalence-{self.count:04d}"
-        workdir.mkdir(parents=True)
+    def equivalence(self, lengths: list[int], serve_per_frame: float) -> tuple[bool, str]:
+        """Prove ``serve_equivalent`` on the speed content (module doc): (whether ``decode``
+        is what was timed through ``serve``, what was found). Raises SpeedRunError when a
+        run fails or the two outputs differ."""
+        best: dict[int, float] = {}
+        for n in (lengths[0], lengths[-1]):
+            for _ in range(2):
+                run = self.content.make(n)
+                self.count += 1
+                workdir = self.runs_dir / f"equivalence-{self.count:04d}"
+                workdir.mkdir(parents=True)
+                try:
+                    _w, by_serve = self._serve(run)
+                    window, job, argv = self._decode(run, workdir)
+                    self._check_output(job, run, argv)
+                    self._same_frames(job.path("faps_out"), by_serve, n)
+                    best[n] = min(best.get(n, math.inf), window.seconds)
+                finally:
+                    run.remove()
+                    remove_tree(workdir)
+        lo, hi = lengths[0], lengths[-1]
+        slope = (best[hi] - best[lo]) / (hi - lo)
+        what = (f"decode's per-frame cost {slope * 1000:.3f} ms ({lo} and {hi} frames, fastest of two each) "
+                f"against serve's {serve_per_frame * 1000:.3f} ms")
+        if slope <= EQUIVALENCE_FACTOR * serve_per_frame:
+            return True, (f"serve checked against decode on fresh content of {lo} and {hi} frames: the same frames; "
+                          f"{what}")
+        return False, (f"the manifest declares serve equivalent to decode, but {what} (more than "
+                       f"{EQUIVALENCE_FACTOR:g} x): serve is not what is certified, decode was timed")
+
+    def _same_frames(self, by_decode: Path | None, by_serve: Path, n: int) -> None:
+        limit = self.adapter.limits.output_mb * 2**20
         try:
-            self._run(n, workdir)
-            try:
-                by_decode = load_output_faps(self.last_output, max_bytes=self.adapter.limits.output_mb * 2**20)
-                by_serve = load_output_faps(serve_out, max_bytes=self.adapter.limits.output_mb * 2**20)
-            except OutputError as e:
-                raise SpeedRunError(self.operation, n, Outcome.FAIL, f"serve_equivalent: {e}") from None
-            r = compare_faps(by_decode, by_serve, text_output=serve_out.suffix == ".fap")
-            if not r.outcome.ok:
-                raise SpeedRunError(self.operation, n, Outcome.FAIL,
-                                    f"the manifest declares [commands] serve equivalent to decode, but on {n} frames "
-                                    f"serve's output differs from decode's: {r.message}", self._server.argv)
-        finally:
-            remove_tree(workdir)
-        if len(self._equivalent) == EQUIVALENCE_RUNS:
-            self.notes.append(f"serve's output checked against decode's on {EQUIVALENCE_RUNS} lengths "
-                              f"({', '.join(map(str, sorted(self._equivalent)))} frames): the same frames")
+            d = load_output_faps(by_decode, max_bytes=limit)
+            s = load_output_faps(by_serve, max_bytes=limit)
+        except OutputError as e:
+            raise SpeedRunError(self.operation, n, Outcome.FAIL, f"serve_equivalent: {e}") from None
+        r = compare_faps(d, s, text_output=by_serve.suffix == ".fap")
+        if not r.outcome.ok:
+            raise SpeedRunError(self.operation, n, Outcome.FAIL,
+                                f"the manifest declares [commands] serve equivalent to decode, but on {n} frames "
+                                f"serve's output differs from decode's: {r.message}", self._server.argv)
 
     def _judge(self, res, n: int, argv) -> None:
         """A run that did not decode (exit code, crash, timeout...) fails the measurement."""
@@ -322,96 +379,27 @@ class _Runner:
         if verdict is not None:
             raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
 
-    def _check_output(self, job: Job, n: int, argv) -> None:
+    def _check_output(self, job: Job, run: Run, argv) -> None:
+        n = run.n
         key = "images_dir" if self.operation == "render" else next(
             k for k in ("faps_out", "vertices_out", "images_dir") if k in job.values)
         p = job.path(key)
+        limit = self.adapter.limits.output_mb * 2**20
+        why = None
         if key == "faps_out":
-            why = output_problem(p, n, self.content, max_bytes=self.adapter.limits.output_mb * 2**20,
-                                 player="fba" not in self.adapter.inputs)
+            why = faps_problem(p, run, max_bytes=limit, player="fba" not in self.adapter.inputs)
             if why is not None:
-                raise SpeedRunError(self.operation, n, Outcome.FAIL,
-                                    f"the decoder {why.replace('its output', f'its output at {{{key}}}')}", argv)
-            return
-        ok = p is not None and (any(p.iterdir()) if p.is_dir() else (p.is_file() and p.stat().st_size > 0))
-        if not ok:
-            raise SpeedRunError(self.operation, n, Outcome.FAIL,
-                                f"the decoder finished but wrote no output at {{{key}}} ({p})", argv)
-        if self.operation == "render":  # every frame rendered: a file per frame (any face folders below)
-            got = sum(1 for _dir, _subdirs, files in os.walk(p) for _f in files)
-            if got < n:
-                raise SpeedRunError(self.operation, n, Outcome.FAIL,
-                                    f"the decoder was asked to render {n} frames but wrote {got} images at "
-                                    f"{{{key}}}", argv)
-
-
-# --------------------------------------------------------------------------- judging an output
-# A .fap output is read frame by frame for the sampled frames only when it is laid out as the
-# format's writers lay it out (a header, then a mask line of all ones and a data line per
-# frame); any other layout is read whole.
-
-def sample(n: int) -> np.ndarray:
-    """The frames compared in one run of ``n``: the first, the last, and a fresh random draw."""
-    rnd = secrets.SystemRandom()
-    inner = rnd.sample(range(1, n - 1), min(RANDOM_FRAMES, max(0, n - 2))) if n > 2 else []
-    return np.array(sorted({0, n - 1, *inner}), dtype=np.int64)
-
-
-def output_problem(path: Path, n: int, content: Content, *, max_bytes: int, player: bool = False) -> str | None:
-    """Why the FAP output at ``path`` is not the reference decoding of the ``n``-frame content
-    (module doc, "Output check") — a clause to follow "the decoder" — or None. Raises nothing for the
-    decoder's output."""
-    try:
-        check_output_file(path, max_bytes)
-        ks = sample(n)
-        got, count, text = _sampled(path, n, ks, max_bytes)
-    except OutputError as e:
-        return (f"finished but wrote no output ({path})" if e.rule == "output-missing" else
-                f"finished but its output is unusable: {e}")
-    if count != n:
-        return f"was given {n} frames but its output holds {count}"
-    r = compare_faps(content.expected(n, ks), got, text_output=text, player=player)
-    if r.outcome.ok:
-        return None
-    d = r.first_difference or {}
-    k = int(ks[d["frame"]]) if isinstance(d.get("frame"), (int, np.integer)) and d["frame"] < len(ks) else None
-    where = f"frame {k}" if k is not None else "a sampled frame"
-    return (f"finished but its output is not the decoding of the content it was given ({where} of {n}, "
-            f"{d.get('what', 'value')}"
-            f"{' of FAP ' + str(d['fap']) if d.get('fap') is not None else ''}: expected {d.get('expected')}, "
-            f"got {d.get('got')})")
-
-
-def _sampled(path: Path, n: int, ks: np.ndarray, max_bytes: int) -> tuple[FapFrames, int, bool]:
-    """(frames ``ks`` of the output, its frame count, whether it is .fap text)."""
-    try:
-        with open_regular(path, max_bytes) as f:
-            zipped = f.read(4) == b"PK\x03\x04"
-        if zipped or path.suffix.lower() == ".npz":
-            frames = load_output_faps(path, max_bytes=max_bytes)
-            return (frames.select(ks) if len(frames) == n else frames), len(frames), False
-        data = read_regular(path, max_bytes)
-    except UnsafeFileError as e:
-        raise OutputError(f"unusable output: {e}", rule="output-unsafe", file=str(path)) from None
-    lines = [ln for ln in data.split(b"\n") if ln.strip() and not ln.lstrip().startswith(b"#")]
-    try:
-        head = lines[0].split()
-        declared = int(head[-1])
-    except (IndexError, ValueError):
-        raise OutputError("no .fap header with a frame count", rule="output-fap-count", file=str(path)) from None
-    ones = b" ".join([b"1"] * 68)
-    if declared == n and len(lines) == 1 + 2 * n and all(lines[1 + 2 * k].strip() == ones for k in ks):
-        mini = b" ".join(head[:-1] + [str(len(ks)).encode()]) + b"\n" + b"".join(
-            lines[1 + 2 * k] + b"\n" + lines[2 + 2 * k] + b"\n" for k in ks)
-        try:
-            frames, _header, _w = read_fap_text(mini.decode("utf-8"), file=str(path))
-        except (FbaconfInputError, UnicodeDecodeError) as e:
-            raise OutputError(f"unreadable FAP output: {e}", rule="output-fap-text", file=str(path)) from None
-        return frames, n, True
-    if declared != n or len(lines) - 1 < n:  # each frame takes at least one line: short, whatever it holds
-        return FapFrames.empty(0), min(declared, len(lines) - 1), True
-    frames = load_output_faps(path, max_bytes=max_bytes)  # another layout: read whole
-    return (frames.select(ks) if len(frames) == n else frames), len(frames), True
+                why = why.replace("its output", f"its output at {{{key}}}")
+        elif key == "vertices_out":
+            if not (p is not None and p.is_file() and p.stat().st_size > 0):
+                why = f"finished but wrote no output at {{{key}}} ({p})"
+        else:
+            ks = self._image_frames or sample(n, RANDOM_IMAGES).tolist()
+            size = self.render_size if self.operation == "render" else (DECODE_IMAGE_SIZE, DECODE_IMAGE_SIZE)
+            # the reference renders the bundled default head: the scene a command that asks for one is given
+            why = images_problem(p, run, ks, width=size[0], height=size[1], max_bytes=limit)
+        if why is not None:
+            raise SpeedRunError(self.operation, n, Outcome.FAIL, f"the decoder {why}", argv)
 
 
 # --------------------------------------------------------------------------- fitting
@@ -490,7 +478,7 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
     Returns None when the adapter cannot do the operation (:func:`skip_reason` says why).
     Raises :class:`SpeedError` for setup problems and :class:`SpeedRunError` when a decoder
     run fails. ``lengths`` (frames) fixes the series instead of the adaptive search;
-    ``work_dir`` keeps the generated content there (default: a temporary folder)."""
+    ``work_dir`` holds the generated content while it is used (default: a temporary folder)."""
     if operation not in OPERATIONS:
         raise SpeedError(f"unknown operation {operation!r} (decode, render)")
     if skip_reason(adapter, operation) is not None:
@@ -504,54 +492,103 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
     required, provenance, _desc = required_rate(claim, operation)
     if max_run_s is None:
         max_run_s = min(20.0, 0.4 * adapter.limits.timeout_s)
-    tmp = runner = None
+    tmp = None
     if work_dir is None:
         tmp = tempfile.TemporaryDirectory(prefix="fbaconf-speed-")
         root = Path(tmp.name)
     else:
         root = Path(work_dir)
+    content = Content(root / "content")
+    opts = dict(lengths=lengths, repeats=repeats, target_s=target_s, max_frames=max_frames, max_run_s=max_run_s)
     try:
-        runner = _Runner(adapter, operation, Content(root / "content"), root / f"runs-{operation}",
-                         tuple(render_size), persistent=persistent)
+        runner = _Runner(adapter, operation, content, root / f"runs-{operation}", tuple(render_size),
+                         persistent=persistent)
+        fit = _measure_series(runner, **opts)
+        if runner.persistent:
+            try:
+                same, note = (runner.equivalence(fit["lengths"], fit["per_frame"]) if fit["per_frame"] > 0 else
+                              (False, "serve's time did not grow with the frames it decoded: decode was timed"))
+            finally:
+                runner.close()
+            if same:
+                runner.notes.append(note)
+            else:
+                runner = _Runner(adapter, operation, content, root / f"runs-{operation}-decode", tuple(render_size),
+                                 persistent=False)
+                runner.notes.append(note)
+                fit = _measure_series(runner, **opts)
+        runner.close()
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    fit.update(required=required, provenance=provenance, target_s=target_s, max_frames=max_frames, repeats=repeats)
+    return _result(operation, claim, fit, runner.notes)
+
+
+def _measure_series(runner: _Runner, *, lengths, repeats: int, target_s: float, max_frames: int,
+                    max_run_s: float) -> dict:
+    """Run the measurement proper: the lengths (searched unless given) ``repeats`` times,
+    each run's time and accounting; the fits."""
+    try:
         t_start = time.perf_counter()
         if lengths is None:
-            lengths = _choose_lengths(runner.run, target_s=target_s, max_frames=max_frames, max_run_s=max_run_s)
+            lengths = _choose_lengths(lambda n: runner.run(n).seconds, target_s=target_s, max_frames=max_frames,
+                                      max_run_s=max_run_s)
         else:
             runner.run(lengths[0])  # warm-up, discarded
         samples: list[dict] = []
-        fits: list[tuple[float, float, float]] = []
+        windows: list[speed_load.Window] = []
         for r in range(repeats):
             order = lengths if r % 2 == 0 else lengths[::-1]
-            xs, ys = [], []
             for n in order:
-                t = runner.run(n)
-                sample = {"frames": n, "seconds": t, "repeat": r}
-                if runner.last_cpu_s is not None:
-                    sample["cpu_s"] = runner.last_cpu_s
-                samples.append(sample)
-                xs.append(n)
-                ys.append(t)
-            fits.append(fit_line(xs, ys))
-        per_frame = statistics.median(f[0] for f in fits)
-        startup = statistics.median(f[1] for f in fits)
-        r2 = _r2([s["frames"] for s in samples], [s["seconds"] for s in samples], per_frame, startup)
+                w = runner.run(n)
+                windows.append(w)
+                samples.append({"frames": n, "seconds": w.seconds, "repeat": r,
+                                **{k: v for k, v in (("cpu_s", w.cpu_s), ("stall_s", w.stall_s),
+                                                     ("others_s", w.others_s)) if v is not None}})
         wall = time.perf_counter() - t_start
-    finally:
-        if runner is not None:
-            runner.close()
-        if tmp is not None:
-            tmp.cleanup()
-    notes = list(runner.notes)
+    except BaseException:
+        runner.close()
+        raise
+    cpus = sysinfo.usable_cpus()
+    load = speed_load.account(windows, cpus)
+    for s, w in zip(samples, windows):
+        s["uncontended_s"] = w.uncontended_s(cpus)
+    per_frame, startup = _median_fit(samples, "seconds", repeats)
+    r2 = _r2([s["frames"] for s in samples], [s["seconds"] for s in samples], per_frame, startup)
+    unc = _median_fit(samples, "uncontended_s", repeats)[0]
+    return {"lengths": lengths, "samples": samples, "per_frame": per_frame, "startup": startup, "r2": r2,
+            "wall": wall, "load": load, "uncontended_per_frame": unc}
+
+
+def _median_fit(samples: list[dict], key: str, repeats: int) -> tuple[float, float]:
+    fits = [fit_line([s["frames"] for s in samples if s["repeat"] == r], [s[key] for s in samples if s["repeat"] == r])
+            for r in range(repeats)]
+    return statistics.median(f[0] for f in fits), statistics.median(f[1] for f in fits)
+
+
+def _result(operation: str, claim: str, fit: dict, notes: list[str]) -> SpeedResult:
+    required, provenance, target_s, max_frames, repeats = (fit["required"], fit["provenance"], fit["target_s"],
+                                                           fit["max_frames"], fit["repeats"])
+    per_frame, startup, r2, lengths, samples = (fit["per_frame"], fit["startup"], fit["r2"], fit["lengths"],
+                                                fit["samples"])
+    load: speed_load.Load = fit["load"]
+    notes = list(notes)
+    numbers = dict(cpu_s=load.cpu_s, wall_s=load.wall_s, stall_s=load.stall_s, stall_source=load.stall_source,
+                   others_share=load.others_share, others_share_between=load.others_share_between,
+                   load=load.load, cpus=load.cpus)
     if not per_frame > 0:  # never an infinite rate: the time did not grow with the frames decoded
+        reason = (f"no {operation} rate: the fitted per-frame cost is {per_frame * 1000:.4f} ms, not positive — the "
+                  f"run time did not grow with the {lengths} frames decoded (a decoder's time must; the measurement "
+                  f"cannot resolve it, or the decoder does not decode what it is given)")
         return SpeedResult(operation=operation, claim=claim, per_frame_s=per_frame, startup_s=startup, rate_fps=0.0,
                            required_fps=required, passed=False, provenance=provenance, samples=samples, fit_r2=r2,
-                           message=f"no decode rate: the fitted per-frame cost is {per_frame * 1000:.4f} ms, not "
-                                   f"positive — the run time did not grow with the {lengths} frames decoded (a "
-                                   f"decoder's time must; the measurement cannot resolve it, or the decoder does "
-                                   f"not decode what it is given); lengths {lengths} x {repeats}"
-                                   + "".join(f"; {n}" for n in notes))
+                           message=f"{reason}; lengths {lengths} x {repeats}" + "".join(f"; {n}" for n in notes),
+                           verdict="fail", reason=reason, **numbers)
     rate = 1.0 / per_frame
-    passed = rate >= required
+    unc = fit["uncontended_per_frame"]
+    unc_rate = (1.0 / unc) if unc > 0 else None
+    verdict, reason = speed_load.verdict(rate, required, unc_rate, load)
     span = per_frame * (lengths[-1] - lengths[0])
     if span < 0.1 * target_s and lengths[-1] < max_frames:
         notes.append(f"frame-dependent time only {span * 1000:.0f} ms: low precision")
@@ -564,16 +601,17 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
             except ValueError:
                 pass
         notes.append(note)
-    verdict = "meets" if passed else "is below"
+    word = {"pass": "meets", "fail": "is below", "inconclusive": "is below (inconclusive: the machine was busy)"}
     what = {"decode": "decode rate (all faces together)", "render": "render rate per face"}[operation]
-    msg = (f"{what} {_fmt_rate(rate)} fps {verdict} the {claim} minimum {required:g} fps ({provenance}); "
+    msg = (f"{what} {_fmt_rate(rate)} fps {word[verdict]} the {claim} minimum {required:g} fps ({provenance}); "
            f"{per_frame * 1000:.3f} ms/frame, fitted start-up {startup:+.3f} s, lengths {lengths} x {repeats}, "
-           f"{wall:.1f} s")
+           f"{fit['wall']:.1f} s; {reason}")
     if notes:
         msg += "; " + "; ".join(notes)
     return SpeedResult(operation=operation, claim=claim, per_frame_s=per_frame, startup_s=startup,
-                       rate_fps=rate, required_fps=required, passed=passed, provenance=provenance,
-                       samples=samples, fit_r2=r2, message=msg)
+                       rate_fps=rate, required_fps=required, passed=verdict == "pass", provenance=provenance,
+                       samples=samples, fit_r2=r2, message=msg, verdict=verdict, reason=reason,
+                       uncontended_fps=unc_rate, **numbers)
 
 
 def _fmt_rate(rate: float) -> str:
@@ -586,9 +624,10 @@ def failed_result(err: SpeedRunError, claim: str) -> SpeedResult:
         required, provenance, _ = required_rate(claim, err.operation)
     except SpeedError:
         required, provenance = math.nan, "none"
+    reason = f"decoder run failed ({err.outcome.value}) on {err.frames} frames: {err.message}"
     return SpeedResult(operation=err.operation, claim=claim, per_frame_s=math.nan, startup_s=math.nan,
                        rate_fps=0.0, required_fps=required, passed=False, provenance=provenance,
-                       message=f"decoder run failed ({err.outcome.value}) on {err.frames} frames: {err.message}")
+                       message=reason, verdict="fail", reason=reason)
 
 
 def measure_claim(adapter: Adapter, claim: str | None = None, **kwargs) -> list[SpeedResult]:

@@ -135,10 +135,29 @@ def decision_state(decision: str, cases: list[dict], set_aside: set[str], tools:
     return DecisionState(decision, state, len(cases), passed, mine)
 
 
-def speed_block(speed: list[dict] | None) -> tuple[str, int] | None:
-    """What the speed results (None: not measured) make of a claim whose cases all pass."""
-    if speed is not None and any(not s.get("passed") for s in speed):
+def verdict_of(s: dict) -> str:
+    """"pass" | "fail" | "inconclusive" of one speed result's JSON. Only a result that says it
+    passed passes; one without a verdict (written before verdicts) is "pass" or "fail" by
+    ``passed``; anything else that did not pass is a fail."""
+    v = s.get("verdict")
+    if s.get("passed") is True and v in (None, "pass"):
+        return "pass"
+    if s.get("passed") is False and v == "inconclusive":
+        return "inconclusive"
+    return "fail"
+
+
+def speed_verdict(speed: list[dict] | None) -> tuple[str, int] | None:
+    """The claim's speed verdict from its speed results (``SpeedResult.to_json()``; None: not
+    measured): None when nothing blocks the pass; ``("SPEED FAIL", 3)`` when any operation
+    failed; ``("SPEED INCONCLUSIVE", 4)`` when none failed and one was inconclusive."""
+    if not speed:
+        return None
+    verdicts = [verdict_of(s) if isinstance(s, dict) else "fail" for s in speed]
+    if "fail" in verdicts:
         return "SPEED FAIL", 3
+    if "inconclusive" in verdicts:
+        return "SPEED INCONCLUSIVE", 4
     return None
 
 
@@ -176,7 +195,7 @@ def claim_verdict(results: list[dict], *, strict: bool, speed: list[dict] | None
     if hard or (strict and differences):
         cv.verdict, cv.exit_code = "FAIL", 1
         return cv
-    blocked = speed_block(speed)
+    blocked = speed_verdict(speed)
     if blocked is not None:
         cv.verdict, cv.exit_code = blocked
         return cv

@@ -378,7 +378,7 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None, heading: str = "fb
                  "<th class='num'>required fps</th><th>verdict</th><th>provenance</th><th class='num'>per frame s</th>"
                  "<th class='num'>startup s</th><th class='num'>fit r\u00b2</th><th>message</th></tr>")
         for s, row in zip(record.speed, _speed_rows(record.speed)):
-            cls = "c-Pass" if s.passed else "c-Fail"
+            cls = {"PASS": "c-Pass", "INCONCLUSIVE": "c-QualityWarning"}.get(row[4], "c-Fail")
             h.append(f"<tr><td>{_e(row[0])}</td><td>{_e(row[1])}</td><td class='num'>{_e(row[2])}</td>"
                      f"<td class='num'>{_e(row[3])}</td><td class='{cls}'>{_e(row[4])}</td><td>{_e(row[5])}</td>"
                      f"<td class='num'>{_e(_fmt_value(s.per_frame_s))}</td><td class='num'>{_e(_fmt_value(s.startup_s))}</td>"  # noqa: E501

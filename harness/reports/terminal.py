@@ -68,7 +68,7 @@ def _stderr_excerpt(r, n: int = 6) -> tuple[str, list[str]]:
 
 def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: int = 20) -> str:  # noqa: C901
     """A plain-text summary of ``record`` (ANSI colours when ``color``), ending with the verdict line
-    ``result: PASS|FAIL|SPEED FAIL|SETUP ERROR (N cases: a Pass, b Fail, ...)``."""
+    ``result: PASS|FAIL|SPEED FAIL|SPEED INCONCLUSIVE|SETUP ERROR (N cases: a Pass, b Fail, ...)``."""
     def paint(code: str, text: str) -> str:
         return f"\x1b[{code}m{text}\x1b[0m" if color else text
 
@@ -162,7 +162,7 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
         def colour_speed(ri, ci, text):
             if ci != 4:
                 return text
-            return paint("32" if record.speed[ri].passed else "31", text)
+            return paint({"PASS": "32", "INCONCLUSIVE": "33"}.get(text.strip(), "31"), text)
         rows = [[clean_text(c) for c in row] for row in _speed_rows(record.speed)]
         lines.extend(_table(["operation", "claim", "measured fps", "required fps", "verdict", "provenance"],
                             rows, {2, 3}, colour_speed))

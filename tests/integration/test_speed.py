@@ -1,26 +1,39 @@
 """Speed measurement (harness/speed.py, `fbaconf bench`): the fit against a known start-up and
-per-frame cost, verdicts against the level minimums, exit codes.
+per-frame cost, verdicts against the level minimums — pass, fail, and inconclusive when the
+machine did not give the decoder its CPU — exit codes.
 
-No test here depends on how fast this machine is: where a verdict depends on the measured
-time, every run of the real decoder still happens (its output is checked), but the seconds it
-reports are a synthetic clock's (:func:`synthetic_clock`), so the fit, the adaptive lengths and
-the verdicts are exact. The measurement against real time is ``benchmarks/bench_harness_speed.py``."""
+No test here depends on how fast or how busy this machine is, but one: where a verdict depends
+on the measured time, every run of the real decoder still happens (its output is checked), but
+the seconds it reports and the machine's counters around it are a synthetic clock's and a
+:class:`FakeMachine`'s, so the fit, the adaptive lengths and the verdicts are exact. The one
+real run under busy loops (``test_a_saturated_machine_...``) asserts only what load cannot
+change. The measurement against real time is ``benchmarks/bench_harness_speed.py``."""
 from __future__ import annotations
 
 import json
 import math
+import os
+import signal
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 
 from fbaconf.bitstreams.decoder import decode
+from fbaconf.certification.certify import _statement
+from fbaconf.certification.package import derive_verdict
 from fbaconf.cli import main
-from fbaconf.harness import speed
+from fbaconf.generators.speed_content import BLOCK_FRAMES, Content
+from fbaconf.harness import speed, speed_load, sysinfo
 from fbaconf.harness.adapters import PythonAdapter, load_manifest
+from fbaconf.harness.reports import html_report, report_json, terminal_summary
+from fbaconf.harness.results import RunRecord
+from fbaconf.harness.sysinfo import MachineSample
+from fbaconf.harness.verdict import speed_verdict
 
 # A decoder whose cost is known: sleeps STARTUP, then PER_FRAME x frames (the frame count comes
 # from the {frames} placeholder, so counting frames costs nothing), then writes its output —
@@ -38,17 +51,46 @@ DECODER = textwrap.dedent("""\
 """)
 
 
-def synthetic_clock(monkeypatch, startup: float, per_frame: float, jitter: float = 0.0) -> list[int]:
+class FakeMachine:
+    """Machine counters a test dictates. Each run takes the seconds the test says; during it the
+    decoder uses ``cpu`` (a fraction of those seconds) and waits ``stall`` (a fraction), other
+    processes hold ``others`` of the CPUs; between runs (``gap`` seconds) they hold ``between``."""
+
+    def __init__(self, monkeypatch, *, cpus: int = 2, cpu: float = 1.0, stall: float = 0.0, others: float = 0.0,
+                 between: float = 0.0, gap: float = 0.2) -> None:
+        self.cpus, self.cpu, self.stall, self.others, self.between, self.gap = cpus, cpu, stall, others, between, gap
+        self.t = self.busy = self.own = 0.0
+        monkeypatch.setattr(sysinfo, "usable_cpus", lambda: cpus)
+
+    def _sample(self) -> MachineSample:
+        return MachineSample(t=self.t, busy_s=self.busy, pressure_s=None, own_s=self.own, load=4.0)
+
+    def window(self, n: int, seconds: float) -> speed_load.Window:
+        self.t += self.gap
+        self.busy += self.between * self.cpus * self.gap
+        before = self._sample()
+        cpu = self.cpu * seconds
+        self.t += seconds
+        self.busy += self.others * self.cpus * seconds + cpu
+        self.own += cpu
+        return speed_load.Window(n, seconds, before, self._sample(), cpu_s=cpu, stall_s=self.stall * seconds,
+                                 stall_source="thread")
+
+
+def synthetic_clock(monkeypatch, startup: float, per_frame: float, jitter: float = 0.0,
+                    machine: FakeMachine | None = None) -> list[int]:
     """Every speed run takes ``startup + per_frame * n`` seconds (times ``1 +- jitter``,
-    alternating); the decoder still runs. Returns the list of frame counts run."""
+    alternating) on ``machine`` (default: an idle one, the decoder on a CPU all the time); the
+    decoder still runs. Returns the list of frame counts run."""
     runs: list[int] = []
     real = speed._Runner.run
+    machine = machine or FakeMachine(monkeypatch)
 
-    def run(self, n: int) -> float:
+    def run(self, n: int) -> speed_load.Window:
         real(self, n)
         runs.append(n)
         sign = 1 if len(runs) % 2 else -1
-        return (startup + per_frame * n) * (1 + sign * jitter)
+        return machine.window(n, (startup + per_frame * n) * (1 + sign * jitter))
     monkeypatch.setattr(speed._Runner, "run", run)
     return runs
 
@@ -95,11 +137,12 @@ def test_adaptive_lengths_fast_decoder(tmp_path, monkeypatch):
 
 
 def test_too_slow_decoder_fails_speed_only(tmp_path, capsys, monkeypatch):
-    # 40 ms/frame = 25 fps < simple@1's 30 fps decode minimum
+    # 40 ms/frame = 25 fps < simple@1's 30 fps decode minimum, on an idle machine
     synthetic_clock(monkeypatch, 0.01, 0.04)
     m = _manifest(tmp_path, 0.0, 0.0)
     r = speed.measure(load_manifest(m), "simple@1", "decode", lengths=[2, 12], repeats=1)
     assert not r.passed and r.rate_fps < 30 and "below" in r.message
+    assert r.verdict == "fail" and "not busy" in r.reason, r.reason
     code = main(["bench", "--decoder", str(m), "--lengths", "2,12", "--repeats", "1"])
     out = capsys.readouterr().out
     assert code == 3, out
@@ -114,7 +157,8 @@ def test_fast_decoder_passes_bench(tmp_path, capsys, monkeypatch):
     doc = json.loads(capsys.readouterr().out)
     assert code == 0 and doc["exit_code"] == 0
     [dec] = doc["speed"]
-    assert dec["operation"] == "decode" and dec["passed"] and dec["required_fps"] == 30
+    assert dec["operation"] == "decode" and dec["passed"] and dec["verdict"] == "pass" and dec["required_fps"] == 30
+    assert dec["cpu_s"] == pytest.approx(dec["wall_s"]) and dec["others_share"] == 0.0  # the fake idle machine
     assert [s["reason"] for s in doc["skipped"] if s["operation"] == "render"]  # no images output
 
 
@@ -142,27 +186,24 @@ def test_missing_output_is_a_failure(tmp_path):
 
 
 class _SleepyRenderer(PythonAdapter):
-    """In-process adapter with images (its cost comes from the test's synthetic clock)."""
+    """In-process adapter with images (its cost comes from the test's synthetic clock): the
+    reference decoding and rendering of what it is given, as the scenario asks."""
     outputs = ["faps", "images"]
     claims = ["simple@2"]
 
     def run(self, job):
-        n = job.frames
-        if "images_dir" in job.values:
-            d = job.path("images_dir")
-            d.mkdir(parents=True, exist_ok=True)
-            for i in range(n):  # an image per frame (the speed check counts them)
-                (d / f"{i:06d}.png").write_bytes(b"x")
-        if "faps_out" in job.values:  # the frames it was given (the speed check compares a sample)
-            decode(job.path("input").read_bytes()).frames.save_npz(job.path("faps_out"))
+        from fbaconf.pipeline import reference_outputs  # noqa: PLC0415
+        reference_outputs(job.path("input"), scenario=job.path("scenario"), faps_out=job.path("faps_out"),
+                          images_dir=job.path("images_dir"))
 
 
 def test_in_process_adapter_decode_and_render(monkeypatch):
     real = speed._Runner.run
-    monkeypatch.setattr(speed._Runner, "run", lambda self, n: (real(self, n), (
-        0.005 if self.operation == "decode" else 0.003) * n)[1])
+    machine = FakeMachine(monkeypatch)
+    monkeypatch.setattr(speed._Runner, "run", lambda self, n: (real(self, n), machine.window(n, (
+        0.005 if self.operation == "decode" else 0.003) * n))[1])
     a = _SleepyRenderer()
-    res = speed.measure_claim(a, lengths=[10, 100], repeats=1)  # claim: the adapter's highest
+    res = speed.measure_claim(a, lengths=[10, 40], repeats=1)  # claim: the adapter's highest
     assert [r.operation for r in res] == ["decode", "render"]
     dec, ren = res
     assert dec.claim == "simple@2" and dec.required_fps == 240 and ren.required_fps == 30
@@ -179,15 +220,26 @@ def test_skip_render_without_images(tmp_path):
         speed.measure(a, "simple@1", "transcode")
 
 
-def test_content_streams_decode_to_n_frames():
-    block = decode(speed.content_stream(speed.BLOCK_FRAMES)).frames
-    for n in (1, 7, speed.BLOCK_FRAMES, 250):
-        f = decode(speed.content_stream(n)).frames
-        assert len(f) == n
-        if n > speed.BLOCK_FRAMES:  # repeated block + tail: the block's frames tiled
-            idx = np.arange(n) % speed.BLOCK_FRAMES
-            assert np.array_equal(f.values, block.values[idx])
-            assert np.array_equal(f.status, block.status[idx])
+def test_speed_content_is_fresh_and_its_sampled_reference_is_the_decoding(tmp_path):
+    """Every run's stream is new — no run, and no block of a run, repeats another, within one
+    measurement or across two — and the expected frames of any sample (decoded from their
+    blocks only) are the reference decoding of the whole stream."""
+    blocks: list[bytes] = []
+    runs = [Content(tmp_path / "a").make(n) for n in (1, 7, BLOCK_FRAMES, 250, 250)]
+    runs.append(Content(tmp_path / "b").make(250))  # another measurement, the same length
+    for run in runs:
+        f = decode(run.stream_bytes()).frames
+        assert len(f) == run.n
+        ks = np.arange(run.n)
+        e = run.expected(ks)
+        assert np.array_equal(e.values, f.values) and np.array_equal(e.status, f.status)
+        assert np.array_equal(e.high, f.high) and np.array_equal(e.frame_number, f.frame_number)
+        assert np.allclose(e.time_ms, f.time_ms)
+        blocks += [f.values[j:j + BLOCK_FRAMES].tobytes() for j in range(0, run.n, BLOCK_FRAMES)]
+        # every FAP but the two high-level ones moves from frame to frame (the noise is per frame)
+        if run.n > 2:
+            assert (np.diff(f.values[:, 2:], axis=0) != 0).mean() > 0.5
+    assert len(set(blocks)) == len(blocks)
 
 
 def test_fit_line_and_claims():
@@ -259,17 +311,194 @@ def test_a_decoder_that_stops_early_on_long_streams_fails(tmp_path):
 
 
 class _OneImageRenderer(_SleepyRenderer):
-    """A lazy renderer: one image, whatever the number of frames it was asked for."""
+    """A lazy renderer: the first frame's image only, whatever the number of frames asked for."""
 
     def run(self, job):
-        if "images_dir" in job.values:
-            d = job.path("images_dir")
-            d.mkdir(parents=True, exist_ok=True)
-            (d / "000000.png").write_bytes(b"x")
-        elif "faps_out" in job.values:
-            super().run(job)
+        if "images_dir" not in job.values:
+            return super().run(job)
+        from fbaconf.pipeline import reference_outputs  # noqa: PLC0415
+        from fbaconf.rendering.scenario import Scenario  # noqa: PLC0415
+        one = job.workdir / "one.toml"
+        one.write_text(Scenario.load(job.path("scenario")).with_(frames=(0,)).to_toml())
+        reference_outputs(job.path("input"), scenario=one, images_dir=job.path("images_dir"))
 
 
 def test_a_renderer_that_skips_frames_fails():
-    with pytest.raises(speed.SpeedRunError, match="asked to render 10 frames but wrote 1 images"):
+    with pytest.raises(speed.SpeedRunError,
+                       match="not the rendering of the content.*frame 9: .*frame_00009.png: cannot read"):
         speed.measure(_OneImageRenderer(), "simple@2", "render", lengths=[10, 20], repeats=1)
+
+
+# ------------------------------------------------------------------ the machine's load
+# A decoder that costs 20 ms of CPU a frame (50 fps; simple@1 asks 30) on a machine where it gets
+# 40 % of a CPU: 50 ms a frame of wall time (20 fps), waiting the other 60 %. Hand computation of
+# the uncontended time per run (speed_load): others hold 80 % of the 2 CPUs, i.e. 0.8 s of every
+# CPU a second; the wait they explain is min(0.6 s, 0.8 s) = 0.6 s of each second, which leaves
+# 0.4 s: 20 ms a frame, 50 fps.
+LOADED = dict(cpu=0.4, stall=0.6, others=0.8, between=0.8)
+
+
+def _loaded(tmp_path, monkeypatch, per_frame: float = 0.05, **machine):
+    synthetic_clock(monkeypatch, 0.2, per_frame, machine=FakeMachine(monkeypatch, **{**LOADED, **machine}))
+    return speed.measure(load_manifest(_manifest(tmp_path, 0.0, 0.0)), "simple@1", "decode", lengths=[4, 24],
+                         repeats=1)
+
+
+def test_too_slow_only_under_load_is_inconclusive_not_fail(tmp_path, monkeypatch, capsys):
+    r = _loaded(tmp_path, monkeypatch)
+    assert r.rate_fps == pytest.approx(20.0) and r.uncontended_fps == pytest.approx(50.0), r.message
+    assert r.verdict == "inconclusive" and not r.passed, r.message
+    assert r.others_share == pytest.approx(0.8) and r.others_share_between == pytest.approx(0.8)
+    assert "busy" in r.reason and "50.0 fps" in r.reason and "20.0 fps" in r.reason, r.reason
+    d = r.to_json()
+    assert d["passed"] is False and d["verdict"] == "inconclusive"
+    assert {"cpu_s", "wall_s", "stall_s", "load", "reason"} <= set(d)
+    assert speed_verdict([d]) == ("SPEED INCONCLUSIVE", 4)
+    code = main(["bench", "--decoder", str(tmp_path / "timed.toml"), "--lengths", "4,24", "--repeats", "1"])
+    out = capsys.readouterr().out
+    assert code == 4 and "INCONCLUSIVE" in out, out
+
+
+def test_a_wait_of_its_own_making_fails(tmp_path, monkeypatch):
+    """The same readings where other processes did not hold the machine between the runs (the
+    load came and went with the decoder: its own), or at all (it waited on its own threads)."""
+    for machine in (dict(between=0.0), dict(others=0.0, between=0.0)):
+        r = _loaded(tmp_path, monkeypatch, **machine)
+        assert r.verdict == "fail" and r.rate_fps == pytest.approx(20.0), r.message
+        assert "not busy" in r.reason, r.reason
+
+
+def test_a_sleeper_fails_on_a_busy_machine_too(tmp_path, monkeypatch):
+    """Slow by itself: it sleeps (5 % on a CPU, never waiting for one) — nothing the others did
+    explains its time."""
+    r = _loaded(tmp_path, monkeypatch, cpu=0.05, stall=0.0)
+    assert r.verdict == "fail" and r.uncontended_fps == pytest.approx(20.0), r.message
+    assert "even without the wait other processes explain it is 20.0 fps" in r.reason, r.reason
+
+
+def test_a_rate_that_meets_the_minimum_passes_whatever_the_load(tmp_path, monkeypatch):
+    r = _loaded(tmp_path, monkeypatch, per_frame=0.02, others=1.0, between=1.0)
+    assert r.verdict == "pass" and r.passed and r.rate_fps == pytest.approx(50.0), r.message
+
+
+def test_speed_verdict_of_results():
+    ok = {"passed": True, "verdict": "pass"}
+    slow = {"passed": False, "verdict": "fail"}
+    busy = {"passed": False, "verdict": "inconclusive"}
+    assert speed_verdict(None) is None and speed_verdict([ok, ok]) is None
+    assert speed_verdict([ok, busy]) == ("SPEED INCONCLUSIVE", 4)
+    assert speed_verdict([busy, slow]) == ("SPEED FAIL", 3)
+    # results written before verdicts existed: by "passed"
+    assert speed_verdict([{"passed": True}]) is None
+    assert speed_verdict([{"passed": False}]) == ("SPEED FAIL", 3)
+    # contradictions are failures: only a result that says it passed passes
+    for bad in ({"passed": True, "verdict": "fail"}, {"passed": True, "verdict": "inconclusive"},
+                {"passed": False, "verdict": "pass"}, {"verdict": "pass"}, {"passed": "yes"}):
+        assert speed_verdict([bad]) == ("SPEED FAIL", 3), bad
+
+
+# Costs 1/80 s of its own CPU per frame (not of wall time: it spins until its CPU clock has
+# advanced), then writes the reference decoding: 80 fps on an idle core, simple@1 asks 30.
+BURNER = textwrap.dedent("""\
+    import sys, time
+    frames = int(sys.argv[2])
+    t = time.thread_time()
+    while time.thread_time() - t < frames / 80.0:
+        pass
+    from fbaconf.pipeline import reference_outputs
+    reference_outputs(sys.argv[1], faps_out=sys.argv[3])
+""")
+
+
+def test_a_saturated_machine_does_not_fail_a_decoder_that_is_fast_on_an_idle_one(tmp_path):
+    """Busy loops on every CPU, three times over (started here, outside this process's tree,
+    killed after): the decoder gets a quarter of a CPU or less, about 20 fps; its reading may
+    pass or be inconclusive, never fail. (Which of the two depends on the machine: the assertion
+    is what load cannot change.)"""
+    script = tmp_path / "burner.py"
+    script.write_text(BURNER)
+    m = tmp_path / "burner.toml"
+    m.write_text('name = "burner"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{frames}}", "{{faps_out}}"]\n'
+                 '[limits]\ntimeout_s = 120\n')
+    n = 3 * (os.cpu_count() or 1)
+    # each loop's parent shell exits at once: the loops are no child of this process; each in a
+    # session of its own, so a kernel that shares CPU time out by session (autogroup) weighs
+    # every loop as much as the decoder's session
+    loop = f"{sys.executable} -c 'import os; os.setsid()\nwhile True: pass'"
+    start = subprocess.run(["/bin/sh", "-c", f"for i in $(seq {n}); do {loop} </dev/null >/dev/null 2>&1 & "
+                            "echo $!; done"], capture_output=True, text=True, timeout=30)
+    loops = [int(x) for x in start.stdout.split()]
+    try:
+        assert len(loops) == n
+        r = speed.measure(load_manifest(m), "simple@1", "decode", lengths=[12, 72], repeats=1,
+                          work_dir=tmp_path / "w")
+    finally:
+        for pid in loops:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    print(r.message)
+    assert r.verdict in ("pass", "inconclusive"), r.message
+    assert r.others_share is not None and r.others_share > 0.5, r.message  # the loops did load the machine
+
+
+def test_an_inconclusive_reading_in_the_verdict_reports_and_statement(tmp_path, monkeypatch):
+    """What the lead's verdict rests on (speed_verdict through derive_verdict and the exit code)
+    and what the reader sees: the reports' speed table and verdict line, the report schema, the
+    certificate's statement — with the numbers and the reason."""
+    r = _loaded(tmp_path, monkeypatch)
+    assert r.verdict == "inconclusive"
+    cv = derive_verdict([], strict=False, speed=[r.to_json()])
+    assert (cv.verdict, cv.exit_code, cv.differences) == ("SPEED INCONCLUSIVE", 4, [])
+    slow = {**r.to_json(), "verdict": "fail"}
+    cv = derive_verdict([], strict=False, speed=[r.to_json(), slow])
+    assert (cv.verdict, cv.exit_code) == ("SPEED FAIL", 3)
+    cv = derive_verdict([], strict=False, speed=None)
+    assert (cv.verdict, cv.exit_code) == ("PASS", 0)
+    rec = RunRecord(decoder={"name": "timed"}, claim="simple@1", suites=[], system={}, speed=[r], exit_code=4)
+    text = terminal_summary(rec)
+    assert "result: SPEED INCONCLUSIVE" in text and "1 inconclusive (below it on a busy machine)" in text, text
+    assert "INCONCLUSIVE" in text.split("speed:")[1].splitlines()[2], text  # the table row
+    assert "c-QualityWarning'>INCONCLUSIVE" in html_report(rec, tmp_path)
+    schema = json.loads((Path(speed.__file__).parent / "data" / "run-report.schema.json").read_text())
+    jsonschema.validate(report_json(rec), schema)
+    basis = {"tools": [], "coverage_points_exercised": 0, "coverage_points_of_claim": 0, "not_exercised": [],
+             "cases_not_taken": []}
+    st = _statement(rec, derive_verdict([], strict=False, speed=[r.to_json()]), True, basis)
+    line = next(x for x in st.splitlines() if x.startswith("- decode:"))
+    assert "20.0 frames/s measured, 30 required (provisional) — INCONCLUSIVE: the machine was busy" in line, line
+    assert "50.0 fps" in line and "other processes used 80 %" in line, line
+
+
+def test_a_decoder_of_images_only_is_judged_on_the_frames_it_was_asked_to_draw(tmp_path):
+    """A decoder whose only output is images gets two small frames to draw per run (the first and
+    one drawn for the run): judged as images, a faithful drawing passes, a blank one fails."""
+    script = tmp_path / "painter.py"
+    script.write_text(textwrap.dedent("""\
+        import sys
+        from fbaconf.pipeline import reference_outputs
+        from fbaconf.rendering.scenario import Scenario
+        ks = Scenario.load(sys.argv[2]).frames
+        assert len(ks) == 2 and ks[0] == 0, ks  # the first frame and one drawn
+        reference_outputs(sys.argv[1], scenario=sys.argv[2], images_dir=sys.argv[3])
+        if len(sys.argv) > 4:  # blank: every pixel black
+            import numpy as np
+            from fbaconf.rendering.images import write_png
+            for k in ks:
+                write_png(f"{sys.argv[3]}/frame_{k:05d}.png", np.zeros((8, 8, 3)))
+    """))
+    for extra, ok in (("", True), ("blank", False)):
+        m = tmp_path / f"painter{extra}.toml"
+        args = ", ".join(f'"{a}"' for a in ["{python}", str(script), "{input}", "{scenario}", "{images_dir}"]
+                         + ([extra] if extra else []))
+        m.write_text(f'name = "painter"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["images"]\n'
+                     f'[commands]\ndecode = [{args}]\n')
+        a = load_manifest(m)
+        if ok:
+            r = speed.measure(a, "simple@1", "decode", lengths=[6, 30], repeats=1)
+            assert r is not None and len(r.samples) == 2, r.message
+        else:
+            with pytest.raises(speed.SpeedRunError, match="not the rendering of the content"):
+                speed.measure(a, "simple@1", "decode", lengths=[6, 30], repeats=1)
