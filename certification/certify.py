@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fbaconf._atomic import atomic_write_text
+from fbaconf.conformance import official
 from fbaconf.conformance.coverage_table import points_of
 from fbaconf.conformance.golden import MANIFEST
 from fbaconf.conformance.suite import golden_root, load_suites
@@ -46,7 +47,7 @@ from fbaconf.harness.session import (
 )
 from fbaconf.harness.verdict import describe
 from fbaconf.isolation import cgroups, sandbox
-from fbaconf.isolation.bounds import DEFAULT_CEILINGS, Ceilings
+from fbaconf.isolation.bounds import DEFAULT_CEILINGS, Ceilings, limits_in_force
 from fbaconf.profiles.model import Claim, load_profiles
 from fbaconf.safefs import read_regular, remove_tree
 
@@ -150,6 +151,7 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
     basis["isolation"] = _isolation_line(adapter, gaps)
     basis["sandbox_ro"] = [str(p) for p in getattr(adapter, "lab_read_only", [])]
     basis["timing"] = timing_note(record, adapter)
+    basis["limits"] = limits_in_force(adapter) if isinstance(adapter, CommandAdapter) else []
     (out / "suites").mkdir()
     for s in suites:
         if s.name in {c.suite for c in cases}:
@@ -159,7 +161,14 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
         shutil.copyfile(gm, out / "golden-MANIFEST.json")
     if adapter.manifest_path:
         shutil.copyfile(adapter.manifest_path, out / "decoder.toml")
-    summary = reports.terminal_summary(record, color=False)
+    unofficial = official.differences(record.suites, gm.read_bytes() if gm.is_file() else None)
+    basis["unofficial"] = unofficial
+    notices = [f"NOT ISOLATED: {basis['isolation']}"] * bool(gaps) + [
+        f"UNOFFICIAL SUITES (not the suites and goldens this fbaconf ships; the verdict is not the release's "
+        f"claim): {'; '.join(unofficial)}"] * bool(unofficial)
+    for n in notices:
+        print(f"fbaconf certify: {n}", file=sys.stderr)
+    summary = "".join(f"{n}\n" for n in notices) + reports.terminal_summary(record, color=False)
     atomic_write_text(out / "summary.txt", summary + "\n")
     atomic_write_text(out / "statement.md", _statement(record, cv, o.speed, basis))
     counts = {k: n for k, n in record.counts().items() if n}
@@ -167,6 +176,7 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
             "claim": claim, "verdict": verdict, "exit_code": code, "strict": o.strict,
             "readings": list(adapter.readings), "provisional_differences": cv.differences,
             "unverified": cv.unverified, "cases": len(results), "counts": counts,
+            "isolated": not gaps, "unofficial": unofficial,
             "speed": speed if speed is not None else "not measured",
             "suites": record.suites, "provisional": record.provisional, "issued": record.finished,
             "rests_on": basis}
@@ -232,6 +242,9 @@ def _statement(record, cv, speed: bool, basis: dict) -> str:
         lines.append("Speed was not measured (--no-speed): this certificate does not cover the level's minimum rates.")
     lines += ["", "## What this verdict rests on", "",
               f"- isolation of the decoder: {basis.get('isolation', 'unknown')}",
+              "- limits in force: " + ("; ".join(basis.get("limits") or []) or "none (in-process)"),
+              "- suites and goldens: " + ("UNOFFICIAL: " + "; ".join(basis["unofficial"]) if basis.get("unofficial")
+                                          else "the ones this fbaconf ships"),
               "- read-only folders the lab added (--sandbox-ro): " + (", ".join(basis.get("sandbox_ro") or [])
                                                                       or "none"),
               f"- tools the claim requires: {', '.join(basis['tools'])}",

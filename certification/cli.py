@@ -4,7 +4,9 @@ verify a package (``certify verify DIR [--pubkey P]``), make a key pair (``certi
 Exit codes of ``certify``: as ``fbaconf run`` (0 pass, 1 fail, 2 set-up error, 3 only speed
 missed, 4 speed inconclusive: missed on a busy machine). ``certify verify``: 0 when every digest
 and the verdict hold and the signature was checked (``--pubkey``), or the package is unsigned (its
-line says so), or ``--unsigned-ok`` accepts a signature left unchecked; 1 otherwise.
+line says so), or ``--unsigned-ok`` accepts a signature left unchecked — and the package's suites
+and goldens are the ones this fbaconf ships (or ``--unofficial-ok``; the line says UNOFFICIAL
+SUITES); 1 otherwise. A certificate made ``--allow-unisolated`` verifies with UNISOLATED in its line.
 """
 from __future__ import annotations
 
@@ -31,6 +33,9 @@ def register(sub) -> None:
     c.add_argument("package", nargs="?", type=Path, help="(verify) the package folder")
     c.add_argument("--key", type=Path, help="sign the package with this Ed25519 private key (PEM)")
     c.add_argument("--pubkey", type=Path, help="(verify) check the package's signature with this public key")
+    c.add_argument("--unofficial-ok", action="store_true",
+                   help="(verify) accept a package whose suites or goldens are not the ones this fbaconf ships "
+                        "(exit 0, its line says UNOFFICIAL SUITES)")
     c.add_argument("--unsigned-ok", action="store_true",
                    help="(verify) accept a signed package without checking its signature (no --pubkey): exit 0 "
                         "when digests and verdict hold")
@@ -77,8 +82,18 @@ def _verify(args) -> int:
         print(f"certify verify: {clean_text(p)}", file=sys.stderr)
     what = " ".join(clean_text(str(v.certificate.get(k, "?")))[:80] for k in ("decoder", "claim"))
     verdict = clean_text(str(v.certificate.get("verdict", "?")))[:80]
+    if not v.isolated:
+        verdict += " — UNISOLATED (the decoder ran without the sandbox or cgroups: --allow-unisolated)"
+    for u in v.unofficial:
+        print(f"certify verify: {clean_text(u)}", file=sys.stderr)
+    if v.unofficial:
+        verdict += " — UNOFFICIAL SUITES (not the suites and goldens of the fbaconf that verifies)"
     if v.problems:
         print(f"certify verify: FAILED ({len(v.problems)} problem(s); {v.state})")
+        return 1
+    if v.unofficial and not args.unofficial_ok:
+        print(f"certify verify: NOT VERIFIED (made with suites or goldens this fbaconf does not ship; "
+              f"--unofficial-ok accepts them) — {what}: {verdict}")
         return 1
     if v.state == SIGNED:
         print(f"certify verify: OK ({SIGNED} with {args.pubkey}) — {what}: {verdict}")

@@ -30,6 +30,7 @@ from types import SimpleNamespace
 
 from fbaconf._atomic import atomic_write_text
 from fbaconf.bitstreams import readings
+from fbaconf.conformance import official
 from fbaconf.conformance.suite import Case, load_suites
 from fbaconf.errors import FbaconfInputError
 from fbaconf.harness.provisional import rests_on
@@ -138,6 +139,13 @@ class Verification:
     problems: list[str] = field(default_factory=list)
     state: str = UNSIGNED  # UNSIGNED, NOT_CHECKED, INVALID or SIGNED
     certificate: dict = field(default_factory=dict)
+    # what of the package's suites and goldens is not this fbaconf's (conformance/official.py)
+    unofficial: list[str] = field(default_factory=list)
+
+    @property
+    def isolated(self) -> bool:
+        """Whether the certificate says the decoder ran isolated (an in-process bundled adapter counts)."""
+        return self.certificate.get("isolated") is not False
 
     @property
     def authentic(self) -> bool:
@@ -205,6 +213,8 @@ def verify(pkg: Path, pubkey: Path | None = None) -> Verification:
         return v
     if not v.problems:  # re-derived from files whose digests hold (a changed file is named already)
         _check_verdict(files, cert, v.problems)
+        suites = cert.get("suites") if isinstance(cert.get("suites"), list) else []
+        v.unofficial = official.differences(suites, files.get("golden-MANIFEST.json"))
     return v
 
 

@@ -1,4 +1,4 @@
-"""Verbs ``fbaconf suites list|build|coverage|mutants`` and ``fbaconf golden regenerate|verify|margins``."""
+"""Verbs ``fbaconf suites list|build|counts|coverage|mutants`` and ``fbaconf golden regenerate|verify|margins``."""
 from __future__ import annotations
 
 import json
@@ -24,6 +24,10 @@ def register(sub) -> None:
     b.add_argument("--external-out", type=Path, metavar="DIR",
                    help="where the external suite goes (default: a new temporary folder, printed)")
     b.set_defaults(func=cmd_build)
+    cn = ss.add_parser("counts", help="the case counts per suite and per claim (the table the docs print)")
+    cn.add_argument("--write", type=Path, metavar="DOC",
+                    help="replace the table between the counts markers of DOC (docs/suites.md)")
+    cn.set_defaults(func=cmd_counts)
     cv = ss.add_parser("coverage", help="which coverage points each case hits (coverage: K/N points)",
                        description="Decode and inspect every case of the built suites and report which points "
                                    "of the coverage model (conformance/data/coverage.toml) they hit.")
@@ -135,6 +139,18 @@ def cmd_margins(args) -> int:
     from .suite import load_suites
     rows = measure(load_suites(), GOLDEN_SUPERSAMPLE, log=(lambda *_: None) if args.json else print)
     print(json.dumps([asdict(r) for r in rows], indent=1) if args.json else summary(rows))
+    return 0
+
+
+def cmd_counts(args) -> int:
+    from . import counts
+    from .suite import load_suites
+    suites = load_suites()
+    if args.write:
+        changed = counts.write(args.write, suites)
+        print(f"{args.write}: {'rewritten' if changed else 'already current'}")
+        return 0
+    print(counts.table(suites))
     return 0
 
 
