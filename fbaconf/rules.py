@@ -139,7 +139,8 @@ SEM_SINGLE_SYMBOL = _define(
 # ---------------------------------------------------------------------------- decisions
 DECISION_QUANT_NO_LISTS = _define(
     "FAP-DECISION-001", "warning", "decision D4 (alphabets recomputed at each intra plane)",
-    "fap_quant changes at an intra plane that does not send all four new min/max lists; S1 would keep the old scaling.")
+    "A coded FAP's bound was last scaled at another fap_quant (a list, or the defaults at the first intra plane) "
+    "and no new list replaced it: D4 recomputes its alphabet, S1 keeps the old one.")
 DECISION_UNIDIRECTIONAL_NEGATIVE = _define(
     "FAP-DECISION-002", "warning", "decision D4 (symmetric ranges also for unidirectional FAPs)",
     "A unidirectional FAP (3, 14, 41, 42, 47) decodes to a negative value.")

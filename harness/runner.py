@@ -78,7 +78,7 @@ def run_case(ctx: RunContext, case: Case) -> CaseResult:
     t0 = time.perf_counter()
     required = required_for(ctx.claim, case, ctx.adapter)
     base = dict(case_id=case.full_id, suite=case.suite, claim=case.claim, required=required,
-                rests_on=rests_on(case, ctx.golden), kind=case.kind.value, tools=list(case.tools))
+                rests_on=rests_on(case, ctx.golden), kind=CaseKind(case.kind).value, tools=list(case.tools))
     why = capability(ctx.adapter, case)
     if why:
         return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED, message=why)

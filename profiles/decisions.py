@@ -72,7 +72,7 @@ def check_decisions(st, rows: list[tuple[int, Any]], out: list[Diagnostic]) -> N
     for f in tables.fap_table()[2:]:
         raw[f.number - 1] = (f.intra_range, -f.intra_range, f.pred_range, -f.pred_range)
     ever = np.zeros(NUM_FAPS, dtype=bool)
-    prev_q = None
+    set_div = np.zeros((NUM_FAPS, 4), dtype=np.int64)  # the divisor each bound was last scaled by (0: not yet)
     last_q = 0  # the last non-zero fap_quant of a frame-based intra plane (S1 keeps its high-level alphabet at 0)
     row_of = {p.index: k for k, p in rows}
     for i, p in enumerate(planes):
@@ -93,15 +93,21 @@ def check_decisions(st, rows: list[tuple[int, Any]], out: list[Diagnostic]) -> N
         low = [f for f in range(3, NUM_FAPS + 1) if coded[f - 1]]
         has_p = i + 1 < len(planes) and not planes[i + 1].is_intra
         if p.coding_type != CODING_DCT:
-            if prev_q is not None and q != prev_q and low and len(p.new_lists) < 4:
-                missing = [n for n in LIST_ORDER if n not in p.new_lists]
-                out.append(diag(R.DECISION_QUANT_NO_LISTS, f"fap_quant changes {prev_q} -> {q} without new "
-                                f"{', '.join(missing)} lists (D4 recomputes the alphabets; S1 would not)", **loc))
+            d = quant_div(q)
+            set_div[set_div == 0] = d  # the defaults take the first frame-based intra plane's scaling
             for li, name in enumerate(LIST_ORDER):
                 for fap, v in p.new_lists.get(name, {}).items():
                     bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
                     replaced[fap - 1, li] = True
-            d = quant_div(q)
+                    set_div[fap - 1, li] = d
+            kept = sorted({(f, LIST_ORDER[li]) for f in low for li in (range(4) if has_p else (0, 1))
+                           if _tdiv(int(bounds[f - 1, li]), int(set_div[f - 1, li]))
+                           != _tdiv(int(bounds[f - 1, li]), d)})
+            if kept:
+                out.append(diag(R.DECISION_QUANT_NO_LISTS, f"fap_quant {q}: the {kept[0][1]} bound of FAP {kept[0][0]}"
+                                + (f" (and {len(kept) - 1} more)" if len(kept) > 1 else "")
+                                + " was last scaled at another fap_quant and no new list replaced it: D4 recomputes "
+                                  "its alphabet, S1 keeps the old one", fap=kept[0][0], **loc))
             for f in low:
                 for kind, (ih, il) in (("intra", (0, 1)), ("predicted", (2, 3))):
                     if kind == "predicted" and not has_p:
@@ -118,7 +124,6 @@ def check_decisions(st, rows: list[tuple[int, Any]], out: list[Diagnostic]) -> N
                                             f"FAP {f} uses the default {LIST_ORDER[li]} bound {int(raw[f - 1, li])}, "
                                             f"rounded to {int(bounds[f - 1, li])} by D4 (alphabet differs)",
                                             fap=f, **loc))
-            prev_q = q
             _outside_intra_range(st, planes, i, low, bounds, row_of, out)
         types = tuple(p.group_types)
         for gi, g in enumerate(tables.groups()):
