@@ -187,7 +187,7 @@ class Fuzzer:
         kind = self.kinds[index % len(self.kinds)]
         n = len(self.corpus[kind]) if corpus_size is None else corpus_size
         e = self._make_input(index, kind, self.corpus[kind][:n])
-        e.corpus_size = n
+        e.corpus_size, e.index = n, index
         return e
 
     def _make_input(self, index: int, kind: str, corpus: list[Entry]) -> Entry:
@@ -317,6 +317,8 @@ class Fuzzer:
                 st.corpus += 1
         if out.verdict is not None:
             self._finding(index, inp, out.verdict, deadline)
+        for e, v in getattr(self.target, "take_late", list)():  # found on a later input, filed under its own
+            self._finding(e.index if e.index is not None else index, e, v, deadline)
 
     def _finding(self, index: int, inp: Entry, v: Verdict, deadline: float) -> None:
         st = self.stats
@@ -345,8 +347,10 @@ class Fuzzer:
         kind = f.original.kind
         last: dict[str, Verdict | None] = {}
 
+        alone = getattr(self.target, "alone", self.target.execute)  # a process per test: its ending is its own
+
         def test(cand: bytes) -> bool:
-            out = self.target.execute(Entry(cand, kind=kind, origin="minimise"))
+            out = alone(Entry(cand, kind=kind, origin="minimise"))
             ok = out.verdict is not None and out.verdict.key == key
             if ok:
                 last["v"] = out.verdict
@@ -362,7 +366,8 @@ class Fuzzer:
                                           max_seconds=budget, boundaries=bounds)
         f.min_verdict = last.get("v", f.verdict)
         self.progress.message(f"  minimised {f.id}: {f.min_stats.bytes_before} -> {f.min_stats.bytes_after} bytes "
-                              f"({f.min_stats.tests} tests, {f.min_stats.seconds:.1f} s)")
+                              f"({f.min_stats.tests} tests, {f.min_stats.seconds:.1f} s)"
+                              + ("  FLAKY: does not repeat on a fresh process" if f.min_stats.flaky else ""))
 
     def summary(self) -> dict:
         st = self.stats

@@ -27,7 +27,7 @@ from fbaconf.harness.runner import hidden_from_decoders
 from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.endings import crash_report
 from fbaconf.isolation.forkclient import ForkServer
-from fbaconf.isolation.persistent import PersistentDecoder
+from fbaconf.isolation.persistent import FLAKY, PersistentDecoder
 from fbaconf.isolation.sandbox import Limits
 from fbaconf.profiles import checker
 from fbaconf.profiles.checker import check_stream
@@ -151,6 +151,7 @@ class DecoderTarget:
         self._local = threading.local()
         self._workers: list = []
         self._workers_lock = threading.Lock()
+        self._late: list[tuple[Entry, Verdict]] = []  # take_late
         if kind == "stream" and "fba" not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} does not accept binary streams (inputs: "
                                  f"{', '.join(adapter.inputs)})")
@@ -280,15 +281,14 @@ class DecoderTarget:
             slot = w.slots[k]
             job = self._reuse(slot, inp.data, write_input=not self.persistent)  # persistent: on stdin
             if w.server is None and self.persistent:
-                w.argv = [self.adapter.argv("serve", slot.job)]
-                w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),
-                                             self.limits, env=self.adapter.env)
+                self._serve(w)
             elif w.server is None:
                 w.argv = [self.argv_for(s.job) for s in w.slots]  # a slot's paths never change
                 w.server = ForkServer(w.root, self._view(w, w.argv[0]), self.limits, env=self.adapter.env,
                                       sum_outputs_every=16, slots=len(w.slots))
             if self.persistent:
                 pending = w.server.start(inp.data, job.values["faps_out"])
+                pending.on_late = lambda res, inp=inp, job=job: self._late_ending(inp, job, res)
             else:
                 pending = w.server.start(w.argv[k], job.workdir, slot=k)
             return Run(pending.wait, lambda: ExecResult(self._judge(inp, job, pending.result())))
@@ -309,6 +309,43 @@ class DecoderTarget:
                 pass
         return Run.done(out)
 
+    def _serve(self, w: "_Worker") -> None:
+        """The worker's persistent decoder (``[commands] serve``), started at its first input."""
+        w.argv = [self.adapter.argv("serve", w.slots[0].job)]
+        w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),
+                                     self.limits, env=self.adapter.env)
+
+    def alone(self, inp: Entry) -> ExecResult:
+        """``inp`` on a decoder process of its own, whose whole life is this input's: how a
+        finding is minimised, its minimal input checked and replayed. Through ``serve`` that is a
+        fresh process given this one input, its exit awaited (an answer sent before the decoding
+        ended cannot hide a crash that follows it); otherwise every input is a process of its
+        own already."""
+        if not self.persistent:
+            return self.execute(inp)
+        w = self._worker()
+        if w.server is None:
+            self._serve(w)
+        w.server.drain()  # the case folders are free
+        k, w.turn = w.turn, (w.turn + 1) % len(w.slots)
+        job = self._reuse(w.slots[k], inp.data, write_input=False)
+        return ExecResult(self._judge(inp, job, w.server.alone(inp.data, job.values["faps_out"])))
+
+    def _late_ending(self, inp: Entry, job, res) -> None:
+        """An ending found to be ``inp``'s after its result was given out (one input at a time:
+        the persistent decoder confirmed it on a later input, isolation/persistent.py)."""
+        v = self._judge(inp, job, res)
+        if v is not None:
+            with self._workers_lock:
+                self._late.append((inp, v))
+
+    def take_late(self) -> list[tuple[Entry, Verdict]]:
+        """The findings of inputs already judged clean that a later input showed to be theirs
+        (the fuzzer files them under those inputs)."""
+        with self._workers_lock:
+            out, self._late = self._late, []
+        return out
+
     def _judge(self, inp: Entry, job, res) -> Verdict | None:
         """The finding (or None) for one finished decoder process."""
         ending = endings.classify(res, self.limits, self.reject_exit_codes)
@@ -316,8 +353,12 @@ class DecoderTarget:
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
         detail = {"exit_code": res.returncode, "signal": res.signal, "elapsed_s": round(res.elapsed_s, 3),
                   **({"notes": list(res.notes)} if res.notes else {}),
-                  "maxrss_mb": round(res.maxrss_mb, 1), "stderr_tail": res.stderr_tail[-1500:]}
-        return self.verdict_for(ending, inp, job, detail)
+                  **({"harness": res.detail} if res.detail else {}), "maxrss_mb": round(res.maxrss_mb, 1),
+                  "stderr_tail": res.stderr_tail[-1500:]}
+        v = self.verdict_for(ending, inp, job, detail)
+        if v is not None and FLAKY in res.notes:  # no input reproduces it alone: its own key, said so
+            v = Verdict(v.cls, f"flaky:{v.signature}", f"{v.message} {res.detail}", {**v.detail, "flaky": True})
+        return v
 
     def verdict_for(self, ending, inp: Entry, job, detail: dict) -> Verdict | None:
         """The finding (or None) for one process ending — the run's classifier

@@ -160,10 +160,12 @@ def test_shard_and_minimisation_reports_are_checked_field_by_field():
     for change in ({"execs": "3"}, {"corpus": ["not base64!"]}, {"features": [1]}, {"findings": [{"key": 1}]}):
         with pytest.raises(ClusterError):
             shard_report(json.dumps({**good, **change}))
-    assert minimise_report(json.dumps({"minimal": "AA==", "tests": 1, "seconds": 0.1, "message": None,
-                                       "detail": None}))["minimal"] == b"\x00"
-    with pytest.raises(ClusterError):
-        minimise_report(json.dumps({"minimal": 5, "tests": 1, "seconds": 0.1, "message": None, "detail": None}))
+    m = {"minimal": "AA==", "tests": 1, "seconds": 0.1, "reproduced": True, "flaky": False, "message": None,
+         "detail": None}
+    assert minimise_report(json.dumps(m))["minimal"] == b"\x00"
+    for change in ({"minimal": 5}, {"flaky": 1}, {"tests": True}, {"reproduced": "yes"}):
+        with pytest.raises(ClusterError):
+            minimise_report(json.dumps({**m, **change}))
 
 
 # ------------------------------------------------------------------ a process of the lab's user
