@@ -141,13 +141,14 @@ def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: fl
     target = _target(spec, work)
     last = {}
     try:
-        def test(cand: bytes) -> bool:  # a process per test (DecoderTarget.alone): its ending is its own
-            v = target.alone(Entry(cand, kind=kind, origin="minimise")).verdict
+        def test(cand: bytes, run=target.settled) -> bool:  # its ending bound to it (DecoderTarget.settled)
+            v = run(Entry(cand, kind=kind, origin="minimise")).verdict
             if v is not None and v.key == key:
                 last["v"] = v
                 return True
             return False
-        minimal, stats = minimise(data, test, max_tests=tests, max_seconds=seconds)
+        minimal, stats = minimise(data, test, max_tests=tests, max_seconds=seconds,
+                                  check=lambda c: test(c, target.alone))
         v = last.get("v")
         return _json({"minimal": _b64(minimal), "tests": stats.tests, "seconds": stats.seconds,
                       "reproduced": stats.reproduced, "flaky": stats.flaky,

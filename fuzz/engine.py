@@ -347,10 +347,11 @@ class Fuzzer:
         kind = f.original.kind
         last: dict[str, Verdict | None] = {}
 
-        alone = getattr(self.target, "alone", self.target.execute)  # a process per test: its ending is its own
+        settled = getattr(self.target, "settled", self.target.execute)  # its ending bound to it (targets.py)
+        alone = getattr(self.target, "alone", self.target.execute)  # a process of its own: the two checks
 
-        def test(cand: bytes) -> bool:
-            out = alone(Entry(cand, kind=kind, origin="minimise"))
+        def test(cand: bytes, run=settled) -> bool:
+            out = run(Entry(cand, kind=kind, origin="minimise"))
             ok = out.verdict is not None and out.verdict.key == key
             if ok:
                 last["v"] = out.verdict
@@ -363,7 +364,7 @@ class Fuzzer:
                 bounds = None
         budget = max(min(self.minimise_seconds, deadline - time.perf_counter()), min(10.0, self.minimise_seconds))
         f.minimal, f.min_stats = minimise(f.original.data, test, max_tests=self.minimise_tests,
-                                          max_seconds=budget, boundaries=bounds)
+                                          max_seconds=budget, boundaries=bounds, check=lambda c: test(c, alone))
         f.min_verdict = last.get("v", f.verdict)
         self.progress.message(f"  minimised {f.id}: {f.min_stats.bytes_before} -> {f.min_stats.bytes_after} bytes "
                               f"({f.min_stats.tests} tests, {f.min_stats.seconds:.1f} s)"

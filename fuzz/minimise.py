@@ -43,16 +43,18 @@ class MinimiseStats:
     flaky: bool = False  # a re-run of the original or the minimal input did not do it again
 
 
-def minimise(data: bytes, test: Callable[[bytes], bool], *, max_tests: int = 600, max_seconds: float = 30.0,
-             boundaries: list[int] | None = None, bits: bool = True) -> tuple[bytes, MinimiseStats]:
+def minimise(data: bytes, test: Callable[[bytes], bool], *, max_tests: int = 600, max_seconds: float = 30.0,  # noqa: PLR0913
+             boundaries: list[int] | None = None, bits: bool = True,
+             check: Callable[[bytes], bool] | None = None) -> tuple[bytes, MinimiseStats]:
     """The smallest input found that still passes ``test`` (same classification): prefixes at
     plane boundaries, then ddmin on bytes, then on bits (inputs up to 512 bytes).
 
     Checked at both ends, outside the cache, so a finding that does not repeat is never reported
     as a minimal input: the original is run first — if it does not do it again, nothing is
     minimised (``flaky``); the minimal input is run again last — if it does not, the original is
-    returned instead (``flaky``, and ``reproduced`` says whether the original did).
-    ``test`` should run each input on a process of its own (``DecoderTarget.alone``)."""
+    returned instead (``flaky``, and ``reproduced`` says whether the original did). The two
+    checks run ``check`` when given (a decoder process of the input's own:
+    ``DecoderTarget.alone``), ``test`` otherwise."""
     t0 = time.perf_counter()
     stats = MinimiseStats(bytes_before=len(data))
     cache: dict[bytes, bool] = {data: True}
@@ -62,11 +64,12 @@ def minimise(data: bytes, test: Callable[[bytes], bool], *, max_tests: int = 600
 
     def fresh(cand: bytes) -> bool:
         stats.tests += 1
-        return bool(test(cand))
+        return bool((check or test)(cand))
 
     def t(cand: bytes) -> bool:
         if cand not in cache:
-            cache[cand] = fresh(cand)
+            stats.tests += 1
+            cache[cand] = bool(test(cand))
         return cache[cand]
 
     def done(best: bytes, reproduced: bool) -> tuple[bytes, MinimiseStats]:

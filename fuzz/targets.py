@@ -152,6 +152,8 @@ class DecoderTarget:
         self._workers: list = []
         self._workers_lock = threading.Lock()
         self._late: list[tuple[Entry, Verdict]] = []  # take_late
+        self._clean: bytes | None = None  # the shortest input answered cleanly (settled's follower)
+        self._probed = False
         if kind == "stream" and "fba" not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} does not accept binary streams (inputs: "
                                  f"{', '.join(adapter.inputs)})")
@@ -291,7 +293,7 @@ class DecoderTarget:
                 pending.on_late = lambda res, inp=inp, job=job: self._late_ending(inp, job, res)
             else:
                 pending = w.server.start(w.argv[k], job.workdir, slot=k)
-            return Run(pending.wait, lambda: ExecResult(self._judge(inp, job, pending.result())))
+            return Run(pending.wait, lambda: self._clean_if(inp, ExecResult(self._judge(inp, job, pending.result()))))
         workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
         try:
             job = self._job(inp.data, workdir)
@@ -308,6 +310,14 @@ class DecoderTarget:
             except OSError:
                 pass
         return Run.done(out)
+
+    def _clean_if(self, inp: Entry, out: ExecResult) -> ExecResult:
+        """``out`` as it is; a clean input of 4 KB at most, shorter than the last, is kept as
+        :meth:`settled`'s follower."""
+        if (self.persistent and out.verdict is None and len(inp.data) <= 4096
+                and (self._clean is None or len(inp.data) < len(self._clean))):
+            self._clean = inp.data
+        return out
 
     def _serve(self, w: "_Worker") -> None:
         """The worker's persistent decoder (``[commands] serve``), started at its first input."""
@@ -330,6 +340,42 @@ class DecoderTarget:
         k, w.turn = w.turn, (w.turn + 1) % len(w.slots)
         job = self._reuse(w.slots[k], inp.data, write_input=False)
         return ExecResult(self._judge(inp, job, w.server.alone(inp.data, job.values["faps_out"])))
+
+    def settled(self, inp: Entry) -> ExecResult:
+        """``inp``'s verdict once the decoder has answered a request after it — how each input
+        of a minimisation is judged. Through ``serve``, ``inp`` goes to the worker's process
+        followed by an input it handled cleanly before (the follower): ``inp``'s result is held
+        until the follower is answered, so an ending that comes after ``inp``'s answer is
+        confirmed and filed under ``inp`` (isolation/persistent.py), at the cost of one more
+        round trip, not of a process per input. Without a known clean follower, or without
+        ``serve``, as :meth:`alone` / :meth:`execute`."""
+        if not self.persistent:
+            return self.execute(inp)
+        follower = self._follower()
+        if follower is None:
+            return self.alone(inp)
+        w = self._worker()
+        if w.server is None:
+            self._serve(w)
+        w.server.drain()
+        jobs = []
+        for data in (inp.data, follower):
+            k, w.turn = w.turn, (w.turn + 1) % len(w.slots)
+            jobs.append(self._reuse(w.slots[k], data, write_input=False))
+        first = w.server.start(inp.data, jobs[0].values["faps_out"])
+        after = w.server.start(follower, jobs[1].values["faps_out"])
+        res = first.result()
+        after.result()  # the follower's own ending is not this input's finding
+        return ExecResult(self._judge(inp, jobs[0], res))
+
+    def _follower(self) -> bytes | None:
+        """An input this decoder answered cleanly (no finding): the shortest of those it was
+        given, else the empty input if it handles that cleanly alone, else None."""
+        if self._clean is None and not self._probed:
+            self._probed = True
+            if self.alone(Entry(b"", kind=self.kind, origin="follower")).verdict is None:
+                self._clean = b""
+        return self._clean
 
     def _late_ending(self, inp: Entry, job, res) -> None:
         """An ending found to be ``inp``'s after its result was given out (one input at a time:
