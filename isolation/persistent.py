@@ -36,7 +36,9 @@ input's ending as its exit status says (a crash, a memory limit...); one that ex
 answering is a protocol error too.
 
 A crash (the process dies: a signal, a sanitizer abort, a panic), a hang (no answer within
-``timeout_s``) or a memory or output blow-up is the ending of the input being decoded. The
+``timeout_s``) or a memory or output blow-up is the ending of the input being decoded, and
+what the process writes on stderr from the previous answer to this input's is this input's
+stderr (a crash report there is a crash). The
 folder's size is watched while an input runs (:mod:`.watch`). The result is a
 :class:`~fbaconf.isolation.sandbox.ProcResult`, judged by :mod:`.endings` like a spawned
 decoder's.
@@ -297,13 +299,13 @@ class PersistentDecoder:
         (``a.suspect``): an ending now is its own; a clean answer sends the question on to the
         input answered before it (module doc)."""
         (first, prev), a.suspect = a.suspect, None
-        if abnormal(res):
-            if ending_key(res) == ending_key(first):
-                self._owned.add(ending_key(res))
-            a.res = res
-            return
-        a.res = res  # its own result, the ending was not
-        self._whose(first, None, prev, inflight=a)
+        a.res = res  # its own ending or result, whether the first ending was its own or not
+        if not abnormal(res):
+            self._whose(first, None, prev, inflight=a)
+        elif ending_key(res) == ending_key(first):
+            self._owned.add(ending_key(res))
+        else:  # another ending of its own: the first may still be the input answered before's
+            self._before(prev)
 
     def _whose(self, res: ProcResult, a: "Answer | None", prev: "Answer", *, inflight: "Answer | None" = None) -> None:
         """``res`` ended (or was printed by) a process that had answered ``prev`` last, while
@@ -318,12 +320,7 @@ class PersistentDecoder:
             if abnormal(own):
                 return
             inflight = a
-        before = self.alone(prev.data, prev.out_path)
-        if abnormal(before) and "exec-failed" not in before.notes:
-            before.detail = (before.detail + " " if before.detail else "") + (
-                "(it answered before it had finished: the ending came while the next input was in flight, "
-                "and this input alone ends so)")
-            self._file(prev, before)
+        if self._before(prev):
             return
         res.notes.append(FLAKY)
         res.detail = (res.detail + " " if res.detail else "") + (
@@ -333,6 +330,18 @@ class PersistentDecoder:
             inflight.res = res
         else:
             self._file(prev, res)
+
+    def _before(self, prev: "Answer") -> bool:
+        """Run ``prev`` (the input a process answered before an ending) alone; whether it ended
+        so there — its ending is then filed under it."""
+        before = self.alone(prev.data, prev.out_path)
+        if not abnormal(before) or "exec-failed" in before.notes:
+            return False
+        before.detail = (before.detail + " " if before.detail else "") + (
+            "(it answered before it had finished: the ending came while the next input was in flight, "
+            "and this input alone ends so)")
+        self._file(prev, before)
+        return True
 
     def _file(self, ans: "Answer", res: ProcResult) -> None:
         """``res`` is ``ans``'s ending: its result if not given out yet, else a late ending."""
@@ -382,7 +391,8 @@ class PersistentDecoder:
     def _answered(self, a: "Answer", srv: "_Server") -> ProcResult:
         head = a.line.split(b" ", 2)
         code = int(head[1])
-        res = ProcResult(self.argv, code, elapsed_s=a.elapsed, stderr_tail=srv.err_since(a.err_start))
+        srv.err_mark = os.fstat(srv.err.fileno()).st_size  # what it writes from now on is the next input's
+        res = ProcResult(self.argv, code, elapsed_s=a.elapsed, stderr_tail=srv.err_since(a.err_start, srv.err_mark))
         self._answers += 1
         if code == 0 or self._answers % 16 == 0:  # each file is capped by RLIMIT_FSIZE anyway
             res.output_bytes = tree_size(self.workdir, stop_at=self.limits.output_mb * 2**20 * 4)
@@ -440,6 +450,7 @@ class _Server:
         self.proc, self.cg, self.err, self.status_r, self.as_limit = proc, cg, err, status_r, as_limit
         self.buf = b""
         self.last: Answer | None = None
+        self.err_mark: int | None = None  # the end of its stderr when its last answer was read
 
     def exit_status(self) -> int | None:
         """The process's exit code if it has ended (not reaped: :meth:`PersistentDecoder._ended`
@@ -465,15 +476,17 @@ class _Server:
             os.close(self.status_r)
             self.status_r = None
 
-    def err_since(self, start: int) -> str:
-        return tail_from(self.err.fileno(), start)
+    def err_since(self, start: int, end: int | None = None) -> str:
+        return tail_from(self.err.fileno(), start, end)
 
     def send(self, a: "Answer", limits: Limits) -> None:
         """Write ``a``'s request within its deadline, reading what the decoder sends meanwhile
         (kept for :meth:`read_answer`; more than one answer's worth is a protocol error)."""
         a.id = secrets.randbits(48)
         a.srv = self
-        a.err_start = os.fstat(self.err.fileno()).st_size
+        # stderr written since the last answer was read is this input's (a report an answer sent
+        # early left behind is then confirmed); before any answer, from now
+        a.err_start = self.err_mark if self.err_mark is not None else os.fstat(self.err.fileno()).st_size
         a.t0 = time.perf_counter()
         data = memoryview(f"{a.id} {len(a.data)} {a.out_path}\n".encode() + a.data)
         wfd, rfd = self.proc.stdin.fileno(), self.proc.stdout.fileno()

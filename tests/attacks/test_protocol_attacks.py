@@ -326,3 +326,33 @@ while True:
     assert f.min_stats.flaky is True and f.min_stats.reproduced is False
     assert f.minimal == f.original.data and f.min_stats.tests == 1  # not minimised
     assert json.loads((f.path / "finding.json").read_text())["flaky"] is True
+
+
+def test_a_crash_report_printed_after_the_answer_is_its_inputs(tmp_path):
+    """A sanitizer report printed after the answer, the process living on: wherever it lands
+    (before the harness read the answer, in the next input's stderr, or between the two
+    requests), it is confirmed and filed under the input that printed it — not the next one,
+    and not lost."""
+    serve = """while True:
+    rid, data = read()
+    answer(rid, 2)
+    if b'REPORT' in data:
+        time.sleep(0.05)
+        sys.stderr.write('==1==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x602 at pc 0x4005\\n'
+                         '    #0 0x4005 in parse_plane dec.c:10\\n    #1 0x4006 in main dec.c:20\\n')
+        sys.stderr.flush()
+"""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(2)", serve=serve, limits="timeout_s = 5"))
+    try:
+        got = _queue(t, [b"", b"REPORT", b"", b""])
+        assert [v is None for v in got] == [True, False, True, True], got
+        assert got[1].cls == "crash" and "AddressSanitizer" in got[1].message
+        # one input at a time, the report written between two requests: it reaches its input late
+        report = Entry(STREAM + b"REPORT", origin="report")
+        assert t.execute(report).verdict is None  # given out at its answer
+        time.sleep(0.5)  # the report is written before the next request
+        assert t.execute(Entry(STREAM, origin="next")).verdict is None
+        ((e, v),) = t.take_late()
+        assert e is report and v.cls == "crash" and "AddressSanitizer" in v.message
+    finally:
+        t.close()
