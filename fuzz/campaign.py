@@ -113,7 +113,8 @@ _FINDING_FIELDS = {"key": str, "cls": str, "signature": str, "message": str, "de
 
 def _fields(d: dict, want: dict, what: str) -> None:
     for k, t in want.items():
-        if k not in d or isinstance(d[k], bool) or not isinstance(d[k], t):
+        kinds = t if isinstance(t, tuple) else (t,)
+        if k not in d or (isinstance(d[k], bool) and bool not in kinds) or not isinstance(d[k], t):
             raise ClusterError(f"{what} from the cluster lacks {k!r} or holds the wrong kind of value there")
 
 
@@ -140,15 +141,17 @@ def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: fl
     target = _target(spec, work)
     last = {}
     try:
-        def test(cand: bytes) -> bool:
-            v = target.execute(Entry(cand, kind=kind, origin="minimise")).verdict
+        def test(cand: bytes, run=target.settled) -> bool:  # its ending bound to it (DecoderTarget.settled)
+            v = run(Entry(cand, kind=kind, origin="minimise")).verdict
             if v is not None and v.key == key:
                 last["v"] = v
                 return True
             return False
-        minimal, stats = minimise(data, test, max_tests=tests, max_seconds=seconds)
+        minimal, stats = minimise(data, test, max_tests=tests, max_seconds=seconds,
+                                  check=lambda c: test(c, target.alone))
         v = last.get("v")
         return _json({"minimal": _b64(minimal), "tests": stats.tests, "seconds": stats.seconds,
+                      "reproduced": stats.reproduced, "flaky": stats.flaky,
                       "message": v.message if v else None, "detail": v.detail if v else None})
     finally:
         target.close()
@@ -194,8 +197,8 @@ class Campaign:
 def minimise_report(text) -> dict:
     """A minimisation's JSON report, checked, its input decoded."""
     m = from_data(text, "minimisation report")
-    _fields(m, {"minimal": str, "tests": int, "seconds": (int, float), "message": (str, type(None)),
-                "detail": (dict, type(None))}, "a minimisation report")
+    _fields(m, {"minimal": str, "tests": int, "seconds": (int, float), "reproduced": (bool, type(None)),
+                "flaky": bool, "message": (str, type(None)), "detail": (dict, type(None))}, "a minimisation report")
     m["minimal"] = _unb64(m["minimal"], "a minimised input")
     return m
 
@@ -250,7 +253,8 @@ def _write(camp: Campaign, mins: dict, spec: ShardSpec, out: Path) -> list:
             if m.get("minimal") is not None:
                 fd.minimal = m["minimal"]
                 fd.min_stats = MinimiseStats(bytes_before=len(f["data"]), bytes_after=len(m["minimal"]),
-                                             tests=m["tests"], seconds=m["seconds"])
+                                             tests=m["tests"], seconds=m["seconds"], reproduced=m["reproduced"],
+                                             flaky=m["flaky"])
                 if m.get("message"):
                     fd.min_verdict = Verdict(f["cls"], f["signature"], m["message"], m["detail"] or {})
             write_finding(out, fd, SimpleNamespace(target=local, decoder_info=info, seed=f["seed"]))

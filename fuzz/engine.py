@@ -187,7 +187,7 @@ class Fuzzer:
         kind = self.kinds[index % len(self.kinds)]
         n = len(self.corpus[kind]) if corpus_size is None else corpus_size
         e = self._make_input(index, kind, self.corpus[kind][:n])
-        e.corpus_size = n
+        e.corpus_size, e.index = n, index
         return e
 
     def _make_input(self, index: int, kind: str, corpus: list[Entry]) -> Entry:
@@ -317,6 +317,8 @@ class Fuzzer:
                 st.corpus += 1
         if out.verdict is not None:
             self._finding(index, inp, out.verdict, deadline)
+        for e, v in getattr(self.target, "take_late", list)():  # found on a later input, filed under its own
+            self._finding(e.index if e.index is not None else index, e, v, deadline)
 
     def _finding(self, index: int, inp: Entry, v: Verdict, deadline: float) -> None:
         st = self.stats
@@ -345,8 +347,11 @@ class Fuzzer:
         kind = f.original.kind
         last: dict[str, Verdict | None] = {}
 
-        def test(cand: bytes) -> bool:
-            out = self.target.execute(Entry(cand, kind=kind, origin="minimise"))
+        settled = getattr(self.target, "settled", self.target.execute)  # its ending bound to it (targets.py)
+        alone = getattr(self.target, "alone", self.target.execute)  # a process of its own: the two checks
+
+        def test(cand: bytes, run=settled) -> bool:
+            out = run(Entry(cand, kind=kind, origin="minimise"))
             ok = out.verdict is not None and out.verdict.key == key
             if ok:
                 last["v"] = out.verdict
@@ -359,10 +364,11 @@ class Fuzzer:
                 bounds = None
         budget = max(min(self.minimise_seconds, deadline - time.perf_counter()), min(10.0, self.minimise_seconds))
         f.minimal, f.min_stats = minimise(f.original.data, test, max_tests=self.minimise_tests,
-                                          max_seconds=budget, boundaries=bounds)
+                                          max_seconds=budget, boundaries=bounds, check=lambda c: test(c, alone))
         f.min_verdict = last.get("v", f.verdict)
         self.progress.message(f"  minimised {f.id}: {f.min_stats.bytes_before} -> {f.min_stats.bytes_after} bytes "
-                              f"({f.min_stats.tests} tests, {f.min_stats.seconds:.1f} s)")
+                              f"({f.min_stats.tests} tests, {f.min_stats.seconds:.1f} s)"
+                              + ("  FLAKY: does not repeat on a fresh process" if f.min_stats.flaky else ""))
 
     def summary(self) -> dict:
         st = self.stats

@@ -81,8 +81,11 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
         "original": {"file": f"original.{ext}", "bytes": len(f.original.data),
                      "sha256": hashlib.sha256(f.original.data).hexdigest()},
         "minimal": {"file": f"minimal.{ext}", "bytes": len(minimal), "sha256": hashlib.sha256(minimal).hexdigest()},
-        "minimisation": ({"tests": f.min_stats.tests, "seconds": round(f.min_stats.seconds, 2)}
+        "minimisation": ({"tests": f.min_stats.tests, "seconds": round(f.min_stats.seconds, 2),
+                          "reproduced": f.min_stats.reproduced, "flaky": f.min_stats.flaky}
                          if f.min_stats else None),
+        # a finding whose input does not do it again on a fresh process, or that no input did alone
+        "flaky": bool((f.min_stats and f.min_stats.flaky) or (f.verdict.detail or {}).get("flaky")),
         "detail": {k: v for k, v in (mv.detail or {}).items()},
         "reproduce": {"fbaconf": shlex.join(replay), "command": command,
                       "regenerate": f"input #{f.index} of seed {fz.seed} (corpus size {f.original.corpus_size})"},
@@ -113,10 +116,11 @@ def load_findings(fuzz_dir: Path) -> list[tuple[Path, dict]]:
 
 
 def replay(target, data: bytes, kind: str = "stream") -> Verdict | None:
-    """The verdict of ``target`` on ``data``. A replay is a run of its own: the fork server or
-    persistent decoder it starts is stopped when it ends (``target.close``)."""
+    """The verdict of ``target`` on ``data``, on a process of its own (``alone``: through
+    ``serve``, a fresh process whose exit is awaited). A replay is a run of its own: the fork
+    server or persistent decoder it starts is stopped when it ends (``target.close``)."""
     try:
-        return target.execute(Entry(data, kind=kind, origin="replay")).verdict
+        return getattr(target, "alone", target.execute)(Entry(data, kind=kind, origin="replay")).verdict
     finally:
         close = getattr(target, "close", None)
         if close is not None:

@@ -38,6 +38,7 @@ class Entry:
     recon: Any = None  # encoder reconstruction for generated streams (round-trip oracle)
     model: StreamModel | None = None
     corpus_size: int | None = None  # size of the corpus it was made from (regeneration)
+    index: int | None = None  # its input number in the run that made it
 
     def __post_init__(self) -> None:
         self.kind = InputKind(self.kind)

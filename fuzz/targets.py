@@ -27,7 +27,7 @@ from fbaconf.harness.runner import hidden_from_decoders
 from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.endings import crash_report
 from fbaconf.isolation.forkclient import ForkServer
-from fbaconf.isolation.persistent import PersistentDecoder
+from fbaconf.isolation.persistent import FLAKY, PersistentDecoder
 from fbaconf.isolation.sandbox import Limits
 from fbaconf.profiles import checker
 from fbaconf.profiles.checker import check_stream
@@ -151,6 +151,9 @@ class DecoderTarget:
         self._local = threading.local()
         self._workers: list = []
         self._workers_lock = threading.Lock()
+        self._late: list[tuple[Entry, Verdict]] = []  # take_late
+        self._clean: bytes | None = None  # the shortest input answered cleanly (settled's follower)
+        self._probed = False
         if kind == "stream" and "fba" not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} does not accept binary streams (inputs: "
                                  f"{', '.join(adapter.inputs)})")
@@ -280,18 +283,17 @@ class DecoderTarget:
             slot = w.slots[k]
             job = self._reuse(slot, inp.data, write_input=not self.persistent)  # persistent: on stdin
             if w.server is None and self.persistent:
-                w.argv = [self.adapter.argv("serve", slot.job)]
-                w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),
-                                             self.limits, env=self.adapter.env)
+                self._serve(w)
             elif w.server is None:
                 w.argv = [self.argv_for(s.job) for s in w.slots]  # a slot's paths never change
                 w.server = ForkServer(w.root, self._view(w, w.argv[0]), self.limits, env=self.adapter.env,
                                       sum_outputs_every=16, slots=len(w.slots))
             if self.persistent:
                 pending = w.server.start(inp.data, job.values["faps_out"])
+                pending.on_late = lambda res, inp=inp, job=job: self._late_ending(inp, job, res)
             else:
                 pending = w.server.start(w.argv[k], job.workdir, slot=k)
-            return Run(pending.wait, lambda: ExecResult(self._judge(inp, job, pending.result())))
+            return Run(pending.wait, lambda: self._clean_if(inp, ExecResult(self._judge(inp, job, pending.result()))))
         workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
         try:
             job = self._job(inp.data, workdir)
@@ -309,6 +311,87 @@ class DecoderTarget:
                 pass
         return Run.done(out)
 
+    def _clean_if(self, inp: Entry, out: ExecResult) -> ExecResult:
+        """``out`` as it is; a clean input of 4 KB at most, shorter than the last, is kept as
+        :meth:`settled`'s follower."""
+        if (self.persistent and out.verdict is None and len(inp.data) <= 4096
+                and (self._clean is None or len(inp.data) < len(self._clean))):
+            self._clean = inp.data
+        return out
+
+    def _serve(self, w: "_Worker") -> None:
+        """The worker's persistent decoder (``[commands] serve``), started at its first input."""
+        w.argv = [self.adapter.argv("serve", w.slots[0].job)]
+        w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),
+                                     self.limits, env=self.adapter.env)
+
+    def alone(self, inp: Entry) -> ExecResult:
+        """``inp`` on a decoder process of its own, whose whole life is this input's: how a
+        finding is minimised, its minimal input checked and replayed. Through ``serve`` that is a
+        fresh process given this one input, its exit awaited (an answer sent before the decoding
+        ended cannot hide a crash that follows it); otherwise every input is a process of its
+        own already."""
+        if not self.persistent:
+            return self.execute(inp)
+        w = self._worker()
+        if w.server is None:
+            self._serve(w)
+        w.server.drain()  # the case folders are free
+        k, w.turn = w.turn, (w.turn + 1) % len(w.slots)
+        job = self._reuse(w.slots[k], inp.data, write_input=False)
+        return ExecResult(self._judge(inp, job, w.server.alone(inp.data, job.values["faps_out"])))
+
+    def settled(self, inp: Entry) -> ExecResult:
+        """``inp``'s verdict once the decoder has answered a request after it — how each input
+        of a minimisation is judged. Through ``serve``, ``inp`` goes to the worker's process
+        followed by an input it handled cleanly before (the follower): ``inp``'s result is held
+        until the follower is answered, so an ending that comes after ``inp``'s answer is
+        confirmed and filed under ``inp`` (isolation/persistent.py), at the cost of one more
+        round trip, not of a process per input. Without a known clean follower, or without
+        ``serve``, as :meth:`alone` / :meth:`execute`."""
+        if not self.persistent:
+            return self.execute(inp)
+        follower = self._follower()
+        if follower is None:
+            return self.alone(inp)
+        w = self._worker()
+        if w.server is None:
+            self._serve(w)
+        w.server.drain()
+        jobs = []
+        for data in (inp.data, follower):
+            k, w.turn = w.turn, (w.turn + 1) % len(w.slots)
+            jobs.append(self._reuse(w.slots[k], data, write_input=False))
+        first = w.server.start(inp.data, jobs[0].values["faps_out"])
+        after = w.server.start(follower, jobs[1].values["faps_out"])
+        res = first.result()
+        after.result()  # the follower's own ending is not this input's finding
+        return ExecResult(self._judge(inp, jobs[0], res))
+
+    def _follower(self) -> bytes | None:
+        """An input this decoder answered cleanly (no finding): the shortest of those it was
+        given, else the empty input if it handles that cleanly alone, else None."""
+        if self._clean is None and not self._probed:
+            self._probed = True
+            if self.alone(Entry(b"", kind=self.kind, origin="follower")).verdict is None:
+                self._clean = b""
+        return self._clean
+
+    def _late_ending(self, inp: Entry, job, res) -> None:
+        """An ending found to be ``inp``'s after its result was given out (one input at a time:
+        the persistent decoder confirmed it on a later input, isolation/persistent.py)."""
+        v = self._judge(inp, job, res)
+        if v is not None:
+            with self._workers_lock:
+                self._late.append((inp, v))
+
+    def take_late(self) -> list[tuple[Entry, Verdict]]:
+        """The findings of inputs already judged clean that a later input showed to be theirs
+        (the fuzzer files them under those inputs)."""
+        with self._workers_lock:
+            out, self._late = self._late, []
+        return out
+
     def _judge(self, inp: Entry, job, res) -> Verdict | None:
         """The finding (or None) for one finished decoder process."""
         ending = endings.classify(res, self.limits, self.reject_exit_codes)
@@ -316,8 +399,12 @@ class DecoderTarget:
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
         detail = {"exit_code": res.returncode, "signal": res.signal, "elapsed_s": round(res.elapsed_s, 3),
                   **({"notes": list(res.notes)} if res.notes else {}),
-                  "maxrss_mb": round(res.maxrss_mb, 1), "stderr_tail": res.stderr_tail[-1500:]}
-        return self.verdict_for(ending, inp, job, detail)
+                  **({"harness": res.detail} if res.detail else {}), "maxrss_mb": round(res.maxrss_mb, 1),
+                  "stderr_tail": res.stderr_tail[-1500:]}
+        v = self.verdict_for(ending, inp, job, detail)
+        if v is not None and FLAKY in res.notes:  # no input reproduces it alone: its own key, said so
+            v = Verdict(v.cls, f"flaky:{v.signature}", f"{v.message} {res.detail}", {**v.detail, "flaky": True})
+        return v
 
     def verdict_for(self, ending, inp: Entry, job, detail: dict) -> Verdict | None:
         """The finding (or None) for one process ending — the run's classifier

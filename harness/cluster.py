@@ -1,11 +1,11 @@
 """Cases as tasks on a Dask cluster: ``--cluster local[:N]`` or ``--cluster tls://HOST:PORT``.
 
 The embedded thread pool (``-j N``) stays the default; a cluster is for campaigns that
-outgrow one machine. ``local[:N]`` starts a ``LocalCluster`` of N single-threaded worker
-processes on this machine (default: the CPU count); ``tls://HOST:PORT`` (``tcp://`` is read
-as the same, always over TLS) connects to a running Dask scheduler whose workers have fbaconf
-installed and see the same paths (a shared filesystem: suites, goldens, the decoder and the
-run folder).
+outgrow one machine. ``local[:N]`` starts a cluster of N single-threaded worker processes on
+this machine, forked from this one (default: the CPU count; :mod:`fbaconf.cluster_local`);
+``tls://HOST:PORT`` (``tcp://`` is read as the same, always over TLS) connects to a running
+Dask scheduler whose workers have fbaconf installed and see the same paths (a shared
+filesystem: suites, goldens, the decoder and the run folder).
 
 Each case is one task (``run_case`` in a worker); results stream back to this process,
 which writes them to the same resumable ``results.jsonl`` as the pool does. A worker lost
@@ -17,11 +17,13 @@ Security (issue 29). Anyone who can talk to a Dask scheduler or worker can run c
 workers, so every cluster is mutual TLS (``distributed.security.Security``): each end proves
 itself with a certificate signed by the cluster's own authority.
 
-* ``local``: the authority and one certificate are made for the run
-  (:func:`fbaconf.tls.make_certificates`) in a private temporary folder (mode 0700, removed after); the
-  scheduler, workers and nannies listen on 127.0.0.1 only, over TLS; their HTTP servers
-  (health, metrics) on 127.0.0.1 too. A local process without the run's certificate — another
-  user's, or the same user's not started by this run — cannot join or submit.
+* ``local``: the cluster authenticates the run, not a user (:mod:`fbaconf.cluster_local`): the
+  authority and one certificate are made for the run (:func:`fbaconf.tls.make_certificates`)
+  and the certificate's key lives only in the memory of this process and of the workers it
+  forks, all non-dumpable while the cluster lives — no file, argument or environment variable
+  holds it. Everything listens on 127.0.0.1 over TLS and nothing speaks HTTP (no dashboard).
+  No other process — another user's, or the same user's not started by this run — can join or
+  submit.
 * ``tls://HOST:PORT``: the lab's certificates are required — ``FBACONF_CLUSTER_CA``,
   ``FBACONF_CLUSTER_CERT`` and ``FBACONF_CLUSTER_KEY`` (PEM files: the lab's authority, and a
   client certificate and key it signed), else Dask's own configuration
@@ -44,8 +46,6 @@ import json
 import os
 import re
 import secrets
-import shutil
-import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
@@ -82,14 +82,6 @@ def parse(spec: str) -> tuple[str, str | int]:
 
 # ------------------------------------------------------------------ certificates
 
-def security_for(paths: dict[str, Path]):
-    """Mutual TLS for every role (scheduler, worker, client) with one authority and certificate."""
-    from distributed.security import Security  # noqa: PLC0415 (the cluster extra)
-    ca, cert, key = (str(paths[k]) for k in ("ca", "cert", "key"))
-    return Security(tls_ca_file=ca, tls_client_cert=cert, tls_client_key=key, tls_scheduler_cert=cert,
-                    tls_scheduler_key=key, tls_worker_cert=cert, tls_worker_key=key, require_encryption=True)
-
-
 def lab_security():
     """The lab's certificates for a remote scheduler (module doc), or ClusterError."""
     from distributed.security import Security  # noqa: PLC0415 (the cluster extra)
@@ -113,30 +105,24 @@ def lab_security():
 
 @contextmanager
 def client(spec: str) -> Iterator:
-    """A connected ``distributed.Client`` for ``spec`` (closed, and a local cluster shut down and
-    its certificates removed, after)."""
+    """A connected ``distributed.Client`` for ``spec`` (closed, and a local cluster shut down,
+    after)."""
     kind, arg = parse(spec)
     try:
-        from distributed import Client, LocalCluster  # noqa: PLC0415 (Dask: optional (the cluster extra))
+        from distributed import Client  # noqa: PLC0415 (Dask: optional (the cluster extra))
     except ImportError:
         raise ClusterError("--cluster needs Dask: pip install 'dask[distributed]'") from None
     if kind == "local":
-        folder = Path(tempfile.mkdtemp(prefix="fbaconf-tls-"))
-        try:
-            sec = security_for(make_certificates(folder / "certs"))
-            cluster = LocalCluster(n_workers=int(arg), threads_per_worker=1, processes=True, protocol="tls://",
-                                   host="127.0.0.1", security=sec, dashboard_address="127.0.0.1:0",
-                                   worker_dashboard_address="127.0.0.1:0", silence_logs=40)
+        if not hasattr(os, "memfd_create"):
+            raise ClusterError("--cluster local needs Linux: the run's key is kept in memory (memfd, prctl); "
+                               "use --cluster tls://HOST:PORT or -j N")
+        from fbaconf.cluster_local import local_cluster  # noqa: PLC0415 (Dask: optional)
+        with local_cluster(int(arg), make_certificates) as (cluster, sec):
+            c = Client(cluster, security=sec, deserializers=RESULT_DESERIALIZERS)
             try:
-                c = Client(cluster, security=sec, deserializers=RESULT_DESERIALIZERS)
-                try:
-                    yield c
-                finally:
-                    c.close()
+                yield c
             finally:
-                cluster.close()
-        finally:
-            shutil.rmtree(folder, ignore_errors=True)
+                c.close()
     else:
         sec = lab_security()
         try:

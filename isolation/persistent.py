@@ -16,7 +16,8 @@ else is sent until it arrives) and ends when its stdin closes.
 
 Framing, one input at a time. The next input is written only once the previous one's answer
 is in, so whatever happens between two answers — a crash, a hang, a report on stderr — is
-the input in flight's, and the inputs queued behind it are sent, in order, to a fresh process
+the input in flight's (unless confirmation says otherwise: "Answers bound to what they
+answer", below), and the inputs queued behind it are sent, in order, to a fresh process
 (after a first crash a spare process is kept starting in the background, so the next input
 need not wait for a sandbox). Reads and writes are bounded in size and time, in both
 directions: the input is written with the input's deadline while the harness keeps reading
@@ -35,10 +36,32 @@ input's ending as its exit status says (a crash, a memory limit...); one that ex
 answering is a protocol error too.
 
 A crash (the process dies: a signal, a sanitizer abort, a panic), a hang (no answer within
-``timeout_s``) or a memory or output blow-up is the ending of the input being decoded. The
+``timeout_s``) or a memory or output blow-up is the ending of the input being decoded, and
+what the process writes on stderr from the previous answer to this input's is this input's
+stderr (a crash report there is a crash). The
 folder's size is watched while an input runs (:mod:`.watch`). The result is a
 :class:`~fbaconf.isolation.sandbox.ProcResult`, judged by :mod:`.endings` like a spawned
 decoder's.
+
+Answers bound to what they answer. An answer says "done" — a decoder may send it before it has
+finished (answer, then decode), and then its crash, hang, blow-up, exit or crash report comes
+while the *next* input is in flight. So an ending on a process that had answered an earlier
+input is confirmed. The input in flight is sent again as the first input of a fresh process
+(the spare): an ending there is its own. If it is answered there instead, the input the old
+process answered last is run **alone** (:meth:`PersistentDecoder.alone`: a fresh process, that
+one input, its stdin closed after the answer and its exit awaited — everything the process
+does is that input's); if it ends so alone, the ending is filed under it (its result is still
+held: an input's result is given out once the next queued input has answered, and that
+answer now includes the confirmation; one already given out — one input at a time, ``-j N``
+— reaches its caller through :attr:`Answer.on_late`). An ending neither reproduces alone
+needs what the process decoded before: it stays with the input in flight, marked
+``not-reproduced-alone`` (flaky). A process that crashes between an answer and the next
+request, and a crash report printed while an input was in flight, are confirmed alone the same
+way. Once an ending of a kind (signal, limit, exit code, crash report: :func:`ending_key`) has
+been confirmed as the input-in-flight's, that kind is not confirmed again on this decoder: a
+later one is at worst one more hit of a finding already filed under its own input. A clean
+answer costs nothing; a new kind of crash, one process start (two when the input answered
+before it must be run alone); a hang, its timeout once more.
 """
 from __future__ import annotations
 
@@ -47,13 +70,16 @@ import os
 import secrets
 import select
 import subprocess
+import tempfile
 import time
 from pathlib import Path
+from typing import Callable
 
 from fbaconf.safefs import tree_size
 
 from . import preflight, sandbox
 from .cgroups import Cgroups
+from .endings import crash_report
 from .forkclient import ForkServerError
 from .process import Finish, exit_reported, kill_group, launch_server, result, stop_server, stopping, tail_from
 from .sandbox import Limits, ProcResult, View
@@ -62,6 +88,25 @@ from .watch import Watch
 PROTOCOL = 2
 MAX_ANSWER = 4096  # bytes of one answer line
 CHUNK = 1 << 16
+FLAKY = "not-reproduced-alone"  # the note on an ending no input reproduces alone
+NO_ANSWER = "no-answer"  # the note on an ending before the input's answer (the process ended or was stopped)
+
+
+def abnormal(res: ProcResult) -> bool:
+    """Whether ``res`` is an ending, not an answer: the process ended or was stopped before it
+    answered, or died or blew a limit after it, or printed a crash report, or broke the
+    protocol — an answered code, whatever it is, is none."""
+    return (NO_ANSWER in res.notes or "protocol-error" in res.notes or res.signal is not None or res.timed_out
+            or res.memory_limit_hit or res.output_limit_hit or crash_report(res.stderr_tail) is not None)
+
+
+def ending_key(res: ProcResult) -> tuple:
+    """What kind of ending ``res`` is (signal, limit, exit code, crash report): an ending of a
+    kind already confirmed as the input-in-flight's is not confirmed again (module doc)."""
+    rep = crash_report(res.stderr_tail)
+    return (res.signal, res.timed_out, res.memory_limit_hit, res.output_limit_hit, "protocol-error" in res.notes,
+            res.returncode if NO_ANSWER in res.notes else None, rep.kind if rep else None,
+            rep.signature if rep else None)
 
 
 class PersistentDecoder:
@@ -79,13 +124,17 @@ class PersistentDecoder:
         self.io = self.root / ".io"
         self.server: _Server | None = None
         self._spare: _Server | None = None  # started ahead, after a first crash
-        self._launches = 0
+        self._alone_spare: _Server | None = None  # the next run alone's process, started ahead
         self._pending: collections.deque[Answer] = collections.deque()
         self._inflight: Answer | None = None
+        self._launches = 0  # processes started to take inputs in turn (the one in use, the spare)
+        self.alone_runs = 0  # processes started for one input each (alone)
         self._answers = 0
+        self.unclaimed: list[tuple[Answer, ProcResult]] = []  # late endings of inputs given out, no on_late
+        self._owned: set[tuple] = set()  # ending kinds confirmed as the input-in-flight's (ending_key)
 
     # ---------------------------------------------------------------- processes
-    def _launch(self) -> "_Server":
+    def _launch(self, *, alone: bool = False) -> "_Server":
         """One sandboxed ``serve`` process, not yet given an input."""
         self.io.mkdir(parents=True, exist_ok=True)
         (self.workdir / "tmp").mkdir(parents=True, exist_ok=True)
@@ -98,8 +147,11 @@ class PersistentDecoder:
             head, status_r = sandbox.sandbox_argv(self.view, self.workdir, fds)
             inner = head + inner
         lim = self.limits
-        self._launches += 1
-        err = open(self.io / f"stderr{self._launches % 2}", "wb+")  # the process in use and its spare
+        if alone:
+            self.alone_runs += 1
+        else:
+            self._launches += 1
+        err = tempfile.TemporaryFile(dir=self.io)  # its stderr (the one in use, a spare and one alone run at most)
         cg = Cgroups(processes=lim.processes, memory_mb=lim.memory_mb if lim.memory_kind != "none" else 0)
         as_bytes = sandbox.as_bytes_for(lim, cg)
         try:
@@ -117,15 +169,19 @@ class PersistentDecoder:
             os.set_blocking(f.fileno(), False)
         return _Server(proc, cg, err, status_r, as_bytes > 0)
 
+    def _take_spare(self, which: str = "_spare") -> "_Server | None":
+        spare = getattr(self, which)
+        setattr(self, which, None)
+        if spare is not None and spare.exit_status() is not None:  # it died waiting
+            spare.stop()
+            spare = None
+        return spare
+
     def _start(self) -> None:
         """The process for the next inputs: the spare if one is ready, else a new one. After a
         first restart a spare is kept starting in the background, so a decoder that crashes
         often does not wait for a sandbox to start before each next input."""
-        spare, self._spare = self._spare, None
-        if spare is not None and spare.proc.poll() is not None:  # it died waiting
-            spare.stop()
-            spare = None
-        self.server = spare or self._launch()
+        self.server = self._take_spare() or self._launch()
         self.starts += 1
         if self.starts > 1:
             self._spare = self._launch()
@@ -138,9 +194,11 @@ class PersistentDecoder:
 
     def close(self) -> None:
         self._drop()
-        spare, self._spare = self._spare, None
-        if spare is not None:
-            spare.stop()
+        for which in ("_spare", "_alone_spare"):
+            spare = getattr(self, which)
+            setattr(self, which, None)
+            if spare is not None:
+                spare.stop()
 
     # ---------------------------------------------------------------- inputs
     def run(self, data: bytes, out_path: str) -> ProcResult:
@@ -160,14 +218,24 @@ class PersistentDecoder:
             self._dispatch()
         return a
 
+    def drain(self) -> None:
+        """Every queued input answered or ended (the process is then free)."""
+        while self._inflight is not None or self._pending:
+            if self._inflight is None:
+                self._dispatch()
+            if self._inflight is not None:
+                self._complete(self._inflight)
+
     def _dispatch(self) -> None:
         """Write the next queued input (the decoder is free)."""
         while self._inflight is None and self._pending:
             a = self._pending.popleft()
             if a.res is not None:
                 continue
-            if self.server is None or self.server.proc.poll() is not None:
-                self._drop()
+            srv = self.server
+            if srv is not None and srv.exit_status() is not None:  # it ended after its last answer
+                self._ended_between(srv)
+            if self.server is None:
                 try:
                     self._start()
                 except ForkServerError as e:
@@ -176,36 +244,155 @@ class PersistentDecoder:
             self._inflight = a
             self.server.send(a, self.limits)  # how it went is read by _complete
 
+    def _ended_between(self, srv: "_Server") -> None:
+        """The process ended after answering its last input, nothing sent since: an exit is let
+        go (a fresh process takes the next input); a crash, or a crash report, is confirmed on
+        the input it answered last (module doc)."""
+        last = srv.last
+        res = self._ended(last, srv, None, answered=True) if last is not None else None
+        self._drop()
+        if res is not None and abnormal(res):
+            self._whose(res, None, last)
+
     def _complete(self, a: "Answer") -> None:
         """Read ``a``'s answer (``a`` is in flight) and judge it; then the next input goes out."""
         srv = self.server
+        prev = srv.last  # the input this process answered before ``a``, if any
         watch = Watch(self.limits, [self.workdir], pid=srv.proc.pid, procs=srv.cg.procs if srv.cg.dirs else None,
                       t0=a.t0)
         got = srv.read_answer(a, a.t0 + self.limits.timeout_s, watch)
         a.elapsed = time.perf_counter() - a.t0
         self._inflight = None
+        res = None
         if got == "answered":
-            a.res = self._answered(a, srv)
+            res = self._answered(a, srv)
             srv.last = a
-        elif got in ("timeout", "memory", "output"):
-            a.res = self._ended(a, srv, got)
-        elif got == "eof":
-            a.res = self._ended(a, srv, None)
+        elif got in ("timeout", "memory", "output", "eof"):
+            res = self._ended(a, srv, None if got == "eof" else got)
+            self._drop()
         else:  # a protocol error: of this input, or of the previous one (module doc)
             whose, why = got
-            prev = srv.last
             if whose == "previous" and prev is not None and not prev.consumed:
                 prev.res = self._broken(prev, srv, why)
+                self._drop()
                 a.reset()
                 self._pending.appendleft(a)  # held up by the previous input's error: again, on a fresh process
             else:
-                a.res = self._broken(a, srv, why)
+                a.res, a.suspect = self._broken(a, srv, why), None
+                self._drop()
+        if res is None:
+            pass
+        elif a.suspect is not None:
+            self._confirmed(a, res)
+        elif prev is None or not abnormal(res) or ending_key(res) in self._owned:
+            a.res = res
+        elif got == "answered":  # a crash report; the process lives on: confirmed on processes of their own
+            self._whose(res, a, prev)
+        else:  # maybe what an answer sent early left running (module doc)
+            a.reset()
+            a.suspect = (res, prev)
+            self._pending.appendleft(a)  # again, as the first input of a fresh process
         self._dispatch()
+
+    def _confirmed(self, a: "Answer", res: ProcResult) -> None:
+        """``a`` ran again as the first input of a fresh process after an ending it may not own
+        (``a.suspect``): an ending now is its own; a clean answer sends the question on to the
+        input answered before it (module doc)."""
+        (first, prev), a.suspect = a.suspect, None
+        a.res = res  # its own ending or result, whether the first ending was its own or not
+        if not abnormal(res):
+            self._whose(first, None, prev, inflight=a)
+        elif ending_key(res) == ending_key(first):
+            self._owned.add(ending_key(res))
+        else:  # another ending of its own: the first may still be the input answered before's
+            self._before(prev)
+
+    def _whose(self, res: ProcResult, a: "Answer | None", prev: "Answer", *, inflight: "Answer | None" = None) -> None:
+        """``res`` ended (or was printed by) a process that had answered ``prev`` last, while
+        ``a`` was in flight (``a`` None: nothing was, or ``inflight`` has its own result already):
+        file it under the input that ends so alone (module doc)."""
+        if a is not None:
+            own = self.alone(a.data, a.out_path)
+            if "exec-failed" in own.notes:  # no process to confirm it with: the input in flight's, as ever
+                a.res = res
+                return
+            a.res = own  # its own ending, on a process of its own
+            if abnormal(own):
+                return
+            inflight = a
+        if self._before(prev):
+            return
+        res.notes.append(FLAKY)
+        res.detail = (res.detail + " " if res.detail else "") + (
+            "(flaky: neither this input nor the one the process answered before it ends so alone — it needs "
+            "what the process decoded before)")
+        if inflight is not None:
+            inflight.res = res
+        else:
+            self._file(prev, res)
+
+    def _before(self, prev: "Answer") -> bool:
+        """Run ``prev`` (the input a process answered before an ending) alone; whether it ended
+        so there — its ending is then filed under it."""
+        before = self.alone(prev.data, prev.out_path)
+        if not abnormal(before) or "exec-failed" in before.notes:
+            return False
+        before.detail = (before.detail + " " if before.detail else "") + (
+            "(it answered before it had finished: the ending came while the next input was in flight, "
+            "and this input alone ends so)")
+        self._file(prev, before)
+        return True
+
+    def _file(self, ans: "Answer", res: ProcResult) -> None:
+        """``res`` is ``ans``'s ending: its result if not given out yet, else a late ending."""
+        if not ans.consumed:
+            ans.res = res
+        elif ans.on_late is not None:
+            ans.on_late(res)
+        else:
+            self.unclaimed.append((ans, res))
+
+    def alone(self, data: bytes, out_path: str) -> ProcResult:
+        """``data`` as the only input of a fresh process: its request, its answer, then its
+        stdin closed and its exit awaited within the input's timeout — everything that process
+        does is this input's. A crash, a limit or a crash report after the answer is its ending;
+        an exit, whatever its code, leaves the answer. (Not the spare, which stays ready for the
+        inputs in turn: one started ahead for runs alone, the next one starting while this one
+        runs — a decoder that crashes often, or a minimisation, does not wait for a sandbox.)"""
+        try:
+            srv = self._take_spare("_alone_spare") or self._launch(alone=True)
+        except ForkServerError as e:
+            return ProcResult(self.argv, None, stderr_tail=str(e), notes=["exec-failed"], detail=str(e))
+        try:
+            self._alone_spare = self._launch(alone=True)
+        except ForkServerError:
+            self._alone_spare = None  # the next run alone starts its own
+        a = Answer(self, data, out_path)
+        try:
+            srv.send(a, self.limits)
+            deadline = a.t0 + self.limits.timeout_s
+            watch = Watch(self.limits, [self.workdir], pid=srv.proc.pid,
+                          procs=srv.cg.procs if srv.cg.dirs else None, t0=a.t0)
+            got = srv.read_answer(a, deadline, watch)
+            a.elapsed = time.perf_counter() - a.t0
+            answered = got == "answered"
+            if answered:
+                res = self._answered(a, srv)
+                got = srv.finish(a, deadline, watch)
+                if got == "eof":
+                    end = self._ended(a, srv, None, answered=True)
+                    return end if abnormal(end) else res
+            if got in ("timeout", "memory", "output", "eof"):
+                return self._ended(a, srv, None if got == "eof" else got, answered=answered)
+            return self._broken(a, srv, got[1])
+        finally:
+            srv.stop()
 
     def _answered(self, a: "Answer", srv: "_Server") -> ProcResult:
         head = a.line.split(b" ", 2)
         code = int(head[1])
-        res = ProcResult(self.argv, code, elapsed_s=a.elapsed, stderr_tail=srv.err_since(a.err_start))
+        srv.err_mark = os.fstat(srv.err.fileno()).st_size  # what it writes from now on is the next input's
+        res = ProcResult(self.argv, code, elapsed_s=a.elapsed, stderr_tail=srv.err_since(a.err_start, srv.err_mark))
         self._answers += 1
         if code == 0 or self._answers % 16 == 0:  # each file is capped by RLIMIT_FSIZE anyway
             res.output_bytes = tree_size(self.workdir, stop_at=self.limits.output_mb * 2**20 * 4)
@@ -214,14 +401,14 @@ class PersistentDecoder:
         return res
 
     def _broken(self, a: "Answer", srv: "_Server", why: str) -> ProcResult:
-        """The decoder broke the protocol during ``a``: that input's ending; a fresh process next."""
-        err = srv.err_since(a.err_start)
-        self._drop()
-        return ProcResult(self.argv, None, elapsed_s=a.elapsed, stderr_tail=err, notes=["protocol-error"],
+        """The decoder broke the protocol during ``a``: that input's ending (a fresh process next)."""
+        return ProcResult(self.argv, None, elapsed_s=a.elapsed, stderr_tail=srv.err_since(a.err_start),
+                          notes=["protocol-error"],
                           detail=f"broke the persistent protocol (version {PROTOCOL}, docs/fuzzing.md): {why}")
 
-    def _ended(self, a: "Answer", srv: "_Server", hit: str | None) -> ProcResult:
-        """The process died (``hit`` None) or was stopped at a limit while decoding ``a``."""
+    def _ended(self, a: "Answer", srv: "_Server", hit: str | None, *, answered: bool = False) -> ProcResult:
+        """The process died (``hit`` None) or was stopped at a limit (``hit``) while decoding
+        ``a`` (``answered``: after its answer)."""
         p = srv.proc
         if hit is not None:
             kill_group(p.pid)
@@ -246,8 +433,9 @@ class PersistentDecoder:
                      bwrap_status=sandbox.isolation() == "bwrap", notes=tuple(notes))
         res = result(self.argv, self.limits, fin, stdout_tail="", stderr_tail=srv.err_since(a.err_start),
                      measure_dirs=[self.workdir])
-        self._drop()
-        if res.returncode == 0 and hit is None:  # it exited cleanly in the middle of an input
+        if not answered:
+            res.notes.append(NO_ANSWER)
+        if res.returncode == 0 and hit is None and not answered:  # it exited cleanly in the middle of an input
             res.returncode = None
             res.notes.append("protocol-error")
             res.detail = f"broke the persistent protocol (version {PROTOCOL}): exited without answering request {a.id}"
@@ -262,6 +450,20 @@ class _Server:
         self.proc, self.cg, self.err, self.status_r, self.as_limit = proc, cg, err, status_r, as_limit
         self.buf = b""
         self.last: Answer | None = None
+        self.err_mark: int | None = None  # the end of its stderr when its last answer was read
+
+    def exit_status(self) -> int | None:
+        """The process's exit code if it has ended (not reaped: :meth:`PersistentDecoder._ended`
+        reads its status), else None."""
+        if self.proc.returncode is not None:
+            return self.proc.returncode
+        try:
+            info = os.waitid(os.P_PID, self.proc.pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+        except ChildProcessError:
+            return 0
+        if info is None:
+            return None
+        return info.si_status if info.si_code == os.CLD_EXITED else -info.si_status
 
     def take_status(self) -> int | None:
         fd, self.status_r = self.status_r, None
@@ -274,15 +476,17 @@ class _Server:
             os.close(self.status_r)
             self.status_r = None
 
-    def err_since(self, start: int) -> str:
-        return tail_from(self.err.fileno(), start)
+    def err_since(self, start: int, end: int | None = None) -> str:
+        return tail_from(self.err.fileno(), start, end)
 
     def send(self, a: "Answer", limits: Limits) -> None:
         """Write ``a``'s request within its deadline, reading what the decoder sends meanwhile
         (kept for :meth:`read_answer`; more than one answer's worth is a protocol error)."""
         a.id = secrets.randbits(48)
         a.srv = self
-        a.err_start = os.fstat(self.err.fileno()).st_size
+        # stderr written since the last answer was read is this input's (a report an answer sent
+        # early left behind is then confirmed); before any answer, from now
+        a.err_start = self.err_mark if self.err_mark is not None else os.fstat(self.err.fileno()).st_size
         a.t0 = time.perf_counter()
         data = memoryview(f"{a.id} {len(a.data)} {a.out_path}\n".encode() + a.data)
         wfd, rfd = self.proc.stdin.fileno(), self.proc.stdout.fileno()
@@ -365,6 +569,29 @@ class _Server:
         a.line = line
         return "answered"
 
+    def finish(self, a: "Answer", deadline: float, watch: Watch):
+        """After the answer of the process's only input (:meth:`PersistentDecoder.alone`): close
+        its stdin and wait for it to end — "eof" when it did (closed its output), a limit's
+        name, or ("this", why) when it wrote more."""
+        try:
+            self.proc.stdin.close()
+        except OSError:
+            pass
+        rfd = self.proc.stdout.fileno()
+        while True:
+            now = time.perf_counter()
+            if now >= deadline:
+                return "timeout"
+            if not select.select([rfd], [], [], min(deadline - now, watch.next_in(now)))[0]:
+                hit = watch.check(time.perf_counter())
+                if hit:
+                    return hit
+                continue
+            if not self._take(rfd, a):
+                return a.pending_end
+            if self.buf:
+                return ("this", f"wrote {self.buf[:60]!r} after its answer to request {a.id}, its only request")
+
 
 class Answer:
     """One input queued to a :class:`PersistentDecoder`: ``wait`` until it answered or ended
@@ -374,6 +601,8 @@ class Answer:
         self.dec, self.data, self.out_path = dec, data, out_path
         self.res: ProcResult | None = None
         self.consumed = False  # its result was given out
+        self.on_late: Callable[[ProcResult], None] | None = None  # its ending, found after it was given out
+        self.suspect: tuple[ProcResult, Answer] | None = None  # an ending to confirm, and the input answered before
         self.reset()
 
     def reset(self) -> None:
@@ -407,5 +636,7 @@ class Answer:
         if (not self.consumed and nxt is not None and nxt.res is None and self.srv is not None
                 and nxt.srv is self.srv and self.srv.last is self):
             dec._complete(nxt)
+            while nxt.res is None and nxt.suspect is not None and nxt.suspect[1] is self and dec._inflight is nxt:
+                dec._complete(nxt)  # its ending is being confirmed: it may be this input's
         self.consumed = True
         return self.res

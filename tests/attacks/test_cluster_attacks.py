@@ -5,9 +5,11 @@ run_case so a decoder exiting 3 everywhere reported PASS, or pre-submit fbaconf'
 keys; a local process joined --cluster local:1 mid-run."""
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
-import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -15,35 +17,45 @@ import pytest
 from fbaconf.fuzz.campaign import minimise_report, shard_report
 from fbaconf.harness import cluster
 from fbaconf.harness.cluster import ClusterError
+from fbaconf.tls import make_certificates
 
 distributed = pytest.importorskip("distributed")
 from distributed import Client, Worker  # noqa: E402
 from distributed.security import Security  # noqa: E402
 
 
-def _listening(pids: set[int]) -> set[str]:
-    """The addresses the processes ``pids`` listen on (TCP, IPv4 and IPv6)."""
+def _address(entry: str) -> tuple[str, int]:
+    """``host:port`` of /proc/net/tcp{,6} (the host in 32-bit words, each little-endian)."""
+    host, port = entry.split(":")
+    raw = bytes.fromhex(host)
+    return str(ipaddress.ip_address(b"".join(raw[i:i + 4][::-1] for i in range(0, len(raw), 4)))), int(port, 16)
+
+
+def own_listening() -> list[tuple[str, int]]:
+    """The addresses this process listens on (TCP), read from its own descriptors — a
+    non-dumpable process may read its own ``/proc``, no other process of its user may: run
+    here and, by ``client.run``, in each worker."""
     inodes = set()
-    for pid in pids:
+    for fd in os.listdir("/proc/self/fd"):
         try:
-            for fd in os.listdir(f"/proc/{pid}/fd"):
-                link = os.readlink(f"/proc/{pid}/fd/{fd}")
-                if link.startswith("socket:["):
-                    inodes.add(link[8:-1])
+            link = os.readlink(f"/proc/self/fd/{fd}")
         except OSError:
             continue
-    out = set()
-    for table, v6 in (("/proc/net/tcp", False), ("/proc/net/tcp6", True)):
+        if link.startswith("socket:["):
+            inodes.add(link[8:-1])
+    out = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
         for line in Path(table).read_text().splitlines()[1:]:
             f = line.split()
             if f[3] == "0A" and f[9] in inodes:  # LISTEN
-                host = f[1].split(":")[0]
-                if v6:
-                    out.add("::" if set(host) == {"0"} else "::1" if host.endswith("1") and set(host[:-1]) <= {"0"}
-                            else host)
-                else:
-                    out.add(socket.inet_ntoa(bytes.fromhex(host)[::-1]))
+                out.append(_address(f[1]))
     return out
+
+
+def cluster_ports(c) -> dict[str, list[tuple[str, int]]]:
+    """What the cluster's processes listen on: this one (the scheduler and the nannies) and
+    each worker."""
+    return {"harness": own_listening(), **c.run(own_listening)}
 
 
 def _refused(fn) -> bool:
@@ -61,9 +73,10 @@ def test_a_stranger_can_neither_connect_nor_join_a_local_cluster(tmp_path):
         assert addr.startswith("tls://127.0.0.1:"), addr
         workers = c.scheduler_info()["workers"]
         assert len(workers) == 1 and all(w.startswith("tls://127.0.0.1:") for w in workers)
-        # every socket the cluster's processes listen on is on loopback (TLS: the HTTP servers too)
-        pids = {os.getpid(), *c.run(os.getpid).values(), *c.run(os.getppid).values()}  # + the nannies
-        assert _listening(pids) <= {"127.0.0.1", "::1"}, _listening(pids)
+        # every socket the cluster's processes listen on is on loopback
+        ports = cluster_ports(c)
+        assert len(ports) == 2 and all(ports.values()), ports
+        assert {h for v in ports.values() for h, _p in v} <= {"127.0.0.1", "::1"}, ports
         plain = addr.replace("tls://", "tcp://")
         assert _refused(lambda: Client(plain, timeout=3))  # no TLS
         assert _refused(lambda: Client(addr, timeout=3, security=Security.temporary()))  # another authority
@@ -90,20 +103,32 @@ def test_a_remote_scheduler_is_refused_without_the_labs_certificates(monkeypatch
             pass
 
 
+def _lab_files(folder: Path) -> dict[str, Path]:
+    """A lab's authority and certificate, as the files a lab keeps (made here with fbaconf's
+    maker; a lab uses openssl, docs/fuzzing.md)."""
+    certs = make_certificates()
+    folder.mkdir(mode=0o700)
+    paths = {k: folder / f"{k}.pem" for k in ("ca", "cert", "key")}
+    for k, p in paths.items():
+        p.write_bytes(getattr(certs, k))
+        p.chmod(0o600)
+    return paths
+
+
 def test_a_lab_scheduler_with_the_labs_certificates_is_reached_and_no_one_else(tmp_path, monkeypatch):
     """The documented lab set-up: the lab's authority signs its nodes' and its clients'
     certificates; fbaconf is given them by FBACONF_CLUSTER_*."""
-    paths = cluster.make_certificates(tmp_path / "lab")
-    assert oct((tmp_path / "lab").stat().st_mode & 0o777) == "0o700"
-    assert oct(paths["key"].stat().st_mode & 0o777) == "0o600"
-    sec = cluster.security_for(paths)
+    paths = _lab_files(tmp_path / "lab")
+    ca, cert, key = (str(paths[k]) for k in ("ca", "cert", "key"))
+    sec = Security(tls_ca_file=ca, tls_client_cert=cert, tls_client_key=key, tls_scheduler_cert=cert,
+                   tls_scheduler_key=key, tls_worker_cert=cert, tls_worker_key=key, require_encryption=True)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tls://",
                                   host="127.0.0.1", security=sec, dashboard_address=None) as lab:
         for k in ("ca", "cert", "key"):
             monkeypatch.setenv(f"FBACONF_CLUSTER_{k.upper()}", str(paths[k]))
         with cluster.client(lab.scheduler_address.replace("tls://", "tcp://")) as c:
             assert c.submit(lambda: "ran", key=cluster.task_key("probe")).result() == "ran"
-        other = cluster.make_certificates(tmp_path / "other")
+        other = _lab_files(tmp_path / "other")
         for k in ("ca", "cert", "key"):
             monkeypatch.setenv(f"FBACONF_CLUSTER_{k.upper()}", str(other[k]))
         with pytest.raises((ClusterError, OSError, TimeoutError)):
@@ -135,7 +160,261 @@ def test_shard_and_minimisation_reports_are_checked_field_by_field():
     for change in ({"execs": "3"}, {"corpus": ["not base64!"]}, {"features": [1]}, {"findings": [{"key": 1}]}):
         with pytest.raises(ClusterError):
             shard_report(json.dumps({**good, **change}))
-    assert minimise_report(json.dumps({"minimal": "AA==", "tests": 1, "seconds": 0.1, "message": None,
-                                       "detail": None}))["minimal"] == b"\x00"
-    with pytest.raises(ClusterError):
-        minimise_report(json.dumps({"minimal": 5, "tests": 1, "seconds": 0.1, "message": None, "detail": None}))
+    m = {"minimal": "AA==", "tests": 1, "seconds": 0.1, "reproduced": True, "flaky": False, "message": None,
+         "detail": None}
+    assert minimise_report(json.dumps(m))["minimal"] == b"\x00"
+    for change in ({"minimal": 5}, {"flaky": 1}, {"tests": True}, {"reproduced": "yes"}):
+        with pytest.raises(ClusterError):
+            minimise_report(json.dumps({**m, **change}))
+
+
+# ------------------------------------------------------------------ a process of the lab's user
+
+ATTACKER = r'''
+"""A process of the lab's user that the run did not start (issue 41): it holds a copy of
+everything the run wrote to disk and tries every way into the run's cluster — the files, /proc
+of the harness and of the workers, the HTTP ports — and, with any key it finds, joins and
+patches run_case in the workers so every case passes. Prints what it got, as JSON."""
+import json, os, re, socket, ssl, sys
+
+args = json.loads(sys.argv[1])
+rep = {"keys": [], "canary": [], "files": 0, "proc": {}, "http": {}, "tls": {}, "joined": False, "patched": 0}
+rep["cap_eff"] = open("/proc/self/status").read().split("CapEff:")[1].split()[0]
+KEY = re.compile(rb"-----BEGIN [A-Z ]*PRIVATE KEY-----[A-Za-z0-9+/=\s]+-----END [A-Z ]*PRIVATE KEY-----")
+CERT = re.compile(rb"-----BEGIN CERTIFICATE-----[A-Za-z0-9+/=\s]+-----END CERTIFICATE-----")
+keys, certs = set(), set()
+
+def scan(blob, where):
+    for k in KEY.findall(blob):
+        keys.add(k)
+        (rep["canary"] if b"CANARYCANARY" in k else rep["keys"]).append(where)
+    certs.update(CERT.findall(blob))
+
+for top in args["dirs"]:
+    for d, _dirs, files in os.walk(top):
+        for f in files:
+            try:
+                with open(os.path.join(d, f), "rb") as fh:
+                    scan(fh.read(), os.path.join(d, f))
+                rep["files"] += 1
+            except OSError:
+                pass
+for pid in args["pids"]:
+    got = rep["proc"][str(pid)] = {}
+    for what in ("environ", "maps"):
+        try:
+            with open(f"/proc/{pid}/{what}", "rb") as fh:
+                scan(fh.read(), f"/proc/{pid}/{what}")
+            got[what] = "read"
+        except OSError as e:
+            got[what] = type(e).__name__
+    try:
+        with open(f"/proc/{pid}/maps") as fh, open(f"/proc/{pid}/mem", "rb", 0) as mem:
+            for line in fh:
+                span, perms = line.split()[:2]
+                lo, hi = (int(x, 16) for x in span.split("-"))
+                if perms[0] != "r" or hi - lo > 1 << 30 or "[v" in line:
+                    continue
+                try:
+                    mem.seek(lo)
+                    scan(mem.read(hi - lo), f"/proc/{pid}/mem")
+                except (OSError, OverflowError, ValueError):
+                    pass
+        got["mem"] = "read"
+    except OSError as e:
+        got["mem"] = type(e).__name__
+    try:
+        fds = os.listdir(f"/proc/{pid}/fd")  # as uid 0 the folder lists; its links are the point
+        got["fd"] = 0
+        for fd in fds:
+            try:
+                os.readlink(f"/proc/{pid}/fd/{fd}")
+                h = os.open(f"/proc/{pid}/fd/{fd}", os.O_RDONLY | os.O_NONBLOCK)
+            except OSError:
+                continue
+            got["fd"] += 1
+            try:
+                scan(os.read(h, 1 << 20), f"/proc/{pid}/fd/{fd}")
+            except OSError:
+                pass
+            finally:
+                os.close(h)
+    except OSError as e:
+        got["fd"] = type(e).__name__
+for host, port in args["ports"]:  # the dashboard: Dask's /info pages (logs, call stacks, task keys)
+    try:
+        with socket.create_connection((host, port), timeout=3) as s:
+            s.sendall(b"GET /info/main/workers.html HTTP/1.1\r\nHost: localhost\r\n\r\n")
+            rep["http"][f"{host}:{port}"] = s.recv(200).decode("latin-1") or "closed"
+    except OSError as e:
+        rep["http"][f"{host}:{port}"] = type(e).__name__
+
+from distributed import Client
+from distributed.security import Security
+own = Security.temporary()  # a certificate of its own authority
+for host, port in args["ports"]:  # a TLS handshake with a certificate the run's authority did not sign
+    ctx = own.get_connection_args("client")["ssl_context"]
+    ctx.check_hostname, ctx.verify_mode = False, ssl.CERT_NONE
+    try:
+        with socket.create_connection((host, port), timeout=3) as raw, ctx.wrap_socket(raw) as s:
+            s.sendall(b"\0" * 8)
+            rep["tls"][f"{host}:{port}"] = "answered" if s.recv(1) else "closed"
+    except (OSError, ssl.SSLError) as e:
+        rep["tls"][f"{host}:{port}"] = type(e).__name__
+
+
+def patch():
+    import fbaconf.harness.runner as runner
+    from fbaconf.harness.results import Outcome
+    real = getattr(runner, "_real_run_case", runner.run_case)
+
+    def run_case(ctx, case):
+        r = real(ctx, case)
+        r.outcome, r.message = Outcome.PASS, "patched by a process that joined the run's cluster"
+        return r
+    runner._real_run_case, runner.run_case = real, run_case
+    return True
+
+
+tried = [(c, k) for c in certs for k in keys if b"CANARYCANARY" not in k] or [None]
+for pair in tried:
+    if pair is None:
+        sec = own
+    else:
+        folder = os.path.join(args["mine"], "stolen")
+        os.makedirs(folder, exist_ok=True)
+        for name, blob in (("ca", b"\n".join(certs)), ("cert", pair[0]), ("key", pair[1])):
+            with open(os.path.join(folder, name + ".pem"), "wb") as fh:
+                fh.write(blob + b"\n")
+        p = {n: os.path.join(folder, n + ".pem") for n in ("ca", "cert", "key")}
+        sec = Security(tls_ca_file=p["ca"], tls_client_cert=p["cert"], tls_client_key=p["key"],
+                       require_encryption=True)
+    try:
+        c = Client(args["scheduler"], security=sec, timeout=4)
+    except Exception as e:  # noqa: BLE001
+        rep.setdefault("refused", []).append(f"{type(e).__name__}: {e}")
+        continue
+    rep["joined"] = True
+    rep["patched"] = sum(c.run(patch).values())
+    c.close()
+print(json.dumps(rep))
+'''
+
+DECOY = """import time
+key = '''-----BEGIN PRIVATE KEY-----
+CANARYCANARYCANARYCANARYCANARYCANARY
+-----END PRIVATE KEY-----'''
+print('ready', flush=True)
+time.sleep(300)
+"""
+
+
+SCENARIO = r'''
+"""The run, with the attacker started once its cluster is up and before a case is sent: prints
+what the attacker got, what it was told, and the run's outcomes."""
+import json, os, subprocess, sys, tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+from fbaconf.conformance.suite import load_suites
+from fbaconf.harness import adapters, cluster
+from fbaconf.harness.runner import run_cases
+from test_cluster_attacks import DECOY, cluster_ports
+
+tmp, hand_over = Path(sys.argv[1]), sys.argv[2] == "hand-over"
+temp = tmp / "tmp"
+decoy = subprocess.Popen([sys.executable, "-c", DECOY], stdout=subprocess.PIPE)  # dumpable: the attacker's control
+assert decoy.stdout.readline() == b"ready\n"
+got, real_client = [], cluster.client
+
+
+@contextmanager
+def attacked(spec):
+    with real_client(spec) as c:
+        ports = sorted({tuple(p) for v in cluster_ports(c).values() for p in v})
+        args = {"dirs": [str(tmp / "run"), str(temp)], "scheduler": c.scheduler.address, "ports": ports,
+                "pids": [os.getpid(), *c.run(os.getpid).values(), decoy.pid], "mine": str(tmp / "mine")}
+        if hand_over:  # the control: the attacker given what the run keeps secret
+            (temp / "handed.pem").write_bytes(c.security.tls_ca_file.encode() + c.security._chain)
+        p = subprocess.run([sys.executable, str(tmp / "attacker.py"), json.dumps(args)], capture_output=True,
+                           timeout=300)
+        assert p.returncode == 0, p.stderr.decode()[-3000:]
+        got.append((json.loads(p.stdout), args))
+        yield c
+
+
+cluster.client = attacked
+(s,) = load_suites(names=["simple-l1-core"])
+try:
+    results = run_cases(adapters.resolve(tmp / "fail.toml"), s.cases[:6], claim="simple@1", out_dir=tmp / "run",
+                        progress=False, cluster="local:2")
+finally:
+    decoy.kill()
+((rep, args),) = got
+print(json.dumps({"rep": rep, "args": args, "outcomes": [r.outcome.value for r in results]}))
+'''
+
+# Run as root, the harness and the attacker would hold root's capabilities, with which the kernel
+# lets one read the other's /proc whatever its dumpable flag: both run without any capability
+# (uid 0 kept), as two processes of one ordinary user would — what keeps the attacker out is
+# then the harness's and the workers' being non-dumpable (bubblewrap still starts: it needs no
+# capability, only user namespaces).
+NO_CAPABILITIES = ("import ctypes, os, sys\n"
+                   "for cap in range(64):\n"
+                   "    ctypes.CDLL(None).prctl(24, cap, 0, 0, 0)  # PR_CAPBSET_DROP (root only)\n"
+                   "os.execv(sys.executable, [sys.executable] + sys.argv[1:])\n")
+
+
+def _attacked_run(tmp_path: Path, *, hand_over_the_key: bool):
+    """``run_cases`` of a decoder that exits 3 on every case, on ``--cluster local:2``, with the
+    attacker run once the cluster is up (SCENARIO). Everything the run writes lands under
+    ``tmp_path`` (its folder, and TMPDIR: Dask's scratch space)."""
+    (tmp_path / "fail.py").write_text("import sys\nsys.exit(3)\n")
+    (tmp_path / "fail.toml").write_text(
+        'name = "exit-3"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
+        f'[commands]\ndecode = ["{{python}}", "{tmp_path / "fail.py"}", "{{input}}", "{{faps_out}}"]\n')
+    (tmp_path / "attacker.py").write_text(ATTACKER)
+    (tmp_path / "scenario.py").write_text(SCENARIO)
+    for d in ("tmp", "mine"):
+        (tmp_path / d).mkdir()
+    env = {**os.environ, "TMPDIR": str(tmp_path / "tmp"),
+           "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])}
+    p = subprocess.run([sys.executable, "-c", NO_CAPABILITIES, str(tmp_path / "scenario.py"), str(tmp_path),
+                        "hand-over" if hand_over_the_key else "attack"], capture_output=True, env=env, timeout=600)
+    assert p.returncode == 0, p.stderr.decode()[-4000:]
+    doc = json.loads(p.stdout.decode().strip().splitlines()[-1])
+    return doc["rep"], doc["args"], doc["outcomes"]
+
+
+def test_a_process_of_the_labs_user_cannot_join_the_run_or_change_a_verdict(tmp_path):
+    """Before: the run's certificate and key were files of the lab's user (0600): a process of
+    that user read them, joined --cluster local and patched run_case in the workers — 7 of 10
+    cases passed for a decoder that exits 3 on every case; any local user read the dashboard.
+    Now the key is in the memory of non-dumpable processes only and nothing speaks HTTP."""
+    rep, args, outcomes = _attacked_run(tmp_path, hand_over_the_key=False)
+    assert rep["cap_eff"] == "0000000000000000"  # no capability
+    assert rep["files"] > 0  # it read what the run wrote (the run folder, Dask's scratch space)
+    assert rep["keys"] == []  # no private key: not in a file, not in /proc
+    # the control: a dumpable process of the same user is read through /proc, its key found
+    decoy = rep["proc"][str(args["pids"][-1])]
+    assert {k: v for k, v in decoy.items() if k != "fd"} == {"environ": "read", "maps": "read", "mem": "read"}
+    assert decoy["fd"] >= 3, decoy  # its descriptors opened
+    assert rep["canary"], "the attacker reads a dumpable process's memory"
+    for pid in args["pids"][:-1]:  # the harness and the workers: closed
+        got = rep["proc"][str(pid)]
+        assert got["environ"] == got["maps"] == got["mem"] == "PermissionError", (pid, rep["proc"])
+        assert got["fd"] in (0, "PermissionError"), (pid, rep["proc"])  # no descriptor opened
+    assert len(args["ports"]) >= 5  # the scheduler, two nannies, two workers
+    assert not any(v.startswith("HTTP/") for v in rep["http"].values()), rep["http"]  # no dashboard, no HTTP
+    assert "answered" not in rep["tls"].values(), rep["tls"]  # another authority's certificate: refused
+    assert rep["joined"] is False and rep["refused"], rep
+    assert outcomes == ["Fail"] * 6, outcomes
+
+
+def test_the_attacker_given_the_runs_key_joins_and_changes_verdicts(tmp_path):
+    """The control of the test above: handed the run's key (what the harness keeps in memory),
+    the same attacker joins and every case of the failing decoder passes — so the test above
+    fails if the key can be had."""
+    rep, _args, outcomes = _attacked_run(tmp_path, hand_over_the_key=True)
+    assert rep["joined"] is True and rep["patched"] == 2, rep.get("refused")
+    assert outcomes == ["Pass"] * 6, outcomes

@@ -5,6 +5,7 @@ must be judged as usual.
 """
 from __future__ import annotations
 
+import json
 import os
 import time
 from pathlib import Path
@@ -12,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
+from fbaconf.fuzz.findings import replay
 from fbaconf.fuzz.inputs import Entry
 from fbaconf.fuzz.targets import DecoderTarget
 from fbaconf.harness import adapters, speed
@@ -126,7 +128,10 @@ while True:
 
 def test_a_decoder_that_stops_reading_its_input_is_a_hang_not_a_deadlock(tmp_path):
     """The input is written with its deadline while the answers are read: 4 MB to a decoder
-    that never reads them (a full pipe) ends at the timeout as that input's hang."""
+    that never reads them (a full pipe) ends at the timeout, not in a deadlock. Whose hang it
+    is, is confirmed: a fresh process reads the 4 MB input and answers it; the first input,
+    alone, is answered and then never finished (the process neither reads again nor exits at
+    the end of its input) — the hang is the first input's."""
     serve = """rid, data = read()
 answer(rid, 69)
 while True:
@@ -137,7 +142,7 @@ while True:
         t0 = time.perf_counter()
         runs = [t.start(Entry(STREAM)), t.start(Entry(STREAM + bytes(4 << 20)))]
         got = [r.result().verdict for r in runs]
-        assert [_key(v) for v in got] == [None, "hang:timeout"]
+        assert [_key(v) for v in got] == ["hang:timeout", None]
         assert time.perf_counter() - t0 < 10
     finally:
         t.close()
@@ -230,3 +235,124 @@ def test_no_such_file_on_stderr_does_not_stop_a_fuzz_campaign(tmp_path):
         fz = Fuzzer(t, [Entry(STREAM, origin="seed")], FuzzConfig(seed=1, max_execs=12, progress=False, seconds=60))
         fz.run()
         assert fz.stats.execs == 12
+
+
+# ------------------------------------------------------------------ answers bound to what they answer
+
+# "done" first, then the decoding: its crash comes while the harness has the next input in flight
+ANSWER_FIRST = """while True:
+    rid, data = read()
+    answer(rid, 2)
+    sys.stderr.write('decoding %d bytes\\n' % len(data)); sys.stderr.flush()
+    if b'BOOM' in data:
+        sys.stderr.write('about to crash\\n'); sys.stderr.flush()
+        os.kill(os.getpid(), signal.SIGSEGV)
+"""
+N = 5  # the crashing input's place
+
+
+def _boom_seeds() -> list[Entry]:
+    """Twelve inputs the reference rejects (no oracle finding); the N-th carries BOOM in the
+    middle of 300 bytes."""
+    seeds = [Entry(bytes([0xFF, i]) * 150, origin=f"seed-{i}") for i in range(12)]
+    seeds[N] = Entry(bytes([0xFF, N]) * 70 + b"BOOM" + bytes([0xFF, N]) * 78, origin=f"seed-{N}")
+    return seeds
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_serve_that_answers_before_decoding_gets_its_crash_filed_under_its_input(tmp_path, jobs):
+    """Before: its crash was filed under the next input (or lost), and minimised — each test
+    judged by the crash of the test before it — to a 2-byte input that does not crash it. Now
+    the ending is confirmed by running inputs alone: one finding, on the BOOM input, minimised
+    to the four bytes that crash it, re-run and reproduced. With -j 2 each decoder gets one
+    input at a time and an input's result is given out at its answer: the crash reaches the
+    fuzzer late, and is filed under its input all the same."""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(2)", serve=ANSWER_FIRST, limits="timeout_s = 5"))
+    assert t.persistent
+    fz = Fuzzer(t, _boom_seeds(), FuzzConfig(seed=3, max_execs=12, seconds=120, jobs=jobs, progress=False,
+                                             minimise_seconds=60, minimise_tests=400, out_dir=tmp_path / "out"))
+    fz.run()
+    assert fz.stats.execs == 12
+    (f,) = fz.findings.values()
+    assert (f.verdict.cls, f.verdict.signature) == ("crash", "SIGSEGV"), f.verdict.message
+    assert (f.index, f.original.origin) == (N, f"seed-{N}")
+    assert "about to crash" in f.verdict.detail["stderr_tail"]
+    assert f.minimal == b"BOOM" and f.min_stats.reproduced is True and f.min_stats.flaky is False
+    doc = json.loads((f.path / "finding.json").read_text())
+    assert doc["flaky"] is False and doc["minimisation"]["reproduced"] is True and doc["input_index"] == N
+    try:
+        assert replay(t, f.minimal).key == f.verdict.key
+        assert replay(t, bytes([0xFF, N + 1]) * 150) is None  # the input after it is not blamed
+    finally:
+        t.close()
+
+
+def test_one_input_at_a_time_the_late_crash_reaches_its_input_not_the_next(tmp_path):
+    """``execute`` gives an input's result out at its answer; the crash that follows shows on the
+    next input, which gets its own ending (none) while the crash goes to ``take_late`` under
+    the input that made it."""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(2)", serve=ANSWER_FIRST, limits="timeout_s = 5"))
+    try:
+        boom, after = Entry(STREAM + b"BOOM", origin="boom"), Entry(STREAM + b"after", origin="after")
+        got = [t.execute(e).verdict for e in (Entry(STREAM, origin="first"), boom, after)]
+        assert got == [None, None, None]
+        ((e, v),) = t.take_late()
+        assert e is boom and _key(v) == "crash:SIGSEGV" and "alone" in v.detail["harness"]
+        assert t.take_late() == []
+    finally:
+        t.close()
+
+
+def test_a_crash_that_needs_the_processs_history_is_reported_flaky_not_minimised(tmp_path):
+    """A serve that crashes on the third input any process of it receives: no input crashes it
+    alone, so the finding says flaky (its own key), and minimisation — which runs each input
+    on a process of its own — reports it flaky with the original input, not a two-byte input
+    that does nothing."""
+    serve = """n = 0
+while True:
+    rid, data = read()
+    n += 1
+    if n == 3:
+        os.kill(os.getpid(), signal.SIGSEGV)
+    answer(rid, 2)
+"""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(2)", serve=serve, limits="timeout_s = 5"))
+    fz = Fuzzer(t, _boom_seeds(), FuzzConfig(seed=3, max_execs=7, seconds=120, progress=False, minimise_seconds=60,
+                                             minimise_tests=400, out_dir=tmp_path / "out"))
+    fz.run()
+    (f,) = fz.findings.values()
+    assert (f.verdict.cls, f.verdict.signature) == ("crash", "flaky:SIGSEGV"), f.verdict.message
+    assert f.verdict.detail["flaky"] is True and "neither this input" in f.verdict.message
+    assert f.min_stats.flaky is True and f.min_stats.reproduced is False
+    assert f.minimal == f.original.data and f.min_stats.tests == 1  # not minimised
+    assert json.loads((f.path / "finding.json").read_text())["flaky"] is True
+
+
+def test_a_crash_report_printed_after_the_answer_is_its_inputs(tmp_path):
+    """A sanitizer report printed after the answer, the process living on: wherever it lands
+    (before the harness read the answer, in the next input's stderr, or between the two
+    requests), it is confirmed and filed under the input that printed it — not the next one,
+    and not lost."""
+    serve = """while True:
+    rid, data = read()
+    answer(rid, 2)
+    if b'REPORT' in data:
+        time.sleep(0.05)
+        sys.stderr.write('==1==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x602 at pc 0x4005\\n'
+                         '    #0 0x4005 in parse_plane dec.c:10\\n    #1 0x4006 in main dec.c:20\\n')
+        sys.stderr.flush()
+"""
+    t = _target(tmp_path, _manifest(tmp_path, "sys.exit(2)", serve=serve, limits="timeout_s = 5"))
+    try:
+        got = _queue(t, [b"", b"REPORT", b"", b""])
+        assert [v is None for v in got] == [True, False, True, True], got
+        assert got[1].cls == "crash" and "AddressSanitizer" in got[1].message
+        # one input at a time, the report written between two requests: it reaches its input late
+        report = Entry(STREAM + b"REPORT", origin="report")
+        assert t.execute(report).verdict is None  # given out at its answer
+        time.sleep(0.5)  # the report is written before the next request
+        assert t.execute(Entry(STREAM, origin="next")).verdict is None
+        ((e, v),) = t.take_late()
+        assert e is report and v.cls == "crash" and "AddressSanitizer" in v.message
+    finally:
+        t.close()

@@ -273,7 +273,9 @@ def test_persistent_protocol_survives_crashes_and_hangs(tmp_path):
         assert quit_.result().verdict.cls == "unexpected-exit"
         assert run(b"") is None
         dec = t._workers[0].server
-        assert dec.starts == 6  # the first, and one after SEGV, HANG, JUNK and each QUIT
+        # the first, one after SEGV, HANG, JUNK and each QUIT, and two to confirm SEGV and HANG (each ended
+        # a process that had answered an input before: run again as a fresh process's first input)
+        assert dec.starts == 8
         # after the first restart a spare was kept starting, and each later restart took it
         assert dec._launches == dec.starts + 1
         spare = dec._spare.proc
