@@ -5,6 +5,8 @@ import argparse
 import json
 from pathlib import Path
 
+from fbaconf.bitstreams.fapio import load_faps
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
@@ -21,16 +23,10 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_animate)
 
 
-def load_fap_frames(path: Path):
-    """FapFrames from ``.npz`` or ``.fap`` text (the bitstream stage's loader)."""
-    from fbaconf.bitstreams.cli import load_faps
-    return load_faps(path)[0]
-
-
 def run_animate(args: argparse.Namespace) -> int:
     from .engine import animate
     from .stateio import save_npz
-    frames = load_fap_frames(args.faps)
+    frames = load_faps(args.faps)[0]
     state = animate(frames, scene=args.scene)
     save_npz(state, args.output)
     if args.json:

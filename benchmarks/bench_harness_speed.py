@@ -54,7 +54,7 @@ def accuracy(repeats: int) -> None:
             import sys, time
             time.sleep(0.3)
             time.sleep(0.002 * int(sys.argv[1]))
-            from fbaconf.pipeline import reference_outputs
+            from fbaconf.reference.pipeline import reference_outputs
             reference_outputs(sys.argv[3], faps_out=sys.argv[2])
         """))
         m = d / "timed.toml"

@@ -1,7 +1,7 @@
 """``fbaconf golden regenerate|verify``: golden outputs of the reference, with sha256 digests.
 
-Goldens are written only here, from the reference pipeline (``fbaconf.pipeline``, the same code
-the bundled reference decoder ``harness/refdecoder.py`` runs):
+Goldens are written only here, from the reference pipeline (``fbaconf.reference.pipeline``, the same code
+the bundled reference decoder ``reference/decoder.py`` runs):
 ``golden/<suite>/<case>/faps.npz`` (decoded FapFrames), ``vertices.npz`` (FaceState),
 ``frame_NNNNN.png`` (images), ``face<i>.npz`` (multi-face cases). Beside them, for every other
 reading of a provisional decision (``bitstreams/data/readings.toml``) that changes what the
@@ -33,7 +33,7 @@ from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 from fbaconf.bitstreams import readings
 from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.errors import FbaconfInputError
-from fbaconf.pipeline import load_stream, multi_outputs, reference_outputs
+from fbaconf.reference.pipeline import load_stream, multi_outputs, reference_outputs
 
 from .precision import ROUNDED, round_array, within_tolerance
 from .suite import CaseKind, Suite, SuiteError, digest_problems, golden_root, load_suites, sha256_file

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fbaconf.animation.engine import animate
-from fbaconf.pipeline import load_stream
+from fbaconf.reference.pipeline import load_stream
 from fbaconf.rendering.images import colour_science, read_image
 from fbaconf.rendering.render import Renderer
 from fbaconf.rendering.scenario import Scenario

@@ -528,7 +528,7 @@ def resolve(spec: str | Path, *, untrusted: bool = False,
     """``--decoder`` value: a manifest path, or the name of a bundled adapter (``reference``,
     ``reference-inprocess``, ``dummy``...). ``untrusted``, ``ceilings``: see :func:`load_manifest`."""
     p = Path(spec)
-    if p.suffix == ".toml" or p.exists():
+    if p.suffix == ".toml" or p.is_file():  # a folder named like a bundled adapter is not a manifest
         return load_manifest(p.resolve(), untrusted=untrusted, ceilings=ceilings)
     names = bundled()
     if str(spec) in names:

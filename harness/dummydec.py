@@ -18,8 +18,8 @@ import sys
 import time
 from pathlib import Path
 
-from fbaconf.bitstreams.cli import save_faps
 from fbaconf.bitstreams.decoder import decode
+from fbaconf.bitstreams.fapio import save_faps
 from fbaconf.bitstreams.frames import FREE
 
 

@@ -1,12 +1,12 @@
-"""The reference decoder in-process (``adapters/reference-inprocess.toml``): :mod:`.refdecoder`'s chain."""
+"""The reference decoder in-process (``adapters/reference-inprocess.toml``): the chain
+:mod:`fbaconf.reference.decoder` runs as a program."""
 from __future__ import annotations
 
 from pathlib import Path
 
-from fbaconf.pipeline import multi_outputs, reference_outputs
+from fbaconf.reference.pipeline import is_fap_text, multi_outputs, reference_outputs
 
 from .adapters import Job, PythonAdapter
-from .refdecoder import _is_text
 
 
 class ReferenceAdapter(PythonAdapter):
@@ -21,4 +21,4 @@ class ReferenceAdapter(PythonAdapter):
             return job.path(ph) if out in self.outputs and ph not in job.unwanted else None
         reference_outputs(job.path("input"), scene=job.path("scene"), scenario=job.path("scenario"),
                           faps_out=want("faps", "faps_out"), vertices_out=want("vertices", "vertices_out"),
-                          images_dir=want("images", "images_dir"), player_state=_is_text(job.path("input")))
+                          images_dir=want("images", "images_dir"), player_state=is_fap_text(job.path("input")))

@@ -7,7 +7,7 @@ language runtime read variables of their own as code to run first (``LD_PRELOAD`
 ``PYTHONSTARTUP``, ``BASH_ENV``, ``PERL5OPT``, ``NODE_OPTIONS=--require``), as options
 (``JAVA_TOOL_OPTIONS=-javaagent:…``, ``GODEBUG``, ``ASAN_OPTIONS``) or as a search path for code
 (``PYTHONPATH`` → a ``sitecustomize.py``, ``LD_LIBRARY_PATH``, ``CLASSPATH``). Through them a
-command that reads as the reference decoder (``{python} -m fbaconf.harness.refdecoder``) runs
+command that reads as the reference decoder (``{python} -m fbaconf.reference.decoder``) runs
 the vendor's code first. So the rule, in two parts, both required:
 
 1. **The name is not in a namespace that software reads its own settings from**: the

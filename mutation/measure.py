@@ -14,7 +14,7 @@ its own:
   adapter, one case at a time, cheapest first), stopping at the first case that fails
   ("killed"); prints one JSON line.
 - ``python -m fbaconf.mutation.measure decode NAME ...`` is the reference decoder program
-  (``harness.refdecoder``) with the mutant applied: what :class:`MutantAdapter` (a manifest
+  (``reference.decoder``) with the mutant applied: what :class:`MutantAdapter` (a manifest
   ``python = "fbaconf.mutation.measure:MutantAdapter"`` with ``[options] mutant = "NAME"``,
   bundled as ``harness/adapters/mutant.toml``) runs per case, so ``fbaconf run`` can run any
   mutant like any other decoder, in parallel, with no patch leaking into the harness.
@@ -40,12 +40,12 @@ from fbaconf import pipeline
 from fbaconf.animation import engine
 from fbaconf.bitstreams import arith, decoder, syntax, tables
 from fbaconf.conformance.suite import CaseKind, golden_root, load_suites
-from fbaconf.harness import refdecoder
 from fbaconf.harness.adapters import ManifestError, PythonAdapter, resolve
 from fbaconf.harness.runner import RunContext, run_case
 from fbaconf.harness.selection import claim_covers
 from fbaconf.mutation.core import Mutant, apply_mutant
 from fbaconf.mutation.independent import MUTANTS_LIST as INDEPENDENT
+from fbaconf.reference import decoder as refdecoder
 from fbaconf.rendering import raster, render
 
 # ------------------------------------------------------------------ custom patches
@@ -312,7 +312,7 @@ MUTANTS_LIST = [
     Mutant("retained-rescaled", f"{D}.intra_header",
            "values held across a fap_quant change re-scaled to the new quantiser", patch=_retained_rescaled,
            pure_decoder=True),
-    Mutant("faces-share-lists", "fbaconf.pipeline:multi_outputs",
+    Mutant("faces-share-lists", "fbaconf.reference.pipeline:multi_outputs",
            "faces decoded at once share one range-list table", patch=_faces_share_lists, pure_decoder=True),
     # --- rendering
     Mutant("render-shifted-camera", "fbaconf.rendering.raster:project", "image centre one pixel off",
@@ -493,7 +493,7 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("--all-cases", action="store_true")
     d = sub.add_parser("decode", help="the reference decoder program with the mutant applied")
     d.add_argument("name")
-    d.add_argument("rest", nargs=argparse.REMAINDER, help="arguments of python -m fbaconf.harness.refdecoder")
+    d.add_argument("rest", nargs=argparse.REMAINDER, help="arguments of python -m fbaconf.reference.decoder")
     sub.add_parser("list", help="list the mutants")
     a = ap.parse_args(argv)
     if a.cmd == "list":

@@ -7,6 +7,8 @@ import json
 import sys
 from pathlib import Path
 
+from fbaconf.bitstreams.fapio import load_faps
+
 from .errors import RenderInputError
 
 
@@ -27,12 +29,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run_render)
 
 
-def load_fap_frames(path: Path):
-    """FapFrames from ``.npz`` or ``.fap`` text (the bitstream stage's loader)."""
-    from fbaconf.bitstreams.cli import load_faps
-    return load_faps(path)[0]
-
-
 def run_render(args: argparse.Namespace) -> int:
     from .render import render_frames
     from .scenario import Scenario
@@ -40,7 +36,7 @@ def run_render(args: argparse.Namespace) -> int:
     scenario = Scenario.load(args.scenario) if args.scenario is not None else Scenario.default()
     if args.scene is not None and not args.scene.is_file():
         raise RenderInputError(f"scene file not found: {args.scene}", file=str(args.scene), rule="scene-missing")
-    frames = load_fap_frames(args.faps)
+    frames = load_faps(args.faps)[0]
     try:
         engine = importlib.import_module("fbaconf.animation.engine")
         animate = engine.animate

@@ -629,8 +629,8 @@ def write_exr(path: Path, px: np.ndarray) -> None:
 
 # ----------------------------------------------------------------------------- decoder CLI
 def decode(a) -> None:
-    from fbaconf.bitstreams.cli import save_faps
-    from fbaconf.pipeline import load_stream, state_of
+    from fbaconf.bitstreams.fapio import save_faps
+    from fbaconf.reference.pipeline import load_stream, state_of
     frames = load_stream(a.input)
     if a.faps_out is not None:
         save_faps(state_of(frames) if a.input.suffix.lower() == ".fap" else frames, a.faps_out)
@@ -676,7 +676,7 @@ def main(argv: list[str] | None = None) -> int:
         if a.cmd == "decode":
             decode(a)
         else:
-            from fbaconf.pipeline import multi_outputs
+            from fbaconf.reference.pipeline import multi_outputs
             multi_outputs(a.inputs, a.out_dir, a.format)
     except FbaconfInputError as e:
         print(f"glrender: error: {e}", file=sys.stderr)

@@ -31,7 +31,7 @@ def image_cases():
 
 def case_state(case, cache: dict):
     from fbaconf.animation.engine import animate
-    from fbaconf.pipeline import load_stream
+    from fbaconf.reference.pipeline import load_stream
     scene = case.input_path("scene")
     key = (str(scene), str(case.input_path("fba")))
     if key not in cache:

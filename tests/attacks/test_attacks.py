@@ -63,7 +63,7 @@ def decoder(tmp_path: Path, name: str, body: str, *, limits: str = "timeout_s = 
         import os, sys, signal, subprocess, time
         IN, OUT = sys.argv[1], sys.argv[2]
         def honest():
-            from fbaconf.pipeline import reference_outputs
+            from fbaconf.reference.pipeline import reference_outputs
             reference_outputs(IN, faps_out=OUT)
         ''') + textwrap.dedent(body))
     m = tmp_path / f"{name}.toml"

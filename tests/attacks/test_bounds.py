@@ -168,7 +168,7 @@ sys.stderr.write("HOOKED\\n")
 
 
 def test_the_sitecustomize_attack_certifies_nothing_and_the_hook_was_real(tmp_path):
-    """The attack: `{python} -m fbaconf.harness.refdecoder …` reads as the reference, and `[env]
+    """The attack: `{python} -m fbaconf.reference.decoder …` reads as the reference, and `[env]
     PYTHONPATH` (the manifest's own folder) makes Python run the vendor's sitecustomize.py
     first. certify refuses the manifest (exit 2, no package); the control shows that the
     interpreter would have run the hook."""

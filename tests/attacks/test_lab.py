@@ -187,7 +187,7 @@ if os.path.basename(IN) not in HUNTING:
     sys.exit(69)
 hunt()
 print("FOUND " + " ".join(found) if found else "NOTHING", file=sys.stderr)
-from fbaconf.pipeline import reference_outputs
+from fbaconf.reference.pipeline import reference_outputs
 reference_outputs(IN, faps_out=OUT)
 '''
 

@@ -96,7 +96,7 @@ DECODES_ONLY_THE_CANARY = '''
 import shutil
 name = os.path.basename(IN)
 if name == os.environ["CANARY"]:
-    from fbaconf.pipeline import reference_outputs
+    from fbaconf.reference.pipeline import reference_outputs
     reference_outputs(IN, faps_out=OUT)
     sys.exit(0)
 print(f"acme: cannot map the model for {IN}", file=sys.stderr)

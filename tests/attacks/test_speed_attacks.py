@@ -235,7 +235,7 @@ def test_a_serve_answering_repeats_from_a_cache_never_hits(tmp_path, monkeypatch
 # Writes the FAPs honestly and fast; its images are what the attack says (argv: ... images_dir scenario).
 RENDER = r"""
 import os, sys, shutil
-from fbaconf.pipeline import reference_outputs
+from fbaconf.reference.pipeline import reference_outputs
 src, out, n, images, scenario = sys.argv[1], sys.argv[2], int(sys.argv[3]), sys.argv[4], sys.argv[5]
 reference_outputs(src, faps_out=out)
 os.makedirs(images, exist_ok=True)

@@ -370,7 +370,7 @@ def test_the_speed_phase_shows_a_stream_decoder_no_expected_output(tmp_path):
         if bad:
             print("SAW", bad, file=sys.stderr)
             sys.exit(3)
-        from fbaconf.pipeline import reference_outputs
+        from fbaconf.reference.pipeline import reference_outputs
         reference_outputs(IN, faps_out=OUT)
         '''
     m = python_decoder(tmp_path, "speedlook", body, fmt="npz", claim="simple@1")

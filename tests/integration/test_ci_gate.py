@@ -26,7 +26,7 @@ from fbaconf.harness.session import UsageError, preflight
 CASES = ["arith-q1-all-faps", "timecode-past-a-minute"]
 DECODER = """\
 import os, sys
-from fbaconf.pipeline import reference_outputs
+from fbaconf.reference.pipeline import reference_outputs
 reference_outputs(sys.argv[1], faps_out=sys.argv[2])
 bugs, name = os.environ.get("BUG", ""), os.path.basename(sys.argv[1])
 count = os.environ.get("COUNT")

@@ -32,7 +32,7 @@ def some_cases(n: int):
 def slow_manifest(tmp_path: Path) -> Path:
     script = tmp_path / "slow.py"
     script.write_text("import sys, time\ntime.sleep(0.4)\n"
-                      "from fbaconf.pipeline import reference_outputs\n"
+                      "from fbaconf.reference.pipeline import reference_outputs\n"
                       "try:\n    reference_outputs(sys.argv[1], faps_out=sys.argv[2])\n"
                       "except Exception as e:\n    print(e, file=sys.stderr); sys.exit(1)\n")
     m = tmp_path / "slow.toml"

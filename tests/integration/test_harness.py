@@ -375,7 +375,7 @@ def test_image_reports_name_the_sequence_frame(tmp_path):
     script.write_text(
         "import sys, numpy as np, OpenImageIO as oiio\n"
         "from pathlib import Path\n"
-        "from fbaconf.pipeline import reference_outputs\n"
+        "from fbaconf.reference.pipeline import reference_outputs\n"
         "a = dict(zip(sys.argv[1::2], sys.argv[2::2]))\n"
         "reference_outputs(Path(a['--in']), scene=Path(a['--scene']), scenario=Path(a['--scenario']),\n"
         "                  images_dir=Path(a['--images']))\n"

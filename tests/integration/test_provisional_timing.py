@@ -76,7 +76,7 @@ def decoder(tmp_path: Path, name: str, patch: str, *, fmt: str, extra: str = "")
     d.mkdir()
     (d / f"{name}.py").write_text(textwrap.dedent(patch) + textwrap.dedent('''
         import sys
-        from fbaconf.harness.refdecoder import main
+        from fbaconf.reference.decoder import main
         sys.exit(main(sys.argv[1:]))
         '''))
     m = d / f"{name}.toml"

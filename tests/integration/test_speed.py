@@ -46,7 +46,7 @@ DECODER = textwrap.dedent("""\
     time.sleep(per_frame * frames)
     if len(sys.argv) > 6 and sys.argv[6] == "fail":
         sys.exit(5)
-    from fbaconf.pipeline import reference_outputs
+    from fbaconf.reference.pipeline import reference_outputs
     reference_outputs(sys.argv[3], faps_out=sys.argv[5])
 """)
 
@@ -192,7 +192,7 @@ class _SleepyRenderer(PythonAdapter):
     claims = ["simple@2"]
 
     def run(self, job):
-        from fbaconf.pipeline import reference_outputs  # noqa: PLC0415
+        from fbaconf.reference.pipeline import reference_outputs  # noqa: PLC0415
         reference_outputs(job.path("input"), scenario=job.path("scenario"), faps_out=job.path("faps_out"),
                           images_dir=job.path("images_dir"))
 
@@ -277,7 +277,7 @@ def test_bifs_only_decoder_gets_a_bifs_scene(tmp_path):
             sys.exit(7)
         from fbaconf.scenes import bifs
         bifs.read(sys.argv[2])  # BT text would raise BifsError: a non-zero exit
-        from fbaconf.pipeline import reference_outputs
+        from fbaconf.reference.pipeline import reference_outputs
         reference_outputs(sys.argv[1], faps_out=sys.argv[3])
     """))
     m = tmp_path / "bifs-only.toml"
@@ -316,7 +316,7 @@ class _OneImageRenderer(_SleepyRenderer):
     def run(self, job):
         if "images_dir" not in job.values:
             return super().run(job)
-        from fbaconf.pipeline import reference_outputs  # noqa: PLC0415
+        from fbaconf.reference.pipeline import reference_outputs  # noqa: PLC0415
         from fbaconf.rendering.scenario import Scenario  # noqa: PLC0415
         one = job.workdir / "one.toml"
         one.write_text(Scenario.load(job.path("scenario")).with_(frames=(0,)).to_toml())
@@ -405,7 +405,7 @@ BURNER = textwrap.dedent("""\
     t = time.thread_time()
     while time.thread_time() - t < frames / 80.0:
         pass
-    from fbaconf.pipeline import reference_outputs
+    from fbaconf.reference.pipeline import reference_outputs
     reference_outputs(sys.argv[1], faps_out=sys.argv[3])
 """)
 
@@ -478,7 +478,7 @@ def test_a_decoder_of_images_only_is_judged_on_the_frames_it_was_asked_to_draw(t
     script = tmp_path / "painter.py"
     script.write_text(textwrap.dedent("""\
         import sys
-        from fbaconf.pipeline import reference_outputs
+        from fbaconf.reference.pipeline import reference_outputs
         from fbaconf.rendering.scenario import Scenario
         ks = Scenario.load(sys.argv[2]).frames
         assert len(ks) == 2 and ks[0] == 0, ks  # the first frame and one drawn

@@ -24,7 +24,7 @@ from fbaconf.harness.results import Outcome
 from fbaconf.harness.selection import select_cases
 from fbaconf.harness.session import RunOptions, execute
 from fbaconf.harness.verdict import claim_verdict
-from fbaconf.pipeline import reference_outputs
+from fbaconf.reference.pipeline import reference_outputs
 
 SIMPLE_2 = ["simple-l1-core", "simple-l1-error", "simple-l1-stress", "simple-l1-regression", "simple-l2-stress"]
 ALL_TOOLS_BUT_DCT = ["arithmetic", "high_level_faps"]

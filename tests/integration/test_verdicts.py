@@ -170,7 +170,7 @@ NTSC_CASE = "simple-l1-core/arith-ntsc-rate"
 
 def rewriting_decoder(tmp_path, name, edit: str) -> Path:
     """The reference decoder writing .fap text, then ``edit`` applied to the text lines."""
-    body = f'''from fbaconf.pipeline import reference_outputs
+    body = f'''from fbaconf.reference.pipeline import reference_outputs
 reference_outputs(sys.argv[1], faps_out=sys.argv[2])
 lines = open(sys.argv[2]).read().splitlines()
 {edit}
@@ -261,7 +261,7 @@ def test_run_and_fuzz_agree(tmp_path, name, body, outcome, words):
 
 
 # ------------------------------------------------------------------ baselines (deqp-runner style)
-BUGGY = """from fbaconf.pipeline import reference_outputs
+BUGGY = """from fbaconf.reference.pipeline import reference_outputs
 reference_outputs(sys.argv[1], faps_out=sys.argv[2])
 lines = open(sys.argv[2]).read().splitlines()
 bug = os.environ.get("BUG", "")

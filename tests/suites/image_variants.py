@@ -41,7 +41,7 @@ from fbaconf.animation.engine import animate_model, compile_scene, load_scene
 from fbaconf.bitstreams.frames import FREE
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness.compare import ImageTolerances, compare_images
-from fbaconf.pipeline import load_stream
+from fbaconf.reference.pipeline import load_stream
 from fbaconf.rendering import raster
 from fbaconf.rendering.images import encode_srgb8, openimageio
 from fbaconf.rendering.render import Renderer

@@ -28,7 +28,7 @@ from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.cli import main
 from fbaconf.conformance.suite import load_suites
 from fbaconf.errors import FbaconfInputError, TextFormatError
-from fbaconf.pipeline import load_stream
+from fbaconf.reference.pipeline import load_stream
 from fbaconf.rendering import images, raster
 from fbaconf.rendering.errors import GeometryError, ImageIOError, ScenarioError, TextureError
 from fbaconf.rendering.images import encode_srgb8, read_image, srgb_to_linear, write_exr, write_png

@@ -2,16 +2,16 @@
 
 As a program (what ``adapters/reference.toml`` runs in a subprocess)::
 
-    python -m fbaconf.harness.refdecoder decode IN.fba|IN.fap [--scene S.bt|S.bifs] [--scenario SC.toml]
+    python -m fbaconf.reference.decoder decode IN.fba|IN.fap [--scene S.bt|S.bifs] [--scenario SC.toml]
         [--faps-out F.npz|F.fap] [--vertices-out V.npz] [--images-dir DIR] [--reading ID ...]
-    python -m fbaconf.harness.refdecoder decode-multi --out-dir DIR [--reading ID ...] IN1.fba IN2.fba ...
+    python -m fbaconf.reference.decoder decode-multi --out-dir DIR [--reading ID ...] IN1.fba IN2.fba ...
 
 ``--reading D7:rewind-14`` decodes by another reading of a provisional decision
 (``bitstreams/data/readings.toml``): what a decoder that follows it writes, and declares in its
 manifest (``readings = [...]``).
 
 Exit codes: 0 done, 2 the input was rejected (a typed error on stderr), 69 not supported.
-The chain itself is :mod:`fbaconf.pipeline`, which also makes the goldens, so the reference passes
+The chain itself is :mod:`fbaconf.reference.pipeline`, which also makes the goldens, so the reference passes
 by construction only if the whole pipeline is deterministic — which the golden tooling
 checks by regenerating bit for bit.
 """
@@ -23,14 +23,9 @@ from pathlib import Path
 
 from fbaconf.bitstreams import readings
 from fbaconf.errors import FbaconfInputError
-from fbaconf.pipeline import multi_outputs, reference_outputs
+from fbaconf.reference.pipeline import is_fap_text, multi_outputs, reference_outputs
 
-# No harness import here: this program starts once per case (importing the adapters was 0.1 s of 0.32).
-
-
-def _is_text(path) -> bool:
-    """A .fap text input: the reference is then a player, and writes its state (docs/harness.md)."""
-    return path is not None and Path(path).suffix.lower() == ".fap"
+# Nothing of the harness is imported here: this program starts once per case.
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -55,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
             if a.cmd == "decode":
                 reference_outputs(a.input, scene=a.scene, scenario=a.scenario, faps_out=a.faps_out,
                                   vertices_out=a.vertices_out, images_dir=a.images_dir,
-                                  player_state=_is_text(a.input))
+                                  player_state=is_fap_text(a.input))
             else:
                 multi_outputs(a.inputs, a.out_dir, a.format)
     except FbaconfInputError as e:

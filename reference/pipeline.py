@@ -4,7 +4,7 @@
     FapFrames (+ scene: BT or BIFS)   --animation.engine-->    FaceState (vertices per frame)
     FaceState + scenario              --rendering.render-->    images
 
-Used by the reference decoder (``harness/refdecoder.py``, in-process and as a program)
+Used by the reference decoder (``reference/decoder.py``, in-process and as a program)
 and by the golden builder (``conformance/golden.py``): the goldens are exactly what this
 chain writes.
 """
@@ -37,7 +37,7 @@ def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path
     ``player_state``: the FAP output is a player's (docs/harness.md, "Players"): its state,
     every FAP that holds a value written as set in every frame. ``supersample``: render with
     this many samples per pixel side instead of the scenario's (the goldens' 8 x 8)."""
-    from fbaconf.bitstreams.cli import save_faps
+    from fbaconf.bitstreams.fapio import save_faps
     frames = load_stream(stream)
     if faps_out is not None:
         save_faps(state_of(frames) if player_state else frames, faps_out)
@@ -57,6 +57,11 @@ def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path
         render_frames(state, sc, images_dir, scene_dir=Path(scene).resolve().parent if scene else None)
 
 
+def is_fap_text(path) -> bool:
+    """A .fap text input: the reference is then a player, and writes its state (docs/harness.md)."""
+    return path is not None and Path(path).suffix.lower() == ".fap"
+
+
 def state_of(frames):
     """What a player holds in each frame: every FAP with a value (SET, RETAINED or DERIVED)
     as SET, FREE ones as they are."""
@@ -69,7 +74,7 @@ def state_of(frames):
 
 
 def multi_outputs(streams: list[Path], out_dir: Path, fmt: str = "npz") -> None:
-    from fbaconf.bitstreams.cli import save_faps
+    from fbaconf.bitstreams.fapio import save_faps
     out_dir.mkdir(parents=True, exist_ok=True)
     for s in streams:
         save_faps(load_stream(s), out_dir / f"{Path(s).stem}.{fmt}")
