@@ -23,8 +23,8 @@ from pathlib import Path
 from fbaconf.fuzz.corpus import default_seeds
 from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
 from fbaconf.fuzz.targets import DecoderTarget
-from fbaconf.harness import speed
 from fbaconf.harness.adapters import resolve
+from fbaconf.harness.speed import measure as speed
 
 SRC = Path(__file__).resolve().parent.parent / "examples" / "fbadec"
 

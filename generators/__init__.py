@@ -1,4 +1,3 @@
 """Generators: code that makes the bundled models and the conformance suites. Run on purpose (``fbaconf
 suites build``, ``python -m fbaconf.generators.models``), never at test time: what they make is
-committed as data. One exception is made per measurement and never committed: the speed content
-(``speed_content``)."""
+committed as data."""

@@ -161,7 +161,7 @@ class CommandAdapter(Adapter):
         self.env = {str(k): str(v) for k, v in data.get("env", {}).items()}
         self.limits = _limits(data.get("limits", {}), path, ceilings)
         self.reject_exit_codes = frozenset(data.get("reject_exit_codes", DEFAULT_REJECT_EXIT_CODES))
-        # serve answers what decode writes: speed may be measured through it (checked on a sample, harness/speed.py)
+        # serve answers what decode writes: speed may be measured through it (checked on a sample: harness/speed/)
         self.serve_equivalent = bool(data.get("serve_equivalent", False)) and "serve" in self.commands
         self.lab_read_only: list[Path] = []  # the lab's --sandbox-ro folders (never the manifest's)
         self.supports_multi = "decode_multi" in self.commands

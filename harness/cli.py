@@ -1,4 +1,4 @@
-"""The harness verbs, each registered here: ``fbaconf run`` and ``fbaconf bench`` (:mod:`.bench`)
+"""The harness verbs, each registered here: ``fbaconf run`` and ``fbaconf bench`` (:mod:`.speed.bench`)
 (``fbaconf certify`` is the certification stage's: :mod:`fbaconf.certification.cli`).
 
 Exit codes (docs/harness.md): 0 every required case passes (and the speed requirements when
@@ -149,5 +149,5 @@ def _register_bench(sub) -> None:
 
 
 def cmd_bench(args) -> int:
-    from . import bench
+    from .speed import bench
     return bench.run(args)

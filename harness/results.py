@@ -126,7 +126,7 @@ class CaseResult:
 @dataclass
 class SpeedResult:
     """Measured per-frame cost of one operation (decode or render) against a level minimum, and
-    whether the machine gave the decoder its CPU meanwhile (harness/speed.py, speed_load.py)."""
+    whether the machine gave the decoder its CPU meanwhile (harness/speed/measure.py, harness/speed/load.py)."""
     operation: str  # "decode" | "render"
     claim: str
     per_frame_s: float

@@ -31,7 +31,7 @@ from .provisional import rests_on
 from .results import RunRecord
 from .runner import hidden_from_decoders, prepare_job, run_cases
 from .selection import capability, required_for, select_cases
-from .speed import measure_claim
+from .speed.measure import measure_claim
 from .sysinfo import system_info
 from .verdict import claim_verdict, speed_verdict
 

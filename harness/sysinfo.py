@@ -10,7 +10,7 @@ the whole machine spent busy (``/proc/stat``), the time some task waited for a C
 stall information, ``/proc/pressure/cpu`` "some"), this process's and its reaped children's
 CPU time (``getrusage``), a thread's CPU time and run-queue wait (``schedstat``), those of a
 process tree while it lives (:class:`TreeWatch`), the load average. :func:`machine_sample` takes
-the ones a window needs; the speed measurement (:mod:`.speed_load`) turns two of them into what
+the ones a window needs; the speed measurement (:mod:`.speed.load`) turns two of them into what
 others used meanwhile.
 """
 from __future__ import annotations

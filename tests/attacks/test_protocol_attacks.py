@@ -16,7 +16,8 @@ from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
 from fbaconf.fuzz.findings import replay
 from fbaconf.fuzz.inputs import Entry
 from fbaconf.fuzz.targets import DecoderTarget
-from fbaconf.harness import adapters, speed
+from fbaconf.harness import adapters
+from fbaconf.harness.speed import measure as speed
 from fbaconf.isolation import forkserver_build, sandbox
 
 STREAM = b"\x00\x00\x01\xba" + bytes(40)

@@ -15,9 +15,10 @@ from pathlib import Path
 
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.faptext import write_fap
-from fbaconf.generators import speed_content
-from fbaconf.harness import speed, speed_load
 from fbaconf.harness.adapters import load_manifest
+from fbaconf.harness.speed import content as speed_content
+from fbaconf.harness.speed import load as speed_load
+from fbaconf.harness.speed import measure as speed
 from fbaconf.harness.sysinfo import MachineSample
 from fbaconf.harness.verdict import speed_verdict
 
@@ -191,7 +192,9 @@ def test_a_fast_serve_declared_equivalent_is_not_what_is_timed(tmp_path):
     fps (the two wrote the same frames). Now decode is timed beside serve on the speed content:
     25 times slower, so serve is not what is certified and decode is measured: SPEED FAIL."""
     r = _decode_result(_manifest(tmp_path, HONEST, serve=SERVE, extra="serve_equivalent = true"))
-    assert "serve is not what is certified, decode was timed" in r.message, r.message
+    # serve 25 times faster than decode (or, under load, no time growing with the frames it decoded): either
+    # way decode is what is timed
+    assert "decode was timed" in r.message, r.message
     assert r.verdict == "fail" and r.rate_fps < 100, r.message
     assert all(x["seconds"] >= x["frames"] / 25.0 * 0.99 for x in r.samples), r.samples
 

@@ -363,7 +363,7 @@ def test_the_speed_phase_shows_a_stream_decoder_no_expected_output(tmp_path):
     """The speed content folder is in the decoder's view: it holds the streams, never their .fap
     (the expected output), and a command that asks for {fap} cannot be given one."""
     needs_sandbox()
-    from fbaconf.harness import speed  # noqa: PLC0415 (only this test)
+    from fbaconf.harness.speed import measure as speed  # noqa: PLC0415 (only this test)
     body = '''
         here = os.path.dirname(IN)
         bad = [f for f in os.listdir(here) if f.endswith((".fap", ".npz"))]

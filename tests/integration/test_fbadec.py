@@ -24,10 +24,11 @@ from fbaconf.conformance.suite import load_suites
 from fbaconf.fuzz.corpus import default_seeds
 from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
 from fbaconf.fuzz.targets import DecoderTarget
-from fbaconf.harness import adapters, speed
+from fbaconf.harness import adapters
 from fbaconf.harness.results import Outcome
 from fbaconf.harness.runner import run_cases
 from fbaconf.harness.selection import required_for
+from fbaconf.harness.speed import measure as speed
 
 SRC = Path(__file__).resolve().parents[2] / "examples" / "fbadec"
 

@@ -1,4 +1,4 @@
-"""Speed measurement (harness/speed.py, `fbaconf bench`): the fit against a known start-up and
+"""Speed measurement (harness/speed/measure.py, `fbaconf bench`): the fit against a known start-up and
 per-frame cost, verdicts against the level minimums — pass, fail, and inconclusive when the
 machine did not give the decoder its CPU — exit codes.
 
@@ -27,11 +27,13 @@ from fbaconf.bitstreams.decoder import decode
 from fbaconf.certification.certify import _statement
 from fbaconf.certification.package import derive_verdict
 from fbaconf.cli import main
-from fbaconf.generators.speed_content import BLOCK_FRAMES, Content
-from fbaconf.harness import speed, speed_load, sysinfo
+from fbaconf.harness import sysinfo
 from fbaconf.harness.adapters import PythonAdapter, load_manifest
 from fbaconf.harness.reports import html_report, report_json, terminal_summary
 from fbaconf.harness.results import RunRecord
+from fbaconf.harness.speed import load as speed_load
+from fbaconf.harness.speed import measure as speed
+from fbaconf.harness.speed.content import BLOCK_FRAMES, Content
 from fbaconf.harness.sysinfo import MachineSample
 from fbaconf.harness.verdict import speed_verdict
 
@@ -261,7 +263,7 @@ def test_sandboxed_command_decoder_reads_the_generated_content(tmp_path):
                        cwd=tmp_path)
     # 0: fast enough, 3: below the level's minimum (this machine's speed is not the point);
     # never 1 (a decoder run failed) or 2 (set-up)
-    assert r.returncode in (0, 3), r.stdout + r.stderr
+    assert r.returncode in (0, 3, 4), r.stdout + r.stderr  # 4: below it on a busy machine
     [dec] = json.loads(r.stdout)["speed"]
     assert len(dec["samples"]) == 2, dec
 
@@ -462,7 +464,7 @@ def test_an_inconclusive_reading_in_the_verdict_reports_and_statement(tmp_path, 
     assert "result: SPEED INCONCLUSIVE" in text and "1 inconclusive (below it on a busy machine)" in text, text
     assert "INCONCLUSIVE" in text.split("speed:")[1].splitlines()[2], text  # the table row
     assert "c-QualityWarning'>INCONCLUSIVE" in html_report(rec, tmp_path)
-    schema = json.loads((Path(speed.__file__).parent / "data" / "run-report.schema.json").read_text())
+    schema = json.loads((Path(speed.__file__).parents[1] / "data" / "run-report.schema.json").read_text())
     jsonschema.validate(report_json(rec), schema)
     basis = {"tools": [], "coverage_points_exercised": 0, "coverage_points_of_claim": 0, "not_exercised": [],
              "cases_not_taken": []}

@@ -17,9 +17,9 @@ frame-dependent part of the largest run (its time minus the smallest run's) reac
 ``target_s`` and the smallest run's time (mostly start-up) — so it dominates start-up
 noise — or a run would pass ``max_run_s`` or the length ``max_frames``. The series is then ``n/10, n/2, n``.
 
-Every run gets fresh content (:mod:`fbaconf.generators.speed_content`) and its output is judged
-on a sample (:mod:`.speed_check`); each run's CPU time, wait and the others' CPU are read around
-it (:mod:`.speed_load`), which gives the verdict: pass, fail or inconclusive.
+Every run gets fresh content (:mod:`.content`) and its output is judged
+on a sample (:mod:`.check`); each run's CPU time, wait and the others' CPU are read around
+it (:mod:`.load`), which gives the verdict: pass, fail or inconclusive.
 
 Operations. ``decode``: the adapter's ``decode`` command with the FAP output (outputs a
 command names unconditionally are supplied too and their cost is included; a named
@@ -53,20 +53,21 @@ from typing import Callable
 import numpy as np
 
 from fbaconf.errors import FbaconfInputError
-from fbaconf.generators.speed_content import BLOCK_FRAMES, Content, Run, content_stream  # noqa: F401 (re-exported)
 from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.persistent import PersistentDecoder
 from fbaconf.profiles.model import Claim, load_profiles
 from fbaconf.safefs import remove_tree
 
-from . import speed_load, sysinfo
-from .adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim  # noqa: F401
-from .compare.faps import compare_faps
-from .compare.ladder import outcome_for
-from .compare.loaders import OutputError, load_output_faps
-from .results import Outcome, SpeedResult
-from .runner import hidden_from_decoders
-from .speed_check import RANDOM_IMAGES, faps_problem, images_problem, sample
+from .. import sysinfo
+from ..adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim  # noqa: F401
+from ..compare.faps import compare_faps
+from ..compare.ladder import outcome_for
+from ..compare.loaders import OutputError, load_output_faps
+from ..results import Outcome, SpeedResult
+from ..runner import hidden_from_decoders
+from . import load as speed_load
+from .check import RANDOM_IMAGES, faps_problem, images_problem, sample
+from .content import BLOCK_FRAMES, Content, Run, content_stream  # noqa: F401 (re-exported)
 
 OPERATIONS = ("decode", "render")
 LIMIT_FOR = {"decode": "decode_rate", "render": "render_rate"}

@@ -16,13 +16,13 @@ import numpy as np
 from fbaconf.bitstreams.faptext import read_fap_text
 from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.errors import FbaconfInputError
-from fbaconf.generators.speed_content import Run
 from fbaconf.safefs import UnsafeFileError, open_regular, read_regular
 
-from .compare.faps import compare_faps
-from .compare.images import compare_images
-from .compare.loaders import OutputError, check_output_file, load_output_faps
-from .compare.tolerances import ImageTolerances
+from ..compare.faps import compare_faps
+from ..compare.images import compare_images
+from ..compare.loaders import OutputError, check_output_file, load_output_faps
+from ..compare.tolerances import ImageTolerances
+from .content import Run
 
 RANDOM_FRAMES = 6  # frames of a run's FAP output compared besides the first and the last
 RANDOM_IMAGES = 2  # rendered frames judged besides the first and the last

@@ -8,11 +8,11 @@ import sys
 
 from fbaconf.isolation.bounds import ceilings_from
 
-from .adapters import resolve
-from .reports.jsonreport import jsonable
-from .session import preflight, resolve_claim
-from .speed import OPERATIONS, SpeedError, SpeedRunError, failed_result, measure, skip_reason
-from .verdict import speed_verdict
+from ..adapters import resolve
+from ..reports.jsonreport import jsonable
+from ..session import preflight, resolve_claim
+from ..verdict import speed_verdict
+from .measure import OPERATIONS, SpeedError, SpeedRunError, failed_result, measure, skip_reason
 
 
 def _parse_size(text: str) -> tuple[int, int]:

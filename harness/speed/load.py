@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .sysinfo import MachineSample
+from ..sysinfo import MachineSample
 
 BUSY_SHARE = 0.10  # others used at least this share of the machine's CPUs: it was not the decoder's
 
