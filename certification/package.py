@@ -28,6 +28,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
+from cryptography.exceptions import InvalidSignature
+from cryptography.hazmat.primitives import serialization
+from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
+
 from fbaconf._atomic import atomic_write_text
 from fbaconf.bitstreams import readings
 from fbaconf.conformance import official
@@ -63,8 +67,6 @@ class SignatureError(FbaconfInputError):
 def keygen(out_dir: Path) -> tuple[Path, Path]:
     """A new Ed25519 key pair: ``fbaconf-signing.key`` (PEM, PKCS#8, mode 0600) and
     ``fbaconf-signing.pub`` (PEM) in ``out_dir``; never overwrites an existing key."""
-    from cryptography.hazmat.primitives import serialization  # noqa: PLC0415 (signing only)
-    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey  # noqa: PLC0415 (signing only)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     key_path, pub_path = out_dir / KEY_FILE, out_dir / PUB_FILE
@@ -84,8 +86,6 @@ def keygen(out_dir: Path) -> tuple[Path, Path]:
 def load_key(path: Path, private: bool):
     """An Ed25519 key read (once) from a PEM file; :class:`SignatureError` for anything else.
     ``certify --key`` reads its key with this before any decoder starts."""
-    from cryptography.hazmat.primitives import serialization  # noqa: PLC0415 (signing only)
-    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey  # noqa: PLC0415 (signing only)
     try:
         data = read_regular(path, 64 * 1024)
         key = (serialization.load_pem_private_key(data, password=None) if private
@@ -260,7 +260,6 @@ def _read_listed(pkg: Path, sums: bytes, problems: list[str]) -> tuple[dict[str,
 
 
 def _check_signature(pkg: Path, sums: bytes, pubkey: Path | None, v: Verification) -> None:
-    from cryptography.exceptions import InvalidSignature  # noqa: PLC0415 (signing only)
     sig_path = pkg / SIGNATURE
     if not os.path.lexists(sig_path):
         v.state = UNSIGNED

@@ -17,7 +17,7 @@ import pytest
 from fbaconf.fuzz.campaign import minimise_report, shard_report
 from fbaconf.harness import cluster
 from fbaconf.harness.cluster import ClusterError
-from fbaconf.tls import make_certificates
+from fbaconf.harness.cluster.tls import make_certificates
 
 distributed = pytest.importorskip("distributed")
 from distributed import Client, Worker  # noqa: E402

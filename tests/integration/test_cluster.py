@@ -69,7 +69,7 @@ def _children() -> list[int]:
 
 
 def _workers() -> list[int]:
-    """The cluster's workers: children forked from this process (fbaconf/cluster_local.py), so
+    """The cluster's workers: children forked from this process (harness/cluster/local.py), so
     their command line is this one's."""
     me = Path("/proc/self/cmdline").read_bytes()
     out = []

@@ -19,6 +19,11 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Iterator
 
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import rsa
+from cryptography.x509.oid import NameOID
+
 PR_GET_DUMPABLE, PR_SET_DUMPABLE = 3, 4
 
 
@@ -40,10 +45,6 @@ class RunCertificates:
 def make_certificates(*, common_name: str = "fbaconf-run") -> RunCertificates:
     """A certificate authority and one certificate (and key) it signed, for 127.0.0.1 and
     localhost, as PEM bytes in memory; the authority's key is not kept."""
-    from cryptography import x509  # noqa: PLC0415 (the cluster extra)
-    from cryptography.hazmat.primitives import hashes, serialization  # noqa: PLC0415
-    from cryptography.hazmat.primitives.asymmetric import rsa  # noqa: PLC0415
-    from cryptography.x509.oid import NameOID  # noqa: PLC0415
     now = datetime.datetime.now(datetime.timezone.utc)
 
     def name(cn: str):

@@ -2,10 +2,10 @@
 worker processes on this machine that only this run can talk to (docs/fuzzing.md, "Who may
 talk to the cluster").
 
-* Mutual TLS with the run's authority (:func:`fbaconf.tls.make_certificates`), its key in
+* Mutual TLS with the run's authority (:func:`.tls.make_certificates`), its key in
   memory only. Dask's ``Security`` takes PEM text but writes it to a temporary file for each
   TLS context; :class:`RunSecurity` hands OpenSSL a memfd instead and refuses to be pickled.
-* The harness is non-dumpable while the cluster lives (:func:`fbaconf.tls.nondumpable`), and
+* The harness is non-dumpable while the cluster lives (:func:`.tls.nondumpable`), and
   the workers are *forked* from it (Dask's ``fork`` method): non-dumpable, holding the key,
   from their first instruction. A spawned worker starts as a fresh, dumpable program, whose
   pipes — the pickled worker arguments, the queues whose pickles the nanny in the harness
@@ -22,7 +22,7 @@ import dask
 from distributed import Nanny, Scheduler, SpecCluster, Worker
 from distributed.security import Security
 
-from fbaconf.tls import RunCertificates, memory_file, nondumpable
+from .tls import RunCertificates, memory_file, nondumpable
 
 _IN_MEMORY = "<in memory: fbaconf run>"  # what Dask's repr of the Security shows for the certificate
 

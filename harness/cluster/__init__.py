@@ -2,7 +2,7 @@
 
 The embedded thread pool (``-j N``) stays the default; a cluster is for campaigns that
 outgrow one machine. ``local[:N]`` starts a cluster of N single-threaded worker processes on
-this machine, forked from this one (default: the CPU count; :mod:`fbaconf.cluster_local`);
+this machine, forked from this one (default: the CPU count; :mod:`.local`);
 ``tls://HOST:PORT`` (``tcp://`` is read as the same, always over TLS) connects to a running
 Dask scheduler whose workers have fbaconf installed and see the same paths (a shared
 filesystem: suites, goldens, the decoder and the run folder).
@@ -17,8 +17,8 @@ Security (issue 29). Anyone who can talk to a Dask scheduler or worker can run c
 workers, so every cluster is mutual TLS (``distributed.security.Security``): each end proves
 itself with a certificate signed by the cluster's own authority.
 
-* ``local``: the cluster authenticates the run, not a user (:mod:`fbaconf.cluster_local`): the
-  authority and one certificate are made for the run (:func:`fbaconf.tls.make_certificates`)
+* ``local``: the cluster authenticates the run, not a user (:mod:`.local`): the
+  authority and one certificate are made for the run (:func:`.tls.make_certificates`)
   and the certificate's key lives only in the memory of this process and of the workers it
   forks, all non-dumpable while the cluster lives — no file, argument or environment variable
   holds it. Everything listens on 127.0.0.1 over TLS and nothing speaks HTTP (no dashboard).
@@ -51,9 +51,9 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from fbaconf.errors import FbaconfInputError
-from fbaconf.tls import make_certificates
 
-from .results import CaseResult
+from ..results import CaseResult
+from .tls import make_certificates
 
 MAX_DEPTH = 32
 MAX_ITEMS = 1 << 20
@@ -116,7 +116,7 @@ def client(spec: str) -> Iterator:
         if not hasattr(os, "memfd_create"):
             raise ClusterError("--cluster local needs Linux: the run's key is kept in memory (memfd, prctl); "
                                "use --cluster tls://HOST:PORT or -j N")
-        from fbaconf.cluster_local import local_cluster  # noqa: PLC0415 (Dask: optional)
+        from .local import local_cluster  # noqa: PLC0415 (Dask: optional, the cluster extra)
         with local_cluster(int(arg), make_certificates) as (cluster, sec):
             c = Client(cluster, security=sec, deserializers=RESULT_DESERIALIZERS)
             try:
