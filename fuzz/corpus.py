@@ -6,8 +6,6 @@ from pathlib import Path
 
 from fbaconf.bitstreams.bitedit import end_stream
 from fbaconf.conformance.suite import suites_root
-from fbaconf.generators.suite_scenes import make_scene
-from fbaconf.scenes import bt
 
 from .choosers import RandomChooser
 from .inputs import Entry, gen_valid
@@ -31,14 +29,10 @@ def conformance_seeds(root: Path | None = None) -> list[Entry]:
     return suite_files("fba", "stream", root)
 
 
-def scene_seeds(root: Path | None = None, max_bytes: int = 8000) -> list[Entry]:
-    """Small BT scenes of the suites plus generated Face-family scenes."""
+def scene_seeds(root: Path | None = None, max_bytes: int = 20_000) -> list[Entry]:
+    """The suites' small BT scenes (the Face family among them: FDP feature points, textures, FIT
+    graphs, a FaceDefTables grid) plus generated ones."""
     out = suite_files("bt", "scene", root, max_bytes)
-    try:
-        for name in ("fit:chain", "calibration:all"):
-            out.append(Entry(bt.write(make_scene(name)).encode(), kind="scene", origin=f"seed:make_scene({name})"))
-    except Exception:  # noqa: BLE001 - optional seeds
-        pass
     rng = RandomChooser(random.Random(7))
     out.extend(gen_scene(rng) for _ in range(4))
     return out

@@ -27,3 +27,15 @@ def test_promote_names_the_next_commands(tmp_path):
     assert lines[-1].startswith("  3. commit /tmp/mine/regression.toml")
     assert _after_promotion([], args) == ["nothing new: every finding is already a regression case (or none is a "
                                           "stream)"]
+
+
+def test_the_scene_seeds_hold_the_face_family_of_the_suites():
+    """The seed scenes are the suites' own small BT scenes (FDP feature points, FIT, a FaceDefTables
+    grid), not generator output: a generator call that failed was swallowed and no promised scene was
+    ever added."""
+    from fbaconf.fuzz.corpus import scene_seeds  # noqa: PLC0415 (this test only)
+    seeds = scene_seeds()
+    texts = [e.data.decode("utf-8", "replace") for e in seeds if e.origin.startswith("seed:")]
+    assert any("featurePointsCoord" in t for t in texts) and any("FIT" in t for t in texts)
+    assert any("FaceDefTables" in t for t in texts)
+    assert all(e.kind == "scene" for e in seeds)
