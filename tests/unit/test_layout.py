@@ -189,6 +189,77 @@ def test_no_import_cycle_between_stages():
     assert _cycles(dict(stages)) == []
 
 
+# The stages from the bottom up (docs/architecture.md says the same, checked below): a stage imports
+# only the core and the stages before it (stages grouped in a tuple stand side by side: golden is
+# data beside conformance; certification and mutation both rest on the harness); fuzz may fuzz every
+# reader below it; generators (run on purpose) may use anything and nothing but the verbs uses them.
+LAYERS = ("bitstreams", "scenes", "animation", "rendering", "reference", "profiles", ("conformance", "golden"),
+          "isolation", "harness", ("certification", "mutation"), "fuzz", "generators")
+CORE = "fbaconf"  # errors, rules, safefs, _atomic and the verb dispatcher (cli, __main__)
+GLUE = ("fbaconf.cli", "fbaconf.__main__")
+
+
+def _rank() -> dict[str, int]:
+    return {(name if isinstance(names, str) else name): i
+            for i, names in enumerate(LAYERS) for name in ((names,) if isinstance(names, str) else names)}
+
+
+def _stage_of(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[0] == "fbaconf" and f"fbaconf.{parts[1]}" in _package_dirs() \
+        else CORE
+
+
+def _is_glue(module: str) -> bool:
+    return module.endswith(".cli") or module in GLUE
+
+
+def direction_problems(graph: dict[str, set[str]]) -> list[str]:
+    """Every import against the direction rules (the verbs' ``cli`` modules compose stages and are
+    exempt from the first two)."""
+    rank, out = _rank(), []
+    for mod, deps in sorted(graph.items()):
+        a = _stage_of(mod)
+        for d in sorted(deps):
+            b = _stage_of(d)
+            if d.endswith(".cli") and not _is_glue(mod):
+                out.append(f"{mod} imports the verb module {d} (a library module imports no *.cli)")
+            if _is_glue(mod) or a == b:
+                continue
+            if a == CORE:
+                out.append(f"{mod} (the core) imports the stage {b}")
+            elif b == "generators":
+                out.append(f"{mod} imports generators (run on purpose: only the verbs and tests use them)")
+            elif b != CORE and rank[b] >= rank[a]:
+                out.append(f"{mod} ({a}) imports {d} ({b}), a stage at or above its own")
+    return out
+
+
+def test_every_stage_has_its_place_in_the_layers():
+    stages = {name.split(".")[1] for name in _package_dirs() if name.count(".") == 1}
+    assert stages == set(_rank())
+
+
+def test_imports_go_down_the_layers():
+    assert direction_problems(_graph()) == []
+
+
+def test_the_direction_rules_catch_what_they_name():
+    g = {"fbaconf.harness.speed.measure": {"fbaconf.generators.models"},
+         "fbaconf.reference.pipeline": {"fbaconf.bitstreams.cli"},
+         "fbaconf.errors": {"fbaconf.harness.adapters"},
+         "fbaconf.bitstreams.decoder": {"fbaconf.harness.adapters"},
+         "fbaconf.harness.cli": {"fbaconf.generators.models", "fbaconf.fuzz.engine"}}
+    got = direction_problems(g)
+    assert len(got) == 4 and all("harness.cli" not in x.split()[0] for x in got), got
+
+
+def test_the_architecture_page_names_the_layers_as_they_are():
+    text = (ROOT / "docs" / "architecture.md").read_text("utf-8")
+    flat = " → ".join(x if isinstance(x, str) else ", ".join(x) for x in LAYERS[:-1])
+    assert f"layers — {flat} —" in " ".join(text.split()), flat
+
+
 def test_no_module_over_the_size_limit():
     big = {str(p.relative_to(ROOT)): n for p in _modules().values()
            if (n := len(p.read_text("utf-8").splitlines())) > MAX_LINES}
