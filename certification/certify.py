@@ -35,19 +35,14 @@ from fbaconf.conformance.suite import golden_root, load_suites
 from fbaconf.errors import FbaconfInputError
 from fbaconf.harness import reports
 from fbaconf.harness.adapters import CommandAdapter, resolve
+from fbaconf.harness.preflight import preflight
 from fbaconf.harness.selection import claim_covers, select_cases
-from fbaconf.harness.session import (
-    RunOptions,
-    UsageError,
-    execute,
-    lab_folders,
-    preflight,
-    resolve_claim,
-    write_reports,
-)
+from fbaconf.harness.session import RunOptions, execute, write_reports
+from fbaconf.harness.usage import UsageError, lab_folders, resolve_claim
 from fbaconf.harness.verdict import describe
-from fbaconf.isolation import cgroups, sandbox
+from fbaconf.isolation import sandbox
 from fbaconf.isolation.bounds import DEFAULT_CEILINGS, Ceilings, limits_in_force
+from fbaconf.isolation.report import report
 from fbaconf.profiles.model import Claim, load_profiles
 from fbaconf.safefs import read_regular, remove_tree
 
@@ -87,19 +82,6 @@ class CertifyOptions:
     ceilings: Ceilings = DEFAULT_CEILINGS  # the most a manifest's [limits] may ask for (--max-*)
 
 
-def isolation_gaps(adapter) -> list[str]:
-    """What this machine lacks to isolate ``adapter`` fully (empty: nothing)."""
-    if not isinstance(adapter, CommandAdapter):
-        return []
-    gaps = []
-    if sandbox.isolation() == "none":
-        gaps.append("bubblewrap (bwrap) is not available: the decoder could read the goldens and the host")
-    if not cgroups.cgroup_bases():
-        gaps.append("no writable cgroups (/sys/fs/cgroup): memory and process limits hold per process, not for "
-                    "the decoder's whole process tree")
-    return gaps
-
-
 def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions | None = None, **kw) -> int:
     """Certify ``decoder`` for ``claim`` into the package folder ``out`` (``kw``: fields of
     :class:`CertifyOptions`). Returns the exit code (0 pass, 1 fail, 2 set-up, 3 speed)."""
@@ -124,7 +106,8 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
               f"requires decoding the binary face-object stream (inputs must include \"fba\"). Test a player "
               f"with `fbaconf run` (docs/harness.md, \"Players\").", file=sys.stderr)
         return 2
-    gaps = isolation_gaps(adapter)
+    isolated = report(adapter)
+    gaps = [] if isolated.complete else list(isolated.missing)
     if gaps and not o.allow_unisolated:
         print("fbaconf certify: error: the decoder cannot be isolated on this machine: " + "; ".join(gaps) +
               ". Install bubblewrap (Debian: apt-get install bubblewrap) and run where cgroups are writable (as "
@@ -148,7 +131,7 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
     if code != record.exit_code:  # one rule: the session's exit code and the package's verdict agree
         raise RuntimeError(f"certify: the run's exit code {record.exit_code} and the verdict {verdict} disagree")
     basis = claim_basis(record, cases, claim)
-    basis["isolation"] = _isolation_line(adapter, gaps)
+    basis["isolation"] = isolated.statement()
     basis["sandbox_ro"] = [str(p) for p in getattr(adapter, "lab_read_only", [])]
     basis["timing"] = timing_note(record, adapter)
     basis["limits"] = limits_in_force(adapter) if isinstance(adapter, CommandAdapter) else []
@@ -185,14 +168,6 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
     print(summary)
     print(f"certificate: {out / CERTIFICATE}  report: {out / 'index.html'}  ({time.perf_counter() - t0:.1f} s)")
     return record.exit_code
-
-
-def _isolation_line(adapter, gaps: list[str]) -> str:
-    if not isinstance(adapter, CommandAdapter):
-        return "in-process (a bundled, trusted Python adapter)"
-    if gaps:
-        return "not isolated: " + "; ".join(gaps) + " (--allow-unisolated)"
-    return "bubblewrap sandbox (own PID, network, IPC namespaces; the view of docs/harness.md) and cgroups"
 
 
 def timing_note(record, adapter) -> dict:

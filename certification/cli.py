@@ -15,7 +15,7 @@ from pathlib import Path
 
 from fbaconf.harness.cli import lab_options
 from fbaconf.harness.reports import clean_text
-from fbaconf.harness.session import UsageError
+from fbaconf.harness.usage import UsageError
 from fbaconf.isolation.bounds import ceilings_from
 
 from . import certify

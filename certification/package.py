@@ -35,9 +35,9 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 from fbaconf._atomic import atomic_write_text
 from fbaconf.bitstreams import readings
 from fbaconf.conformance import official
+from fbaconf.conformance.provisional import rests_on
 from fbaconf.conformance.suite import Case, load_suites
 from fbaconf.errors import FbaconfInputError
-from fbaconf.harness.provisional import rests_on
 from fbaconf.harness.selection import required_for
 from fbaconf.harness.verdict import ClaimVerdict, claim_verdict
 from fbaconf.safefs import confined, read_regular

@@ -76,20 +76,22 @@ def cmd_run(args) -> int:
 
     from . import baseline as bl
     from . import reports
-    from . import session as ss
     from .adapters import resolve
+    from .preflight import preflight
     from .selection import select_cases
+    from .session import RunOptions, execute, write_reports
+    from .usage import UsageError, check_suites, lab_folders, resolve_claim, use_color
     adapter = resolve(args.decoder, ceilings=ceilings_from(args))
-    claim = ss.resolve_claim(args.claim, adapter)
+    claim = resolve_claim(args.claim, adapter)
     if args.sandbox_ro and hasattr(adapter, "lab_read_only"):
-        adapter.lab_read_only = ss.lab_folders(args.sandbox_ro)
+        adapter.lab_read_only = lab_folders(args.sandbox_ro)
     suites = load_suites()
-    ss.check_suites(suites, args.suite)
+    check_suites(suites, args.suite)
     if args.retries < 0:
-        raise ss.UsageError("--retries must be >= 0")
+        raise UsageError("--retries must be >= 0")
     cases = select_cases(suites, claim, args.suite, args.case, args.only_required, adapter)
     if not cases:
-        raise ss.UsageError("no case selected (check --case and --only-required)")
+        raise UsageError("no case selected (check --case and --only-required)")
     # the baseline files are checked before any case runs (a bad line is a usage error now, not after the run)
     if args.baseline is not None:
         ids = {c.full_id for s in suites for c in s.cases}
@@ -100,14 +102,14 @@ def cmd_run(args) -> int:
         bl.load_flakes(args.flakes)
     if args.write_baseline is not None:
         bl.check_writable(args.write_baseline)
-    ss.preflight(adapter, claim)
+    preflight(adapter, claim)
     out_dir = (args.output or Path("fbaconf-run") / adapter.name).resolve()
-    options = ss.RunOptions(jobs=args.jobs, cluster=args.cluster, resume=args.resume, keep_workdirs=args.keep_workdirs,
+    options = RunOptions(jobs=args.jobs, cluster=args.cluster, resume=args.resume, keep_workdirs=args.keep_workdirs,
                             progress=False if args.no_progress else None, baseline=args.baseline, flakes=args.flakes,
                             retries=args.retries, allow_fixed=args.allow_fixed, speed=args.speed, strict=args.strict)
-    record = ss.execute(adapter, claim, cases, suites, out_dir, options)
-    paths = ss.write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
-    print(reports.terminal_summary(record, color=ss.use_color(sys.stdout)))
+    record = execute(adapter, claim, cases, suites, out_dir, options)
+    paths = write_reports(record, out_dir, json_path=args.json, junit_path=args.junit, html_dir=args.html)
+    print(reports.terminal_summary(record, color=use_color(sys.stdout)))
     if args.write_baseline:
         print(bl.write(record.results, args.write_baseline).line())
     if record.baseline_summary:

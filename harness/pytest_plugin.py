@@ -15,7 +15,7 @@ With a baseline (``fbaconf run``'s file, harness/baseline.py) a case failing as 
 xfail naming its line, one listed ``Flake`` (or matching ``--fbaconf-flakes``) is re-run and
 an xfail if it keeps failing, a listed case that passes now fails ("fixed": remove the line)
 unless ``--fbaconf-allow-fixed``, and anything else that fails is new and fails. A provisional
-difference (harness/provisional.py) is an xfail unless ``--fbaconf-strict``, as in ``fbaconf run``.
+difference (conformance/provisional.py) is an xfail unless ``--fbaconf-strict``, as in ``fbaconf run``.
 The run ends with ``fbaconf: N new, N known, N fixed, N flaky`` and the new failures by name,
 before pytest's own failure sections (with ``--junitxml``, the file's ``baseline`` property). Options:
 
@@ -42,17 +42,18 @@ from pathlib import Path
 
 import pytest
 
+from fbaconf.conformance.provisional import open_decisions
 from fbaconf.conformance.suite import load_suites
 from fbaconf.errors import FbaconfInputError
 
 from . import baseline as bl
 from .adapters import resolve
-from .provisional import open_decisions
+from .preflight import preflight
 from .reports.common import clean_text, format_difference, reproduce_line
 from .results import Outcome
 from .runner import RunContext, run_case
 from .selection import required_for
-from .session import check_suites, preflight, resolve_claim
+from .usage import check_suites, resolve_claim
 
 PREFIX = "fbaconf::"
 _PROPERTY = "fbaconf"  # user property of each item: new, known, fixed, flaky, provisional, pass

@@ -30,6 +30,7 @@ from typing import Callable
 
 from fbaconf.bitstreams import readings
 from fbaconf.conformance.golden import REJECT, reading_goldens
+from fbaconf.conformance.provisional import readings_for, rests_on
 from fbaconf.conformance.suite import Case, CaseKind, golden_root, suites_root
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import endings, sandbox
@@ -40,7 +41,6 @@ from . import cluster as cl
 from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
 from .compare.base import worst
 from .compare.ladder import compare_outputs, outcome_for
-from .provisional import readings_for, rests_on
 from .results import CaseResult, Outcome, ResultLog
 from .selection import capability, required_for
 

@@ -1,54 +1,26 @@
-"""One harness session: select the cases of a claim, execute them (+ speed), write the reports.
-
-Used by ``fbaconf run`` and ``fbaconf certify`` alike (:mod:`.verbs`, :mod:`.certify`).
-"""
+"""One harness session: run the selected cases of a claim (+ speed), judge the claim, write the
+reports. Used by ``fbaconf run`` and ``fbaconf certify`` alike; what comes before the cases is
+:mod:`.preflight`, the command line's values :mod:`.usage`."""
 from __future__ import annotations
 
 import datetime as _dt
-import difflib
-import os
-import shutil
 import signal
-import sys
-import tempfile
 import threading
 import time
-import tomllib
 from collections import Counter
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
-from fbaconf.conformance.suite import CaseKind, load_suites
-from fbaconf.errors import FbaconfInputError
-from fbaconf.isolation import bounds, sandbox, setup, view
-from fbaconf.profiles.model import Claim, load_profiles
+from fbaconf.conformance import provisional
+from fbaconf.isolation import sandbox, setup
 
 from . import baseline as bl
 from . import reports
-from .adapters import PLACEHOLDERS, CommandAdapter, Job, highest_claim
-from .provisional import rests_on
 from .results import RunRecord
-from .runner import hidden_from_decoders, prepare_job, run_cases
-from .selection import capability, required_for, select_cases
+from .runner import run_cases
 from .speed.measure import measure_claim
 from .sysinfo import system_info
 from .verdict import claim_verdict, speed_verdict
-
-
-def provisional_statements(claim: str | None) -> list[str]:
-    """What a verdict rests on that the public sources leave open (data: harness/data/provisional.toml
-    and the provenance of each level limit)."""
-    data = tomllib.loads(resources.files("fbaconf.harness").joinpath("data/provisional.toml").read_text("utf-8"))
-    out = [f"{r['id']}: {r['text']} ({r['where']})" for r in data["rule"]]
-    ps = load_profiles()
-    if claim:
-        c = Claim.parse(claim, ps)
-        for lim in ps.limits_for(c):
-            if lim.provenance == "provisional" and c.level in lim.values:
-                out.append(f"level limit {lim.id} = {lim.value(c.level):g} {lim.unit} at {claim} "
-                           f"({lim.description}) is provisional")
-    return out
 
 
 def _now() -> str:
@@ -70,7 +42,7 @@ class RunOptions:
     retries: int = 0
     allow_fixed: bool = False
     speed: bool = False
-    strict: bool = False  # provisional differences fail the claim (harness/provisional.py)
+    strict: bool = False  # provisional differences fail the claim (conformance/provisional.py)
 
 
 def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptions | None = None):
@@ -159,132 +131,6 @@ def missing_summary(results) -> list[str]:
     return [f"{n} required case(s): {why}" for why, n in reasons.most_common()]
 
 
-class UsageError(FbaconfInputError):
-    """A command-line value is wrong (exit 2, one line)."""
-    rule = "usage"
-
-
-def use_color(stream) -> bool:
-    """Colour only on a terminal and never when NO_COLOR is set (https://no-color.org)."""
-    return stream.isatty() and not os.environ.get("NO_COLOR")
-
-
-def resolve_claim(text: str | None, adapter) -> str:
-    try:
-        return str(Claim.parse(text or highest_claim(adapter)))
-    except ValueError as e:
-        raise UsageError(f"--claim: {e}") from None
-
-
-def lab_folders(paths: list[Path]) -> list[Path]:
-    """The lab's --sandbox-ro folders, checked: absolute, existing, not too broad, holding none of
-    what a decoder never sees (git data, a copy of the goldens or suites: UsageError)."""
-    out = []
-    for p in paths:
-        p = Path(p)
-        if not p.is_absolute() or not p.is_dir():
-            raise UsageError(f"--sandbox-ro {p}: give an absolute path to an existing folder")
-        why = sandbox.view_problem(p) or view.folder_problem(p)
-        if why:
-            raise UsageError(f"--sandbox-ro {p}: {why}")
-        out.append(p)
-    return out
-
-
-def check_suites(suites, names: list[str]) -> None:
-    """Unknown ``--suite`` names are a usage error, with the nearest name."""
-    known = [s.name for s in suites]
-    for n in names:
-        if n not in known:
-            close = difflib.get_close_matches(n, known, n=1)
-            raise UsageError(f"--suite {n!r}: no such suite" + (f" (did you mean {close[0]!r}?)" if close else
-                             f" (known: {', '.join(known)})"))
-
-
-def isolation_notice(adapter) -> str:
-    """One line: whether decoders are isolated on this machine and by which limits (``run`` and
-    ``certify`` print it) — never "isolated" where a limit holds per process only."""
-    if sandbox.isolation() == "bwrap":
-        rep = sandbox.isolation_report()
-        here = ("decoders run in a bubblewrap sandbox on this machine" +
-                ("" if rep.complete else " — NOT fully isolated: " + "; ".join(rep.missing)))
-    else:
-        why = ("switched off (FBACONF_SANDBOX=none)" if os.environ.get("FBACONF_SANDBOX") == "none"
-               else "not available")
-        here = (f"WARNING: bubblewrap (bwrap) is {why}: decoders run UNISOLATED on this machine — they can "
-                "read the goldens and write outside their folder. Install it (Debian: apt-get install bubblewrap); "
-                "certify refuses to run a decoder without it unless told --allow-unisolated")
-    if not isinstance(adapter, CommandAdapter):
-        return f"fbaconf: isolation: {adapter.name} runs inside fbaconf (no sandbox applies); {here}"
-    return f"fbaconf: isolation: {here}; limits in force: " + "; ".join(bounds.limits_in_force(adapter))
-
-
-def preflight(adapter, claim: str | None = None) -> float | None:
-    """Before any case: one line saying whether decoders are isolated here and by which limits;
-    a command decoder's program must exist and be executable, and every folder its commands
-    would show must pass the view's checks (ViewError, exit 2). With ``claim``: the canary
-    (:func:`canary`: SetupError, exit 2, when the decoder does not decode the claim's simplest
-    valid stream); returns the seconds it took (None: none ran)."""
-    print(isolation_notice(adapter), file=sys.stderr)
-    if not isinstance(adapter, CommandAdapter):
-        return None
-    prog = adapter.program()
-    # the folders its commands would show (program, the files they name, manifest, --sandbox-ro), case files aside
-    at = Path("/nonexistent-case")
-    job = Job(at, {p: str(at / p) for p in PLACEHOLDERS if p not in ("python", "manifest_dir", "workdir", "frames")},
-              faces=[str(at / "face.fba")], frames=1)
-    for name in adapter.commands:
-        adapter.sandbox_view(adapter.argv(name, job), at, hidden=hidden_from_decoders())
-    if prog is None:
-        first = str(adapter.commands["decode"][0])
-        where = Path(adapter.manifest_path).resolve().parent if adapter.manifest_path is not None else None
-        shown = os.path.normpath(first.replace("{manifest_dir}", str(where))) if where is not None else first
-        raise UsageError(f"decoder {adapter.name}: program {shown} not found (not a file, and not on PATH)"
-                         + (f"; [commands] decode names it \"{first}\": build the decoder first" if shown != first
-                            else ""))
-    if not os.access(prog, os.X_OK):
-        raise UsageError(f"decoder {adapter.name}: program {prog} is not executable")
-    return canary(adapter, claim) if claim is not None else None
-
-
-def canary_case(adapter, claim: str):
-    """The claim's simplest valid stream for ``adapter``: the smallest required ``decode`` case
-    it can take (by the size of the stream it is given) that rests on no provisional decision (a
-    decoder may follow another reading there, and then rejects it rightly), or None."""
-    best = None
-    for c in select_cases(load_suites(), claim, [], [], True, adapter):
-        if c.kind != CaseKind.DECODE or capability(adapter, c) or not required_for(claim, c, adapter) or rests_on(c):
-            continue
-        stream = c.input_path("fba") if "fba" in adapter.inputs else c.input_path("fap")
-        if stream is not None and stream.is_file() and (best is None or (stream.stat().st_size, c.full_id) < best[0]):
-            best = ((stream.stat().st_size, c.full_id), c)
-    return best[1] if best else None
-
-
-def canary(adapter, claim: str) -> float | None:
-    """Run the decoder on :func:`canary_case` exactly as a case runs (:func:`fbaconf.isolation.setup.probe`:
-    SetupError when it does not decode); the seconds it took, or None when there was none to run
-    (an in-process adapter, no case it can take, a command the case cannot fill)."""
-    case = canary_case(adapter, claim) if isinstance(adapter, CommandAdapter) else None
-    if case is None:
-        return None
-    t0, work = time.perf_counter(), Path(tempfile.mkdtemp(prefix="fbaconf-canary-"))
-    try:
-        job = prepare_job(adapter, case, work / "case")
-        try:
-            argv = adapter.argv("decode", job)
-        except KeyError:  # a placeholder the case has no value for: NotSupported, no canary
-            return None
-        hidden = hidden_from_decoders() + ([case.suite_dir.resolve()] if case.suite_dir else [])
-        setup.probe(argv, job.workdir, adapter.limits, name=adapter.name, env=adapter.env,
-                    what=f"the claim's simplest valid stream ({case.full_id})",
-                    file=str(adapter.manifest_path or adapter.name), reject_exit_codes=adapter.reject_exit_codes,
-                    view=adapter.sandbox_view(argv, job.workdir, hidden=hidden))
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    return time.perf_counter() - t0
-
-
 class _Stop:
     signum: int | None = None
 
@@ -320,7 +166,7 @@ def _record(adapter, claim, suites, cases, results, started, t0):
         suites=[{"name": s.name, "version": s.version, "sha256": s.digest(), "claim": s.claim, "group": s.group,
                  "cases": len(s.cases)} for s in suites if s.name in ran],
         system=system_info(), results=results, started=started, finished=_now(),
-        duration_s=time.perf_counter() - t0, provisional=provisional_statements(claim))
+        duration_s=time.perf_counter() - t0, provisional=provisional.statements(claim))
 
 
 def _interrupted_record(adapter, claim, suites, cases, results, started, t0, signum):

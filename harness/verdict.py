@@ -32,8 +32,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 from fbaconf.bitstreams import readings
-
-from .provisional import open_decisions
+from fbaconf.conformance.provisional import open_decisions
 
 OK = ("Pass", "QualityWarning")
 HARD = ("Crash", "Timeout", "Error")  # never set aside: the decoder misbehaved or could not run

@@ -18,7 +18,7 @@ Limits per invocation:
 * memory (``memory_kind``): ``"tree"`` (the default) — ``memory_mb`` over the whole process
   tree, as a cgroup memory limit where the machine's cgroups are writable (what the tree
   really uses: a Go or Java runtime's address-space reservation does not count), else as an
-  address-space rlimit per process (the fallback, :func:`isolation_report` says so);
+  address-space rlimit per process (the fallback, :mod:`.report` says so);
   ``"address-space"`` — the rlimit per process always (and the cgroup limit too);
   ``"rss"`` — the resident set of the whole tree, sampled every 10 ms (and the cgroup limit);
   ``"none"`` (the harness's own use: a manifest may not ask for it, :mod:`.bounds`).
@@ -67,7 +67,7 @@ from pathlib import Path
 
 import fbaconf
 
-from . import cgroups, preflight, seccomp
+from . import preflight, seccomp
 from .cgroups import Cgroups
 from .process import (  # noqa: F401 (the names callers import from here)
     _RUNNING,
@@ -456,45 +456,3 @@ def _wait(proc, t0: float, limits: Limits, watch: Watch):
     finally:
         if fd is not None:
             os.close(fd)
-
-
-# ------------------------------------------------------------------ what this machine isolates
-
-@dataclass(frozen=True)
-class IsolationReport:
-    """Which isolation features this machine gives decoders; ``missing`` says, in words, what
-    is not there and what that leaves open (empty when everything is)."""
-    bubblewrap: bool
-    controllers: frozenset[str]
-    seccomp: bool
-    missing: tuple[str, ...]
-
-    @property
-    def complete(self) -> bool:
-        return not self.missing
-
-    def line(self) -> str:
-        if self.complete:
-            return "isolated: bubblewrap sandbox, cgroup memory and process limits, seccomp filter"
-        return "not isolated: " + "; ".join(self.missing)
-
-
-def isolation_report() -> IsolationReport:
-    """What :func:`run` can isolate a decoder with here: bubblewrap, writable cgroups (memory
-    and pids controllers), the seccomp filter — and what is missing (``certify`` refuses or
-    marks its statement with :meth:`IsolationReport.line`)."""
-    bw = isolation() == "bwrap"
-    ctl = cgroups.controllers()
-    missing = []
-    if not bw:
-        missing.append("bubblewrap (bwrap): decoders run unsandboxed, seeing the whole machine, its network and "
-                       "its processes")
-    if "memory" not in ctl:
-        missing.append("writable cgroups with the memory controller: no memory limit on a decoder's whole process "
-                       "tree (an address-space limit per process instead: three 800 MB children pass a 1 GB limit)")
-    if "pids" not in ctl:
-        missing.append("writable cgroups with the pids controller: no limit on the processes a decoder starts")
-    if bw and not seccomp.supported():
-        missing.append("the seccomp filter (an architecture it does not know): a decoder can take the host user's "
-                       "inotify instances")
-    return IsolationReport(bw, frozenset(ctl), bw and seccomp.supported(), tuple(missing))

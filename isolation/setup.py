@@ -9,7 +9,7 @@ fails for what is the lab's set-up. Two checks by behaviour turn that into one s
 stdout and stderr, the limits in force and the likely fix (:func:`report`):
 
 * **the canary** (:func:`probe`; the harness picks the claim's simplest valid stream and runs
-  it exactly as a case runs, :func:`fbaconf.harness.session.canary`): any ending but a decoding (exit 0,
+  it exactly as a case runs, :func:`fbaconf.harness.preflight.canary`): any ending but a decoding (exit 0,
   no crash report) or "not supported" (exit 69) is a set-up error. Where an address-space
   limit was in force, the stream runs once more without it (``memory_kind = "rss"``: the same
   megabytes, sampled over the tree, and the cgroup where there is one); when it then decodes,

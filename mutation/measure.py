@@ -36,7 +36,6 @@ from pathlib import Path
 
 import numpy as np
 
-from fbaconf import pipeline
 from fbaconf.animation import engine
 from fbaconf.bitstreams import arith, decoder, syntax, tables
 from fbaconf.conformance.suite import CaseKind, golden_root, load_suites
@@ -46,6 +45,7 @@ from fbaconf.harness.selection import claim_covers
 from fbaconf.mutation.core import Mutant, apply_mutant
 from fbaconf.mutation.independent import MUTANTS_LIST as INDEPENDENT
 from fbaconf.reference import decoder as refdecoder
+from fbaconf.reference import pipeline
 from fbaconf.rendering import raster, render
 
 # ------------------------------------------------------------------ custom patches

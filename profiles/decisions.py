@@ -1,6 +1,6 @@
 """Where a stream depends on an fbaconf decision (D3-D7 of the spec notes): the checker's
 FAP-DECISION-* warnings, each emitted where a plausible other reading would decode the stream
-differently (``harness/provisional.py`` derives from them what a case rests on).
+differently (``conformance/provisional.py`` derives from them what a case rests on).
 """
 from __future__ import annotations
 

@@ -99,7 +99,7 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
     metrics = {"frames_compared": float(n), "frames_differing": float(bad_frame.sum()),
                "faps_differing": float(per_fap.sum()), "max_abs_diff": float(max_abs.max(initial=0)),
                "expected_frames": float(ne), "got_frames": float(ng), "frame_number_offset": float(offset)}
-    # what kind of difference (harness/provisional.py: which provisional decision could explain it)
+    # what kind of difference (conformance/provisional.py: which provisional decision could explain it)
     metrics.update(values_differing=float((vdiff | missing).sum()), status_differing=float(sdiff.sum()),
                    frame_numbers_differing=float(fndiff.sum()), times_differing=float(tdiff.sum()),
                    rate_differs=float(rate_bad))

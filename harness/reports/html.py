@@ -302,7 +302,7 @@ def _baseline_html(record: RunRecord) -> str:
 
 
 def _provisional_differences_html(record: RunRecord) -> str:
-    """The failing cases whose expected output rests on a provisional decision (harness/provisional.py)."""
+    """The failing cases whose expected output rests on a provisional decision (conformance/provisional.py)."""
     diffs = record.provisional_differences
     if not diffs:
         return ""

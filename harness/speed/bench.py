@@ -9,8 +9,9 @@ import sys
 from fbaconf.isolation.bounds import ceilings_from
 
 from ..adapters import resolve
+from ..preflight import preflight
 from ..reports.jsonreport import jsonable
-from ..session import preflight, resolve_claim
+from ..usage import resolve_claim
 from ..verdict import speed_verdict
 from .measure import OPERATIONS, SpeedError, SpeedRunError, failed_result, measure, skip_reason
 

@@ -103,7 +103,7 @@ MUTANTS_LIST: list[Mutant] = [
          "the player state marks every FAP SET, also the FREE ones never sent",
          "np.isin(out.status, (RETAINED, DERIVED))", "np.isin(out.status, (RETAINED, DERIVED, 0))",
          rule="decoder output, player state of .fap input"),
-    _src("ind-wr-player-state-always", "fbaconf.reference.decoder:_is_text",
+    _src("ind-wr-player-state-always", "fbaconf.reference.pipeline:is_fap_text",
          "a bitstream (.fba) input is also written as a player state (RETAINED -> SET)",
          """return path is not None and Path(path).suffix.lower() == ".fap\"""",
          "return path is not None", rule="decoder output, player state only for .fap input"),

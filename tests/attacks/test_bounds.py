@@ -13,10 +13,10 @@ from pathlib import Path
 import pytest
 
 from fbaconf.harness import adapters
-from fbaconf.harness.session import isolation_notice
 from fbaconf.isolation import bounds, cgroups, sandbox
 from fbaconf.isolation.bounds import limits_in_force
 from fbaconf.isolation.environ import env_problem
+from fbaconf.isolation.report import report
 
 BASE = 'name = "acme"\nclaims = ["predictable@2"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
 COMMANDS = '[commands]\ndecode = ["/bin/true", "{input}", "{faps_out}"]\n'
@@ -104,7 +104,7 @@ def test_run_names_the_limits_in_force_with_writable_cgroups(monkeypatch):
     assert lines[1] == "memory: 4096 MB over the whole process tree (cgroup memory limit; OOM events read from " \
                        "the kernel)"
     assert lines[3] == "processes: 64 in the tree (cgroup pids limit)"
-    line = isolation_notice(a)
+    line = report(a).notice()
     assert "NOT" not in line and "over the whole process tree" in line
 
 
@@ -113,7 +113,7 @@ def test_without_writable_cgroups_run_never_reads_as_limited_for_the_tree(monkey
     monkeypatch.setattr(cgroups, "_CG_BASES", [])  # as the other tests simulate a machine without cgroups
     monkeypatch.setattr(sandbox, "isolation", lambda: "bwrap")
     a = adapters.resolve("reference")
-    line = isolation_notice(a)
+    line = report(a).notice()
     assert "decoders run isolated" not in line and "NOT fully isolated" in line
     assert "memory: 4096 MB of address space per process (RLIMIT_AS) — no cgroup here, so NOT over the whole " \
            "tree" in line

@@ -18,6 +18,7 @@ from fbaconf.conformance.suite import load_suites
 from fbaconf.harness import adapters
 from fbaconf.harness.selection import select_cases
 from fbaconf.isolation import cgroups, sandbox
+from fbaconf.isolation.report import report
 
 BASE = 'name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n'
 COMMANDS = '[commands]\ndecode = ["/bin/true", "{input}", "{faps_out}"]\n'
@@ -109,7 +110,8 @@ def test_certify_refuses_without_cgroups_naming_them(tmp_path, monkeypatch, caps
     monkeypatch.setattr(cgroups, "cgroup_bases", lambda: [])
     rc = certify.certify("reference", "simple@1", tmp_path / "pkg", speed=False)
     err = capsys.readouterr().err
-    assert rc == 2 and "no writable cgroups" in err and "bubblewrap" not in err.split("cannot be isolated")[1][:60]
+    assert rc == 2 and "writable cgroups with the memory controller" in err
+    assert "bubblewrap" not in err.split("cannot be isolated")[1][:60]
 
 
 def test_allow_unisolated_says_what_was_missing_in_the_statement(tmp_path, monkeypatch):
@@ -118,7 +120,7 @@ def test_allow_unisolated_says_what_was_missing_in_the_statement(tmp_path, monke
     monkeypatch.setattr(certify, "select_cases", lambda *a, **k: _two_cases())
     rc = certify.certify("reference", "simple@1", tmp_path / "pkg", speed=False, allow_unisolated=True, jobs=1)
     statement = (tmp_path / "pkg" / "statement.md").read_text()
-    assert "isolation of the decoder: not isolated: no writable cgroups" in statement
+    assert "isolation of the decoder: not isolated: writable cgroups with the memory controller" in statement
     assert rc in (0, 1)  # two cases are not the claim: verify would say so; the statement is the point here
 
 
@@ -131,9 +133,9 @@ def _two_cases():
 def test_the_isolation_gaps_are_named_for_command_decoders_only(monkeypatch):
     monkeypatch.setattr(sandbox, "isolation", lambda: "none")
     monkeypatch.setattr(cgroups, "cgroup_bases", lambda: [])
-    gaps = certify.isolation_gaps(adapters.resolve("reference"))
-    assert len(gaps) == 2 and "bwrap" in gaps[0] and "cgroups" in gaps[1]
-    assert certify.isolation_gaps(adapters.resolve("reference-inprocess")) == []
+    rep = report(adapters.resolve("reference"))
+    assert not rep.complete and "bwrap" in rep.missing[0] and all("cgroups" in m for m in rep.missing[1:])
+    assert report(adapters.resolve("reference-inprocess")).complete
 
 
 # ------------------------------------------------------------------ the key

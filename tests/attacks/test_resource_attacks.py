@@ -21,6 +21,7 @@ from fbaconf.harness import adapters
 from fbaconf.harness.results import Outcome
 from fbaconf.harness.runner import run_cases
 from fbaconf.isolation import cgroups, endings, sandbox
+from fbaconf.isolation.report import report
 from fbaconf.isolation.sandbox import Limits
 
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
@@ -166,12 +167,12 @@ def test_rss_is_sampled_over_the_decoders_tree_not_the_launcher(tmp_path, monkey
 
 
 def test_isolation_report_names_what_is_missing(monkeypatch):
-    rep = sandbox.isolation_report()
+    rep = report()
     if sandbox.isolation() == "bwrap" and {"memory", "pids"} <= cgroups.controllers():
         assert rep.complete and rep.line().startswith("isolated")
     monkeypatch.setattr(cgroups, "_CG_BASES", [])
     monkeypatch.setattr(sandbox, "_ISOLATION", "none")
-    rep = sandbox.isolation_report()
+    rep = report()
     assert not rep.complete and rep.line().startswith("not isolated: ")
     assert [m.split(":")[0] for m in rep.missing] == ["bubblewrap (bwrap)",
                                                       "writable cgroups with the memory controller",

@@ -1,6 +1,6 @@
 """Set-up failures recognised by behaviour, not by wording (issue 37, item 4): a decoder that
 cannot run as set up fails every case the same way, and each read as "a reject: a valid stream
-was rejected". The canary (harness/session.py, isolation/setup.py) runs the decoder on the
+was rejected". The canary (harness/preflight.py, isolation/setup.py) runs the decoder on the
 claim's simplest valid stream before the cases; after them, identical endings with no decoding are one set-up error
 too. Either way: exit 2, the program's stdout and stderr, the limits in force, the likely fix —
 no case counted, no certificate. The decoders here are written for it; none prints a runtime's
@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
+from fbaconf.conformance.provisional import rests_on
 from fbaconf.conformance.suite import CaseKind, load_suites
-from fbaconf.harness import adapters, session
-from fbaconf.harness.provisional import rests_on
+from fbaconf.harness import adapters, preflight
 from fbaconf.harness.results import CaseResult, Outcome
 from fbaconf.harness.runner import run_cases
 from fbaconf.harness.selection import select_cases
@@ -76,20 +76,20 @@ def test_the_canary_is_the_smallest_required_valid_stream_the_decoder_can_take()
     # not one a provisional decision decides: a decoder following another reading may rightly reject it
     plain = [c for c in required if not rests_on(c)]
     smallest = min(plain, key=lambda c: (c.input_path("fba").stat().st_size, c.full_id))
-    assert session.canary_case(a, "simple@1").full_id == smallest.full_id
-    assert len(plain) < len(required) and not rests_on(session.canary_case(a, "simple@1"))
+    assert preflight.canary_case(a, "simple@1").full_id == smallest.full_id
+    assert len(plain) < len(required) and not rests_on(preflight.canary_case(a, "simple@1"))
     dct_less = adapters.resolve("reference")
     dct_less.tools = ["arithmetic", "high_level_faps"]  # it cannot take a DCT case: never its canary
-    assert "dct" not in (session.canary_case(dct_less, "simple@1").tools or [])
+    assert "dct" not in (preflight.canary_case(dct_less, "simple@1").tools or [])
 
 
 def test_the_canary_passes_a_decoder_that_decodes_and_one_that_declines(tmp_path):
     needs_sandbox()
-    took = session.canary(adapters.resolve("reference"), "predictable@2")
+    took = preflight.canary(adapters.resolve("reference"), "predictable@2")
     assert took is not None and took > 0  # the seconds it added (reported, never a budget)
-    assert session.canary(adapters.resolve("reference-inprocess"), "predictable@2") is None  # in-process: none
+    assert preflight.canary(adapters.resolve("reference-inprocess"), "predictable@2") is None  # in-process: none
     declines = decoder(tmp_path, "declines", "sys.exit(69)\n")
-    assert session.canary(adapters.resolve(declines), "simple@1") is not None  # NotSupported: the cases decide
+    assert preflight.canary(adapters.resolve(declines), "simple@1") is not None  # NotSupported: the cases decide
 
 
 DECODES_ONLY_THE_CANARY = '''
@@ -109,7 +109,7 @@ def test_every_case_ending_the_same_way_without_a_decoding_is_one_set_up_error(t
     same way — its stderr naming each case's own file — and none decodes."""
     needs_sandbox()
     a0 = adapters.resolve("reference")
-    stem = session.canary_case(a0, "simple@1").id
+    stem = preflight.canary_case(a0, "simple@1").id
     m = decoder(tmp_path, "acme", DECODES_ONLY_THE_CANARY)
     m.write_text(m.read_text() + f'[env]\nCANARY = "{stem}.fba"\n')
     r = fbaconf("run", "--decoder", m, "--claim", "simple@1", "--case", "simple-l1-core/arith-q*",

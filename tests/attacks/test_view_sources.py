@@ -28,7 +28,7 @@ import fbaconf
 from fbaconf.conformance.suite import golden_root, load_suites, suites_root
 from fbaconf.harness import adapters
 from fbaconf.harness.adapters import ViewError
-from fbaconf.harness.session import preflight
+from fbaconf.harness.preflight import preflight
 from fbaconf.isolation import sandbox, view
 
 ROOT = Path(fbaconf.__file__).resolve().parents[1]

@@ -21,7 +21,8 @@ from pathlib import Path
 import pytest
 
 from fbaconf.harness.adapters import resolve
-from fbaconf.harness.session import UsageError, preflight
+from fbaconf.harness.preflight import preflight
+from fbaconf.harness.usage import UsageError
 
 CASES = ["arith-q1-all-faps", "timecode-past-a-minute"]
 DECODER = """\

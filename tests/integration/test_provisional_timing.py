@@ -20,9 +20,9 @@ from pathlib import Path
 import pytest
 
 from fbaconf.certification import certify, package
+from fbaconf.conformance.provisional import rests_on
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness import adapters
-from fbaconf.harness.provisional import rests_on
 from fbaconf.harness.results import Outcome
 from fbaconf.harness.runner import run_cases
 

@@ -210,7 +210,7 @@ def test_declaring_a_reading_and_decoding_by_fbaconfs_fails(d7_runs):
 
 def test_rejecting_the_streams_that_rest_on_d7_is_no_provisional_difference(tmp_path):
     ss = load_suites(names=["simple-l1-core"])
-    from fbaconf.harness.provisional import rests_on  # noqa: PLC0415
+    from fbaconf.conformance.provisional import rests_on  # noqa: PLC0415
     RejectsD7.rejected = {Path(c.inputs["fba"]).name for c in ss[0].cases if "D7" in rests_on(c)}
     assert len(RejectsD7.rejected) == 29
     rec = certify_like(adapter(RejectsD7, name="rejects-d7"), tmp_path, suites=["simple-l1-core"])

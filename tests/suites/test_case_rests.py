@@ -13,8 +13,8 @@ from __future__ import annotations
 import pytest
 
 from fbaconf.bitstreams.decoder import decode
+from fbaconf.conformance.provisional import rests_on
 from fbaconf.conformance.suite import load_suites
-from fbaconf.harness.provisional import rests_on
 
 CASES = {c.full_id: c for s in load_suites() for c in s.cases}
 

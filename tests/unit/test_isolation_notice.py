@@ -5,8 +5,9 @@ from __future__ import annotations
 import pytest
 
 from fbaconf.harness import adapters
-from fbaconf.harness.session import isolation_notice, preflight
+from fbaconf.harness.preflight import preflight
 from fbaconf.isolation import sandbox
+from fbaconf.isolation.report import report
 
 
 @pytest.mark.parametrize("have,env,words", [
@@ -21,9 +22,9 @@ def test_one_line_says_whether_decoders_are_isolated(monkeypatch, capsys, have, 
     else:
         monkeypatch.delenv("FBACONF_SANDBOX", raising=False)
     ref = adapters.resolve("reference")  # a command decoder (the bundled reference program)
-    line = isolation_notice(ref)
+    line = report(ref).notice()
     assert line.startswith("fbaconf: isolation: ") and words in line and "\n" not in line
-    inproc = isolation_notice(adapters.resolve("reference-inprocess"))
+    inproc = report(adapters.resolve("reference-inprocess")).notice()
     assert "reference-inprocess runs inside fbaconf (no sandbox applies)" in inproc and words in inproc
     preflight(adapters.resolve("reference-inprocess"))  # what run and certify print first
     assert capsys.readouterr().err.strip() == inproc

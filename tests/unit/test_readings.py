@@ -45,7 +45,7 @@ def same(a, b) -> bool:
 
 
 def test_the_catalogue_names_known_decisions_and_checker_codes():
-    decisions = {r["id"] for r in tomllib.loads(resources.files("fbaconf.harness").joinpath(
+    decisions = {r["id"] for r in tomllib.loads(resources.files("fbaconf.conformance").joinpath(
         "data/provisional.toml").read_text("utf-8"))["rule"]}
     cat = readings.catalogue()
     assert set(cat) == {"D3:type10-keeps", "D4:keep-scaling", "D4:defaults-unrounded", "D4:value-range-enforced",

@@ -1,7 +1,7 @@
 """What a case's expected result rests on: the provisional decisions another reading would change.
 
 The ISO/IEC 14496 text was not available to fbaconf: some expected results follow readings
-fbaconf had to decide (``harness/data/provisional.toml``, D1-D8). A case *rests on* a decision
+fbaconf had to decide (``conformance/data/provisional.toml``, D1-D8). A case *rests on* a decision
 when a known other reading changes its result:
 
 * **D3-D7** — an other reading of ``bitstreams/data/readings.toml`` (each seen in a public
@@ -14,7 +14,7 @@ when a known other reading changes its result:
 
 A decision no case's result depends on under any known reading (D1, D2, D6's frame rate 0, the
 viseme/expression select ranges) is no excuse for anything: what the verdict makes of these is
-:mod:`.verdict`.
+:mod:`fbaconf.harness.verdict`.
 """
 from __future__ import annotations
 
@@ -24,14 +24,16 @@ from importlib import resources
 from pathlib import Path
 
 from fbaconf.bitstreams import readings
-from fbaconf.conformance.golden import reading_goldens
-from fbaconf.conformance.suite import Case
+from fbaconf.profiles.model import Claim, load_profiles
+
+from .golden import reading_goldens
+from .suite import Case
 
 
 @functools.lru_cache(maxsize=1)
 def decisions() -> dict[str, dict]:
-    """The provisional rules, by id (``harness/data/provisional.toml``)."""
-    data = tomllib.loads(resources.files("fbaconf.harness").joinpath("data/provisional.toml").read_text("utf-8"))
+    """The provisional rules, by id (``conformance/data/provisional.toml``)."""
+    data = tomllib.loads(resources.files("fbaconf.conformance").joinpath("data/provisional.toml").read_text("utf-8"))
     return {r["id"]: r for r in data["rule"]}
 
 
@@ -53,3 +55,17 @@ def readings_for(case: Case, declared, golden: Path | None = None) -> dict[str, 
     """The other readings ``declared`` by a decoder that change ``case``'s result, with the
     folders of what they give."""
     return {r: p for r, p in reading_goldens(case, golden).items() if r in set(declared)}
+
+
+def statements(claim: str | None) -> list[str]:
+    """What a verdict rests on that the public sources leave open (data: conformance/data/provisional.toml
+    and the provenance of each level limit)."""
+    out = [f"{r['id']}: {r['text']} ({r['where']})" for r in decisions().values()]
+    ps = load_profiles()
+    if claim:
+        c = Claim.parse(claim, ps)
+        for lim in ps.limits_for(c):
+            if lim.provenance == "provisional" and c.level in lim.values:
+                out.append(f"level limit {lim.id} = {lim.value(c.level):g} {lim.unit} at {claim} "
+                           f"({lim.description}) is provisional")
+    return out
