@@ -14,7 +14,7 @@ import sys
 import tempfile
 import time
 
-from fbaconf.mutation.measure import run_mutant
+from fbaconf.mutation.run import run_mutant
 
 
 def main() -> None:

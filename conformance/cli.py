@@ -39,7 +39,7 @@ def register(sub) -> None:
     cv.set_defaults(func=cmd_coverage)
     mu = ss.add_parser("mutants", help="run every mutant decoder against the suites (mutation score)",
                        description="Run each mutant decoder (the reference with one realistic bug, "
-                                   "mutation/measure.py, mutation/independent/) against the cases "
+                                   "mutation/own.py, mutation/independent/) against the cases "
                                    "of the claim (required and .fap player cases, with .npz and then .fap "
                                    "output), each mutant in its own process, and print the case that "
                                    "kills it; then the score of each family and, last, "
@@ -173,22 +173,22 @@ def cmd_coverage(args) -> int:
 
 
 def cmd_mutants(args) -> int:
-    from fbaconf.mutation import measure
-    chosen = [m.name for m in measure.MUTANTS_LIST if args.family in (None, m.family)]
+    from fbaconf.mutation import own, run
+    chosen = [m.name for m in own.MUTANTS_LIST if args.family in (None, m.family)]
     if args.list:
         for n in chosen:
-            m = measure.MUTANTS[n]
+            m = own.MUTANTS[n]
             print(f"{m.name:32s} {m.where:40s} {m.description}")
         print(f"{len(chosen)} mutant(s)")
         return 0
-    unknown = [n for n in args.names if n not in measure.MUTANTS]
+    unknown = [n for n in args.names if n not in own.MUTANTS]
     if unknown:
         print(f"fbaconf suites mutants: error: unknown mutant(s) {', '.join(unknown)}", file=sys.stderr)
         return 2
-    results = measure.run_all(args.names or chosen, claim=args.claim, jobs=args.jobs,
+    results = run.run_all(args.names or chosen, claim=args.claim, jobs=args.jobs,
                               stop_at_first=not args.all_cases)
     if args.json:
         print(json.dumps(results, indent=1))
     else:
-        print(measure.format_results(results))
+        print(run.format_results(results))
     return 0

@@ -1,5 +1,5 @@
 """What a mutant is and how one is applied: shared by the suite's own mutants
-(``mutation/measure.py``) and the independent set (``mutation/independent/``).
+(``mutation/own.py``) and the independent set (``mutation/independent/``).
 
 A :class:`Mutant` names the place it changes (``module:qualname``) and how: a source mutation
 (one exact snippet of the reference function replaced, the function recompiled in its module's

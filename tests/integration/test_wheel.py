@@ -145,7 +145,7 @@ def test_every_data_verb_runs_from_the_installed_wheel(wheel_venv, tmp_path):
     for name in DATA_SUITES:
         assert _tree_differences(tmp_path / "suites" / name, ROOT / "conformance" / "suites" / name) == [], name
     assert "reference conditioning: worst condition number" in results["suites build"].stdout
-    from fbaconf.mutation.measure import MUTANTS_LIST  # noqa: PLC0415 (the source tree's count, for comparison)
+    from fbaconf.mutation.own import MUTANTS_LIST  # noqa: PLC0415 (the source tree's count, for comparison)
     assert results["mutants --list"].stdout.strip().splitlines()[-1] == f"{len(MUTANTS_LIST)} mutant(s)"
     assert "golden verify: OK" in results["golden verify"].stdout
     report = json.loads((tmp_path / "run" / "report.json").read_text())

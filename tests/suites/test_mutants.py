@@ -10,21 +10,21 @@ import pytest
 
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness.adapters import ManifestError, resolve
-from fbaconf.mutation import measure
+from fbaconf.mutation import own, run
 from fbaconf.mutation.core import Mutant, snippet_count
 
 
 def test_at_least_30_mutants_each_naming_its_place():
-    assert len(measure.MUTANTS) >= 30
-    for m in measure.MUTANTS.values():
+    assert len(own.MUTANTS) >= 30
+    for m in own.MUTANTS.values():
         assert m.description and ":" in m.where
         assert (m.patch is None) == bool(m.old), m.name
 
 
-@pytest.mark.parametrize("name", [m.name for m in measure.MUTANTS_LIST if m.patch is None])
+@pytest.mark.parametrize("name", [m.name for m in own.MUTANTS_LIST if m.patch is None])
 def test_source_snippet_occurs_once(name):
     """A refactoring of the reference must not silently turn a mutant into the reference."""
-    assert snippet_count(measure.MUTANTS[name]) == 1
+    assert snippet_count(own.MUTANTS[name]) == 1
 
 
 def test_snippet_count_sees_a_missing_and_a_repeated_snippet():
@@ -35,32 +35,32 @@ def test_snippet_count_sees_a_missing_and_a_repeated_snippet():
 
 def test_independent_set_is_large_named_and_tagged():
     """Issue 15: 100+ mutants written from the spec notes alone, each naming the rule it breaks."""
-    ind = [m for m in measure.MUTANTS_LIST if m.family == "independent"]
+    ind = [m for m in own.MUTANTS_LIST if m.family == "independent"]
     assert len(ind) >= 100
-    assert len(set(m.name for m in measure.MUTANTS_LIST)) == len(measure.MUTANTS_LIST)
+    assert len(set(m.name for m in own.MUTANTS_LIST)) == len(own.MUTANTS_LIST)
     for m in ind:
         assert m.name.startswith("ind-") and m.rule and m.description, m.name
-    assert {m.family for m in measure.MUTANTS_LIST} == set(measure.FAMILIES)
+    assert {m.family for m in own.MUTANTS_LIST} == set(own.FAMILIES)
 
 
 def test_score_leaves_equivalent_mutants_out():
-    ind = [m for m in measure.MUTANTS_LIST if m.family == "independent"]
+    ind = [m for m in own.MUTANTS_LIST if m.family == "independent"]
     eq = [m.name for m in ind if m.equivalent]
     rows = [{"mutant": m.name, "killed": not m.equivalent} for m in ind]
-    assert measure.score(rows, "independent") == (len(ind) - len(eq), len(ind) - len(eq), len(eq))
+    assert run.score(rows, "independent") == (len(ind) - len(eq), len(ind) - len(eq), len(eq))
     rows[0]["killed"] = False
-    assert measure.score(rows, "independent")[0] == len(ind) - len(eq) - (0 if ind[0].equivalent else 1)
+    assert run.score(rows, "independent")[0] == len(ind) - len(eq) - (0 if ind[0].equivalent else 1)
 
 
 def test_a_source_mutant_reaches_the_modules_that_imported_its_function():
     """engine.py does ``from .faceparams import fapu_from_feature_points`` at import time: the
     mutant of faceparams' function must replace that name too, or the mutant never runs (it
     survived every case until core._rebind)."""
-    code = ("from fbaconf.mutation import measure\n"
+    code = ("from fbaconf.mutation import own\n"
             "from fbaconf.mutation.core import apply_mutant\n"
             "from fbaconf.animation import calibrate, engine, faceparams\n"
             "old = faceparams.fapu_from_feature_points\n"
-            "apply_mutant(measure.MUTANTS['wrong-fapu'])\n"
+            "apply_mutant(own.MUTANTS['wrong-fapu'])\n"
             "new = faceparams.fapu_from_feature_points\n"
             "import sys\n"
             "left = [n for n, m in sys.modules.items() if n.startswith('fbaconf') and m is not None\n"
@@ -75,32 +75,32 @@ def test_reference_passes_and_mutants_are_killed():
     """Three mutants are killed; the unmutated reference, run the way the mutants run (both
     output formats), passes one case of every suite (its cheapest, in the mutants' own order) —
     every case of every suite is run through the harness by tests/integration/test_harness.py."""
-    res = measure.run_all(["prediction-sign", "ignore-retained", "wrong-fapu"], jobs=2)
+    res = run.run_all(["prediction-sign", "ignore-retained", "wrong-fapu"], jobs=2)
     assert all(r["killed"] for r in res), res
-    picked = [min(s.cases, key=measure._case_cost) for s in load_suites()]
-    out = measure.run_mutant(None, stop_at_first=False, cases=picked)  # None: the reference, unmutated
+    picked = [min(s.cases, key=run._case_cost) for s in load_suites()]
+    out = run.run_mutant(None, stop_at_first=False, cases=picked)  # None: the reference, unmutated
     assert not out["killed"] and out["ran"] == out["total"] >= len(picked), out
 
 
 def test_mutant_adapter_manifest(tmp_path):
     a = resolve("mutant")
-    assert a.mutant in measure.MUTANTS and a.claims == ["predictable@2"]
+    assert a.mutant in own.MUTANTS and a.claims == ["predictable@2"]
     bad = tmp_path / "m.toml"
-    bad.write_text((measure.__file__ and open(a.manifest_path).read()).replace('mutant = "prediction-sign"',
-                                                                                'mutant = "no-such"'))
+    bad.write_text(open(a.manifest_path).read().replace('mutant = "prediction-sign"', 'mutant = "no-such"'))
     with pytest.raises(ManifestError):
         resolve(bad)
 
 
-# The rules the issue-37 cases guard, each with a mutant that breaks it and the case that must kill it.
+# The rules of the cases independent faulty decoders got past: each with a mutant that breaks it and the
+# case that must kill it.
 _RUN = ("import json, sys\n"
         "from fbaconf.conformance.suite import load_suites\n"
-        "from fbaconf.mutation import measure\n"
+        "from fbaconf.mutation import run\n"
         "ids = sys.argv[2:]\n"
         "cases = [c for s in load_suites() for c in s.cases if c.full_id in ids]\n"
         "assert sorted(c.full_id for c in cases) == sorted(ids), ids\n"
         "name = None if sys.argv[1] == 'reference' else sys.argv[1]\n"
-        "print(json.dumps(measure.run_mutant(name, cases=cases, stop_at_first=False)))\n")
+        "print(json.dumps(run.run_mutant(name, cases=cases, stop_at_first=False)))\n")
 MARKERS = [f"simple-l1-error/list-marker-{x}" for x in ("i-max", "i-min", "p-max", "p-min")]
 GUARDS = {
     "hl-alphabet-first-quant": ["simple-l1-core/high-level-quant-change"],

@@ -107,7 +107,7 @@ def failing(names: list[str] | None = None, first: bool = False) -> list[str]:
     return bad
 
 
-# Reference mutants (mutation/measure.py) the vectors must kill: each breaks one rule a vector
+# Reference mutants (mutation/own.py) the vectors must kill: each breaks one rule a vector
 # was written for. Not killed by these vectors: stuffing-not-removed (no vector has a stuffing
 # bit inside a block where that mutant's rewind does not compensate it; the suite's
 # lookahead-stuffing case kills it).
@@ -150,7 +150,7 @@ def test_there_are_corner_vectors_for_every_tie_and_position():
 # the same state as a fresh interpreter per mutant, without paying the imports 59 times.
 DRIVER = """
 import json, os, runpy, signal, sys
-from fbaconf.mutation.measure import apply
+from fbaconf.mutation.own import apply
 test_file, jobs, first = sys.argv[1], json.loads(sys.argv[2]), sys.argv[3] == "first"
 results, running = {}, {}
 
