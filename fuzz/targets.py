@@ -21,7 +21,7 @@ from fbaconf.bitstreams.faptext import read_fap_text
 from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.errors import FbaconfInputError
 from fbaconf.harness import compare as cmp
-from fbaconf.harness.adapters import CommandAdapter, Job, NotSupportedError
+from fbaconf.harness.adapters import CommandAdapter, Job
 from fbaconf.harness.compare import compare_faps
 from fbaconf.harness.runner import hidden_from_decoders
 from fbaconf.isolation import endings, sandbox
@@ -430,25 +430,13 @@ class DecoderTarget:
         return self._oracle(inp, job, rc, detail)
 
     def _run_python(self, inp: Entry, job) -> Verdict | None:
-        t0 = time.perf_counter()
-        try:
-            self.adapter.run(job)
-            rc = 0
-        except NotSupportedError:
-            rc = 69
-        except FbaconfInputError:
-            rc = 2
-        except MemoryError:
-            return Verdict("memory", "MemoryError", "in-process decoder raised MemoryError")
-        except Exception as e:  # noqa: BLE001 - the finding
-            tb = traceback.format_exc()
-            st = stack_hash(tb)
-            return Verdict("crash", f"{type(e).__name__}:{st[1] if st else ''}",
-                           f"in-process decoder raised {type(e).__name__}: {e}", {"traceback": tb[-2000:]})
-        dt = time.perf_counter() - t0
-        if dt > self.limits.timeout_s:
-            return Verdict("hang", "timeout", f"in-process decoder took {dt:.1f} s")
-        return self._oracle(inp, job, rc, {"exit_code": rc})
+        """An in-process decoder, called the one way run and speed call it
+        (:meth:`fbaconf.harness.adapters.PythonAdapter.execute`) and judged as a process ending."""
+        ex = self.adapter.execute(job)
+        if ex.ending.kind == "setup":
+            raise FuzzSetupError(f"cannot run the decoder: {ex.ending.message}")
+        return self.verdict_for(ex.ending, inp, job, {"exit_code": ex.exit_code, "elapsed_s": round(ex.elapsed_s, 3),
+                                                      "stderr_tail": ex.stderr_tail[-1500:]})
 
     def _oracle(self, inp: Entry, job, rc: int, detail: dict) -> Verdict | None:
         if rc == 69:

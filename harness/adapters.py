@@ -24,14 +24,16 @@ import importlib
 import re
 import shutil
 import sys
+import time
 import tomllib
+import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from fbaconf.bitstreams import readings
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import bounds, view
-from fbaconf.isolation.endings import DEFAULT_REJECT_EXIT_CODES
+from fbaconf.isolation.endings import DEFAULT_REJECT_EXIT_CODES, Ending, EndingKind, crash_report
 from fbaconf.isolation.environ import env_problem
 from fbaconf.isolation.sandbox import Limits, default_view, python_view
 from fbaconf.profiles.model import Claim, load_profiles
@@ -118,10 +120,11 @@ class Adapter:
 class PythonAdapter(Adapter):
     """Base class for in-process decoders: override :meth:`run` (write the outputs named in
     ``job.values``: ``faps_out``, ``vertices_out``, ``images_dir``, ``faps_out_dir``).
-    Raise :class:`NotSupportedError` for "not supported"; any other exception is a Fail
-    (the decoder rejected or crashed on the input) with its message. In-process decoders
-    share the harness's process: the timeout is checked after the call returns, and memory
-    is not limited — use a command manifest for untrusted code."""
+    Raise :class:`NotSupportedError` for "not supported", a typed input error
+    (:class:`fbaconf.errors.FbaconfInputError`) to reject the stream; any other exception is a
+    crash. In-process decoders share the harness's process: the timeout is checked after the call
+    returns, and memory is not limited — use a command manifest for untrusted code.
+    :meth:`execute` is the one way ``run``, the speed phase and ``fuzz`` call it."""
     kind = "python"
 
     def __init__(self) -> None:
@@ -136,6 +139,44 @@ class PythonAdapter(Adapter):
 
     def run(self, job: Job) -> None:  # pragma: no cover - interface
         raise NotImplementedError
+
+    def execute(self, job: Job) -> Execution:
+        """Call :meth:`run` once; how it ended in the terms of :mod:`fbaconf.isolation.endings` (a
+        typed input error is its reject, an unreadable input a set-up error, an uncaught
+        exception its crash with the traceback as its report), judged there like any process."""
+        t0 = time.perf_counter()
+        try:
+            self.run(job)
+        except NotSupportedError as e:
+            return Execution(Ending(EndingKind.NOT_SUPPORTED, f"decoder: not supported: {e}"), 69, "",
+                             time.perf_counter() - t0)
+        except MemoryError:
+            return Execution(Ending(EndingKind.MEMORY, "in-process decoder raised MemoryError"), None, "",
+                             time.perf_counter() - t0)
+        except FbaconfInputError as e:
+            kind, what = ((EndingKind.SETUP, "could not read its input") if e.rule == "io" else
+                          (EndingKind.REJECT, "rejected the stream"))
+            return Execution(Ending(kind, f"in-process decoder {what}: {e}"), 2, str(e)[-2000:],
+                             time.perf_counter() - t0)
+        except Exception as e:  # noqa: BLE001 - the decoder's own crash, judged as one
+            tb = traceback.format_exc()
+            return Execution(Ending(EndingKind.CRASH, f"in-process decoder raised {type(e).__name__}: {e}",
+                                    crash_report(tb)), 1, tb[-2000:], time.perf_counter() - t0)
+        dt = time.perf_counter() - t0
+        if dt > self.limits.timeout_s:
+            return Execution(Ending(EndingKind.TIMEOUT, f"in-process decoder took {dt:.1f} s, over the "
+                                                        f"{self.limits.timeout_s:g} s limit"), None, "", dt)
+        return Execution(Ending(EndingKind.DECODED, "in-process decoder returned"), 0, "", dt)
+
+
+@dataclass(frozen=True)
+class Execution:
+    """One call of an in-process decoder: how it ended, its "exit code" (0 decoded, 2 rejected,
+    69 not supported, 1 crashed), what it said and how long it took."""
+    ending: Ending
+    exit_code: int | None
+    stderr_tail: str
+    elapsed_s: float
 
 
 class NotSupportedError(Exception):

@@ -32,13 +32,12 @@ from fbaconf.bitstreams import readings
 from fbaconf.conformance.golden import REJECT, reading_goldens
 from fbaconf.conformance.provisional import readings_for, rests_on
 from fbaconf.conformance.suite import Case, CaseKind, golden_root, suites_root
-from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.staging import stage
 from fbaconf.safefs import remove_tree
 
 from . import cluster as cl
-from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter
+from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job
 from .compare.base import worst
 from .compare.ladder import compare_outputs, outcome_for
 from .results import CaseResult, Outcome, ResultLog
@@ -115,7 +114,9 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
         proc = dict(command=argv, exit_code=res.returncode, signal=res.signal,
                     stderr_tail=endings.kept_stderr(res.stderr_tail, ending))
     else:
-        ending, proc = _run_python(a, job)
+        ex = a.execute(job)
+        ending = ex.ending
+        proc = dict(command=None, exit_code=ex.exit_code, signal=None, stderr_tail=ex.stderr_tail)
     proc["ending"] = ending.kind.value
     if ending.report is not None:
         proc["crash_kind"] = ending.report.kind
@@ -193,37 +194,6 @@ def hidden_from_decoders(ctx: RunContext | None = None) -> list[Path]:
     if ctx is not None:
         out += [Path(ctx.golden).resolve(), Path(ctx.out_dir).resolve()]
     return out
-
-
-def _run_python(a: PythonAdapter, job: Job):
-    """Call an in-process adapter; its ending in the terms of :mod:`fbaconf.isolation.endings` (a typed input
-    error is its reject, an uncaught exception its crash)."""
-    t0 = time.perf_counter()
-    proc = dict(command=None, exit_code=None, signal=None, stderr_tail="")
-    try:
-        a.run(job)
-    except NotSupportedError as e:
-        return endings.Ending(endings.EndingKind.NOT_SUPPORTED, f"decoder: not supported: {e}"), proc
-    except MemoryError:
-        return endings.Ending(endings.EndingKind.MEMORY, "in-process decoder raised MemoryError"), proc
-    except FbaconfInputError as e:
-        proc["exit_code"] = 2
-        proc["stderr_tail"] = str(e)[-2000:]
-        if e.rule == "io":
-            return endings.Ending(endings.EndingKind.SETUP, f"in-process decoder could not read its input: {e}"), proc
-        return endings.Ending(endings.EndingKind.REJECT, f"in-process decoder rejected the stream: {e}"), proc
-    except Exception as e:
-        tb = traceback.format_exc(limit=5)
-        proc["stderr_tail"] = tb[-2000:]
-        proc["exit_code"] = 1
-        return endings.Ending(endings.EndingKind.CRASH, f"in-process decoder raised {type(e).__name__}: {e}",
-                            endings.crash_report(traceback.format_exc())), proc
-    dt = time.perf_counter() - t0
-    if dt > a.limits.timeout_s:
-        return endings.Ending(endings.EndingKind.TIMEOUT, f"in-process decoder took {dt:.1f} s, over the {a.limits.timeout_s:g} s "  # noqa: E501
-                                       f"limit"), proc
-    proc["exit_code"] = 0
-    return endings.Ending(endings.EndingKind.DECODED, "in-process decoder returned"), proc
 
 
 # ------------------------------------------------------------------------ many cases

@@ -275,21 +275,12 @@ class _Runner:
             raise SpeedError(f"unsupported adapter kind {type(a).__name__}")
         job = job_for()
         before, th0 = sysinfo.machine_sample(), sysinfo.thread_cpu_wait()
-        t0 = time.perf_counter()
-        try:
-            a.run(job)
-        except NotSupportedError as e:
-            raise SpeedRunError(self.operation, n, Outcome.NOT_SUPPORTED, f"not supported: {e}") from None
-        except MemoryError:
-            raise SpeedRunError(self.operation, n, Outcome.CRASH, "decoder raised MemoryError") from None
-        except Exception as e:  # the decoder's own failure
-            raise SpeedRunError(self.operation, n, Outcome.FAIL,
-                                f"decoder raised {type(e).__name__}: {e}") from None
-        elapsed = time.perf_counter() - t0
+        ex = a.execute(job)  # the one way an in-process decoder is called (run, speed and fuzz alike)
+        elapsed = ex.elapsed_s
         th1, after = sysinfo.thread_cpu_wait(), sysinfo.machine_sample()
-        if elapsed > a.limits.timeout_s:
-            raise SpeedRunError(self.operation, n, Outcome.TIMEOUT,
-                                f"in-process decoder took {elapsed:.1f} s, over the {a.limits.timeout_s:g} s limit")
+        judged = outcome_for(ex.ending)
+        if judged is not None:
+            raise SpeedRunError(self.operation, n, judged[0], judged[1])
         known = th0 is not None and th1 is not None
         return speed_load.Window(n, elapsed, before, after, cpu_s=th1[0] - th0[0] if known else None,
                                  stall_s=th1[1] - th0[1] if known else None,
