@@ -108,7 +108,7 @@ class MeshTable:
 
     @classmethod
     def build(cls, fap: int, target: str, borders, coord_index, displacements, n_vertices: int, *,
-              high_level_select: int = 1, node_path: str | None = None) -> "MeshTable":
+              high_level_select: int = 1, node_path: str | None = None) -> MeshTable:
         b = validate_borders(borders, node_path=node_path and node_path + ".intervalBorders")
         n = b.size - 1
         idx = np.asarray(coord_index, dtype=np.int64).reshape(-1)
@@ -183,7 +183,7 @@ class TransformTable:
 
     @classmethod
     def build(cls, fap: int, target: str, field_id: int, rotation=(0, 0, 1, 0), scale=(1, 1, 1),
-              translation=(0, 0, 0), *, high_level_select: int = 1, node_path: str | None = None) -> "TransformTable":
+              translation=(0, 0, 0), *, high_level_select: int = 1, node_path: str | None = None) -> TransformTable:
         if field_id not in FIELD_IDS:
             raise SceneError(f"fieldId {field_id} is not 1 (rotation), 2 (scale) or 3 (translation)",
                              rule="facedef-field-id", node_path=node_path and node_path + ".fieldId")

@@ -10,8 +10,8 @@ the neutral face; unit = distance / 1024; AU = 1e-5 rad.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 

@@ -60,6 +60,6 @@ class FaceState:
     def part_vertices(self, part: MeshPart, frame: int) -> np.ndarray:
         return self.vertices[frame, part.first_vertex:part.first_vertex + part.vertex_count]
 
-    def frame(self, k: int) -> "FaceState":
+    def frame(self, k: int) -> FaceState:
         return FaceState(self.parts, self.vertices[k:k + 1], self.time_ms[k:k + 1],
                          {n: a[k:k + 1] for n, a in self.extras.items()})

@@ -111,13 +111,13 @@ class FitGraph:
     order: list[int] = field(default_factory=list)  # child nodes in topological order
 
     @classmethod
-    def from_node(cls, node, *, node_path: str | None = None) -> "FitGraph":
+    def from_node(cls, node, *, node_path: str | None = None) -> FitGraph:
         """The graph of a FIT scene node (anything with ``get(field name)``)."""
         return cls.from_fields(node.get("FAPs"), node.get("Graph"), {k: node.get(k) for k in FIT_FUNCTION_FIELDS},
                                node_path=node_path)
 
     @classmethod
-    def from_fields(cls, faps, graph, functions=None, *, node_path: str | None = None) -> "FitGraph":
+    def from_fields(cls, faps, graph, functions=None, *, node_path: str | None = None) -> FitGraph:
         """The graph from the FIT node's ``FAPs`` and ``Graph`` fields and its function fields
         (``functions``: FIT field name -> values, those of :data:`FIT_FUNCTION_FIELDS`; a
         missing one is empty). Raises :class:`SceneError` naming the field and the rule."""

@@ -23,9 +23,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from fbaconf.harness.adapters import load_manifest, resolve  # noqa: E402
-from fbaconf.harness.bench import render_table  # noqa: E402
-from fbaconf.harness.speed import measure as speed  # noqa: E402
+from fbaconf.harness.adapters import load_manifest, resolve
+from fbaconf.harness.bench import render_table
+from fbaconf.harness.speed import measure as speed
 
 
 def reference(name: str, repeats: int) -> None:

@@ -27,11 +27,11 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from fbaconf.animation.facestate import FaceState, MeshPart  # noqa: E402
-from fbaconf.rendering.render import Renderer  # noqa: E402
-from fbaconf.rendering.scenario import Scenario  # noqa: E402
+from fbaconf.animation.facestate import FaceState, MeshPart
+from fbaconf.rendering.render import Renderer
+from fbaconf.rendering.scenario import Scenario
 
 
 def head_mesh(n_lat: int, n_lon: int) -> tuple[np.ndarray, np.ndarray]:
@@ -96,7 +96,7 @@ def bundled_states(n_frames: int) -> dict[str, FaceState]:
         out["default head"] = animate(FapFrames.empty(n_frames), scene=None)
         from fbaconf.generators.models import level_limit_scene  # noqa: PLC0415 (optional, as above)
         out["level-limit head"] = animate(FapFrames.empty(n_frames), scene=level_limit_scene())
-    except Exception as e:  # the animation stage is optional for this benchmark
+    except Exception as e:  # noqa: BLE001 - the animation stage is optional for this benchmark
         print(f"(bundled heads unavailable: {type(e).__name__}: {e})")
     return out
 

@@ -314,7 +314,7 @@ def _encode_once(frames: FapFrames, opts: EncoderOptions) -> EncodeResult:
     return _write(src, opts, code, quants, types, plan)
 
 
-def _plan_arithmetic(src: FapFrames, opts: EncoderOptions, quants, types) -> "_Plan":
+def _plan_arithmetic(src: FapFrames, opts: EncoderOptions, quants, types) -> _Plan:
     forced: set[int] = {k for k, f in enumerate(src.frame_number.tolist()) if f in opts.intra_at}
     while True:
         plan = _Plan(src, opts, quants, types, forced)
@@ -359,7 +359,7 @@ class _StreamContext:
     hcur: np.ndarray | None = None
 
     @classmethod
-    def new(cls) -> "_StreamContext":
+    def new(cls) -> _StreamContext:
         w = BitWriter()
         w.start_code(FACE_OBJECT_START_CODE)
         return cls(w=w, bounds=tables.default_bounds().copy(), ever=np.zeros(NUM_FAPS, dtype=bool),

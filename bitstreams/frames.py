@@ -72,7 +72,7 @@ class FapFrames:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def empty(cls, n: int, frame_rate: float = 25.0) -> "FapFrames":
+    def empty(cls, n: int, frame_rate: float = 25.0) -> FapFrames:
         return cls(values=np.zeros((n, NUM_FAPS), np.int32), status=np.zeros((n, NUM_FAPS), np.uint8),
                    high=np.zeros((n, len(HIGH_LEVEL_FIELDS)), np.int32),
                    frame_number=np.arange(n, dtype=np.int64),
@@ -90,18 +90,18 @@ class FapFrames:
         """bool[n, 68]: the FAPs coded in each plane (status SET)."""
         return self.status == SET
 
-    def copy(self) -> "FapFrames":
+    def copy(self) -> FapFrames:
         kw = {f.name: (getattr(self, f.name).copy() if isinstance(getattr(self, f.name), np.ndarray)
                        else getattr(self, f.name)) for f in fields(self)}
         return FapFrames(**kw)
 
-    def select(self, idx) -> "FapFrames":
+    def select(self, idx) -> FapFrames:
         kw = {f.name: (getattr(self, f.name)[idx] if isinstance(getattr(self, f.name), np.ndarray)
                        else getattr(self, f.name)) for f in fields(self)}
         return FapFrames(**kw)
 
     # ------------------------------------------------------------------ comparison
-    def normative_equal(self, other: "FapFrames") -> bool:
+    def normative_equal(self, other: FapFrames) -> bool:
         """Equal where the standard fixes the result: status, and values/high-level fields of
         every FAP that is not FREE. FREE values are the decoder's choice."""
         return first_difference(self, other) is None
@@ -118,7 +118,7 @@ class FapFrames:
         atomic_write_bytes(path, self.to_npz_bytes())
 
     @classmethod
-    def load_npz(cls, path_or_file) -> "FapFrames":
+    def load_npz(cls, path_or_file) -> FapFrames:
         with np.load(path_or_file, allow_pickle=False) as z:
             if "format" not in z or str(z["format"]) != "fbaconf.FapFrames/1":
                 raise ValueError("not an fbaconf FapFrames .npz file (missing format tag)")

@@ -21,9 +21,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from importlib import resources
-from typing import Iterator
 
 from fbaconf.errors import FbaconfInputError
 

@@ -286,7 +286,7 @@ def _check_signature(pkg: Path, sums: bytes, pubkey: Path | None, v: Verificatio
     v.state = SIGNED
 
 
-def _check_verdict(files: dict[str, bytes], cert: dict, problems: list[str]) -> None:  # noqa: C901
+def _check_verdict(files: dict[str, bytes], cert: dict, problems: list[str]) -> None:
     """Re-derive the verdict from results.jsonl, report.json and the claim rules."""
     claim = cert.get("claim")
     try:

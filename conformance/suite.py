@@ -82,7 +82,7 @@ def check_claim(claim, where: str) -> str:
     return claim
 
 
-def _check_case(d: dict, suite: str) -> None:  # noqa: C901 - one check per field of the schema
+def _check_case(d: dict, suite: str) -> None:
     """Every field of case ``d`` of the kind the schema gives it (module doc)."""
     where = f"suite {suite}: case {_quote(d.get('id'))}"
 
@@ -199,7 +199,7 @@ class Case:
         return d
 
     @classmethod
-    def from_json(cls, d: dict, suite: str, suite_dir: Path | None) -> "Case":
+    def from_json(cls, d: dict, suite: str, suite_dir: Path | None) -> Case:
         _check_case(d, suite)
         try:
             c = cls(suite=suite, suite_dir=suite_dir, **{k: d[k] for k in d if k in cls.__dataclass_fields__
@@ -234,14 +234,15 @@ class Suite:
                 "group": self.group, "version": self.version, "cases": [c.to_json() for c in self.cases]}
 
     def manifest_path(self) -> Path:
-        assert self.path is not None
+        if self.path is None:
+            raise ValueError(f"suite {self.name} was not loaded from a folder")
         return self.path / "suite.json"
 
     def digest(self) -> str:
         return sha256_file(self.manifest_path())
 
     @classmethod
-    def load(cls, directory: Path) -> "Suite":
+    def load(cls, directory: Path) -> Suite:
         directory = Path(directory)
         mf = directory / "suite.json"
         if not mf.exists() and not mf.is_symlink():

@@ -78,8 +78,8 @@ def main(argv: list[str] | None = None) -> None:  # pragma: no cover - needs ath
         sys.exit("fuzz_entry: atheris is not installed (pip install atheris); "
                  "`fbaconf fuzz --self` needs nothing extra")
     with atheris.instrument_imports():
-        import fbaconf.bitstreams.decoder  # noqa: F401
-        import fbaconf.profiles.checker  # noqa: F401
+        import fbaconf.bitstreams.decoder
+        import fbaconf.profiles.checker
         import fbaconf.scenes.bt  # noqa: F401
     atheris.Setup(sys.argv if argv is None else argv, fuzz_one_input)
     atheris.Fuzz()

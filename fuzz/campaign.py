@@ -178,7 +178,7 @@ class Campaign:
         self.universe |= set(r["universe"])
         for b in r["corpus"]:
             if len(self.corpus) < MAX_MERGED:
-                self.corpus.setdefault(hashlib.sha1(b).hexdigest(), b)
+                self.corpus.setdefault(hashlib.sha1(b, usedforsecurity=False).hexdigest(), b)
         new = []
         for f in r["findings"]:
             have = self.findings.get(f["key"])

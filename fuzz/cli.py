@@ -281,8 +281,8 @@ def _after_promotion(added: list[dict], args) -> list[str]:
     """What to do after ``--promote``: build the suite (and goldens), check the decoder on it, commit."""
     if not added:
         return ["nothing new: every finding is already a regression case (or none is a stream)"]
-    from .findings import load_findings  # noqa: PLC0415 (the verb's own imports are lazy)
-    from .promote import REGRESSION_SUITE  # noqa: PLC0415
+    from .findings import load_findings
+    from .promote import REGRESSION_SUITE
     decoders = sorted({str((doc.get("decoder") or {}).get("manifest") or "") for _d, doc in load_findings(args.promote)}
                       - {""})
     data = f"{args.data_dir}/" if args.data_dir else "conformance/data/"

@@ -7,10 +7,10 @@ import hashlib
 import random
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from fbaconf.errors import FbaconfInputError
 from fbaconf.scenes import bifs, bt
@@ -399,6 +399,6 @@ def _bifs_seeds(scenes: list[Entry]) -> list[Entry]:
     for e in scenes:
         try:
             out.append(Entry(bifs.encode(bt.parse(e.data.decode("utf-8"))), kind="bifs", origin=f"bifs({e.origin})"))
-        except Exception:  # noqa: BLE001 - scenes the BIFS encoder does not cover
+        except Exception:  # noqa: BLE001, S112 - scenes the BIFS encoder does not cover
             continue
     return out

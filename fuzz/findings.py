@@ -46,7 +46,7 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
     replay += ["--replay", str((d / f"minimal.{ext}").resolve())]
     command = None
     if isinstance(target, DecoderTarget) and target.is_command:
-        wd = "/tmp/fbaconf-repro"
+        wd = "/tmp/fbaconf-repro"  # noqa: S108 - the reproduce script runs the decoder in a fixed folder it creates
         values = {"input": str((d / f"minimal.{ext}").resolve()), "fba": str((d / f"minimal.{ext}").resolve()),
                   "faps_out": f"{wd}/faps.{'fap' if target.adapter.faps_format == 'fap' else 'npz'}",
                   "vertices_out": f"{wd}/vertices.npz", "images_dir": f"{wd}/images", "faps_out_dir": f"{wd}/faces"}
@@ -69,7 +69,7 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
             script.append(f"{envs + ' ' if envs else ''}timeout {lim.timeout_s:g} {shlex.join(command)}")
             script.append('echo "exit status: $?"')
         atomic_write_text(d / "reproduce.sh", "\n".join(script) + "\n")
-        os.chmod(d / "reproduce.sh", 0o755)
+        os.chmod(d / "reproduce.sh", 0o755)  # noqa: S103 - an executable script, as its name says
     mv = f.min_verdict or f.verdict
     doc = {
         "format": "fbaconf.fuzz-finding/1", "id": f.id, "class": f.verdict.cls, "signature": f.verdict.signature,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from fbaconf.bitstreams.bitedit import from_bits, to_bits, truncate_bits
 
@@ -43,7 +43,7 @@ class MinimiseStats:
     flaky: bool = False  # a re-run of the original or the minimal input did not do it again
 
 
-def minimise(data: bytes, test: Callable[[bytes], bool], *, max_tests: int = 600, max_seconds: float = 30.0,  # noqa: PLR0913
+def minimise(data: bytes, test: Callable[[bytes], bool], *, max_tests: int = 600, max_seconds: float = 30.0,
              boundaries: list[int] | None = None, bits: bool = True,
              check: Callable[[bytes], bool] | None = None) -> tuple[bytes, MinimiseStats]:
     """The smallest input found that still passes ``test`` (same classification): prefixes at

@@ -98,7 +98,7 @@ class StreamModel:
         return sorted(x for x in out if 0 < x <= self.nbits)
 
 
-_PARSES: "collections.OrderedDict[bytes, tuple]" = collections.OrderedDict()
+_PARSES: collections.OrderedDict[bytes, tuple] = collections.OrderedDict()
 _PARSES_KEEP = 8
 _PARSES_LOCK = threading.Lock()
 

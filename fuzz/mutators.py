@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import random
-from typing import Callable
+from collections.abc import Callable
 
 from fbaconf.bitstreams.bitedit import bit_range, insert_bits, join_bits, remove_bits, set_bits, truncate_bits
 

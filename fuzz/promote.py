@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import json
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 from fbaconf.bitstreams.decoder import decode

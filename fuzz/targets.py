@@ -8,9 +8,9 @@ import tempfile
 import threading
 import time
 import traceback
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable
 
 import numpy as np
 
@@ -101,13 +101,13 @@ class Run:
         self._wait, self._judge, self._out = wait, judge, None
 
     @classmethod
-    def done(cls, out: "ExecResult") -> "Run":
+    def done(cls, out: ExecResult) -> Run:
         return cls(lambda: None, lambda: out)
 
     def wait(self) -> None:
         self._wait()
 
-    def result(self) -> "ExecResult":
+    def result(self) -> ExecResult:
         if self._out is None:
             self._wait()
             self._out = self._judge()
@@ -202,7 +202,7 @@ class DecoderTarget:
         (outd / "faces").mkdir()
         return Job(workdir=workdir, values=values, frames=0)
 
-    def _worker(self) -> "_Worker":
+    def _worker(self) -> _Worker:
         """This thread's worker: ``depth`` case folders used in turn (inputs queued and running
         in some while an earlier input's outputs are judged from another), reused input after
         input, and (command decoders) its fork server or persistent decoder."""
@@ -220,7 +220,7 @@ class DecoderTarget:
                 self._workers.append(w)
         return w
 
-    def _reuse(self, slot: "_Slot", data: bytes, write_input: bool = True):
+    def _reuse(self, slot: _Slot, data: bytes, write_input: bool = True):
         """The slot's job for the next input: the input rewritten in place (through a
         descriptor kept open), the outputs and everything else an earlier input left removed."""
         for d in slot.dirs:
@@ -234,7 +234,7 @@ class DecoderTarget:
             slot.input_len = len(data)
         return slot.job
 
-    def _view(self, w: "_Worker", argv: list[str]):
+    def _view(self, w: _Worker, argv: list[str]):
         """The sandbox view of a worker: the decoder's own view of case folder 0, plus the others."""
         view = self.adapter.sandbox_view(argv, w.slots[0].job.workdir, hidden=hidden_from_decoders())
         for slot in w.slots[1:]:
@@ -256,7 +256,7 @@ class DecoderTarget:
                     slot.input_fd = None
         self._local = threading.local()
 
-    def __enter__(self) -> "DecoderTarget":
+    def __enter__(self) -> DecoderTarget:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -272,7 +272,7 @@ class DecoderTarget:
     def execute(self, inp: Entry) -> ExecResult:
         return self.start(inp).result()
 
-    def start(self, inp: Entry) -> "Run":
+    def start(self, inp: Entry) -> Run:
         """Start running ``inp``: ``result()`` on the :class:`Run` judges it. Through a fork
         server or a persistent decoder the decoder runs while the caller works, and an input
         started while another runs is queued behind it (one decoder at a time, no gap); at
@@ -319,7 +319,7 @@ class DecoderTarget:
             self._clean = inp.data
         return out
 
-    def _serve(self, w: "_Worker") -> None:
+    def _serve(self, w: _Worker) -> None:
         """The worker's persistent decoder (``[commands] serve``), started at its first input."""
         w.argv = [self.adapter.argv("serve", w.slots[0].job)]
         w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),

@@ -14,14 +14,15 @@ from __future__ import annotations
 import json
 import os
 import threading
+from collections.abc import Iterable, Iterator
 from dataclasses import asdict, dataclass, field
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
-from typing import Any, Iterable, Iterator
+from typing import Any
 
 
-class Outcome(str, Enum):
-    PASS = "Pass"
+class Outcome(StrEnum):
+    PASS = "Pass"  # noqa: S105 - an outcome, not a password
     FAIL = "Fail"
     QUALITY_WARNING = "QualityWarning"
     NOT_SUPPORTED = "NotSupported"
@@ -72,7 +73,7 @@ class StageResult:
         return d
 
     @classmethod
-    def from_json(cls, d: dict) -> "StageResult":
+    def from_json(cls, d: dict) -> StageResult:
         d = dict(d)
         d["outcome"] = Outcome(d["outcome"])
         return cls(**d)
@@ -116,7 +117,7 @@ class CaseResult:
         return d
 
     @classmethod
-    def from_json(cls, d: dict) -> "CaseResult":
+    def from_json(cls, d: dict) -> CaseResult:
         d = dict(d)
         d["outcome"] = Outcome(d["outcome"])
         d["stages"] = [StageResult.from_json(s) for s in d.get("stages", [])]
@@ -158,7 +159,7 @@ class SpeedResult:
         return asdict(self)
 
     @classmethod
-    def from_json(cls, d: dict) -> "SpeedResult":
+    def from_json(cls, d: dict) -> SpeedResult:
         return cls(**d)
 
 
@@ -204,7 +205,7 @@ class RunRecord:
         }
 
     @classmethod
-    def from_json(cls, d: dict) -> "RunRecord":
+    def from_json(cls, d: dict) -> RunRecord:
         return cls(decoder=d["decoder"], claim=d.get("claim"), suites=d.get("suites", []),
                    system=d.get("system", {}), results=[CaseResult.from_json(r) for r in d.get("results", [])],
                    speed=[SpeedResult.from_json(s) for s in d.get("speed", [])],

@@ -23,10 +23,10 @@ import tempfile
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from fbaconf.bitstreams import readings
 from fbaconf.conformance.golden import REJECT, reading_goldens
@@ -85,7 +85,7 @@ def run_case(ctx: RunContext, case: Case) -> CaseResult:
     try:
         job = prepare_job(ctx.adapter, case, workdir)
         result = _execute(ctx, case, job, base)
-    except Exception as e:  # a harness problem, never the decoder's verdict
+    except Exception as e:  # noqa: BLE001 - a harness problem, never the decoder's verdict
         result = CaseResult(**base, outcome=Outcome.ERROR,
                             message=f"harness error: {type(e).__name__}: {e}",
                             stderr_tail=traceback.format_exc(limit=3)[-2000:])
@@ -163,7 +163,8 @@ def _judge_by_declared(ctx: RunContext, case: Case, job: Job, ending, fields: di
             r.message = f"judged by the declared reading {rid}: {r.message}"
             return r
         first = first or r
-    assert first is not None
+    if first is None:  # declared is never empty here (the caller's condition)
+        raise ValueError(f"{case.full_id}: no declared reading to judge by")
     if _judge(ctx, case, job, ending, dict(fields)).outcome.ok:
         first.message = (f"decoded by fbaconf's reading, not the declared {', '.join(declared)} (which changes "
                          f"this case): a decoder follows the reading it declares; {first.message}")

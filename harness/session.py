@@ -24,7 +24,7 @@ from .verdict import claim_verdict, speed_verdict
 
 
 def _now() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
 
 
 @dataclass
@@ -113,7 +113,7 @@ def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) ->
         todo = [r for r in todo if r.case_id not in passed]
 
 
-def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None,  # noqa: PLR0913
+def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None,
                   heading: str = "fbaconf run") -> dict[str, Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": json_path or out_dir / "report.json", "junit": junit_path or out_dir / "junit.xml",

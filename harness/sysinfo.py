@@ -22,7 +22,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from importlib import metadata
 
 # Distributions whose versions can change a verdict (numerics, image I/O, colour maths).
@@ -41,7 +41,7 @@ def _cpu_model() -> str:
         pass
     if sys.platform == "darwin":
         try:
-            out = subprocess.run(["sysctl", "-n", "machdep.cpu.brand_string"], capture_output=True,
+            out = subprocess.run(["sysctl", "-n", "machdep.cpu.brand_string"], capture_output=True,  # noqa: S607 - the macOS system tool, found where the system puts it
                                  text=True, timeout=5, check=False).stdout.strip()
             if out:
                 return out
@@ -81,7 +81,7 @@ def system_info(extra: dict | None = None) -> dict:
         "python_version": platform.python_version(),
         "python_implementation": platform.python_implementation(),
         "versions": {d: _version(d) for d in DISTRIBUTIONS},
-        "timestamp_utc": datetime.now(timezone.utc).isoformat(timespec="seconds").replace("+00:00", "Z"),
+        "timestamp_utc": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
     }
     if extra:
         info.update(extra)
@@ -186,7 +186,7 @@ class TreeWatch:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="fbaconf-treewatch", daemon=True)
 
-    def __enter__(self) -> "TreeWatch":
+    def __enter__(self) -> TreeWatch:
         self.poll()
         self._base = dict(self._last)
         self._thread.start()

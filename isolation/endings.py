@@ -95,7 +95,7 @@ def _python_exception_line(text: str) -> str:
     return next((ln.strip() for ln in after if ln.strip() and not ln[:1].isspace()), "")[:300]
 
 
-def crash_report(text: str) -> CrashReport | None:  # noqa: C901 (one branch per runtime)
+def crash_report(text: str) -> CrashReport | None:
     """The crash report a process printed: sanitizer, Python traceback, Go/Rust panic, uncaught
     Java or .NET exception — or None."""
     m = _SANITIZER.search(text)

@@ -136,7 +136,7 @@ class ForkServer:
                 f.close()
         self._files = []
 
-    def __enter__(self) -> "ForkServer":
+    def __enter__(self) -> ForkServer:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -150,7 +150,7 @@ class ForkServer:
 
     def start(self, argv: list[str], workdir: Path, limits: Limits | None = None, *,
               env: dict[str, str] | None = None, measure_dirs: list[Path] | None = None,
-              slot: int = 0) -> "Pending":
+              slot: int = 0) -> Pending:
         """Send one input to the server; the :class:`Pending` waits for it (``wait``: the
         decoder has ended) and judges it (``result``: reads its stdout/stderr, which stay until
         the next input in the same ``slot``). An input sent while another runs waits in the
@@ -222,7 +222,7 @@ class ForkServer:
             pids |= any(ln.split()[:1] == ["max"] and ln.split()[1:2] != ["0"] for ln in text.splitlines())
         return oom, pids
 
-    def _send(self, p: "Pending") -> bool:
+    def _send(self, p: Pending) -> bool:
         p.nonce = secrets.token_hex(12)
         data = p.nonce.encode() + b"\0" + p.body
         try:

@@ -57,9 +57,9 @@ def _read_exact(n):
 
 
 def _send(nonce, reply):
-    data = ("%s %d %.6f %.6f %d %.6f %d %d %d" % (nonce, reply["status"], reply["utime"], reply["stime"],
-                                                   reply["maxrss_kb"], reply["elapsed"], reply["timed_out"],
-                                                   reply["mem_hit"], reply.get("exec_errno", 0))).encode()
+    data = (f"{nonce} {reply['status']:d} {reply['utime']:.6f} {reply['stime']:.6f} {reply['maxrss_kb']:d} "
+            f"{reply['elapsed']:.6f} {reply['timed_out']:d} {reply['mem_hit']:d} "
+            f"{reply.get('exec_errno', 0):d}").encode()
     data = struct.pack(">I", len(data)) + data
     while data:
         data = data[os.write(1, data):]

@@ -72,8 +72,8 @@ import select
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from fbaconf.safefs import tree_size
 
@@ -134,7 +134,7 @@ class PersistentDecoder:
         self._owned: set[tuple] = set()  # ending kinds confirmed as the input-in-flight's (ending_key)
 
     # ---------------------------------------------------------------- processes
-    def _launch(self, *, alone: bool = False) -> "_Server":
+    def _launch(self, *, alone: bool = False) -> _Server:
         """One sandboxed ``serve`` process, not yet given an input."""
         self.io.mkdir(parents=True, exist_ok=True)
         (self.workdir / "tmp").mkdir(parents=True, exist_ok=True)
@@ -169,7 +169,7 @@ class PersistentDecoder:
             os.set_blocking(f.fileno(), False)
         return _Server(proc, cg, err, status_r, as_bytes > 0)
 
-    def _take_spare(self, which: str = "_spare") -> "_Server | None":
+    def _take_spare(self, which: str = "_spare") -> _Server | None:
         spare = getattr(self, which)
         setattr(self, which, None)
         if spare is not None and spare.exit_status() is not None:  # it died waiting
@@ -206,7 +206,7 @@ class PersistentDecoder:
         code, or the process's own ending when it died)."""
         return self.start(data, out_path).result()
 
-    def start(self, data: bytes, out_path: str) -> "Answer":
+    def start(self, data: bytes, out_path: str) -> Answer:
         """Queue one input; it is written to the decoder once every input before it has its
         answer. The :class:`Answer` waits for it."""
         a = Answer(self, data, out_path)
@@ -244,7 +244,7 @@ class PersistentDecoder:
             self._inflight = a
             self.server.send(a, self.limits)  # how it went is read by _complete
 
-    def _ended_between(self, srv: "_Server") -> None:
+    def _ended_between(self, srv: _Server) -> None:
         """The process ended after answering its last input, nothing sent since: an exit is let
         go (a fresh process takes the next input); a crash, or a crash report, is confirmed on
         the input it answered last (module doc)."""
@@ -254,7 +254,7 @@ class PersistentDecoder:
         if res is not None and abnormal(res):
             self._whose(res, None, last)
 
-    def _complete(self, a: "Answer") -> None:
+    def _complete(self, a: Answer) -> None:
         """Read ``a``'s answer (``a`` is in flight) and judge it; then the next input goes out."""
         srv = self.server
         prev = srv.last  # the input this process answered before ``a``, if any
@@ -294,7 +294,7 @@ class PersistentDecoder:
             self._pending.appendleft(a)  # again, as the first input of a fresh process
         self._dispatch()
 
-    def _confirmed(self, a: "Answer", res: ProcResult) -> None:
+    def _confirmed(self, a: Answer, res: ProcResult) -> None:
         """``a`` ran again as the first input of a fresh process after an ending it may not own
         (``a.suspect``): an ending now is its own; a clean answer sends the question on to the
         input answered before it (module doc)."""
@@ -307,7 +307,7 @@ class PersistentDecoder:
         else:  # another ending of its own: the first may still be the input answered before's
             self._before(prev)
 
-    def _whose(self, res: ProcResult, a: "Answer | None", prev: "Answer", *, inflight: "Answer | None" = None) -> None:
+    def _whose(self, res: ProcResult, a: Answer | None, prev: Answer, *, inflight: Answer | None = None) -> None:
         """``res`` ended (or was printed by) a process that had answered ``prev`` last, while
         ``a`` was in flight (``a`` None: nothing was, or ``inflight`` has its own result already):
         file it under the input that ends so alone (module doc)."""
@@ -331,7 +331,7 @@ class PersistentDecoder:
         else:
             self._file(prev, res)
 
-    def _before(self, prev: "Answer") -> bool:
+    def _before(self, prev: Answer) -> bool:
         """Run ``prev`` (the input a process answered before an ending) alone; whether it ended
         so there — its ending is then filed under it."""
         before = self.alone(prev.data, prev.out_path)
@@ -343,7 +343,7 @@ class PersistentDecoder:
         self._file(prev, before)
         return True
 
-    def _file(self, ans: "Answer", res: ProcResult) -> None:
+    def _file(self, ans: Answer, res: ProcResult) -> None:
         """``res`` is ``ans``'s ending: its result if not given out yet, else a late ending."""
         if not ans.consumed:
             ans.res = res
@@ -388,7 +388,7 @@ class PersistentDecoder:
         finally:
             srv.stop()
 
-    def _answered(self, a: "Answer", srv: "_Server") -> ProcResult:
+    def _answered(self, a: Answer, srv: _Server) -> ProcResult:
         head = a.line.split(b" ", 2)
         code = int(head[1])
         srv.err_mark = os.fstat(srv.err.fileno()).st_size  # what it writes from now on is the next input's
@@ -400,13 +400,13 @@ class PersistentDecoder:
                 res.output_limit_hit = True
         return res
 
-    def _broken(self, a: "Answer", srv: "_Server", why: str) -> ProcResult:
+    def _broken(self, a: Answer, srv: _Server, why: str) -> ProcResult:
         """The decoder broke the protocol during ``a``: that input's ending (a fresh process next)."""
         return ProcResult(self.argv, None, elapsed_s=a.elapsed, stderr_tail=srv.err_since(a.err_start),
                           notes=["protocol-error"],
                           detail=f"broke the persistent protocol (version {PROTOCOL}, docs/fuzzing.md): {why}")
 
-    def _ended(self, a: "Answer", srv: "_Server", hit: str | None, *, answered: bool = False) -> ProcResult:
+    def _ended(self, a: Answer, srv: _Server, hit: str | None, *, answered: bool = False) -> ProcResult:
         """The process died (``hit`` None) or was stopped at a limit (``hit``) while decoding
         ``a`` (``answered``: after its answer)."""
         p = srv.proc
@@ -479,7 +479,7 @@ class _Server:
     def err_since(self, start: int, end: int | None = None) -> str:
         return tail_from(self.err.fileno(), start, end)
 
-    def send(self, a: "Answer", limits: Limits) -> None:
+    def send(self, a: Answer, limits: Limits) -> None:
         """Write ``a``'s request within its deadline, reading what the decoder sends meanwhile
         (kept for :meth:`read_answer`; more than one answer's worth is a protocol error)."""
         a.id = secrets.randbits(48)
@@ -511,7 +511,7 @@ class _Server:
                     return
         a.early = bool(self.buf)  # written before it had all of this request: not its answer (module doc)
 
-    def _take(self, rfd: int, a: "Answer", wait: bool = True) -> bool:
+    def _take(self, rfd: int, a: Answer, wait: bool = True) -> bool:
         """Read what the decoder sent (``wait``: select said there is something); False (and
         ``a.pending_end`` set) when that ends the input."""
         if not wait and not select.select([rfd], [], [], 0)[0]:
@@ -532,7 +532,7 @@ class _Server:
             return False
         return True
 
-    def read_answer(self, a: "Answer", deadline: float, watch: Watch):
+    def read_answer(self, a: Answer, deadline: float, watch: Watch):
         """Wait for ``a``'s answer: "answered" (``a.line`` set), "eof", "timeout", "memory",
         "output", or (whose, why) when the decoder broke the protocol — whose: "this" input's
         doing or the "previous" one's (module doc)."""
@@ -569,7 +569,7 @@ class _Server:
         a.line = line
         return "answered"
 
-    def finish(self, a: "Answer", deadline: float, watch: Watch):
+    def finish(self, a: Answer, deadline: float, watch: Watch):
         """After the answer of the process's only input (:meth:`PersistentDecoder.alone`): close
         its stdin and wait for it to end — "eof" when it did (closed its output), a limit's
         name, or ("this", why) when it wrote more."""

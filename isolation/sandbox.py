@@ -174,7 +174,7 @@ def _bwrap_argv(view: View, workdir: Path) -> list[str]:
         elif p.is_dir():
             out += ["--ro-bind", top, top]
     # the sandbox's own /proc (its PID namespace: none of the host's processes), /dev, /tmp
-    out += ["--proc", "/proc", "--dev", "/dev", "--tmpfs", "/tmp"]
+    out += ["--proc", "/proc", "--dev", "/dev", "--tmpfs", "/tmp"]  # noqa: S108 - the sandbox mounts a fresh tmpfs of its own there
     seen = set()
     for p in view.read_only:
         p = Path(p)
@@ -332,7 +332,7 @@ def sandbox_argv(view: View, workdir: Path, fds: list[int], *, status: bool = Tr
     return argv[:1] + extra + argv[1:], status_r
 
 
-def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,  # noqa: PLR0913
+def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,
         measure_dirs: list[Path] | None = None, view: View | None = None, keep_io: Path | None = None) -> ProcResult:
     """Run ``argv`` in ``workdir`` under ``limits`` (sandboxed when :func:`isolation` allows);
     never raises for the decoder's behaviour. ``keep_io``: a folder to keep the whole stdout and

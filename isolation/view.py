@@ -200,8 +200,8 @@ def command_folders(argv: list[str], workdir: Path, program_dirs: list[Path], *,
     own (``/``, ``/tmp``, ``/dev/null``, ``/proc/self/…``) or never shows (``/sys``, ``/run``)."""
     out = [] if through_python else [(p, f"the folder of the program {argv[0]}") for p in program_dirs]
     for p in named_paths(argv[1:]):
-        if _under(p, [workdir, *_OWN]) or p in (Path("/"), Path("/tmp")) or \
-                (through_python and p.resolve() == Path(argv[0]).resolve()):
+        own = p in (Path("/"), Path("/tmp"))  # noqa: S108 - what the sandbox mounts of its own, never the host's
+        if _under(p, [workdir, *_OWN]) or own or (through_python and p.resolve() == Path(argv[0]).resolve()):
             continue  # the case's own files; what the sandbox has of its own (/, /tmp, /dev, /proc) or never shows
         what = f"the folder {p}, which [commands] names" if p.is_dir() else f"the folder of {p}, which [commands] names"
         out += [(f, what) for f in dict.fromkeys([p, p.resolve()] if p.is_dir() else [p.parent, p.resolve().parent])]

@@ -14,8 +14,8 @@ import importlib
 import inspect
 import sys
 import textwrap
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from fbaconf.bitstreams import arith
 
@@ -67,7 +67,7 @@ def source_patch(where: str, old: str, new: str) -> None:
     if n != 1:
         raise RuntimeError(f"mutant source snippet occurs {n} times in {where} (must be once): {old!r}")
     ns: dict = {}
-    exec(compile(src.replace(old, new), f"<mutant of {where}>", "exec"), mod.__dict__, ns)
+    exec(compile(src.replace(old, new), f"<mutant of {where}>", "exec"), mod.__dict__, ns)  # noqa: S102 - a mutant recompiles the reference function from its own source
     obj = ns[attr]
     if isinstance(raw, staticmethod) and not isinstance(obj, staticmethod):
         obj = staticmethod(obj)

@@ -34,7 +34,7 @@ from fbaconf.harness.runner import RunContext, run_case
 from fbaconf.harness.selection import claim_covers
 from fbaconf.reference import decoder as refdecoder
 
-from .own import FAMILIES, MUTANTS, MUTANTS_LIST, apply  # noqa: F401 (the registry callers read from here too)
+from .own import FAMILIES, MUTANTS, MUTANTS_LIST, apply
 
 # ------------------------------------------------------------------ running one mutant
 

@@ -104,7 +104,7 @@ def image_size(path: Path) -> tuple[int, int] | None:
         spec = inp.spec()
         inp.close()
         return int(spec.width), int(spec.height)
-    except Exception:
+    except Exception:  # noqa: BLE001 - an image the reader cannot open: no size to check
         return None
 
 
@@ -203,7 +203,7 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
         try:
             importlib.import_module("fbaconf.scenes.bt")  # optional: the scene readers (BT, and BIFS on it)
             bifs = importlib.import_module("fbaconf.scenes.bifs")
-        except Exception as e:  # ImportError, or a reader that fails to import
+        except Exception as e:  # noqa: BLE001 - ImportError, or a reader that fails to import
             out.append(diag(R.SCENE_UNAVAILABLE, f"scene {scene}: no scene reader in this build "
                             f"({type(e).__name__}: {e}); the scene was not checked"))
             return None
@@ -212,7 +212,7 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
         except OSError as e:
             out.append(diag(R.SCENE_INVALID, f"scene {scene} cannot be read: {e.strerror or e}"))
             return None
-        except Exception as e:  # TextFormatError / SceneError / anything the reader raises
+        except Exception as e:  # noqa: BLE001 - TextFormatError / SceneError / anything the reader raises
             path = getattr(e, "node_path", None)
             line = getattr(e, "line", None)
             where = f" (line {line}, column {getattr(e, 'column', '?')})" if line is not None else ""
@@ -224,7 +224,7 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
         scene = parsed
     try:
         _interop(scene, out)
-    except Exception:  # the interop note never stops the check
+    except Exception:  # noqa: BLE001, S110 - the interop note never stops the check
         pass
     # FAP-SCENE-004; loaded with the scene readers (it compiles the scene the way the reference does)
     out.extend(importlib.import_module("fbaconf.profiles.conditioning").conditioning_diagnostics(scene))
@@ -233,7 +233,7 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
     except SceneStructureError as e:
         out.append(diag(R.SCENE_INVALID, f"scene: {e}", node_path=e.node_path))
         return None
-    except Exception as e:
+    except Exception as e:  # noqa: BLE001 - any other failure of an untrusted scene is reported
         out.append(diag(R.SCENE_INVALID, f"scene structure not understood: {type(e).__name__}: {e}"))
         return None
 
@@ -285,7 +285,7 @@ def analyse(data: bytes, *, scene=None, claim: Claim | str | None = None, file: 
         claim = Claim.parse(claim, profiles or load_profiles())
     try:
         _analyse(bytes(data), scene, claim, file, profiles, smallest_claim, rep)
-    except Exception as e:  # a checker bug must not crash the caller
+    except Exception as e:  # noqa: BLE001 - a checker bug must not crash the caller
         out.append(diag(R.CHECK_INTERNAL, f"internal checker failure: {type(e).__name__}: {e}"))
     out.sort(key=lambda d: d.location.sort_key())
     rep.unreadable = any(d.code in UNREADABLE_CODES for d in out)

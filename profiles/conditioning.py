@@ -35,6 +35,6 @@ def conditioning_diagnostics(scene) -> list[Diagnostic]:
     except SceneError as e:
         if e.rule == "calibration-degenerate":
             return [diag(R.SCENE_ILL_CONDITIONED, f"scene: {e.message}", node_path=e.node_path)]
-    except Exception:  # noqa: S110 (any other failure of the scene is reported by the checks that own it)
+    except Exception:  # noqa: BLE001, S110 - any other failure of the scene is reported by the checks that own it
         pass
     return []

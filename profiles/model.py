@@ -92,15 +92,15 @@ class ProfileSet:
         p = self.profiles[profile]
         return other == p.id or other in p.ancestors
 
-    def limits_for(self, claim: "Claim") -> list[Limit]:
+    def limits_for(self, claim: Claim) -> list[Limit]:
         """The limits that apply to a claim (applies_from included in the claimed profile)."""
         return [lim for lim in self.limits.values() if self.profile_includes(claim.profile, lim.applies_from)]
 
-    def claims(self) -> list["Claim"]:
+    def claims(self) -> list[Claim]:
         out = [Claim(p.id, lv, p.rank) for p in self.profiles.values() for lv in self.levels]
         return sorted(out)
 
-    def claim(self, text: str) -> "Claim":
+    def claim(self, text: str) -> Claim:
         return Claim.parse(text, self)
 
 
@@ -112,7 +112,7 @@ class Claim:
     rank: int = 0
 
     @classmethod
-    def parse(cls, text: str, profiles: ProfileSet | None = None) -> "Claim":
+    def parse(cls, text: str, profiles: ProfileSet | None = None) -> Claim:
         """``simple@1`` / ``Simple@L2`` / ``calibration@l1`` -> Claim (ValueError when unknown)."""
         ps = profiles or load_profiles()
         if not isinstance(text, str) or text.count("@") != 1:
@@ -131,7 +131,7 @@ class Claim:
             raise ValueError(f"unknown level {lv!r} (known: {', '.join(map(str, ps.levels))})")
         return cls(prof.id, int(lv), prof.rank)
 
-    def __lt__(self, other: "Claim") -> bool:
+    def __lt__(self, other: Claim) -> bool:
         return (self.rank, self.level, self.profile) < (other.rank, other.level, other.profile)
 
     def __str__(self) -> str:

@@ -39,7 +39,7 @@ def analyse_text(data: bytes, *, file: str | None = None) -> Report:
                                  w.line, w.column))
         if frames is not None and header is not None:
             summary.update(frames=len(frames), frame_rate=header.frame_rate)
-    except Exception as e:  # a checker bug must not crash the caller
+    except Exception as e:  # noqa: BLE001 - a checker bug must not crash the caller
         out.append(text_diag(R.CHECK_INTERNAL, f"internal checker failure: {type(e).__name__}: {e}", 1, 1))
     return Report(out, summary)
 

@@ -216,7 +216,7 @@ class Coverage:
     n_skipped_near: int = 0  # triangles skipped by the near-plane / range rule
 
     @classmethod
-    def empty(cls, n_skipped: int = 0) -> "Coverage":
+    def empty(cls, n_skipped: int = 0) -> Coverage:
         i, f = np.zeros(0, np.int64), np.zeros(0, np.float64)
         return cls(i, i, i, i, i, f, f, f, np.zeros(0, bool), n_skipped)
 

@@ -171,7 +171,7 @@ class Scenario:
 
     # ------------------------------------------------------------------ I/O
     @classmethod
-    def from_toml(cls, text: str, *, file: str | None = None) -> "Scenario":
+    def from_toml(cls, text: str, *, file: str | None = None) -> Scenario:
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as e:
@@ -183,7 +183,7 @@ class Scenario:
         return cls.from_dict(data, file=file)
 
     @classmethod
-    def load(cls, path) -> "Scenario":
+    def load(cls, path) -> Scenario:
         path = Path(path)
         try:
             raw = path.read_bytes()
@@ -198,13 +198,13 @@ class Scenario:
         return cls.from_toml(text, file=str(path))
 
     @classmethod
-    def default(cls) -> "Scenario":
+    def default(cls) -> Scenario:
         """The bundled default scenario (``rendering/data/default.toml``)."""
         ref = resources.files("fbaconf.rendering").joinpath("data/default.toml")
         return cls.from_toml(ref.read_text(encoding="utf-8"), file="<bundled default.toml>")
 
     @classmethod
-    def from_dict(cls, data: dict, *, file: str | None = None) -> "Scenario":
+    def from_dict(cls, data: dict, *, file: str | None = None) -> Scenario:
         return _Parser(file).scenario(data)
 
     def to_toml(self) -> str:
@@ -244,7 +244,7 @@ class Scenario:
     def save(self, path) -> None:
         atomic_write_text(path, self.to_toml())
 
-    def with_(self, **changes) -> "Scenario":
+    def with_(self, **changes) -> Scenario:
         return replace(self, **changes)
 
 

@@ -99,7 +99,7 @@ void vrml_light(vec3 n, vec3 p, out vec3 E, out vec3 S) {
         }
     }
 }
-""" % {"ML": MAX_LIGHTS}
+""" % {"ML": MAX_LIGHTS}  # noqa: UP031 - GLSL has braces: % keeps them literal
 
 # Gouraud: lit at the vertices, both sides, like fixed-function GL with
 # GL_LIGHT_MODEL_TWO_SIDE and GL_SEPARATE_SPECULAR_COLOR: primary = albedo x E (E alone on
@@ -592,7 +592,7 @@ class GLRenderer:
             if tex is not None:
                 try:
                     tex.release()
-                except Exception:  # noqa: BLE001 - shared between parts: released once
+                except Exception:  # noqa: BLE001, S110 - shared between parts: released once
                     pass
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import glrender  # noqa: E402
+import glrender
 
 
 def image_cases():

@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from glrender import FAITHFUL, WRONG  # noqa: E402
+from glrender import FAITHFUL, WRONG
 
 KEYS = ("violations_max", "violation_limit", "interior_deltae_mean_max", "interior_deltae_p99_max",
         "deltae_mean_max", "psnr_min", "max_error", "frames_failing", "frames_warning", "frames_compared")

@@ -15,8 +15,8 @@ talk to the cluster").
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Callable, Iterator
 
 import dask
 from distributed import Nanny, Scheduler, SpecCluster, Worker
@@ -50,10 +50,10 @@ class RunSecurity(Security):
     def __reduce__(self):
         raise TypeError("the run's TLS key is not pickled: its workers are forked from the harness")
 
-    def __copy__(self) -> "RunSecurity":
+    def __copy__(self) -> RunSecurity:
         return self
 
-    def __deepcopy__(self, memo) -> "RunSecurity":
+    def __deepcopy__(self, memo) -> RunSecurity:
         return self
 
 

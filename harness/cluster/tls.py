@@ -15,9 +15,9 @@ import datetime
 import ipaddress
 import os
 import secrets
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Iterator
 
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
@@ -45,7 +45,7 @@ class RunCertificates:
 def make_certificates(*, common_name: str = "fbaconf-run") -> RunCertificates:
     """A certificate authority and one certificate (and key) it signed, for 127.0.0.1 and
     localhost, as PEM bytes in memory; the authority's key is not kept."""
-    now = datetime.datetime.now(datetime.timezone.utc)
+    now = datetime.datetime.now(datetime.UTC)
 
     def name(cn: str):
         return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])

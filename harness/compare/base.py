@@ -1,7 +1,7 @@
 """What every comparison stage shares: limits on untrusted outputs, the error types, the worst-of outcome."""
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 from fbaconf.errors import FbaconfInputError
 from fbaconf.harness.results import OUTCOME_ORDER, Outcome

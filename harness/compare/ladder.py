@@ -11,8 +11,8 @@ from __future__ import annotations
 import os
 import re
 import shutil
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -63,7 +63,7 @@ def outcome_for(ending: Ending, *, invalid_stream: bool = False, conceal_allowed
     return None
 
 
-def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], out_dir: Path,  # noqa: PLR0913
+def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], out_dir: Path,
                     gdir: Path | None = None, stages_of_case: list[str] | None = None) -> list[StageResult]:
     """Each stage the case compares and the decoder outputs, judged against the goldens under
     ``golden`` (or in ``gdir``: what another reading gives, conformance/golden.py); failing images
@@ -163,7 +163,7 @@ def _effective_faps_stage(golden: Path, got_path: Path, tol: dict) -> StageResul
     exp = _load_effective(golden)
     try:
         got = _load_effective(got_path)
-    except Exception as e:  # untrusted file
+    except Exception as e:  # noqa: BLE001 - untrusted file
         return StageResult(name, Outcome.FAIL, f"unreadable effective FAP output: {type(e).__name__}: {e}")
     if got.shape != exp.shape:
         return StageResult(name, Outcome.FAIL, f"shape {list(got.shape)}, expected {list(exp.shape)}",

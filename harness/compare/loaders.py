@@ -64,7 +64,7 @@ class _SafeNpz:
                            f"{max_bytes}", rule="output-too-large")
         self.members = {i.filename[:-4]: i for i in infos if i.filename.endswith(".npy")}
 
-    def __enter__(self) -> "_SafeNpz":
+    def __enter__(self) -> _SafeNpz:
         return self
 
     def __exit__(self, *exc) -> None:

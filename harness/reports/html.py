@@ -257,7 +257,7 @@ def _case_html(r: CaseResult, out_dir: Path, base_dir: Path, env: dict | None = 
 
 def _anchor(case_id: str) -> str:
     return re.sub(r"[^A-Za-z0-9_-]+", "-", case_id).strip("-") + "-" + hashlib.sha1(
-        case_id.encode("utf-8", "surrogatepass")).hexdigest()[:6]
+        case_id.encode("utf-8", "surrogatepass"), usedforsecurity=False).hexdigest()[:6]
 
 
 def _counts_table_html(title: str, groups: dict[str, dict[str, int]], order: list[str], total: dict[str, int]) -> str:

@@ -1,7 +1,7 @@
 """The terminal summary: aligned tables per suite, profile and outcome, the failing cases, speed, the verdict line."""
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 from fbaconf.harness.results import Outcome, RunRecord
 from fbaconf.harness.verdict import describe

@@ -66,7 +66,7 @@ class Content:
         self._runs = 0
         self._scene: dict[str, Path] = {}
 
-    def make(self, n: int) -> "Run":
+    def make(self, n: int) -> Run:
         """An ``n``-frame run (``n`` >= 1) no run of this or any other measurement shares."""
         if n < 1:  # a caller's mistake, not an input's
             raise ValueError(f"a run needs at least one frame, not {n}")

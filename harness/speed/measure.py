@@ -47,8 +47,8 @@ import secrets
 import statistics
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -193,7 +193,8 @@ class _Runner:
     def _argv(self, job_for: Callable[[], Job]) -> tuple[list[str], Job]:
         """Expand the decode command, adding the placeholders it requires (first call plans)."""
         a = self.adapter
-        assert isinstance(a, CommandAdapter)
+        if not isinstance(a, CommandAdapter):
+            raise TypeError(f"{a.name}: an in-process adapter has no command to expand")
         supplied = {"fba", "fap", "vertices_out", "images_dir", "faps_out", "scene", "faps_out_dir"}
         if "fba" in a.inputs:  # the content's .fap is its expected output: never shown to a decoder of the stream
             supplied.discard("fap")

@@ -82,7 +82,7 @@ def _patch_default_p_is_i() -> None:
 
 def _patch_shared(attr_line: str, shared_name: str, init_expr: str):
     def patch() -> None:
-        setattr(decoder, shared_name, eval(init_expr, {"np": np, "HIGH_LEVEL_FIELDS": HIGH_LEVEL_FIELDS,
+        setattr(decoder, shared_name, eval(init_expr, {"np": np, "HIGH_LEVEL_FIELDS": HIGH_LEVEL_FIELDS,  # noqa: S307 - fixed expressions of this module, never input
                                                         "NUM_FAPS": decoder.NUM_FAPS}))
         old = attr_line
         new = attr_line.split("=")[0] + f"= {shared_name}"

@@ -45,7 +45,7 @@ def computed(made_once):
     and shared by the workers that run this module's tests."""
     def make(root):
         (root / "computed.pickle").write_bytes(pickle.dumps(coverage.case_coverages()))
-    return pickle.loads((made_once("fbaconf-coverage", make) / "computed.pickle").read_bytes())
+    return pickle.loads((made_once("fbaconf-coverage", make) / "computed.pickle").read_bytes())  # noqa: S301 - this session's own file, written just before
 
 
 @pytest.fixture(scope="module")

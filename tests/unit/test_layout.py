@@ -60,7 +60,7 @@ def _setup_discovery() -> dict[str, str]:
     real = setuptools.setup
     setuptools.setup = lambda **kw: ns.setdefault("_kw", kw)
     try:
-        exec(compile(src, "setup.py", "exec"), ns)
+        exec(compile(src, "setup.py", "exec"), ns)  # noqa: S102 - setup.py read without building: its own source
     finally:
         setuptools.setup = real
     return ns["_kw"]
@@ -309,7 +309,7 @@ _PRODUCED = {"statement.md"}
 _SHARED = ROOT.parent / "shared"
 _SHARED_NAMES = {p.name for p in _SHARED.rglob("*.md")} if _SHARED.is_dir() else set()
 _BARE_MD = re.compile(r"(?<![\w./-])([\w-]+\.md)\b")
-_PATH = re.compile(r"(?<![\w./-])((?:%s)/[\w./-]*\w\.(?:py|md|toml|csv|json|c|h|css|txt))\b" % "|".join(_TOP))
+_PATH = re.compile(r"(?<![\w./-])((?:" + "|".join(_TOP) + r")/[\w./-]*\w\.(?:py|md|toml|csv|json|c|h|css|txt))\b")
 
 
 def _texts():

@@ -42,7 +42,7 @@ class _Raising(loaders.Target):
 
     def load(self, data):
         if data == b"bug":
-            {}["missing"]  # noqa: B018 - the bug under test
+            {}["missing"]
         raise FbaconfInputError("refused", rule="manifest-toml")
 
 

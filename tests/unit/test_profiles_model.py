@@ -47,7 +47,7 @@ def test_indication_codes():
 
 def test_limits_for_claims():
     ps = load_profiles()
-    ids = lambda c: {lim.id for lim in ps.limits_for(Claim.parse(c))}  # noqa: E731
+    ids = lambda c: {lim.id for lim in ps.limits_for(Claim.parse(c))}
     assert "fit_nodes" not in ids("simple@1") and "fit_nodes" in ids("calibration@1")
     assert "mesh_vertices" not in ids("calibration@2") and "mesh_vertices" in ids("predictable@1")
 

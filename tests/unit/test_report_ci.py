@@ -134,7 +134,7 @@ def test_html_puts_the_summary_first_with_the_baseline_line_and_provisional_diff
 
 
 def test_junit_carries_the_baseline_line_and_tags_new_failures(tmp_path):
-    root = ET.fromstring(junit_xml(ci_record(tmp_path)))
+    root = ET.fromstring(junit_xml(ci_record(tmp_path)))  # noqa: S314 - fbaconf's own JUnit output
     props = {p.get("name"): p.get("value") for p in root.iter("property")}
     assert props["baseline"] == "2 new, 1 known, 1 fixed, 0 flaky"
     fails = {tc.get("name"): tc.find("failure").get("message") for tc in root.iter("testcase")
