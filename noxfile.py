@@ -16,6 +16,7 @@ One cell: ``nox -s "matrix-3.12(oldest)"``; the table of the cells run so far:
 (``~/.pyenv/versions/3.X.*``). The oldest sets are pinned below (OLDEST): a pip dry run of the
 next-older release of each finds no wheel for that Python or a conflict.
 """
+
 from __future__ import annotations
 
 import filecmp
@@ -53,9 +54,10 @@ def _pyenv_on_path() -> None:
         return
     dirs = []
     for v in PYTHONS:
-        found = sorted(base.glob(f"{v}.*/bin/python{v}"), key=lambda p: [int(x) for x in
-                                                                       p.parents[1].name.split(".")[:3]
-                                                                       if x.isdigit()])
+        found = sorted(
+            base.glob(f"{v}.*/bin/python{v}"),
+            key=lambda p: [int(x) for x in p.parents[1].name.split(".")[:3] if x.isdigit()],
+        )
         if found:
             dirs.append(str(found[-1].parent))
     os.environ["PATH"] = os.pathsep.join(dirs + [os.environ.get("PATH", "")])
@@ -65,9 +67,11 @@ _pyenv_on_path()
 
 
 def _versions(session) -> dict[str, str]:
-    code = ("import importlib.metadata as m, json\n"
-            "def v(d):\n    try:\n        return m.version(d)\n    except m.PackageNotFoundError:\n        return '-'\n"
-            f"print(json.dumps({{d: v(d) for d in {SHOWN!r}}}))")
+    code = (
+        "import importlib.metadata as m, json\n"
+        "def v(d):\n    try:\n        return m.version(d)\n    except m.PackageNotFoundError:\n        return '-'\n"
+        f"print(json.dumps({{d: v(d) for d in {SHOWN!r}}}))"
+    )
     out = session.run("python", "-c", code, silent=True)
     return json.loads(out.strip().splitlines()[-1])
 
@@ -123,15 +127,29 @@ def matrix(session, deps):
     # --no-speed: the cases' verdict is what may depend on the dependency set; the speed measurement
     # is the machine's (README command 1 and benchmarks/bench_certify.py measure it), and on a shared
     # or loaded machine its wall-clock fit would fail cells for no reason of theirs
-    step("certify predictable@2", "fbaconf", "certify", "--decoder", "reference-inprocess", "--claim",
-         "predictable@2", "-o", str(tmp / "cert"), "--no-speed")
+    step(
+        "certify predictable@2",
+        "fbaconf",
+        "certify",
+        "--decoder",
+        "reference-inprocess",
+        "--claim",
+        "predictable@2",
+        "-o",
+        str(tmp / "cert"),
+        "--no-speed",
+    )
     cert = json.loads((tmp / "cert" / "certificate.json").read_text())
     verdict = cert.get("verdict") or cert.get("result")
     RESULTS.mkdir(parents=True, exist_ok=True)
-    row = {"python": session.run("python", "-c", "import platform; print(platform.python_version())",
-                                 silent=True).strip(),
-           "deps": deps, "versions": versions, "steps": steps, "verdict": verdict,
-           "seconds": round(time.monotonic() - t0)}
+    row = {
+        "python": session.run("python", "-c", "import platform; print(platform.python_version())", silent=True).strip(),
+        "deps": deps,
+        "versions": versions,
+        "steps": steps,
+        "verdict": verdict,
+        "seconds": round(time.monotonic() - t0),
+    }
     (RESULTS / f"{py}-{deps}.json").write_text(json.dumps(row, indent=1) + "\n")
     session.log(json.dumps(row))
 
@@ -144,9 +162,21 @@ def matrix_summary(session):
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         s = r["steps"]
-        lines.append("| " + " | ".join([r["python"], r["deps"], *(r["versions"].get(k, "-") for k in SHOWN),
-                                        *(f"{s.get(k, '-')} s" for k in ("suites build", "golden verify",
-                                                                          "mutants --list",
-                                                                          "certify predictable@2")),
-                                        str(r["verdict"]), str(r["seconds"])]) + " |")
+        lines.append(
+            "| "
+            + " | ".join(
+                [
+                    r["python"],
+                    r["deps"],
+                    *(r["versions"].get(k, "-") for k in SHOWN),
+                    *(
+                        f"{s.get(k, '-')} s"
+                        for k in ("suites build", "golden verify", "mutants --list", "certify predictable@2")
+                    ),
+                    str(r["verdict"]),
+                    str(r["seconds"]),
+                ]
+            )
+            + " |"
+        )
     print("\n".join(lines))

@@ -12,6 +12,7 @@ optional: when no C compiler is available the build continues without them and t
 pure-Python/numpy reference paths (bitstreams/arith.py, rendering/raster.py) are used.
 FBACONF_PURE_PYTHON=1 forces the reference paths at run time.
 """
+
 from pathlib import Path
 
 from setuptools import Extension, setup
@@ -26,8 +27,12 @@ SKIP_SUFFIXES = {".pyc", ".pyo", ".so", ".o"}
 def _stages() -> dict[str, str]:
     out = {}
     for d in sorted(ROOT.iterdir()):
-        if d.is_dir() and not d.name.startswith((".", "_")) and d.name not in NOT_INSTALLED \
-                and (d / "__init__.py").is_file():
+        if (
+            d.is_dir()
+            and not d.name.startswith((".", "_"))
+            and d.name not in NOT_INSTALLED
+            and (d / "__init__.py").is_file()
+        ):
             out["fbaconf" if d.name == "fbaconf" else f"fbaconf.{d.name}"] = d.name
     return out
 

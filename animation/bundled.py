@@ -6,6 +6,7 @@ its FaceDefTables) and ``default_head_feature_vertices()`` (which vertex of whic
 carries each feature point — coinciding points such as 2.2/2.3, lips in contact, cannot be
 told apart by position).
 """
+
 from __future__ import annotations
 
 import json

@@ -32,6 +32,7 @@ Method (fbaconf's choice; the standard leaves the adaptation to the decoder):
 * The condition number of each system solved is kept in ``CompiledFace.extras["conditioning"]``
   (``warp``, ``texture``).
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -68,6 +69,7 @@ def _fitted(f: rbf.RbfFit, k: int):
     def apply(p):
         p = np.asarray(p, dtype=np.float64)
         return f(p.reshape(-1, k)).reshape(p.shape[:-1] + (-1,))
+
     apply.fit = f
     return apply
 
@@ -79,8 +81,15 @@ def _project(P: np.ndarray, ortho: bool, centre: np.ndarray) -> np.ndarray:
     return np.stack([np.arctan2(q[:, 0], q[:, 2]), q[:, 1]], axis=1)
 
 
-def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None = None, ortho: bool = False,
-              texture: str | None = None, node_path: str | None = None):
+def calibrate(
+    model,
+    received: np.ndarray,
+    *,
+    texture_coords: np.ndarray | None = None,
+    ortho: bool = False,
+    texture: str | None = None,
+    node_path: str | None = None,
+):
     """Warp a CompiledFace to received feature points.
 
     ``received``: float64[84, 3] in label order, NaN rows = not sent. Returns a new
@@ -91,8 +100,9 @@ def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None 
     use = sent & have
     if not use.any():
         raise SceneError("no received feature point is defined on the model", rule="calibration-empty")
-    warp = rbf_warp(model.feature_points[use], received[use], node_path=f"{node_path}.featurePointsCoord"
-                    if node_path else None)
+    warp = rbf_warp(
+        model.feature_points[use], received[use], node_path=f"{node_path}.featurePointsCoord" if node_path else None
+    )
     # transform origins (world), parents first
     parent = {}
     for p in model.parts:
@@ -100,8 +110,10 @@ def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None 
             parent[k] = p.chain[i - 1] if i else None
     for _k, tr in model.transforms.items():
         if tr["rotation"][3] != 0 or tuple(tr["scale"]) != (1.0, 1.0, 1.0):
-            raise SceneError(f"calibration supports translation-only Transforms ({tr['name']} rotates or scales)",
-                             rule="calibration-transform")
+            raise SceneError(
+                f"calibration supports translation-only Transforms ({tr['name']} rotates or scales)",
+                rule="calibration-transform",
+            )
 
     def world_origin(k):
         o = np.asarray(model.transforms[k]["translation"], dtype=np.float64)
@@ -137,19 +149,32 @@ def calibrate(model, received: np.ndarray, *, texture_coords: np.ndarray | None 
     fps[have] = fps[have] + warp(fps[have])
     fps[sent] = received[sent]
     parts = list(model.parts)
-    out = CompiledFace(new_points, dict(model.ifs_names), new_tr, parts, list(model.mesh_tables),
-                       list(model.transform_tables), fapu_from_feature_points(fps), fps, model.fit,
-                       model.high_level_tables, model.fp_vertices, ortho)
+    out = CompiledFace(
+        new_points,
+        dict(model.ifs_names),
+        new_tr,
+        parts,
+        list(model.mesh_tables),
+        list(model.transform_tables),
+        fapu_from_feature_points(fps),
+        fps,
+        model.fit,
+        model.high_level_tables,
+        model.fp_vertices,
+        ortho,
+    )
     # the condition number of each linear system the calibration solved (fbaconf suites build prints the worst)
     out.extras["conditioning"] = {"warp": warp.fit.condition}
     if texture_coords is not None:
         tc = np.asarray(texture_coords, dtype=np.float64).reshape(-1, 2)
         if tc.shape[0] != NUM_FEATURE_POINTS or not np.all(np.isfinite(tc[sent])):
-            raise SceneError("textureCoord must hold one (u, v) per feature point (84, label order)",
-                             rule="fdp-texture-coord-count")
+            raise SceneError(
+                "textureCoord must hold one (u, v) per feature point (84, label order)", rule="fdp-texture-coord-count"
+            )
         centre = fps[sent].mean(0)
-        uvmap = _uv_map(_project(fps[sent], ortho, centre), tc[sent],
-                        node_path=f"{node_path}.textureCoord" if node_path else None)
+        uvmap = _uv_map(
+            _project(fps[sent], ortho, centre), tc[sent], node_path=f"{node_path}.textureCoord" if node_path else None
+        )
         out.extras["conditioning"]["texture"] = uvmap.fit.condition
         fp_parts = {pi for pi, _ in (model.fp_vertices or [])} or {0}
         new_world = neutral_world(out)

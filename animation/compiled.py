@@ -1,6 +1,7 @@
 """A compiled face: neutral geometry in local coordinates, its transforms and animation
 rules, ready for the engine (:mod:`.engine`) to animate and for calibration
 (:mod:`.calibrate`) to warp."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -25,6 +25,7 @@ FaceState extras: ``fap_values`` float64[F, 68] (after interpolation), ``fap_sta
 uint8[F, 68], and ``feature_points`` float64[F, 84, 3] when every feature point of the
 model lies on a vertex (the default head, calibrated or not).
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -64,9 +65,12 @@ def feature_points_from_fdp(scene: bt.Scene, fdp: bt.Node | None, path: str) -> 
         return out
     pts, sent = fdp_point_rows(c.get("point"))
     if pts.shape[0] != NUM_FEATURE_POINTS:
-        raise SceneError(f"featurePointsCoord must list the 84 feature points in label order (unsent ones as "
-                         f"{UNSENT:g}), got {pts.shape[0]}", rule="fdp-feature-point-count",
-                         node_path=f"{path}.featurePointsCoord")
+        raise SceneError(
+            f"featurePointsCoord must list the 84 feature points in label order (unsent ones as "
+            f"{UNSENT:g}), got {pts.shape[0]}",
+            rule="fdp-feature-point-count",
+            node_path=f"{path}.featurePointsCoord",
+        )
     out[sent] = pts[sent]
     return out
 
@@ -75,8 +79,11 @@ def _triangulate(ci: np.ndarray, n: int, ccw: bool, path: str) -> np.ndarray:
     ci = np.asarray(ci, dtype=np.int64)
     bad = np.nonzero((ci < -1) | (ci >= n))[0]
     if bad.size:
-        raise SceneError(f"coordIndex[{int(bad[0])}] = {int(ci[bad[0]])} names a point the Coordinate does not "
-                         f"have ({n} points)", rule="geometry-index", node_path=f"{path}.coordIndex")
+        raise SceneError(
+            f"coordIndex[{int(bad[0])}] = {int(ci[bad[0]])} names a point the Coordinate does not have ({n} points)",
+            rule="geometry-index",
+            node_path=f"{path}.coordIndex",
+        )
     tris = []
     # fast path: all triangles
     if ci.size % 4 == 0 and ci.size and np.all(ci[3::4] == -1) and np.all(ci.reshape(-1, 4)[:, :3] >= 0):
@@ -111,14 +118,23 @@ def compile_scene(scene: bt.Scene | None) -> CompiledFace:
     graph = fdp.get("faceSceneGraph") if fdp is not None else []
     if fdp is None or not graph:
         if fdp is not None and len(fdp.get("faceDefTables")):
-            raise SceneError("faceDefTables need a downloaded model (faceSceneGraph) to animate",
-                             rule="facedef-without-model", node_path=f"{fdp_path}.faceDefTables")
+            raise SceneError(
+                "faceDefTables need a downloaded model (faceSceneGraph) to animate",
+                rule="facedef-without-model",
+                node_path=f"{fdp_path}.faceDefTables",
+            )
         model = _compiled_default()
         if np.isfinite(fps).all(axis=1).any():
             tex = scene.resolve(fdp.get("textureCoord"))
             tc = None if tex is None else np.asarray(tex.get("point"), dtype=np.float64)
-            model = calibrate(model, fps, texture_coords=tc, ortho=bool(fdp.get("useOrthoTexture")),
-                              texture=_first_texture(scene), node_path=fdp_path)
+            model = calibrate(
+                model,
+                fps,
+                texture_coords=tc,
+                ortho=bool(fdp.get("useOrthoTexture")),
+                texture=_first_texture(scene),
+                node_path=fdp_path,
+            )
         model.fit = fit
         return model
     model = _compile_graph(scene, graph, fdp, fdp_path, fps)
@@ -164,8 +180,11 @@ def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:
                 return
             gpath = f"{path}.geometry.{geo.type}"
             if geo.type != "IndexedFaceSet":
-                raise SceneError(f"geometry {geo.type} is not supported (IndexedFaceSet only)",
-                                 rule="geometry-unsupported", node_path=gpath)
+                raise SceneError(
+                    f"geometry {geo.type} is not supported (IndexedFaceSet only)",
+                    rule="geometry-unsupported",
+                    node_path=gpath,
+                )
             key = id(geo)
             coord = scene.resolve(geo.get("coord"))
             if coord is None:
@@ -187,12 +206,14 @@ def _compile_graph(scene, graph, fdp, fdp_path, fps) -> CompiledFace:
     for i, v in enumerate(graph):
         visit(v, f"{fdp_path}.faceSceneGraph[{i}]", [])
     if not parts:
-        raise SceneError("faceSceneGraph has no IndexedFaceSet", rule="geometry-empty",
-                         node_path=f"{fdp_path}.faceSceneGraph")
+        raise SceneError(
+            "faceSceneGraph has no IndexedFaceSet", rule="geometry-empty", node_path=f"{fdp_path}.faceSceneGraph"
+        )
     fapu = fapu_from_feature_points(fps, node_path=f"{fdp_path}.featurePointsCoord")
     meshes, trs = _facedef_tables(scene, fdp, fdp_path, points, transforms)
-    model = CompiledFace(points, names, transforms, parts, meshes, trs, fapu, fps,
-                         useOrtho=bool(fdp.get("useOrthoTexture")))
+    model = CompiledFace(
+        points, names, transforms, parts, meshes, trs, fapu, fps, useOrtho=bool(fdp.get("useOrthoTexture"))
+    )
     model.fp_vertices = _match_feature_points(model)
     return model
 
@@ -253,21 +274,45 @@ def _facedef_tables(scene, fdp, fdp_path: str, points: dict, transforms: dict) -
             mpath = f"{tpath}.faceDefMesh[{mi}]"
             tgt = scene.resolve(mnode.get("faceSceneGraphNode"))
             if tgt is None or id(tgt) not in points:
-                raise SceneError("faceSceneGraphNode must name an IndexedFaceSet of the faceSceneGraph",
-                                 rule="facedef-missing-node", node_path=f"{mpath}.faceSceneGraphNode")
-            meshes.append(MeshTable.build(fap, id(tgt), mnode.get("intervalBorders"), mnode.get("coordIndex"),
-                                          mnode.get("displacements"), len(points[id(tgt)]),
-                                          high_level_select=hls, node_path=mpath))
+                raise SceneError(
+                    "faceSceneGraphNode must name an IndexedFaceSet of the faceSceneGraph",
+                    rule="facedef-missing-node",
+                    node_path=f"{mpath}.faceSceneGraphNode",
+                )
+            meshes.append(
+                MeshTable.build(
+                    fap,
+                    id(tgt),
+                    mnode.get("intervalBorders"),
+                    mnode.get("coordIndex"),
+                    mnode.get("displacements"),
+                    len(points[id(tgt)]),
+                    high_level_select=hls,
+                    node_path=mpath,
+                )
+            )
         for xi, xnode in enumerate(tnode.get("faceDefTransform")):
             xnode = scene.resolve(xnode)
             xpath = f"{tpath}.faceDefTransform[{xi}]"
             tgt = scene.resolve(xnode.get("faceSceneGraphNode"))
             if tgt is None or id(tgt) not in transforms:
-                raise SceneError("faceSceneGraphNode must name a Transform of the faceSceneGraph",
-                                 rule="facedef-missing-node", node_path=f"{xpath}.faceSceneGraphNode")
-            trs.append(TransformTable.build(fap, id(tgt), int(xnode.get("fieldId")), xnode.get("rotationDef"),
-                                            xnode.get("scaleDef"), xnode.get("translationDef"),
-                                            high_level_select=hls, node_path=xpath))
+                raise SceneError(
+                    "faceSceneGraphNode must name a Transform of the faceSceneGraph",
+                    rule="facedef-missing-node",
+                    node_path=f"{xpath}.faceSceneGraphNode",
+                )
+            trs.append(
+                TransformTable.build(
+                    fap,
+                    id(tgt),
+                    int(xnode.get("fieldId")),
+                    xnode.get("rotationDef"),
+                    xnode.get("scaleDef"),
+                    xnode.get("translationDef"),
+                    high_level_select=hls,
+                    node_path=xpath,
+                )
+            )
     return meshes, trs
 
 
@@ -310,10 +355,20 @@ def _compiled_default() -> CompiledFace:
         d.fp_vertices = [(index[fpv[label][0]], fpv[label][1]) for label in FEATURE_POINTS]
         _DEFAULT = d
     d = _DEFAULT
-    return CompiledFace({k: v.copy() for k, v in d.points.items()}, dict(d.ifs_names),
-                        {k: dict(v) for k, v in d.transforms.items()}, list(d.parts), list(d.mesh_tables),
-                        list(d.transform_tables), d.fapu, d.feature_points.copy(), None, None,
-                        list(d.fp_vertices) if d.fp_vertices else None, d.useOrtho)
+    return CompiledFace(
+        {k: v.copy() for k, v in d.points.items()},
+        dict(d.ifs_names),
+        {k: dict(v) for k, v in d.transforms.items()},
+        list(d.parts),
+        list(d.mesh_tables),
+        list(d.transform_tables),
+        d.fapu,
+        d.feature_points.copy(),
+        None,
+        None,
+        list(d.fp_vertices) if d.fp_vertices else None,
+        d.useOrtho,
+    )
 
 
 # ---------------------------------------------------------------------------------- transforms
@@ -326,9 +381,14 @@ def effective_faps(frames: FapFrames, model: CompiledFace) -> tuple[np.ndarray, 
         values, status = model.fit.apply(values, status, frames.high)
     values, status = lr_fill(values, status)
     hl_meshes = {(t.fap, t.high_level_select) for t in model.mesh_tables + model.transform_tables if t.fap <= 2}
-    values, status = apply_high_level(values, status, frames.high, model.high_level_tables,
-                                      exclude_visemes=[s for f, s in hl_meshes if f == 1 and 1 <= s <= 14],
-                                      exclude_expressions=[s for f, s in hl_meshes if f == 2 and 1 <= s <= 6])
+    values, status = apply_high_level(
+        values,
+        status,
+        frames.high,
+        model.high_level_tables,
+        exclude_visemes=[s for f, s in hl_meshes if f == 1 and 1 <= s <= 14],
+        exclude_expressions=[s for f, s in hl_meshes if f == 2 and 1 <= s <= 6],
+    )
     return values, status
 
 
@@ -354,8 +414,10 @@ def animate_model(frames: FapFrames, model: CompiledFace) -> FaceState:
     by_target: dict[int, list] = {}
     for t in model.transform_tables:
         by_target.setdefault(t.target, []).append(t)
-    local = {k: local_matrices(tr, transform_fields(tr, by_target[k], amp, unit) if k in by_target else None, F)
-             for k, tr in model.transforms.items()}
+    local = {
+        k: local_matrices(tr, transform_fields(tr, by_target[k], amp, unit) if k in by_target else None, F)
+        for k, tr in model.transforms.items()
+    }
     verts, parts, first = [], [], 0
     chain_cache: dict[tuple, np.ndarray] = {}
     for p in model.parts:
@@ -369,14 +431,29 @@ def animate_model(frames: FapFrames, model: CompiledFace) -> FaceState:
         P = pos[p.ifs]
         W = np.einsum("fvj,fij->fvi", P, M[:, :3, :3]) + M[:, None, :3, 3]
         verts.append(W)
-        parts.append(MeshPart(p.name, first, P.shape[1], p.triangles, tuple(float(c) for c in p.color),
-                              p.vertex_colors, p.texcoords, p.texture, p.specular, p.shininess))
+        parts.append(
+            MeshPart(
+                p.name,
+                first,
+                P.shape[1],
+                p.triangles,
+                tuple(float(c) for c in p.color),
+                p.vertex_colors,
+                p.texcoords,
+                p.texture,
+                p.specular,
+                p.shininess,
+            )
+        )
         first += P.shape[1]
     V = np.concatenate(verts, axis=1) if verts else np.zeros((F, 0, 3))
     if not np.all(np.isfinite(V)):
         bad = np.argwhere(~np.isfinite(V))[0]
-        raise SceneError(f"animation produced a non-finite vertex (frame {int(bad[0])}, vertex {int(bad[1])}); "
-                         "FAP values too large for the model?", rule="animation-finite")
+        raise SceneError(
+            f"animation produced a non-finite vertex (frame {int(bad[0])}, vertex {int(bad[1])}); "
+            "FAP values too large for the model?",
+            rule="animation-finite",
+        )
     extras = {"fap_values": values, "fap_status": status}
     if model.fp_vertices is not None:
         idx = np.array([parts[pi].first_vertex + v for pi, v in model.fp_vertices])

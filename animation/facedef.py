@@ -34,6 +34,7 @@ rotation angle"). With a = FAP * FAPU (FAPU of that FAP; AU = 1e-5 rad for angle
 * translation: t = t_neutral + a * translationDef.
 * Several tables on the same Transform field accumulate in ascending fapID order.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -49,17 +50,26 @@ FIELD_IDS = {1: "rotation", 2: "scale", 3: "translation"}
 def validate_borders(borders, *, node_path: str | None = None) -> np.ndarray:
     b = np.asarray(borders, dtype=np.float64).reshape(-1)
     if b.size < 2:
-        raise SceneError(f"intervalBorders needs at least 2 borders (1 interval), got {b.size}",
-                         rule="facedef-interval-count", node_path=node_path)
+        raise SceneError(
+            f"intervalBorders needs at least 2 borders (1 interval), got {b.size}",
+            rule="facedef-interval-count",
+            node_path=node_path,
+        )
     if not np.all(np.isfinite(b)):
         raise SceneError("intervalBorders must be finite", rule="facedef-borders-finite", node_path=node_path)
     if np.any(np.diff(b) <= 0):
         k = int(np.nonzero(np.diff(b) <= 0)[0][0])
-        raise SceneError(f"intervalBorders must be strictly increasing: border {k + 1} ({b[k + 1]:g}) "
-                         f"<= border {k} ({b[k]:g})", rule="facedef-borders-unsorted", node_path=node_path)
+        raise SceneError(
+            f"intervalBorders must be strictly increasing: border {k + 1} ({b[k + 1]:g}) <= border {k} ({b[k]:g})",
+            rule="facedef-borders-unsorted",
+            node_path=node_path,
+        )
     if b.size > 2 and not np.any(b == 0):
-        raise SceneError("with more than one interval, one of the intervalBorders must be 0",
-                         rule="facedef-borders-zero", node_path=node_path)
+        raise SceneError(
+            "with more than one interval, one of the intervalBorders must be 0",
+            rule="facedef-borders-zero",
+            node_path=node_path,
+        )
     return b
 
 
@@ -107,27 +117,48 @@ class MeshTable:
     node_path: str | None = None
 
     @classmethod
-    def build(cls, fap: int, target: str, borders, coord_index, displacements, n_vertices: int, *,
-              high_level_select: int = 1, node_path: str | None = None) -> MeshTable:
+    def build(
+        cls,
+        fap: int,
+        target: str,
+        borders,
+        coord_index,
+        displacements,
+        n_vertices: int,
+        *,
+        high_level_select: int = 1,
+        node_path: str | None = None,
+    ) -> MeshTable:
         b = validate_borders(borders, node_path=node_path and node_path + ".intervalBorders")
         n = b.size - 1
         idx = np.asarray(coord_index, dtype=np.int64).reshape(-1)
         d = np.asarray(displacements, dtype=np.float64).reshape(-1, 3) if np.size(displacements) else np.zeros((0, 3))
         if np.size(displacements) % 3:
-            raise SceneError("displacements must be 3D vectors", rule="facedef-displacement-count",
-                             node_path=node_path and node_path + ".displacements")
+            raise SceneError(
+                "displacements must be 3D vectors",
+                rule="facedef-displacement-count",
+                node_path=node_path and node_path + ".displacements",
+            )
         if d.shape[0] != n * idx.size:
-            raise SceneError(f"{d.shape[0]} displacements for {idx.size} vertices x {n} intervals "
-                             f"(need {n * idx.size})", rule="facedef-displacement-count",
-                             node_path=node_path and node_path + ".displacements")
+            raise SceneError(
+                f"{d.shape[0]} displacements for {idx.size} vertices x {n} intervals (need {n * idx.size})",
+                rule="facedef-displacement-count",
+                node_path=node_path and node_path + ".displacements",
+            )
         bad = np.nonzero((idx < 0) | (idx >= n_vertices))[0]
         if bad.size:
-            raise SceneError(f"coordIndex[{int(bad[0])}] = {int(idx[bad[0]])} names a vertex the mesh does not "
-                             f"have (it has {n_vertices})", rule="facedef-missing-vertex",
-                             node_path=node_path and node_path + ".coordIndex")
+            raise SceneError(
+                f"coordIndex[{int(bad[0])}] = {int(idx[bad[0]])} names a vertex the mesh does not "
+                f"have (it has {n_vertices})",
+                rule="facedef-missing-vertex",
+                node_path=node_path and node_path + ".coordIndex",
+            )
         if not np.all(np.isfinite(d)):
-            raise SceneError("displacements must be finite", rule="facedef-displacement-finite",
-                             node_path=node_path and node_path + ".displacements")
+            raise SceneError(
+                "displacements must be finite",
+                rule="facedef-displacement-finite",
+                node_path=node_path and node_path + ".displacements",
+            )
         return cls(fap, target, b, idx, d.reshape(idx.size, n, 3), high_level_select, node_path)
 
     def displacement(self, fap_values, fapu: float) -> np.ndarray:
@@ -182,17 +213,41 @@ class TransformTable:
     node_path: str | None = None
 
     @classmethod
-    def build(cls, fap: int, target: str, field_id: int, rotation=(0, 0, 1, 0), scale=(1, 1, 1),
-              translation=(0, 0, 0), *, high_level_select: int = 1, node_path: str | None = None) -> TransformTable:
+    def build(
+        cls,
+        fap: int,
+        target: str,
+        field_id: int,
+        rotation=(0, 0, 1, 0),
+        scale=(1, 1, 1),
+        translation=(0, 0, 0),
+        *,
+        high_level_select: int = 1,
+        node_path: str | None = None,
+    ) -> TransformTable:
         if field_id not in FIELD_IDS:
-            raise SceneError(f"fieldId {field_id} is not 1 (rotation), 2 (scale) or 3 (translation)",
-                             rule="facedef-field-id", node_path=node_path and node_path + ".fieldId")
+            raise SceneError(
+                f"fieldId {field_id} is not 1 (rotation), 2 (scale) or 3 (translation)",
+                rule="facedef-field-id",
+                node_path=node_path and node_path + ".fieldId",
+            )
         vals = [float(v) for v in (*rotation, *scale, *translation)]
         if not all(np.isfinite(vals)):
-            raise SceneError("rotationDef/scaleDef/translationDef must be finite", rule="facedef-transform-finite",
-                             node_path=node_path)
-        return cls(fap, target, FIELD_IDS[field_id], tuple(vals[:4]), tuple(vals[4:7]), tuple(vals[7:]),
-                   high_level_select, node_path)
+            raise SceneError(
+                "rotationDef/scaleDef/translationDef must be finite",
+                rule="facedef-transform-finite",
+                node_path=node_path,
+            )
+        return cls(
+            fap,
+            target,
+            FIELD_IDS[field_id],
+            tuple(vals[:4]),
+            tuple(vals[4:7]),
+            tuple(vals[7:]),
+            high_level_select,
+            node_path,
+        )
 
 
 def transform_fields(neutral: dict, tables: list[TransformTable], fap_of, fapu_of) -> dict[str, np.ndarray]:

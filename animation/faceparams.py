@@ -8,6 +8,7 @@ FAPU (spec notes 2.1, table ``bitstreams/data/fapu.csv``): IRISD0 = 3.1.y - 3.3.
 ES0 = 3.5.x - 3.6.x, ENS0 = 3.5.y - 9.15.y, MNS0 = 9.15.y - 2.2.y, MW0 = 8.3.x - 8.4.x on
 the neutral face; unit = distance / 1024; AU = 1e-5 rad.
 """
+
 from __future__ import annotations
 
 from collections.abc import Mapping
@@ -92,12 +93,19 @@ def fapu_from_feature_points(points, *, node_path: str | None = None) -> Fapu:
             continue
         for p in (info.point_a, info.point_b):
             if p not in pts:
-                raise SceneError(f"FAPU {name} needs feature point {p}, which the model does not define",
-                                 rule="fapu-missing-point", node_path=node_path)
+                raise SceneError(
+                    f"FAPU {name} needs feature point {p}, which the model does not define",
+                    rule="fapu-missing-point",
+                    node_path=node_path,
+                )
         ax = _AXIS[info.axis]
         d = float(pts[info.point_a][ax] - pts[info.point_b][ax])
         if not np.isfinite(d) or d <= 0.0:
-            raise SceneError(f"FAPU {name}0 = {info.point_a}.{info.axis} - {info.point_b}.{info.axis} = {d!r} "
-                             "must be positive on a neutral face", rule="fapu-degenerate", node_path=node_path)
+            raise SceneError(
+                f"FAPU {name}0 = {info.point_a}.{info.axis} - {info.point_b}.{info.axis} = {d!r} "
+                "must be positive on a neutral face",
+                rule="fapu-degenerate",
+                node_path=node_path,
+            )
         vals[name] = d / info.divisor
     return Fapu(**{n: vals[n] for n in FAPU_NAMES})

@@ -12,6 +12,7 @@ the mesh parts once and the vertex positions of all parts for all frames in one 
 Coordinates follow VRML/BIFS: y up, +z towards the viewer, right-handed; units are
 those of the scene (the bundled models use millimetres-like units, see animation docs).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -58,8 +59,12 @@ class FaceState:
         return self.vertices.shape[0]
 
     def part_vertices(self, part: MeshPart, frame: int) -> np.ndarray:
-        return self.vertices[frame, part.first_vertex:part.first_vertex + part.vertex_count]
+        return self.vertices[frame, part.first_vertex : part.first_vertex + part.vertex_count]
 
     def frame(self, k: int) -> FaceState:
-        return FaceState(self.parts, self.vertices[k:k + 1], self.time_ms[k:k + 1],
-                         {n: a[k:k + 1] for n, a in self.extras.items()})
+        return FaceState(
+            self.parts,
+            self.vertices[k : k + 1],
+            self.time_ms[k : k + 1],
+            {n: a[k : k + 1] for n, a in self.extras.items()},
+        )

@@ -17,6 +17,7 @@ A scene may replace a viseme/expression by its own FaceDefTables (fapID 1/2 with
 ``highLevelSelect`` = the viseme/expression number); such tables deform the model directly
 (see engine) and the default table entry for that number is then not used.
 """
+
 from __future__ import annotations
 
 import csv
@@ -69,16 +70,25 @@ def high_level_weights(high: np.ndarray, status: np.ndarray) -> tuple[np.ndarray
     exp_on = status[:, 1] != FREE
     v1, v2, blend = high[:, 0], high[:, 1], high[:, 2] / 63.0
     e1, i1, e2, i2 = high[:, 4], high[:, 5] / 63.0, high[:, 6], high[:, 7] / 63.0
-    for sel, w, on, table, top in ((v1, blend, vis_on, wv, NUM_VISEMES), (v2, 1.0 - blend, vis_on, wv, NUM_VISEMES),
-                                   (e1, i1, exp_on, we, NUM_EXPRESSIONS), (e2, i2, exp_on, we, NUM_EXPRESSIONS)):
+    for sel, w, on, table, top in (
+        (v1, blend, vis_on, wv, NUM_VISEMES),
+        (v2, 1.0 - blend, vis_on, wv, NUM_VISEMES),
+        (e1, i1, exp_on, we, NUM_EXPRESSIONS),
+        (e2, i2, exp_on, we, NUM_EXPRESSIONS),
+    ):
         ok = on & (sel >= 1) & (sel <= top)
         np.add.at(table, (rows[ok], sel[ok]), w[ok])
     return wv, we
 
 
-def apply_high_level(values: np.ndarray, status: np.ndarray, high: np.ndarray,
-                     tables: tuple[np.ndarray, np.ndarray] | None = None,
-                     exclude_visemes=(), exclude_expressions=()) -> tuple[np.ndarray, np.ndarray]:
+def apply_high_level(
+    values: np.ndarray,
+    status: np.ndarray,
+    high: np.ndarray,
+    tables: tuple[np.ndarray, np.ndarray] | None = None,
+    exclude_visemes=(),
+    exclude_expressions=(),
+) -> tuple[np.ndarray, np.ndarray]:
     """Blend visemes/expressions into the FREE low-level FAPs.
 
     ``values`` float64[F, 68], ``status`` uint8[F, 68] (not modified); returns new

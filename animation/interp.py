@@ -38,6 +38,7 @@ fields:
   A denominator that evaluates to 0 in a frame where it is used is a SceneError naming
   frame and FAP (never NaN/inf).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -86,7 +87,7 @@ class RationalFunction:
         if impulse is not None and np.any(impulse):
             for t, k in enumerate(impulse):
                 if k:
-                    terms[:, t] *= (F[:, k - 1] == 0)
+                    terms[:, t] *= F[:, k - 1] == 0
         return terms @ coefs
 
     def evaluate(self, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -113,8 +114,9 @@ class FitGraph:
     @classmethod
     def from_node(cls, node, *, node_path: str | None = None) -> FitGraph:
         """The graph of a FIT scene node (anything with ``get(field name)``)."""
-        return cls.from_fields(node.get("FAPs"), node.get("Graph"), {k: node.get(k) for k in FIT_FUNCTION_FIELDS},
-                               node_path=node_path)
+        return cls.from_fields(
+            node.get("FAPs"), node.get("Graph"), {k: node.get(k) for k in FIT_FUNCTION_FIELDS}, node_path=node_path
+        )
 
     @classmethod
     def from_fields(cls, faps, graph, functions=None, *, node_path: str | None = None) -> FitGraph:
@@ -129,11 +131,15 @@ class FitGraph:
         nodes = _fit_nodes([int(x) for x in faps], err)
         pairs = _fit_pairs([int(x) for x in graph], nodes, err)
         given = functions or {}
-        fields = _FieldCursor({k: [_FIELD_TYPE[k](x) for x in (() if given.get(k) is None else given[k])]
-                               for k in FIT_FUNCTION_FIELDS}, err)
+        fields = _FieldCursor(
+            {k: [_FIELD_TYPE[k](x) for x in (() if given.get(k) is None else given[k])] for k in FIT_FUNCTION_FIELDS},
+            err,
+        )
         use_impulse = len(fields.lists["numeratorImpulse"]) > 0
-        links = [FitLink(a, b, [_fit_function(fields, (a, b), len(nodes[a]), use_impulse, err) for _ in nodes[b]])
-                 for a, b in pairs]
+        links = [
+            FitLink(a, b, [_fit_function(fields, (a, b), len(nodes[a]), use_impulse, err) for _ in nodes[b]])
+            for a, b in pairs
+        ]
         fields.check_used()
         g = cls(nodes, links)
         g.order = g._topological(err)
@@ -161,8 +167,9 @@ class FitGraph:
         has_parent = {ln.child for ln in self.links}
         return [i for i in order if i in has_parent]
 
-    def apply(self, values: np.ndarray, status: np.ndarray, high: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray]:
+    def apply(
+        self, values: np.ndarray, status: np.ndarray, high: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Interpolate FREE FAPs; returns new (values float64[F, 68], status uint8[F, 68])."""
         values = np.array(values, dtype=np.float64)
         status = np.array(status, dtype=np.uint8)
@@ -190,9 +197,12 @@ class FitGraph:
                     free_here = status[rows, fap_idx] == FREE
                     if np.any(bad & free_here):
                         k = int(rows[np.nonzero(bad & free_here)[0][0]])
-                        raise SceneError(f"FIT link ({ln.parent} -> {child}) for FAP {fap_idx + 1}: denominator is 0 "
-                                         f"(or the value overflows) in frame {k}", rule="fit-division-by-zero",
-                                         node_path="FIT")
+                        raise SceneError(
+                            f"FIT link ({ln.parent} -> {child}) for FAP {fap_idx + 1}: denominator is 0 "
+                            f"(or the value overflows) in frame {k}",
+                            rule="fit-division-by-zero",
+                            node_path="FIT",
+                        )
                     with np.errstate(all="ignore"):
                         val = num / np.where(den == 0, 1.0, den)
                     w = rows[free_here]
@@ -204,10 +214,24 @@ class FitGraph:
 
 
 # The FIT node's function fields (ISO/IEC 14496-2 FIT; layout in docs/animation.md) and their types.
-FIT_FUNCTION_FIELDS = ("numeratorExp", "denominatorExp", "numeratorImpulse", "numeratorTerms", "denominatorTerms",
-                       "numeratorCoefs", "denominatorCoefs")
-_FIELD_TYPE = {"numeratorExp": int, "denominatorExp": int, "numeratorImpulse": int, "numeratorTerms": int,
-               "denominatorTerms": int, "numeratorCoefs": float, "denominatorCoefs": float}
+FIT_FUNCTION_FIELDS = (
+    "numeratorExp",
+    "denominatorExp",
+    "numeratorImpulse",
+    "numeratorTerms",
+    "denominatorTerms",
+    "numeratorCoefs",
+    "denominatorCoefs",
+)
+_FIELD_TYPE = {
+    "numeratorExp": int,
+    "denominatorExp": int,
+    "numeratorImpulse": int,
+    "numeratorTerms": int,
+    "denominatorTerms": int,
+    "numeratorCoefs": float,
+    "denominatorCoefs": float,
+}
 
 
 def _fit_nodes(faps: list[int], err) -> list[list[int]]:
@@ -238,13 +262,17 @@ def _fit_pairs(graph: list[int], nodes: list[list[int]], err) -> list[tuple[int,
     pairs = list(zip(graph[0::2], graph[1::2]))
     for a, b in pairs:
         if not (0 <= a < len(nodes) and 0 <= b < len(nodes)):
-            raise err(f"link ({a}, {b}) names a node that does not exist ({len(nodes)} nodes)", "Graph",
-                      "fit-missing-node")
+            raise err(
+                f"link ({a}, {b}) names a node that does not exist ({len(nodes)} nodes)", "Graph", "fit-missing-node"
+            )
         if a == b:
             raise err(f"link ({a}, {b}) is a self-loop", "Graph", "fit-cycle")
         if any(f in (1, 2) for f in nodes[b]):
-            raise err(f"node {b} is a child but holds FAP 1/2 (high-level FAPs cannot be interpolated)",
-                      "Graph", "fit-high-level-child")
+            raise err(
+                f"node {b} is a child but holds FAP 1/2 (high-level FAPs cannot be interpolated)",
+                "Graph",
+                "fit-high-level-child",
+            )
     if len(set(pairs)) != len(pairs):
         raise err("a link appears twice", "Graph", "fit-duplicate-link")
     return pairs
@@ -260,16 +288,20 @@ class _FieldCursor:
     def take(self, name: str, count: int) -> list:
         c = self.at[name]
         if c + count > len(self.lists[name]):
-            raise self.err(f"{name} has {len(self.lists[name])} entries, more are needed "
-                           f"(function layout: see docs/animation.md)", name, "fit-field-count")
+            raise self.err(
+                f"{name} has {len(self.lists[name])} entries, more are needed (function layout: see docs/animation.md)",
+                name,
+                "fit-field-count",
+            )
         self.at[name] = c + count
-        return self.lists[name][c:c + count]
+        return self.lists[name][c : c + count]
 
     def check_used(self) -> None:
         for name, c in self.at.items():
             if c != len(self.lists[name]):
-                raise self.err(f"{name} has {len(self.lists[name])} entries but the graph uses {c}", name,
-                               "fit-field-count")
+                raise self.err(
+                    f"{name} has {len(self.lists[name])} entries but the graph uses {c}", name, "fit-field-count"
+                )
 
 
 def _fit_function(fields: _FieldCursor, link: tuple[int, int], n: int, use_impulse: bool, err) -> RationalFunction:

@@ -32,6 +32,7 @@ grows as 1/distance^2), so points closer than 1e-4 are merged and a pair just ou
 tolerance (up to ~1.5e-4) is refused, not solved. Every suite scene is measured far below the
 bound (``fbaconf suites build`` prints the worst).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -146,10 +147,13 @@ def fit(points: np.ndarray, values: np.ndarray, *, what: str, node_path: str | N
     A = system(s, kernel)
     cond = condition(A)
     if not cond <= CONDITION_BOUND:
-        raise SceneError(f"{what}: the interpolation system is ill-conditioned (condition number {cond:.3g}, "
-                         f"bound {CONDITION_BOUND:.0e}): its solution would depend on the platform's LAPACK; "
-                         f"points too close to each other or nearly coplanar?", rule="calibration-degenerate",
-                         node_path=node_path)
+        raise SceneError(
+            f"{what}: the interpolation system is ill-conditioned (condition number {cond:.3g}, "
+            f"bound {CONDITION_BOUND:.0e}): its solution would depend on the platform's LAPACK; "
+            f"points too close to each other or nearly coplanar?",
+            rule="calibration-degenerate",
+            node_path=node_path,
+        )
     rhs = np.zeros((len(A), v.shape[1]))
     rhs[:m] = v
     sol = np.linalg.solve(A, rhs)

@@ -4,6 +4,7 @@ Prints frames/s for the bundled default head and the Predictable-L1 level-limit 
 (5,000 vertices), with every low-level FAP and an expression + viseme varying smoothly.
 Run: python benchmarks/bench_animate.py
 """
+
 from __future__ import annotations
 
 import time
@@ -44,8 +45,10 @@ def bench(name: str, scene, frames: FapFrames, repeat: int = 3) -> None:
         t0 = time.perf_counter()
         st = engine.animate_model(frames, model)
         best = min(best, time.perf_counter() - t0)
-    print(f"{name:<22} {st.vertices.shape[1]:>6} vertices  compile {t_compile * 1e3:7.1f} ms  "
-          f"animate {len(frames)} frames in {best:6.3f} s = {len(frames) / best:8.0f} frames/s")
+    print(
+        f"{name:<22} {st.vertices.shape[1]:>6} vertices  compile {t_compile * 1e3:7.1f} ms  "
+        f"animate {len(frames)} frames in {best:6.3f} s = {len(frames) / best:8.0f} frames/s"
+    )
 
 
 def main() -> None:

@@ -5,6 +5,7 @@ produced (what the in-process reference would cost if the harness told it the ca
 
     python benchmarks/bench_certify.py [--speed]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -22,8 +23,18 @@ def main() -> None:
     ap.add_argument("--speed", action="store_true", help="include the speed measurement")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        argv = [sys.executable, "-m", "fbaconf.cli", "certify", "--decoder", "reference-inprocess",
-                "--claim", "predictable@2", "-o", os.path.join(tmp, "cert")] + ([] if a.speed else ["--no-speed"])
+        argv = [
+            sys.executable,
+            "-m",
+            "fbaconf.cli",
+            "certify",
+            "--decoder",
+            "reference-inprocess",
+            "--claim",
+            "predictable@2",
+            "-o",
+            os.path.join(tmp, "cert"),
+        ] + ([] if a.speed else ["--no-speed"])
         t0 = time.perf_counter()
         p = subprocess.run(argv, capture_output=True, text=True)
         dt = time.perf_counter() - t0
@@ -31,8 +42,10 @@ def main() -> None:
         print(f"certify predictable@2 ({'with' if a.speed else 'without'} speed): {dt:.1f} s wall, exit {p.returncode}")
     t0 = time.perf_counter()
     r = run_mutant(None, "predictable@2", stop_at_first=False)
-    print(f"same {r['total']} cases, only the compared outputs produced: {time.perf_counter() - t0:.1f} s wall "
-          f"({'all pass' if not r['killed'] else 'FAILURES: ' + str(r['failing'][:2])})")
+    print(
+        f"same {r['total']} cases, only the compared outputs produced: {time.perf_counter() - t0:.1f} s wall "
+        f"({'all pass' if not r['killed'] else 'FAILURES: ' + str(r['failing'][:2])})"
+    )
     print(f"load average: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
 

@@ -7,6 +7,7 @@ time of the reference decoder alone (the checker's parse), so it is clear which 
 dominates. The arithmetic coder's inner loop runs in the optional C extension when it is
 built; ``--pure`` (or FBACONF_PURE_PYTHON=1) measures the pure-Python reference coder.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -54,8 +55,10 @@ def main() -> None:
     t0 = time.perf_counter()
     data = encode(random_walk_frames(a.frames), EncoderOptions(coding=a.coding, intra_period=300)).data
     t1 = time.perf_counter()
-    print(f"stream: {a.frames} frames, 66 FAPs, 30 Hz, {a.coding}: {len(data)} bytes "
-          f"({len(data) * 8 / (a.frames / 30.0) / 1000:.2f} kbit/s); encoded in {t1 - t0:.2f} s")
+    print(
+        f"stream: {a.frames} frames, 66 FAPs, 30 Hz, {a.coding}: {len(data)} bytes "
+        f"({len(data) * 8 / (a.frames / 30.0) / 1000:.2f} kbit/s); encoded in {t1 - t0:.2f} s"
+    )
     t_dec, t_chk = [], []
     for _ in range(max(1, a.repeat)):
         t2 = time.perf_counter()
@@ -68,8 +71,10 @@ def main() -> None:
     dec, chk = min(t_dec), min(t_chk)
     codes = sorted({d.code for d in rep.diagnostics})
     print(f"reference decode alone: {dec:.2f} s (best of {len(t_dec)})")
-    print(f"fbaconf check: {chk:.2f} s (best of {len(t_chk)}; target < 5 s) -> {'OK' if chk < 5 else 'OVER TARGET'}; "
-          f"checker work beyond the decode: {chk - dec:.2f} s")
+    print(
+        f"fbaconf check: {chk:.2f} s (best of {len(t_chk)}; target < 5 s) -> {'OK' if chk < 5 else 'OVER TARGET'}; "
+        f"checker work beyond the decode: {chk - dec:.2f} s"
+    )
     print(f"diagnostics: {len(rep.diagnostics)} {codes}; smallest claim {rep.summary.get('smallest_claim')}")
 
 

@@ -8,6 +8,7 @@ user knows what a cluster must win back by adding machines.
 
     python benchmarks/bench_cluster.py [--seconds S]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -36,8 +37,19 @@ def main() -> int:
     try:
         rows = []
         for label, extra in (("run -j 2", ["-j", "2"]), ("run --cluster local:2", ["--cluster", "local:2"])):
-            dt, _out = fbaconf("run", "--decoder", "reference", "--suite", "simple-l1-core", "--suite",
-                               "simple-l1-error", "-o", str(tmp / label.replace(" ", "_")), "--no-progress", *extra)
+            dt, _out = fbaconf(
+                "run",
+                "--decoder",
+                "reference",
+                "--suite",
+                "simple-l1-core",
+                "--suite",
+                "simple-l1-error",
+                "-o",
+                str(tmp / label.replace(" ", "_")),
+                "--no-progress",
+                *extra,
+            )
             rows.append((label, dt, "s wall"))
         print("conformance run, reference decoder, simple-l1-core + simple-l1-error")
         for label, dt, unit in rows:
@@ -51,8 +63,19 @@ def main() -> int:
         rates = []
         for label, extra in (("fuzz -j 1", []), ("fuzz --cluster local:2", ["--cluster", "local:2"])):
             out = tmp / label.replace(" ", "_")
-            fbaconf("fuzz", "--decoder", str(m), "--seconds", str(args.seconds), "-o", str(out), "--no-progress",
-                    "--minimise-seconds", "2", *extra)
+            fbaconf(
+                "fuzz",
+                "--decoder",
+                str(m),
+                "--seconds",
+                str(args.seconds),
+                "-o",
+                str(out),
+                "--no-progress",
+                "--minimise-seconds",
+                "2",
+                *extra,
+            )
             doc = json.loads((out / "fuzz.json").read_text())
             rates.append((label, doc["execs"] / max(1e-9, doc["seconds"]), doc["findings"]))
         print(f"fuzzing the planted skipchain decoder, {args.seconds:g} s")

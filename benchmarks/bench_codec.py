@@ -10,6 +10,7 @@ single process, one core, median of repeats. The arithmetic coder's inner loop r
 optional C extension when it is built (``--pure`` or FBACONF_PURE_PYTHON=1: the pure-Python
 reference coder; ``--compare``: both).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -81,8 +82,10 @@ def speed(n_frames: int, repeats: int = 3) -> None:
     coder = "native C extension" if arith.native_decoder() is not None else "pure Python"
     print(f"68-FAP stream, {n_frames} frames at 30 Hz, fap_quant 1, {kbps:.1f} kbit/s; coder: {coder}")
     print(f"  encode: {n_frames / enc:8.0f} frames/s")
-    print(f"  decode: {n_frames / dec:8.0f} frames/s  ({n_frames / dec / 30:.0f}x real time at 30 Hz; "
-          f"target 6000 frames/s -> ratio {n_frames / dec / 6000:.2f})")
+    print(
+        f"  decode: {n_frames / dec:8.0f} frames/s  ({n_frames / dec / 30:.0f}x real time at 30 Hz; "
+        f"target 6000 frames/s -> ratio {n_frames / dec / 6000:.2f})"
+    )
 
 
 def main(argv=None) -> int:

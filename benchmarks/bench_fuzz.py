@@ -21,6 +21,7 @@ asks for: harness vs bare spawn (goal >= 0.5), persistent vs fork server.
 
     python benchmarks/bench_fuzz.py [--seconds S]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -49,8 +50,9 @@ def bare_spawn(exe: Path, stream: Path, seconds: float) -> float:
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
         while time.perf_counter() - t0 < seconds:
-            pid = os.posix_spawn(str(exe), [exe.name, str(stream), out], {},
-                                 file_actions=[(os.POSIX_SPAWN_DUP2, devnull, 2)])
+            pid = os.posix_spawn(
+                str(exe), [exe.name, str(stream), out], {}, file_actions=[(os.POSIX_SPAWN_DUP2, devnull, 2)]
+            )
             os.waitpid(pid, 0)
             n += 1
     finally:
@@ -60,8 +62,9 @@ def bare_spawn(exe: Path, stream: Path, seconds: float) -> float:
 
 def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
     data = stream.read_bytes()
-    p = subprocess.Popen([str(exe), "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                         stderr=subprocess.DEVNULL)
+    p = subprocess.Popen(
+        [str(exe), "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL
+    )
     n, t0 = 0, time.perf_counter()
     try:
         while time.perf_counter() - t0 < seconds:
@@ -75,16 +78,19 @@ def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def fuzz_rate(manifest: Path, seconds: float, work: Path, *, spawn: bool = False,
-              c_server: bool = True) -> tuple[float, str, int]:
+def fuzz_rate(
+    manifest: Path, seconds: float, work: Path, *, spawn: bool = False, c_server: bool = True
+) -> tuple[float, str, int]:
     os.environ["FBACONF_FORKSERVER"] = "c" if c_server else "python"
     target = DecoderTarget(load_manifest(manifest), work, timeout_s=1.0, fork_server=not spawn, persistent=not spawn)
     mode = "persistent" if target.persistent else "spawn"
     if target.fork_server and not target.persistent:
         mode = f"fork server in {forkserver_build.server_kind()}"
-    fz = Fuzzer(target, default_seeds(),
-                FuzzConfig(seed=7, seconds=seconds, progress=False, coverage_every=8, minimise_seconds=2,
-                           minimise_tests=50))
+    fz = Fuzzer(
+        target,
+        default_seeds(),
+        FuzzConfig(seed=7, seconds=seconds, progress=False, coverage_every=8, minimise_seconds=2, minimise_tests=50),
+    )
     fz.run()
     return fz.stats.rate, mode, fz.stats.execs
 
@@ -93,9 +99,11 @@ def _timed(fn, *args, **kw):
     """``fn``'s result and the CPU seconds it took, this process's and its children's: on a
     shared machine a rate far below an earlier one with CPU seconds far below the wall time is
     the machine's load, not the harness."""
+
     def cpu() -> float:
         me, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
         return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
+
     c0 = cpu()
     out = fn(*args, **kw)
     return out, cpu() - c0
@@ -122,18 +130,23 @@ def main() -> int:
         s = args.seconds
         load0 = os.getloadavg()[0]
         rows = [("bare spawn (posix_spawn loop)", *_timed(bare_spawn, exe, stream, s), "")]
-        for label, manifest, one_shot, c_server in (("fuzz --spawn", spawn, True, True),
-                                                    ("fuzz (fork server, default)", spawn, False, True),
-                                                    ("fuzz (fork server in Python)", spawn, False, False),
-                                                    ("fuzz (persistent, [commands] serve)", serve, False, True),
-                                                    ("fuzz (fork server), bug fixed", fixed, False, True),
-                                                    ("fuzz (persistent), bug fixed", fixed_serve, False, True)):
-            (rate, mode, execs), cpu = _timed(fuzz_rate, manifest, s, tmp / f"work-{len(rows)}", spawn=one_shot,
-                                              c_server=c_server)
+        for label, manifest, one_shot, c_server in (
+            ("fuzz --spawn", spawn, True, True),
+            ("fuzz (fork server, default)", spawn, False, True),
+            ("fuzz (fork server in Python)", spawn, False, False),
+            ("fuzz (persistent, [commands] serve)", serve, False, True),
+            ("fuzz (fork server), bug fixed", fixed, False, True),
+            ("fuzz (persistent), bug fixed", fixed_serve, False, True),
+        ):
+            (rate, mode, execs), cpu = _timed(
+                fuzz_rate, manifest, s, tmp / f"work-{len(rows)}", spawn=one_shot, c_server=c_server
+            )
             rows.append((label, rate, cpu, f"{execs} inputs, mode {mode}"))
         rows.append(("bare persistent (pipe round trip)", *_timed(bare_persistent, exe, stream, s), ""))
-        print(f"fuzzing throughput, {s:g} s each, one decoder at a time, {os.cpu_count()} CPUs, "
-              f"load average {load0:.1f} -> {os.getloadavg()[0]:.1f}")
+        print(
+            f"fuzzing throughput, {s:g} s each, one decoder at a time, {os.cpu_count()} CPUs, "
+            f"load average {load0:.1f} -> {os.getloadavg()[0]:.1f}"
+        )
         print(f"  {'':<40} {'execs/s':>9}  {'CPU s':>6}  (this process and its children: a share of the machine)")
         for label, rate, cpu, note in rows:
             print(f"  {label:<40} {rate:9,.0f}  {cpu:6.1f}  {note}")

@@ -10,6 +10,7 @@ measurement took. Also checks the harness's own accuracy on a synthetic decoder 
 
     python benchmarks/bench_harness_speed.py [--repeats N] [--only reference|reference-inprocess|accuracy]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -38,9 +39,11 @@ def reference(name: str, repeats: int) -> None:
     print(render_table(res))
     for r in res:
         lengths = sorted({s["frames"] for s in r.samples})
-        print(f"  {r.operation}: lengths {lengths} x {repeats}, fit r2 {r.fit_r2:.4f}; "
-              f"simple@1 minimum {speed.required_rate('simple@1', r.operation)[0]:g} fps -> "
-              f"{'PASS' if r.rate_fps >= speed.required_rate('simple@1', r.operation)[0] else 'FAIL'}")
+        print(
+            f"  {r.operation}: lengths {lengths} x {repeats}, fit r2 {r.fit_r2:.4f}; "
+            f"simple@1 minimum {speed.required_rate('simple@1', r.operation)[0]:g} fps -> "
+            f"{'PASS' if r.rate_fps >= speed.required_rate('simple@1', r.operation)[0] else 'FAIL'}"
+        )
         print(f"    {r.verdict}: {r.reason}")
 
 
@@ -50,23 +53,29 @@ def accuracy(repeats: int) -> None:
         script = d / "timed.py"
         # sleeps 0.3 s and 2 ms a frame, then writes the reference decoding the speed check asks
         # for (its cost, ~0.03 ms a frame, adds to the 2 ms)
-        script.write_text(textwrap.dedent("""\
+        script.write_text(
+            textwrap.dedent("""\
             import sys, time
             time.sleep(0.3)
             time.sleep(0.002 * int(sys.argv[1]))
             from fbaconf.reference.pipeline import reference_outputs
             reference_outputs(sys.argv[3], faps_out=sys.argv[2])
-        """))
+        """)
+        )
         m = d / "timed.toml"
-        m.write_text(f'name = "timed"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                     f'[commands]\ndecode = ["{{python}}", "{script}", "{{frames}}", "{{faps_out}}", "{{input}}"]\n')
+        m.write_text(
+            f'name = "timed"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+            f'[commands]\ndecode = ["{{python}}", "{script}", "{{frames}}", "{{faps_out}}", "{{input}}"]\n'
+        )
         a = load_manifest(m)
         for label, kw in (("fixed lengths 20,160,320", {"lengths": [20, 160, 320]}), ("adaptive lengths", {})):
             t0 = time.perf_counter()
             r = speed.measure(a, "simple@1", "decode", repeats=repeats, **kw)
-            print(f"  {label}: per-frame {r.per_frame_s * 1000:.4f} ms (true 2 ms, error "
-                  f"{r.per_frame_s / 0.002 - 1:+.2%}), start-up {r.startup_s:.3f} s (0.3 s + interpreter), "
-                  f"r2 {r.fit_r2:.4f}, {time.perf_counter() - t0:.1f} s")
+            print(
+                f"  {label}: per-frame {r.per_frame_s * 1000:.4f} ms (true 2 ms, error "
+                f"{r.per_frame_s / 0.002 - 1:+.2%}), start-up {r.startup_s:.3f} s (0.3 s + interpreter), "
+                f"r2 {r.fit_r2:.4f}, {time.perf_counter() - t0:.1f} s"
+            )
 
 
 def main() -> int:
@@ -74,8 +83,10 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--only", choices=("reference", "reference-inprocess", "accuracy"))
     a = ap.parse_args()
-    print(f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load average "
-          f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    print(
+        f"python {sys.version.split()[0]}, {os.cpu_count()} CPUs, load average "
+        f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}"
+    )
     if a.only in (None, "accuracy"):
         print("\n== accuracy: synthetic decoder, start-up 0.3 s, 2 ms/frame")
         accuracy(a.repeats)

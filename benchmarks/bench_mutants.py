@@ -4,6 +4,7 @@ wall time, and last `mutation score: K/N` (same as `fbaconf suites mutants`).
 
     python benchmarks/bench_mutants.py [-j N]
 """
+
 from __future__ import annotations
 
 import argparse

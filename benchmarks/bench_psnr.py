@@ -22,6 +22,7 @@ ratio is undefined); MSE_i is floored at 1/12, the variance of the integer round
 values already carry, so that a FAP coded without error gives a finite term. The "all
 files" rows pool every (file, FAP) term and divide the total bits by the total duration.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -108,9 +109,16 @@ def summarise(name: str, c) -> dict:
         if pa is not None:
             gains.append((r, p - pa))
     low = [g for r, g in gains if r <= math.sqrt(lo * hi)] if hi > lo else []
-    return {"name": name, "overlap": (lo, hi), "dct_gain_low": float(np.mean(low)) if low else float("nan"),
-            "dct_gains": gains, "max_arith": max(p for *_, p in ar), "max_dct": max(p for *_, p in dc),
-            "min_rate_arith": min(r for _, r, _ in ar), "min_rate_dct": min(r for _, r, _ in dc)}
+    return {
+        "name": name,
+        "overlap": (lo, hi),
+        "dct_gain_low": float(np.mean(low)) if low else float("nan"),
+        "dct_gains": gains,
+        "max_arith": max(p for *_, p in ar),
+        "max_dct": max(p for *_, p in dc),
+        "min_rate_arith": min(r for _, r, _ in ar),
+        "min_rate_dct": min(r for _, r, _ in dc),
+    }
 
 
 def print_table(name: str, c) -> None:
@@ -126,21 +134,28 @@ def print_table(name: str, c) -> None:
         fd = f"{d[0]:.3f} | {d[1]:.2f}" if d else "– | –"
         print(f"| {q} | {fa} | {fd} |")
     s = summarise(name, c)
-    print(f"\noverlapping bitrates {s['overlap'][0]:.3f}..{s['overlap'][1]:.3f} kbit/s; mean DCT gain over the "
-          f"lower half (log scale) {s['dct_gain_low']:+.2f} dB; max PSNR frame-based {s['max_arith']:.2f} dB, "
-          f"DCT {s['max_dct']:.2f} dB; lowest bitrate frame-based {s['min_rate_arith']:.3f}, "
-          f"DCT {s['min_rate_dct']:.3f} kbit/s")
+    print(
+        f"\noverlapping bitrates {s['overlap'][0]:.3f}..{s['overlap'][1]:.3f} kbit/s; mean DCT gain over the "
+        f"lower half (log scale) {s['dct_gain_low']:+.2f} dB; max PSNR frame-based {s['max_arith']:.2f} dB, "
+        f"DCT {s['max_dct']:.2f} dB; lowest bitrate frame-based {s['min_rate_arith']:.3f}, "
+        f"DCT {s['min_rate_dct']:.3f} kbit/s"
+    )
     low_ok = s["dct_gain_low"] > 0
     max_ok = s["max_arith"] > s["max_dct"]
-    print(f"IST Figure 8 shape: DCT better at the lower bitrates: {'yes' if low_ok else 'NO'}; "
-          f"frame-based reaches the higher max PSNR: {'yes' if max_ok else 'NO'}")
+    print(
+        f"IST Figure 8 shape: DCT better at the lower bitrates: {'yes' if low_ok else 'NO'}; "
+        f"frame-based reaches the higher max PSNR: {'yes' if max_ok else 'NO'}"
+    )
 
 
 def main(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("data", nargs="?", default=str(Path(__file__).resolve().parents[2] / "shared" / "data" / "fap"))
-    ap.add_argument("--files", default="xface/anger.fap,xface/joy.fap,xface/test.fap,vreng/jag.fap",
-                    help="comma-separated files (relative to DATA) shown one by one; 'all' for every file")
+    ap.add_argument(
+        "--files",
+        default="xface/anger.fap,xface/joy.fap,xface/test.fap,vreng/jag.fap",
+        help="comma-separated files (relative to DATA) shown one by one; 'all' for every file",
+    )
     ap.add_argument("--step", type=int, default=1, help="use every N-th quantiser / index")
     ap.add_argument("--no-pooled", action="store_true", help="skip the all-files rows")
     ap.add_argument("--summary", action="store_true", help="one summary line per multi-frame file, no tables")
@@ -154,16 +169,20 @@ def main(argv: list[str]) -> int:
     qa = list(range(1, 32, args.step))
     qd = list(range(0, 32, args.step))
     if args.summary:
-        print("| file | Hz | frames | overlap kbit/s | DCT gain, lower half | max PSNR frame-based / DCT | "
-              "lowest kbit/s frame-based / DCT |")
+        print(
+            "| file | Hz | frames | overlap kbit/s | DCT gain, lower half | max PSNR frame-based / DCT | "
+            "lowest kbit/s frame-based / DCT |"
+        )
         print("|---|---:|---:|---|---:|---|---|")
         for n, f in seqs.items():
             if len(f) < 2:
                 continue
             s = summarise(n, curves([f], qa, qd))
-            print(f"| {n} | {f.frame_rate:g} | {len(f)} | {s['overlap'][0]:.3f}..{s['overlap'][1]:.3f} | "
-                  f"{s['dct_gain_low']:+.2f} dB | {s['max_arith']:.2f} / {s['max_dct']:.2f} | "
-                  f"{s['min_rate_arith']:.3f} / {s['min_rate_dct']:.3f} |")
+            print(
+                f"| {n} | {f.frame_rate:g} | {len(f)} | {s['overlap'][0]:.3f}..{s['overlap'][1]:.3f} | "
+                f"{s['dct_gain_low']:+.2f} dB | {s['max_arith']:.2f} / {s['max_dct']:.2f} | "
+                f"{s['min_rate_arith']:.3f} / {s['min_rate_dct']:.3f} |"
+            )
         return 0
     names = list(seqs) if args.files == "all" else [n for n in args.files.split(",") if n in seqs]
     for n in names:

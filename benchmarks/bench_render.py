@@ -14,6 +14,7 @@ encode, read back), both on the one core this benchmark is pinned to, and the ra
 
     python benchmarks/bench_render.py [--frames N] [--repeat R]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -47,6 +48,7 @@ def head_mesh(n_lat: int, n_lon: int) -> tuple[np.ndarray, np.ndarray]:
 
     def idx(i, j):
         return 1 + i * n_lon + (j % n_lon)
+
     tris = [[0, idx(0, j + 1), idx(0, j)] for j in range(n_lon)]
     for i in range(n_lat - 2):
         for j in range(n_lon):
@@ -93,8 +95,10 @@ def bundled_states(n_frames: int) -> dict[str, FaceState]:
     try:
         from fbaconf.animation.engine import animate  # noqa: PLC0415 (the stage is optional here)
         from fbaconf.bitstreams.frames import FapFrames  # noqa: PLC0415 (optional, as above)
+
         out["default head"] = animate(FapFrames.empty(n_frames), scene=None)
         from fbaconf.generators.models import level_limit_scene  # noqa: PLC0415 (optional, as above)
+
         out["level-limit head"] = animate(FapFrames.empty(n_frames), scene=level_limit_scene())
     except Exception as e:  # noqa: BLE001 - the animation stage is optional for this benchmark
         print(f"(bundled heads unavailable: {type(e).__name__}: {e})")
@@ -112,8 +116,10 @@ def main(argv=None) -> int:
         except OSError:
             pass
     states = bundled_states(args.frames)
-    for name, (pts, tris) in {"synthetic ~2.5k tris": head_mesh(36, 36),
-                              "synthetic 5k verts": head_mesh(72, 70)}.items():
+    for name, (pts, tris) in {
+        "synthetic ~2.5k tris": head_mesh(36, 36),
+        "synthetic 5k verts": head_mesh(72, 70),
+    }.items():
         states[name] = animated_state(pts, tris, args.frames)
     print(f"fbaconf reference rasteriser, 256x256, one core, best of {args.repeat} x {args.frames} frames")
     print("fps = frames per second of wall-clock time (CPU time in brackets: unaffected by other load)")
@@ -123,8 +129,10 @@ def main(argv=None) -> int:
         for ss in (1, 3):
             w, c = bench(state, ss, args.frames, args.repeat, write=False)
             ww, cw = bench(state, ss, args.frames, args.repeat, write=True)
-            print(f"{name:<22}{state.vertices.shape[1]:>7}{n_tri:>7}  {ss:>2}  {w:>7.1f} ({c:>6.1f})"
-                  f"  {ww:>7.1f} ({cw:>6.1f})")
+            print(
+                f"{name:<22}{state.vertices.shape[1]:>7}{n_tri:>7}  {ss:>2}  {w:>7.1f} ({c:>6.1f})"
+                f"  {ww:>7.1f} ({cw:>6.1f})"
+            )
     sys.stdout.flush()
     side_by_side(states, args.frames, args.repeat)
     return 0

@@ -12,6 +12,7 @@ launcher (every case: decode, read the output, compare, write the reports).
 
     python benchmarks/bench_run.py [--n N]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -44,8 +45,12 @@ def harness(exe: Path, stream: Path, work: Path, n: int) -> float:
         wd = work / f"c{i}"
         (wd / "in").mkdir(parents=True)
         shutil.copy(stream, wd / "in" / "s.fba")
-        r = sandbox.run([str(exe), str(wd / "in" / "s.fba"), str(wd / "out.npz")], wd, limits,
-                        view=sandbox.View(read_only=[exe.parent], writable=[wd], read_only_inside=[wd / "in"]))
+        r = sandbox.run(
+            [str(exe), str(wd / "in" / "s.fba"), str(wd / "out.npz")],
+            wd,
+            limits,
+            view=sandbox.View(read_only=[exe.parent], writable=[wd], read_only_inside=[wd / "in"]),
+        )
         assert r.returncode == 0, r
     return (time.perf_counter() - t0) / n * 1000
 
@@ -53,8 +58,25 @@ def harness(exe: Path, stream: Path, work: Path, n: int) -> float:
 def run_wall(manifest: Path, out: Path, python_launcher: bool) -> float:
     env = dict(os.environ, FBACONF_LAUNCHER="python" if python_launcher else "prlimit")
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "fbaconf", "run", "--decoder", str(manifest), "--claim", "simple@2",
-                    "-j", "1", "-o", str(out)], check=True, capture_output=True, env=env)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "run",
+            "--decoder",
+            str(manifest),
+            "--claim",
+            "simple@2",
+            "-j",
+            "1",
+            "-o",
+            str(out),
+        ],
+        check=True,
+        capture_output=True,
+        env=env,
+    )
     return time.perf_counter() - t0
 
 
@@ -79,8 +101,10 @@ def main() -> int:
         rows.append(("sandbox.run, prlimit launcher", harness(exe, stream, tmp / "p", a.n)))
         os.environ["FBACONF_LAUNCHER"] = "python"
         rows.append(("sandbox.run, Python launcher", harness(exe, stream, tmp / "y", a.n)))
-        print(f"one case, {a.n} runs each, isolation {sandbox.isolation()}, prlimit "
-              f"{'found' if shutil.which('prlimit') else 'MISSING (both rows use the Python launcher)'}")
+        print(
+            f"one case, {a.n} runs each, isolation {sandbox.isolation()}, prlimit "
+            f"{'found' if shutil.which('prlimit') else 'MISSING (both rows use the Python launcher)'}"
+        )
         for label, ms in rows:
             print(f"  {label:<34} {ms:7.2f} ms/case")
         print(f"  Python / prlimit launcher          {rows[2][1] / rows[1][1]:7.2f}x")

@@ -12,6 +12,7 @@ Prints inputs/s and the ratios of issue 19's goals (fork server >= 0.5 x bare sp
 
     python benchmarks/bench_transport.py [--seconds S]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -78,8 +79,9 @@ def persistent_rate(adapter, exe: Path, stream: Path, work: Path, seconds: float
 
 def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
     data = stream.read_bytes()
-    p = subprocess.Popen([str(exe), "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                         stderr=subprocess.DEVNULL)
+    p = subprocess.Popen(
+        [str(exe), "--serve"], stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL
+    )
     i = 0
 
     def one():
@@ -88,6 +90,7 @@ def bare_persistent(exe: Path, stream: Path, seconds: float) -> float:
         p.stdin.write(f"{i} {len(data)} /dev/null\n".encode() + data)
         p.stdin.flush()
         p.stdout.readline()
+
     try:
         return _loop(one, seconds)
     finally:
@@ -112,20 +115,24 @@ def main() -> int:
         (suite,) = load_suites(names=["simple-l1-core"])
         stream.write_bytes(suite.cases[0].input_path("fba").read_bytes())
         s = args.seconds
-        rows = {"bare spawn (posix_spawn loop)": bare_spawn(exe, stream, s),
-                "sandbox.run (--spawn)": spawn_rate(adapter, exe, stream, tmp, s),
-                "fork server (C)": fork_rate(adapter, exe, stream, tmp, s, python=False),
-                "fork server (Python)": fork_rate(adapter, exe, stream, tmp, s, python=True),
-                "persistent ([commands] serve)": persistent_rate(adapter, exe, stream, tmp, s),
-                "bare persistent (pipe round trip)": bare_persistent(exe, stream, s)}
+        rows = {
+            "bare spawn (posix_spawn loop)": bare_spawn(exe, stream, s),
+            "sandbox.run (--spawn)": spawn_rate(adapter, exe, stream, tmp, s),
+            "fork server (C)": fork_rate(adapter, exe, stream, tmp, s, python=False),
+            "fork server (Python)": fork_rate(adapter, exe, stream, tmp, s, python=True),
+            "persistent ([commands] serve)": persistent_rate(adapter, exe, stream, tmp, s),
+            "bare persistent (pipe round trip)": bare_persistent(exe, stream, s),
+        }
         print(f"transport throughput, {s:g} s each, one decoder at a time, {os.cpu_count()} CPUs")
         for label, rate in rows.items():
             print(f"  {label:<36} {rate:9,.0f} inputs/s")
         bare, spawn = rows["bare spawn (posix_spawn loop)"], rows["sandbox.run (--spawn)"]
         print(f"  fork server (C) / bare spawn         {rows['fork server (C)'] / bare:6.2f}   (goal >= 0.50)")
         print(f"  fork server (Python) / bare spawn    {rows['fork server (Python)'] / bare:6.2f}")
-        print(f"  persistent / --spawn                 {rows['persistent ([commands] serve)'] / spawn:6.2f}"
-              f"   (goal >= 10)")
+        print(
+            f"  persistent / --spawn                 {rows['persistent ([commands] serve)'] / spawn:6.2f}"
+            f"   (goal >= 10)"
+        )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return 0

@@ -15,6 +15,7 @@ limit holds; 12 gives 64 codewords and ~4 % more bits at the finest index, 14 gi
 Canonical code assignment: by length, then EOB, ESCAPE, then (run, |level|) order. The sign is a separate
 bit, so the table is over magnitudes. The DC Exp-Golomb orders minimise the total DC bits.
 """
+
 from __future__ import annotations
 
 import heapq
@@ -111,9 +112,11 @@ def main(argv: list[str]) -> int:
         pairs = [s for s in weights if s != "eob"]
         worst = min(pairs, key=lambda s: (weights[s], str(s)))
         esc += weights.pop(worst)
+
     # canonical code: by length, then EOB, ESC, then (run, level)
     def order(s):
         return (lengths[s], 0 if s == "eob" else 1 if s == "esc" else 2, s if isinstance(s, tuple) else ())
+
     code = 0
     prev_len = 0
     codes = {}

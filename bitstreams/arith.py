@@ -12,6 +12,7 @@ so the next field starts right after the arithmetic input bit that is 15th from 
 (plus a stuffing bit that directly follows it). A stuffing violation inside those 14
 look-ahead bits is not an error: those bits belong to the next field.
 """
+
 from __future__ import annotations
 
 import os
@@ -233,8 +234,20 @@ class ArithDecoder:
     the block (D7) and raises for a stuffing violation inside the block. Bits past the end
     of the data read as 0 (look-ahead); :meth:`finish` checks the block itself is complete."""
 
-    __slots__ = ("r", "bits", "nb", "pos", "low", "high", "value", "zeros", "count", "start", "stuffing",
-                 "bad_stuffing")
+    __slots__ = (
+        "r",
+        "bits",
+        "nb",
+        "pos",
+        "low",
+        "high",
+        "value",
+        "zeros",
+        "count",
+        "start",
+        "stuffing",
+        "bad_stuffing",
+    )
 
     def __init__(self, reader: BitReader) -> None:
         self.r = reader
@@ -385,8 +398,11 @@ def native():
 def native_decoder():
     """The extension for the decoder, or None (also when ArithDecoder was replaced or patched)."""
     mod = native()
-    if mod is None or readings.pure_required() or any(ArithDecoder.__dict__.get(k) is not v
-                                                      for k, v in _PURE_DECODER.items()):
+    if (
+        mod is None
+        or readings.pure_required()
+        or any(ArithDecoder.__dict__.get(k) is not v for k, v in _PURE_DECODER.items())
+    ):
         return None
     return mod
 
@@ -453,8 +469,22 @@ class NativeSegment:
     """Block specs and adaptive model pools of one segment (intra plane + the P planes after it)
     for the native fast path (decoder and encoder): the same alphabets and models as the pure path (D4, D5)."""
 
-    __slots__ = ("idx", "bounds", "q", "istep", "steps", "vis_i", "exp_i", "low_i", "vis_p", "vis_pool",
-                 "exp_p", "exp_pool", "low_p", "low_pool")
+    __slots__ = (
+        "idx",
+        "bounds",
+        "q",
+        "istep",
+        "steps",
+        "vis_i",
+        "exp_i",
+        "low_i",
+        "vis_p",
+        "vis_pool",
+        "exp_p",
+        "exp_pool",
+        "low_p",
+        "low_pool",
+    )
 
     def __init__(self, coded_low: list[int], bounds: np.ndarray, q: int) -> None:
         self.idx = idx = np.asarray(coded_low, dtype=np.int64) - 1
@@ -479,8 +509,9 @@ class NativeSegment:
         ib = _syntax.intensity_bound(q)
         V, E = _syntax.VISEME_SELECT_MAX, _syntax.EXPRESSION_SELECT_MAX
         self.vis_p, self.vis_pool = block_spec([2 * V + 1, 2 * V + 1, 2 * ib + 1], [-V, -V, -ib], adaptive=True)
-        self.exp_p, self.exp_pool = block_spec([2 * E + 1, 2 * ib + 1, 2 * E + 1, 2 * ib + 1], [-E, -ib, -E, -ib],
-                                               adaptive=True)
+        self.exp_p, self.exp_pool = block_spec(
+            [2 * E + 1, 2 * ib + 1, 2 * E + 1, 2 * ib + 1], [-E, -ib, -E, -ib], adaptive=True
+        )
         lo = tdiv_array(self.bounds[:, 3], d)
         hi = tdiv_array(self.bounds[:, 2], d)
         self.low_p, self.low_pool = block_spec(hi - lo + 1, lo, self.steps, self.idx, adaptive=True)

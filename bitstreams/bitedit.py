@@ -5,6 +5,7 @@ All offsets are bit offsets, MSB first (the BitReader convention). Streams are r
 bytes; a final partial byte is padded with zero bits. Reads past the end raise ValueError;
 inserts and removals clamp their offset to the stream.
 """
+
 from __future__ import annotations
 
 from fbaconf.bitstreams.bitio import VISUAL_OBJECT_SEQUENCE_END_CODE, BitWriter
@@ -17,7 +18,7 @@ def to_bits(data: bytes) -> str:
 def from_bits(bits: str) -> bytes:
     if len(bits) % 8:
         bits += "0" * (8 - len(bits) % 8)
-    return bytes(int(bits[i:i + 8], 2) for i in range(0, len(bits), 8))
+    return bytes(int(bits[i : i + 8], 2) for i in range(0, len(bits), 8))
 
 
 def _as_int(data: bytes) -> tuple[int, int]:
@@ -113,5 +114,17 @@ def end_stream(data: bytes, end_bit: int, *, end_code: bool = True) -> bytes:
     return from_bits(s)
 
 
-__all__ = ["bit_range", "end_stream", "flip_bit", "from_bits", "get_bits", "insert_bits", "join_bits", "remove_bits",
-           "set_bits", "splice", "to_bits", "truncate_bits"]
+__all__ = [
+    "bit_range",
+    "end_stream",
+    "flip_bit",
+    "from_bits",
+    "get_bits",
+    "insert_bits",
+    "join_bits",
+    "remove_bits",
+    "set_bits",
+    "splice",
+    "to_bits",
+    "truncate_bits",
+]

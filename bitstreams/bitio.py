@@ -4,6 +4,7 @@ Also the MPEG-4 start codes and next_start_code() stuffing (spec notes 1.1, deci
 stuffing is one '0' bit then '1' bits up to the byte boundary, or the byte 0x7F when
 already aligned.
 """
+
 from __future__ import annotations
 
 import re
@@ -127,8 +128,15 @@ class BitReader:
         return self._bits
 
     def error(self, message: str, rule: str, *, bit_offset: int | None = None, fap: int | None = None):
-        return BitstreamError(message, bit_offset=self.pos if bit_offset is None else bit_offset, rule=rule,
-                              plane=self.plane, frame=self.frame, fap=fap, file=self.file)
+        return BitstreamError(
+            message,
+            bit_offset=self.pos if bit_offset is None else bit_offset,
+            rule=rule,
+            plane=self.plane,
+            frame=self.frame,
+            fap=fap,
+            file=self.file,
+        )
 
     @property
     def remaining(self) -> int:
@@ -140,8 +148,7 @@ class BitReader:
         pos = self.pos
         end = pos + nbits
         if end > self.nbits:
-            raise self.error(f"stream ends inside {what} ({nbits} bits needed, {self.nbits - pos} left)",
-                             "truncated")
+            raise self.error(f"stream ends inside {what} ({nbits} bits needed, {self.nbits - pos} left)", "truncated")
         first = pos >> 3
         last = (end + 7) >> 3
         chunk = int.from_bytes(self.data[first:last], "big")

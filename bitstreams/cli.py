@@ -1,4 +1,5 @@
 """Verbs of the bitstream stage: ``encode``, ``decode`` and ``demo``."""
+
 from __future__ import annotations
 
 import json
@@ -16,22 +17,35 @@ from .frames import FapFrames
 
 def _summary(frames: FapFrames, nbytes: int) -> dict:
     dur = (len(frames) / frames.frame_rate) if len(frames) else 0.0
-    return {"frames": len(frames), "frame_rate": frames.frame_rate, "bytes": nbytes,
-            "kbit_per_s": (nbytes * 8 / dur / 1000.0) if dur else None,
-            "intra_planes": int(frames.is_intra.sum())}
+    return {
+        "frames": len(frames),
+        "frame_rate": frames.frame_rate,
+        "bytes": nbytes,
+        "kbit_per_s": (nbytes * 8 / dur / 1000.0) if dur else None,
+        "intra_planes": int(frames.is_intra.sum()),
+    }
 
 
 def cmd_encode(args) -> int:
     if Path(args.input).suffix.lower() == ".bt":  # a BT scene -> binary BIFS (issue 9)
         from fbaconf.scenes.bifs import cmd_encode_scene
+
         return cmd_encode_scene(args)
     from .encoder import EncoderOptions, encode
+
     frames, warnings = load_faps(args.input)
     for w in warnings:
         print(f"warning: {w}", file=sys.stderr)
-    opts = EncoderOptions(fap_quant=args.quant, intra_period=args.intra_every, frame_rate=args.frame_rate,
-                          time_codes=args.time_codes, plane_start_codes=args.plane_start_codes, ranges=args.ranges,
-                          partial_mask_type=args.partial_mask_type, coding=args.coding)
+    opts = EncoderOptions(
+        fap_quant=args.quant,
+        intra_period=args.intra_every,
+        frame_rate=args.frame_rate,
+        time_codes=args.time_codes,
+        plane_start_codes=args.plane_start_codes,
+        ranges=args.ranges,
+        partial_mask_type=args.partial_mask_type,
+        coding=args.coding,
+    )
     try:
         res = encode(frames, opts)
     except FbaconfInputError as e:
@@ -44,16 +58,20 @@ def cmd_encode(args) -> int:
     if args.json:
         print(json.dumps(s))
     else:
-        print(f"encoded {s['frames']} frames at {s['frame_rate']:g} Hz ({s['intra_planes']} intra) -> "
-              f"{args.output}: {s['bytes']} bytes, {s['kbit_per_s'] or 0:.2f} kbit/s")
+        print(
+            f"encoded {s['frames']} frames at {s['frame_rate']:g} Hz ({s['intra_planes']} intra) -> "
+            f"{args.output}: {s['bytes']} bytes, {s['kbit_per_s'] or 0:.2f} kbit/s"
+        )
     return 0
 
 
 def cmd_decode(args) -> int:
     from .decoder import decode
+
     p = Path(args.input)
     if p.suffix.lower() in (".bifs", ".bif"):  # a binary BIFS scene -> BT text and/or a bit trace (issue 9)
         from fbaconf.scenes.bifs import cmd_decode_scene
+
         return cmd_decode_scene(args)
     if getattr(args, "trace", False):
         raise FbaconfInputError("--trace is for .bifs scenes", rule="usage", file=str(p))
@@ -77,6 +95,7 @@ def cmd_demo(args) -> int:
     from .encoder import EncoderOptions, encode
     from .frames import first_difference
     from .synth import synthetic_sequence
+
     out = Path(args.output)
     frames = synthetic_sequence(250, 25.0)
     ok = True
@@ -120,8 +139,12 @@ def register(sub) -> None:
     p.add_argument("--frame-rate", default=None, help="output frame rate, e.g. 25, 29.97 or 30000/1001")
     p.add_argument("--time-codes", action="store_true", help="write a time code in every intra plane")
     p.add_argument("--plane-start-codes", choices=("none", "intra", "all"), default="intra")
-    p.add_argument("--ranges", choices=("auto", "persist"), default="auto",
-                   help="auto: tight min/max lists in every intra plane; persist: default ranges, lists when needed")
+    p.add_argument(
+        "--ranges",
+        choices=("auto", "persist"),
+        default="auto",
+        help="auto: tight min/max lists in every intra plane; persist: default ranges, lists when needed",
+    )
     p.add_argument("--partial-mask-type", type=int, choices=(1, 2), default=None)
     p.add_argument("--recon", help="also write the encoder's reconstruction (.fap or .npz)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
@@ -130,8 +153,9 @@ def register(sub) -> None:
     p = sub.add_parser("decode", help="reference decoder: .fba -> FapFrames (.fap text or .npz); .bifs scene -> .bt")
     p.add_argument("input")
     p.add_argument("-o", "--output", help="output .fap or .npz (.bt for a .bifs scene)")
-    p.add_argument("--trace", action="store_true", help=".bifs only: print every node and field with its bit "
-                   "offset and width")
+    p.add_argument(
+        "--trace", action="store_true", help=".bifs only: print every node and field with its bit offset and width"
+    )
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_decode)
 

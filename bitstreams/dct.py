@@ -23,6 +23,7 @@ The decoder inverse-transforms 16 dequantised coefficients with the stored integ
 (exact integer arithmetic, round half away from zero) and outputs the first L samples, one
 FapFrames row per frame. A new intra group resets the DC prediction.
 """
+
 from __future__ import annotations
 
 import tomllib
@@ -62,6 +63,7 @@ def rdiv(a: int, b: int) -> int:
 
 # ---------------------------------------------------------------------------- tables
 
+
 @dataclass(frozen=True)
 class DctTables:
     provisional: bool
@@ -98,15 +100,19 @@ class DctTables:
 
 def parse_tables(doc: dict) -> DctTables:
     """Build and validate the tables from a parsed TOML document (RuntimeError if invalid)."""
+
     def need(cond, msg):
         if not cond:
             raise RuntimeError(f"{DATA_FILE}: {msg}")
+
     try:
         seg, tr, qu, dc, ac, hl = (doc[k] for k in ("segment", "transform", "quantiser", "dc", "ac", "high_level"))
         length = int(seg["length"])
         matrix = tuple(tuple(int(v) for v in row) for row in tr["matrix"])
-        need(int(tr["size"]) == length and len(matrix) == length and all(len(r) == length for r in matrix),
-             "transform size, matrix shape and segment length must agree")
+        need(
+            int(tr["size"]) == length and len(matrix) == length and all(len(r) == length for r in matrix),
+            "transform size, matrix shape and segment length must agree",
+        )
         need(1 << int(seg["length_bits"]) >= length, "length_bits too small for the segment length")
         need(tr["rounding"] == "half-away-from-zero", "only half-away-from-zero rounding is implemented")
         ratio = tuple(int(v) for v in qu["dc_step_ratio"])
@@ -115,14 +121,26 @@ def parse_tables(doc: dict) -> DctTables:
         need(len(sf) == 32 and min(sf) >= 1, "scale_factors must hold 32 integers >= 1")
         entries = tuple((int(r), int(lv), str(c)) for r, lv, c in ac["table"])
         t = DctTables(
-            provisional=bool(doc["provisional"]), version=str(doc["version"]), length=length,
-            length_bits=int(seg["length_bits"]), scale_bits=int(tr["scale_bits"]), matrix=matrix,
-            dc_ratio=ratio, scale_factors=sf, dc_intra_order=int(dc["intra_exp_golomb_order"]),
-            dc_pred_order=int(dc["pred_exp_golomb_order"]), dc_max_prefix=int(dc["max_prefix_zeros"]),
-            dc_max_level=int(dc["max_level"]), eob=str(ac["eob"]), escape=str(ac["escape"]),
-            escape_run_bits=int(ac["escape_run_bits"]), escape_level_bits=int(ac["escape_level_bits"]),
-            ac_max_level=int(ac["max_level"]), table=entries,
-            hl_bits={k: int(v) for k, v in hl.items() if k.endswith("_bits")})
+            provisional=bool(doc["provisional"]),
+            version=str(doc["version"]),
+            length=length,
+            length_bits=int(seg["length_bits"]),
+            scale_bits=int(tr["scale_bits"]),
+            matrix=matrix,
+            dc_ratio=ratio,
+            scale_factors=sf,
+            dc_intra_order=int(dc["intra_exp_golomb_order"]),
+            dc_pred_order=int(dc["pred_exp_golomb_order"]),
+            dc_max_prefix=int(dc["max_prefix_zeros"]),
+            dc_max_level=int(dc["max_level"]),
+            eob=str(ac["eob"]),
+            escape=str(ac["escape"]),
+            escape_run_bits=int(ac["escape_run_bits"]),
+            escape_level_bits=int(ac["escape_level_bits"]),
+            ac_max_level=int(ac["max_level"]),
+            table=entries,
+            hl_bits={k: int(v) for k, v in hl.items() if k.endswith("_bits")},
+        )
     except (KeyError, TypeError, ValueError) as e:
         raise RuntimeError(f"{DATA_FILE}: missing or malformed entry: {e}") from None
     need(1 << t.escape_run_bits >= length - 1, "escape_run_bits cannot code every run")
@@ -164,6 +182,7 @@ def dct_tables() -> DctTables:
 
 
 # ---------------------------------------------------------------------------- transform
+
 
 def forward_levels(x, ac_step: int, t: DctTables) -> list[int]:
     """Encoder (informative): quantised levels of 16 samples. AC: rdiv(M x, 2^s * step);
@@ -211,6 +230,7 @@ def error_bound(fap: int, index: int, max_abs: int, t: DctTables | None = None) 
 
 
 # ---------------------------------------------------------------------------- variable-length codes
+
 
 def _write_code(w, code: str) -> None:
     w.write(int(code, 2), len(code))
@@ -315,10 +335,23 @@ def _tc_read(r, bits: int, what: str) -> int:
 
 # high-level field layout: (index in HIGH_LEVEL_FIELDS, width key or None for a flag bit)
 _VISEME_LAYOUT = ((0, "viseme_select"), (1, "viseme_select"), (2, "viseme_blend"), (3, None))
-_EXPRESSION_LAYOUT = ((4, "expression_select"), (5, "expression_intensity"), (6, "expression_select"),
-                      (7, "expression_intensity"), (8, None), (9, None))
-_HL_MAX = {0: VISEME_SELECT_MAX, 1: VISEME_SELECT_MAX, 2: INTENSITY_MAX, 4: EXPRESSION_SELECT_MAX,
-           5: INTENSITY_MAX, 6: EXPRESSION_SELECT_MAX, 7: INTENSITY_MAX}
+_EXPRESSION_LAYOUT = (
+    (4, "expression_select"),
+    (5, "expression_intensity"),
+    (6, "expression_select"),
+    (7, "expression_intensity"),
+    (8, None),
+    (9, None),
+)
+_HL_MAX = {
+    0: VISEME_SELECT_MAX,
+    1: VISEME_SELECT_MAX,
+    2: INTENSITY_MAX,
+    4: EXPRESSION_SELECT_MAX,
+    5: INTENSITY_MAX,
+    6: EXPRESSION_SELECT_MAX,
+    7: INTENSITY_MAX,
+}
 
 
 def _write_hl(w, layout, cur, prev, direct: bool, t: DctTables) -> None:
@@ -350,12 +383,16 @@ def _read_hl(r, layout, hl: list[int], direct: bool, t: DctTables, err, fap: int
                 hl[j] = r.bit(HIGH_LEVEL_FIELDS[j])
     for j, key in layout:
         if key and not 0 <= hl[j] <= _HL_MAX[j]:
-            rule = "intensity-range" if "intensity" in HIGH_LEVEL_FIELDS[j] or "blend" in HIGH_LEVEL_FIELDS[j] \
+            rule = (
+                "intensity-range"
+                if "intensity" in HIGH_LEVEL_FIELDS[j] or "blend" in HIGH_LEVEL_FIELDS[j]
                 else ("viseme-select-range" if fap == 1 else "expression-select-range")
+            )
             raise err(f"{HIGH_LEVEL_FIELDS[j]} = {hl[j]} outside 0..{_HL_MAX[j]}", rule, at, fap)
 
 
 # ---------------------------------------------------------------------------- decoder side
+
 
 def decode_group(d, info) -> None:
     """Decode the segment data of one plane group (after its header) into FapFrames rows.
@@ -527,6 +564,7 @@ class StuffingReader:
 
 # ---------------------------------------------------------------------------- encoder side
 
+
 @dataclass
 class SectionResult:
     values: np.ndarray  # int64[n, 68]
@@ -551,11 +589,18 @@ def plan_groups(fn, coded, types, quants, intra_period: int, t: DctTables) -> li
     while k < n:
         a = k
         k += 1
-        while (k < n and k - a < t.length and fn[k] == fn[k - 1] + 1 and (coded[k] == coded[a]).all()
-               and (types[k] == types[a]).all() and quants[k] == quants[a]):
+        while (
+            k < n
+            and k - a < t.length
+            and fn[k] == fn[k - 1] + 1
+            and (coded[k] == coded[a]).all()
+            and (types[k] == types[a]).all()
+            and quants[k] == quants[a]
+        ):
             k += 1
-        intra = a == 0 or bool((coded[a] != coded[a - 1]).any() or (types[a] != types[a - 1]).any()
-                               or quants[a] != quants[a - 1])
+        intra = a == 0 or bool(
+            (coded[a] != coded[a - 1]).any() or (types[a] != types[a - 1]).any() or quants[a] != quants[a - 1]
+        )
         if not intra and intra_period > 0 and a - last_intra >= intra_period:
             intra = True
         if intra:
@@ -650,18 +695,39 @@ def write_section(ctx, src, opts, code, quants, types, header) -> SectionResult:
         ctx.prev_fn = int(fn[b - 1])
     ctx.cur = cur
     ctx.hcur = hcur
-    return SectionResult(values=out_v, high=out_h, status=status, time_ms=time_ms, is_intra=is_intra,
-                         bit_offset=bit_offset, plane_offsets=plane_offsets, intra_frames=intra_frames)
+    return SectionResult(
+        values=out_v,
+        high=out_h,
+        status=status,
+        time_ms=time_ms,
+        is_intra=is_intra,
+        bit_offset=bit_offset,
+        plane_offsets=plane_offsets,
+        intra_frames=intra_frames,
+    )
 
 
 def _check_levels(levels, dc_prev, intra: bool, t: DctTables, fap: int, frame: int, x) -> None:
     big = max(x, key=abs)
-    if abs(levels[0]) > t.dc_max_level or se_prefix(levels[0] if intra else levels[0] - dc_prev,
-                                                     t.dc_intra_order if intra else t.dc_pred_order) \
-            > t.dc_max_prefix:
-        raise EncodeError(f"DC level {levels[0]} of FAP {fap} in the segment at frame {frame} is not codable "
-                          f"(limit {t.dc_max_level})", rule="value-range", frame=frame, fap=fap, value=int(big))
+    if (
+        abs(levels[0]) > t.dc_max_level
+        or se_prefix(levels[0] if intra else levels[0] - dc_prev, t.dc_intra_order if intra else t.dc_pred_order)
+        > t.dc_max_prefix
+    ):
+        raise EncodeError(
+            f"DC level {levels[0]} of FAP {fap} in the segment at frame {frame} is not codable "
+            f"(limit {t.dc_max_level})",
+            rule="value-range",
+            frame=frame,
+            fap=fap,
+            value=int(big),
+        )
     worst = max(abs(v) for v in levels[1:])
     if worst > t.ac_max_level:
-        raise EncodeError(f"AC level {worst} of FAP {fap} in the segment at frame {frame} exceeds "
-                          f"{t.ac_max_level}", rule="value-range", frame=frame, fap=fap, value=int(big))
+        raise EncodeError(
+            f"AC level {worst} of FAP {fap} in the segment at frame {frame} exceeds {t.ac_max_level}",
+            rule="value-range",
+            frame=frame,
+            fap=fap,
+            value=int(big),
+        )

@@ -11,6 +11,7 @@ bitstreams/_fastarith.c) when it is built; the pure-Python ArithDecoder is the r
 and the fallback (FBACONF_PURE_PYTHON=1 forces it). Both give identical frames, plane
 records and errors (tests/unit/test_native.py).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -118,8 +119,9 @@ class _Decoder:
             raise self.err("stream shorter than a face_object_start_code", "truncated", at=0)
         code = r.read(32, "face_object_start_code")
         if code != FACE_OBJECT_START_CODE:
-            raise self.err(f"stream must start with face_object_start_code 0x000001BA, found 0x{code:08X}",
-                           "start-code", at=0)
+            raise self.err(
+                f"stream must start with face_object_start_code 0x000001BA, found 0x{code:08X}", "start-code", at=0
+            )
         end_code = None
         while True:
             start = r.pos
@@ -139,8 +141,13 @@ class _Decoder:
                 break  # zero padding of the last byte: the stream ended without an end code
             self.plane(start, has_sc)
         frames = self._frames()
-        return DecodeResult(frames=frames, planes=self.planes, end_code=end_code, end_offset=r.pos,
-                            used_default_frame_rate=self.first_rate is None and bool(self.planes))
+        return DecodeResult(
+            frames=frames,
+            planes=self.planes,
+            end_code=end_code,
+            end_offset=r.pos,
+            used_default_frame_rate=self.first_rate is None and bool(self.planes),
+        )
 
     def _frames(self) -> FapFrames:
         n = len(self.rows_values)
@@ -148,7 +155,8 @@ class _Decoder:
         high = np.array(self.rows_high, dtype=np.int64).reshape(n, len(HIGH_LEVEL_FIELDS))
         meta = self.rows_meta
         return FapFrames(
-            values=values.astype(np.int32), status=np.array(self.rows_status, dtype=np.uint8).reshape(n, NUM_FAPS),
+            values=values.astype(np.int32),
+            status=np.array(self.rows_status, dtype=np.uint8).reshape(n, NUM_FAPS),
             high=high.astype(np.int32),
             frame_number=np.array([m[0] for m in meta], dtype=np.int64),
             time_ms=np.array([m[1] for m in meta], dtype=np.float64),
@@ -157,7 +165,8 @@ class _Decoder:
             fap_quant=np.array([m[3] for m in meta], dtype=np.int16),
             coding_type=np.array([m[4] for m in meta], dtype=np.int8),
             bit_offset=np.array([m[5] for m in meta], dtype=np.int64),
-            gender=self.gender)
+            gender=self.gender,
+        )
 
     # ------------------------------------------------------------------ plane
     def plane(self, start: int, has_sc: bool) -> None:
@@ -170,8 +179,9 @@ class _Decoder:
         at = r.pos
         info.object_mask = r.read(2, "fba_object_mask")
         if info.object_mask != FAPS_MASK:
-            raise self.err(f"fba_object_mask {info.object_mask:02b}: only 01 (FAPs, no BAPs) is allowed (D1)",
-                           "object-mask", at=at)
+            raise self.err(
+                f"fba_object_mask {info.object_mask:02b}: only 01 (FAPs, no BAPs) is allowed (D1)", "object-mask", at=at
+            )
         if not info.is_intra and not self.seen_intra:
             raise self.err("the first plane must be intra (D2)", "first-plane-intra", at=info.header_offset)
         if info.is_intra:
@@ -228,8 +238,7 @@ class _Decoder:
         self.rows_values.append(list(self.cur))
         self.rows_status.append(self.status_template.copy())
         self.rows_high.append(list(self.high))
-        self.rows_meta.append((info.frame_number, info.time_ms, info.is_intra, self.fap_quant, self.coding_type,
-                               start))
+        self.rows_meta.append((info.frame_number, info.time_ms, info.is_intra, self.fap_quant, self.coding_type, start))
 
     def intra_header(self, info: PlaneInfo) -> None:
         r = self.r
@@ -242,7 +251,7 @@ class _Decoder:
             t = r.read(2, f"fap_mask_type of group {g.group}")
             types.append(t)
             if t == MASK_ALL:
-                coded[g.first_fap - 1:g.last_fap] = True
+                coded[g.first_fap - 1 : g.last_fap] = True
             elif t != 0:
                 for fap in g.faps:
                     coded[fap - 1] = bool(r.bit(f"fap mask bit of FAP {fap}"))
@@ -278,8 +287,9 @@ class _Decoder:
             self.p_alphabets = {}
             self.nat_seg = NativeSegment(self.coded_low, self.bounds, q)
             return
-        self.p_alphabets = {f: alphabet(int(self.bounds[f - 1, 3]), int(self.bounds[f - 1, 2]), q)
-                            for f in self.coded_low}
+        self.p_alphabets = {
+            f: alphabet(int(self.bounds[f - 1, 3]), int(self.bounds[f - 1, 2]), q) for f in self.coded_low
+        }
 
     def _keep_scaling(self, info: PlaneInfo) -> None:
         """The other reading of D4 (S1): alphabets are not recomputed when fap_quant changes. A
@@ -302,8 +312,13 @@ class _Decoder:
         error (fbaconf's reading: it is decoded)."""
         lo, hi = alphabet(int(self.bounds[f - 1, 1]), int(self.bounds[f - 1, 0]), self.fap_quant)
         if not lo * step <= v <= hi * step:
-            raise self.err(f"FAP {f} value {v} outside the intra range {lo * step}..{hi * step} (read as the "
-                           f"value range: D4:value-range-enforced)", "pred-value-range", at=at, fap=f)
+            raise self.err(
+                f"FAP {f} value {v} outside the intra range {lo * step}..{hi * step} (read as the "
+                f"value range: D4:value-range-enforced)",
+                "pred-value-range",
+                at=at,
+                fap=f,
+            )
 
     def _mask_state(self, types, coded) -> None:
         """Status template (D3) and coded low-level FAPs of the planes that follow an intra header."""
@@ -352,8 +367,9 @@ class _Decoder:
             info.blocks.append(("viseme", start, dec.finish()))
             for k, mx in ((0, VISEME_SELECT_MAX), (1, VISEME_SELECT_MAX)):
                 if not 0 <= hl[k] <= mx:
-                    raise self.err(f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{mx}", "viseme-select-range",
-                                   at=start, fap=1)
+                    raise self.err(
+                        f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{mx}", "viseme-select-range", at=start, fap=1
+                    )
             hl[3] = r.bit("viseme_def")
         if self.coded[1]:
             start = r.pos
@@ -375,8 +391,12 @@ class _Decoder:
             info.blocks.append(("expression", start, dec.finish()))
             for k in (4, 6):
                 if not 0 <= hl[k] <= EXPRESSION_SELECT_MAX:
-                    raise self.err(f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{EXPRESSION_SELECT_MAX}",
-                                   "expression-select-range", at=start, fap=2)
+                    raise self.err(
+                        f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{EXPRESSION_SELECT_MAX}",
+                        "expression-select-range",
+                        at=start,
+                        fap=2,
+                    )
             hl[8] = r.bit("init_face")
             hl[9] = r.bit("expression_def")
         start = r.pos
@@ -455,8 +475,9 @@ class _Decoder:
                 hl[2] += db * istep
             for k, mx in ((0, VISEME_SELECT_MAX), (1, VISEME_SELECT_MAX)):
                 if not 0 <= hl[k] <= mx:
-                    raise self.err(f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{mx}", "viseme-select-range",
-                                   at=start, fap=1)
+                    raise self.err(
+                        f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{mx}", "viseme-select-range", at=start, fap=1
+                    )
             hl[3] = r.bit("viseme_def")
         if self.coded[1]:
             start = r.pos
@@ -471,8 +492,12 @@ class _Decoder:
                 hl[7] += di2 * istep
             for k in (4, 6):
                 if not 0 <= hl[k] <= EXPRESSION_SELECT_MAX:
-                    raise self.err(f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{EXPRESSION_SELECT_MAX}",
-                                   "expression-select-range", at=start, fap=2)
+                    raise self.err(
+                        f"{HIGH_LEVEL_FIELDS[k]} = {hl[k]} outside 0..{EXPRESSION_SELECT_MAX}",
+                        "expression-select-range",
+                        at=start,
+                        fap=2,
+                    )
             hl[8] = r.bit("init_face")
             hl[9] = r.bit("expression_def")
         if intra:

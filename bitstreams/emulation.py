@@ -16,6 +16,7 @@ reading of the syntax allows (D1), in both coding modes. Our decoder decodes the
 written (it does not scan for start codes inside a plane), so a stream with an emulation still
 decodes; it is nonetheless not conformant.
 """
+
 from __future__ import annotations
 
 from fbaconf.errors import FbaconfInputError

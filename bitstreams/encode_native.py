@@ -1,5 +1,6 @@
 """The encoder's plane payload through the C block coder (``_fastarith``): the same bits as
 the pure-Python :class:`~.arith.ArithEncoder` path (``tests/unit/test_native.py``)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -18,8 +19,17 @@ def _block_native(nat, w: BitWriter, spec: np.ndarray, pool, values: np.ndarray)
     append_bits(w, a, b)
 
 
-def write_payload_native(nat, w: BitWriter, plan, k: int, intra: bool, q: int, c, bounds,  # noqa: PLR0913
-                          p_models: dict) -> None:
+def write_payload_native(  # noqa: PLR0913 - the segment's state, as the pure path's method holds it
+    nat,
+    w: BitWriter,
+    plan,
+    k: int,
+    intra: bool,
+    q: int,
+    c,
+    bounds,
+    p_models: dict,
+) -> None:
     """The encoder's ``_write_payload`` through the native block coder; p_models holds the segment's NativeSegment."""
     seg = p_models.get(None)
     if seg is None:  # first plane of the segment (p_models is reset at every intra plane)

@@ -12,6 +12,7 @@ group mask type decides what the decoder does (D3); by default the encoder picks
 when the whole group is coded, 10 when an uncoded FAP of the group is FREE although it
 was set before, 00 when nothing is coded, else 01.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -108,11 +109,13 @@ class EncodeResult:
 
 # ---------------------------------------------------------------------------- encoder
 
+
 class _Plan:
     """Intra placement, closed-loop reconstruction and the symbols of every plane."""
 
-    def __init__(self, frames: FapFrames, opts: EncoderOptions, quants: np.ndarray, types: np.ndarray,
-                 forced: set[int]) -> None:
+    def __init__(
+        self, frames: FapFrames, opts: EncoderOptions, quants: np.ndarray, types: np.ndarray, forced: set[int]
+    ) -> None:
         n = len(frames)
         coded = frames.status == SET
         self.coded = coded
@@ -145,8 +148,9 @@ class _Plan:
             q = int(quants[k])
             steps = steps_by_q.get(q)
             if steps is None:
-                steps = steps_by_q[q] = np.array([1, 1] + [low_level_step(f, q) for f in range(3, NUM_FAPS + 1)],
-                                                 dtype=np.int64)
+                steps = steps_by_q[q] = np.array(
+                    [1, 1] + [low_level_step(f, q) for f in range(3, NUM_FAPS + 1)], dtype=np.int64
+                )
             c = coded[k]
             idx = np.nonzero(c[2:])[0] + 2
             if self.intra[k]:
@@ -196,15 +200,14 @@ class _Plan:
             need[:, 0] = np.maximum(lv.max(axis=0), 0) * d
             need[:, 1] = np.minimum(lv.min(axis=0), 0) * d
             if b > a + 1:
-                ps = self.sym[a + 1:b]
+                ps = self.sym[a + 1 : b]
                 need[:, 2] = np.maximum(ps.max(axis=0), 0) * d
                 need[:, 3] = np.minimum(ps.min(axis=0), 0) * d
-                over = (np.abs(ps) * d > MAX_RANGE) & coded[a + 1:b]
+                over = (np.abs(ps) * d > MAX_RANGE) & coded[a + 1 : b]
                 rows = np.nonzero(over.any(axis=1))[0]
                 if len(rows):
                     self.p_overflow.append(a + 1 + int(rows[0]))
             self.need[a] = need
-
 
     def _intensity(self, k: int, j: int, high, hcur, istep: int) -> None:
         """Quantise a blend/intensity closed-loop, keeping the reconstruction inside 0..63.
@@ -265,16 +268,22 @@ def encode(frames: FapFrames, options: EncoderOptions | None = None) -> EncodeRe
         # then coding the plane (or the one before it) as intra: other symbols, other bits
         cands += [(sc, intra | {here}, wide), (sc | {here}, intra | {here}, wide)]
         if before is not None:
-            cands += [(sc, intra | {before}, wide), (sc | {here}, intra | {before}, wide),
-                      (sc | {before}, intra | {here}, wide)]
+            cands += [
+                (sc, intra | {before}, wide),
+                (sc | {here}, intra | {before}, wide),
+                (sc | {before}, intra | {here}, wide),
+            ]
         # last: that intra plane's range lists wider (other alphabets, other arithmetic codes)
         cands += [(sc, intra | {here}, frozenset({p for p in wide if p[0] != here} | {(here, n)})) for n in (1, 2, 3)]
         nxt = next((c_ for c_ in cands if c_ not in tried), None)
         if nxt is None:
             break
         sc, intra, wide = nxt
-    raise EncodeError(f"cannot avoid a start-code emulation at byte {em[0]} (D9) with plane start codes or "
-                      f"intra planes or wider range lists", rule="start-code-emulation")
+    raise EncodeError(
+        f"cannot avoid a start-code emulation at byte {em[0]} (D9) with plane start codes or "
+        f"intra planes or wider range lists",
+        rule="start-code-emulation",
+    )
 
 
 def _encode_once(frames: FapFrames, opts: EncoderOptions) -> EncodeResult:
@@ -290,8 +299,11 @@ def _encode_once(frames: FapFrames, opts: EncoderOptions) -> EncodeResult:
     n = len(src)
     if n == 0:
         raise EncodeError("no frames to encode", rule="empty")
-    quants = (np.asarray(opts.fap_quant_per_frame, dtype=np.int64) if opts.fap_quant_per_frame is not None
-              else np.full(n, opts.fap_quant, dtype=np.int64))
+    quants = (
+        np.asarray(opts.fap_quant_per_frame, dtype=np.int64)
+        if opts.fap_quant_per_frame is not None
+        else np.full(n, opts.fap_quant, dtype=np.int64)
+    )
     if quants.shape != (n,) or (quants < 0).any() or (quants > 31).any():
         raise EncodeError("fap_quant_per_frame must hold one value 0..31 per frame", rule="option")
     if opts.group_types is not None:
@@ -301,11 +313,14 @@ def _encode_once(frames: FapFrames, opts: EncoderOptions) -> EncodeResult:
         coded = src.status == SET
         for gi, g in enumerate(tables.groups()):
             sl = slice(g.first_fap - 1, g.last_fap)
-            bad = np.nonzero(((types[:, gi] == MASK_ALL) & ~coded[:, sl].all(axis=1))
-                             | ((types[:, gi] == MASK_NONE) & coded[:, sl].any(axis=1)))[0]
+            bad = np.nonzero(
+                ((types[:, gi] == MASK_ALL) & ~coded[:, sl].all(axis=1))
+                | ((types[:, gi] == MASK_NONE) & coded[:, sl].any(axis=1))
+            )[0]
             if len(bad):
-                raise EncodeError(f"group {g.group} mask type contradicts the coded FAPs", rule="option",
-                                  frame=int(bad[0]))
+                raise EncodeError(
+                    f"group {g.group} mask type contradicts the coded FAPs", rule="option", frame=int(bad[0])
+                )
     else:
         types = _derive_group_types(src, opts.partial_mask_type)
     if opts.coding_per_frame is not None or opts.coding == "dct":
@@ -335,7 +350,11 @@ def _plan_arithmetic(src: FapFrames, opts: EncoderOptions, quants, types) -> _Pl
             raise EncodeError(
                 f"value {int(src.values[k, f])} of FAP {f + 1} at frame {int(src.frame_number[k])} is outside the "
                 f"codable range +-{lim} at fap_quant {q} (+-1860 x step; spec notes 1.4)",
-                rule="value-range", frame=int(src.frame_number[k]), fap=f + 1, value=int(src.values[k, f]))
+                rule="value-range",
+                frame=int(src.frame_number[k]),
+                fap=f + 1,
+                value=int(src.values[k, f]),
+            )
     return plan
 
 
@@ -349,6 +368,7 @@ def _rate_code(rate) -> FrameRateCode:
 @dataclass
 class _StreamContext:
     """State of one face object stream shared by its sections (a mode switch starts a section)."""
+
     w: BitWriter
     bounds: np.ndarray  # current (i_max, i_min, p_max, p_min) per FAP (D4)
     ever: np.ndarray  # FAPs ever coded (D3 status)
@@ -362,17 +382,26 @@ class _StreamContext:
     def new(cls) -> _StreamContext:
         w = BitWriter()
         w.start_code(FACE_OBJECT_START_CODE)
-        return cls(w=w, bounds=tables.default_bounds().copy(), ever=np.zeros(NUM_FAPS, dtype=bool),
-                   cur=np.zeros(NUM_FAPS, dtype=np.int64), hcur=np.zeros(len(HIGH_LEVEL_FIELDS), dtype=np.int64))
+        return cls(
+            w=w,
+            bounds=tables.default_bounds().copy(),
+            ever=np.zeros(NUM_FAPS, dtype=bool),
+            cur=np.zeros(NUM_FAPS, dtype=np.int64),
+            hcur=np.zeros(len(HIGH_LEVEL_FIELDS), dtype=np.int64),
+        )
 
 
-def _plane_header(ctx: _StreamContext, opts: EncoderOptions, code: FrameRateCode, intra: bool, frame_no: int,
-                  q: int, types_row, c) -> float:
+def _plane_header(
+    ctx: _StreamContext, opts: EncoderOptions, code: FrameRateCode, intra: bool, frame_no: int, q: int, types_row, c
+) -> float:
     """Write a plane header up to (excluding) coding_type, shared by both modes; return the time of
     the plane (of a DCT group's first frame) exactly as the decoder computes it (D6)."""
     w = ctx.w
-    if opts.plane_start_codes == "all" or (opts.plane_start_codes == "intra" and intra) or \
-            frame_no in opts.start_codes_before:
+    if (
+        opts.plane_start_codes == "all"
+        or (opts.plane_start_codes == "intra" and intra)
+        or frame_no in opts.start_codes_before
+    ):
         w.next_start_code()
         w.start_code(FACE_OBJECT_PLANE_START_CODE)
     w.bit(1 if intra else 0)
@@ -426,8 +455,15 @@ def _plane_header(ctx: _StreamContext, opts: EncoderOptions, code: FrameRateCode
     return ctx.t_prev
 
 
-def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, types, plan: _Plan,
-           ctx: _StreamContext | None = None) -> EncodeResult:
+def _write(
+    src: FapFrames,
+    opts: EncoderOptions,
+    code: FrameRateCode,
+    quants,
+    types,
+    plan: _Plan,
+    ctx: _StreamContext | None = None,
+) -> EncodeResult:
     """Write the planes of the frame-based (arithmetic) mode. Without ``ctx`` the frames are a
     whole stream (object start code ... end code); with it, one section of a mode-switching stream."""
     n = len(src)
@@ -439,10 +475,17 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
     explicit = None
     if opts.bounds is not None:
         explicit = np.asarray(opts.bounds, dtype=np.int64)
-        if explicit.shape != (NUM_FAPS, 4) or (explicit[:, [0, 2]] < 0).any() or (explicit[:, [1, 3]] > 0).any() \
-                or (explicit % RANGE_DELTA).any() or (np.abs(explicit) > MAX_RANGE).any():
-            raise EncodeError("bounds must be int[68, 4] (i_max>=0, i_min<=0, p_max>=0, p_min<=0), multiples of 60 "
-                              "within +-1860", rule="option")
+        if (
+            explicit.shape != (NUM_FAPS, 4)
+            or (explicit[:, [0, 2]] < 0).any()
+            or (explicit[:, [1, 3]] > 0).any()
+            or (explicit % RANGE_DELTA).any()
+            or (np.abs(explicit) > MAX_RANGE).any()
+        ):
+            raise EncodeError(
+                "bounds must be int[68, 4] (i_max>=0, i_min<=0, p_max>=0, p_min<=0), multiples of 60 within +-1860",
+                rule="option",
+            )
     offsets: list[int] = []
     status_rows = np.zeros((n, NUM_FAPS), dtype=np.uint8)
     ever = ctx.ever
@@ -461,8 +504,9 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
         time_ms[k] = _plane_header(ctx, opts, code, intra, int(fn[k]), q, types[k], c)
         if intra:
             w.bit(0)  # coding_type 0: arithmetic
-            lists = _choose_lists(opts, explicit, bounds, plan.need[k], c, q, ctx.prev_q,
-                                  dict(opts.widen_at).get(int(fn[k]), 0))
+            lists = _choose_lists(
+                opts, explicit, bounds, plan.need[k], c, q, ctx.prev_q, dict(opts.widen_at).get(int(fn[k]), 0)
+            )
             for name in LIST_ORDER:
                 w.bit(1 if name in lists else 0)
             for li, name in enumerate(LIST_ORDER):
@@ -490,13 +534,27 @@ def _write(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, quants, ty
     if own and opts.end_code:
         w.next_start_code()
         w.start_code(VISUAL_OBJECT_SEQUENCE_END_CODE)
-    recon = FapFrames(values=plan.recon.astype(np.int32), status=status_rows, high=plan.rhigh.astype(np.int32),
-                      frame_number=fn.copy(), time_ms=time_ms, frame_rate=rate, is_intra=plan.intra.copy(),
-                      fap_quant=quants.astype(np.int16), coding_type=np.zeros(n, np.int8),
-                      bit_offset=np.array(offsets, dtype=np.int64), gender=opts.gender)
+    recon = FapFrames(
+        values=plan.recon.astype(np.int32),
+        status=status_rows,
+        high=plan.rhigh.astype(np.int32),
+        frame_number=fn.copy(),
+        time_ms=time_ms,
+        frame_rate=rate,
+        is_intra=plan.intra.copy(),
+        fap_quant=quants.astype(np.int16),
+        coding_type=np.zeros(n, np.int8),
+        bit_offset=np.array(offsets, dtype=np.int64),
+        gender=opts.gender,
+    )
     recon.values[:, :2] = 0
-    return EncodeResult(data=w.getvalue(), recon=recon, intra_frames=[int(i) for i in np.nonzero(plan.intra)[0]],
-                        plane_offsets=offsets, start_codes=list(w.start_codes))
+    return EncodeResult(
+        data=w.getvalue(),
+        recon=recon,
+        intra_frames=[int(i) for i in np.nonzero(plan.intra)[0]],
+        plane_offsets=offsets,
+        start_codes=list(w.start_codes),
+    )
 
 
 def _coding_modes(opts: EncoderOptions, n: int) -> np.ndarray:
@@ -559,9 +617,15 @@ def _encode_sections(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, 
             offsets += res.plane_offsets
             intra_frames += [a + i for i in res.intra_frames]
         else:
-            res = dct.write_section(ctx, sub, opts, code, quants[a:b], types[a:b],
-                                    lambda c_, intra, fno, q, trow, crow: _plane_header(c_, opts, code, intra, fno,
-                                                                                       q, trow, crow))
+            res = dct.write_section(
+                ctx,
+                sub,
+                opts,
+                code,
+                quants[a:b],
+                types[a:b],
+                lambda c_, intra, fno, q, trow, crow: _plane_header(c_, opts, code, intra, fno, q, trow, crow),
+            )
             values[a:b], high[a:b], status[a:b] = res.values, res.high, res.status
             time_ms[a:b], is_intra[a:b], bit_offset[a:b] = res.time_ms, res.is_intra, res.bit_offset
             offsets += res.plane_offsets
@@ -569,17 +633,32 @@ def _encode_sections(src: FapFrames, opts: EncoderOptions, code: FrameRateCode, 
     if opts.end_code:
         ctx.w.next_start_code()
         ctx.w.start_code(VISUAL_OBJECT_SEQUENCE_END_CODE)
-    recon = FapFrames(values=values.astype(np.int32), status=status, high=high.astype(np.int32),
-                      frame_number=src.frame_number.copy(), time_ms=time_ms, frame_rate=code.rate, is_intra=is_intra,
-                      fap_quant=quants.astype(np.int16), coding_type=modes.copy(), bit_offset=bit_offset,
-                      gender=opts.gender)
+    recon = FapFrames(
+        values=values.astype(np.int32),
+        status=status,
+        high=high.astype(np.int32),
+        frame_number=src.frame_number.copy(),
+        time_ms=time_ms,
+        frame_rate=code.rate,
+        is_intra=is_intra,
+        fap_quant=quants.astype(np.int16),
+        coding_type=modes.copy(),
+        bit_offset=bit_offset,
+        gender=opts.gender,
+    )
     recon.values[:, :2] = 0
-    return EncodeResult(data=ctx.w.getvalue(), recon=recon, intra_frames=intra_frames, plane_offsets=offsets,
-                        start_codes=list(ctx.w.start_codes))
+    return EncodeResult(
+        data=ctx.w.getvalue(),
+        recon=recon,
+        intra_frames=intra_frames,
+        plane_offsets=offsets,
+        start_codes=list(ctx.w.start_codes),
+    )
 
 
-def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, prev_q,
-                  widen: int = 0) -> dict[str, list[int]]:
+def _choose_lists(
+    opts: EncoderOptions, explicit, bounds, need, coded, q: int, prev_q, widen: int = 0
+) -> dict[str, list[int]]:
     """Which new min/max lists an intra plane sends, as 5-bit codes per FAP (index FAP-1);
     ``widen`` makes every sent bound that many codes wider (D9: other alphabets, other bits)."""
     codes = {}
@@ -588,8 +667,12 @@ def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, p
         insufficient[:2] = False
         if insufficient.any():
             f, li = map(int, np.argwhere(insufficient)[0])
-            raise EncodeError(f"explicit {LIST_ORDER[li]} bound {int(explicit[f, li])} of FAP {f + 1} is too small "
-                              f"(needs {int(need[f, li])})", rule="value-range", fap=f + 1)
+            raise EncodeError(
+                f"explicit {LIST_ORDER[li]} bound {int(explicit[f, li])} of FAP {f + 1} is too small "
+                f"(needs {int(need[f, li])})",
+                rule="value-range",
+                fap=f + 1,
+            )
         for li, name in enumerate(LIST_ORDER):
             codes[name] = [abs(int(v)) // RANGE_DELTA for v in explicit[:, li]]
         return codes
@@ -602,14 +685,18 @@ def _choose_lists(opts: EncoderOptions, explicit, bounds, need, coded, q: int, p
             else:
                 codes[name] = [max(n_, abs(int(b)) // RANGE_DELTA) for n_, b in zip(needed, bounds[:, li])]
             continue
-        short = [f for f in range(2, NUM_FAPS) if coded[f] and _tdiv(abs(int(bounds[f, li])), quant_div(q))
-                 < _tdiv(abs(int(need[f, li])), quant_div(q))]
+        short = [
+            f
+            for f in range(2, NUM_FAPS)
+            if coded[f] and _tdiv(abs(int(bounds[f, li])), quant_div(q)) < _tdiv(abs(int(need[f, li])), quant_div(q))
+        ]
         if short:
             codes[name] = [max(n_, abs(int(b)) // RANGE_DELTA) for n_, b in zip(needed, bounds[:, li])]
     if widen:
         for name in list(codes):
-            codes[name] = [min(MAX_RANGE_CODE, v + widen) if coded[f] and f >= 2 else v
-                           for f, v in enumerate(codes[name])]
+            codes[name] = [
+                min(MAX_RANGE_CODE, v + widen) if coded[f] and f >= 2 else v for f, v in enumerate(codes[name])
+            ]
     for vals in codes.values():
         if max(vals[2:], default=0) > MAX_RANGE_CODE:  # cannot happen: symbols were range-checked
             raise EncodeError("range list value exceeds 31", rule="value-range")

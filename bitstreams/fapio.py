@@ -1,5 +1,6 @@
 """FapFrames as files: an fbaconf ``.npz`` or ``.fap`` text, read and written by suffix (the one
 place every stage loads and saves decoded FAPs)."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -23,6 +23,7 @@ rule id from :data:`RULES`: recoverable ones as :class:`TextWarning` (raised as
 :class:`TextFormatError` under ``strict=True``), unreadable input always as
 :class:`TextFormatError`. No other exception escapes the reader for any text input.
 """
+
 from __future__ import annotations
 
 import math
@@ -40,8 +41,18 @@ from .._atomic import atomic_write_text
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .tables import NUM_FAPS
 
-__all__ = ["RULES", "KNOWN_VERSIONS", "FapFileHeader", "TextWarning", "check_fap_text", "read_fap",
-           "read_fap_text", "read_fap_file", "write_fap", "write_fap_file"]
+__all__ = [
+    "RULES",
+    "KNOWN_VERSIONS",
+    "FapFileHeader",
+    "TextWarning",
+    "check_fap_text",
+    "read_fap",
+    "read_fap_text",
+    "read_fap_file",
+    "write_fap",
+    "write_fap_file",
+]
 
 #: Every rule id the reader can report, with its registry entry (fbaconf/rules.py): warning rules
 #: are recoverable (TextWarning, or TextFormatError under strict=True); error rules always raise
@@ -53,8 +64,8 @@ KNOWN_VERSIONS = ("2.0", "2.1", "2.2")
 # Warnings kept per rule before the rest are summarised in one final warning.
 MAX_WARNINGS_PER_RULE = 50
 
-_INT32_MIN, _INT32_MAX = -(2 ** 31), 2 ** 31 - 1
-_FRAME_MAX = 2 ** 31 - 1
+_INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
+_FRAME_MAX = 2**31 - 1
 _LINE_BREAK = re.compile(r"\r\n|\r|\n")
 _TOKEN = re.compile(r"[^ \t\f\v\r\n]+")
 _INT = re.compile(r"[+-]?[0-9]+", re.ASCII)
@@ -87,8 +98,7 @@ class TextWarning:
         return f"{prefix}{self.line}:{self.column}: {self.message} [rule {self.rule}]"
 
     def to_dict(self) -> dict:
-        return {"rule": self.rule, "line": self.line, "column": self.column, "message": self.message,
-                "file": self.file}
+        return {"rule": self.rule, "line": self.line, "column": self.column, "message": self.message, "file": self.file}
 
 
 class _Reporter:
@@ -127,8 +137,11 @@ class _Reporter:
     def finish(self) -> list[TextWarning]:
         for rule, (line, column) in self._first_suppressed.items():
             more = self._count[rule] - MAX_WARNINGS_PER_RULE
-            self.warnings.append(TextWarning(rule, line, column, f"{more} further warning(s) of this rule "
-                                             "suppressed (first one here)", self.file))
+            self.warnings.append(
+                TextWarning(
+                    rule, line, column, f"{more} further warning(s) of this rule suppressed (first one here)", self.file
+                )
+            )
         self._first_suppressed.clear()
         return self.warnings
 
@@ -146,39 +159,58 @@ def _parse_header(lines: list[str], rep: _Reporter) -> tuple[int, FapFileHeader,
             continue
         lineno = i + 1
         if len(toks) < 3:
-            raise rep.error("fap-text-header", lineno, toks[0][1] + 1,
-                            f"header needs 'version name frame_rate number_of_frames', found {len(toks)} token(s)")
+            raise rep.error(
+                "fap-text-header",
+                lineno,
+                toks[0][1] + 1,
+                f"header needs 'version name frame_rate number_of_frames', found {len(toks)} token(s)",
+            )
         (version, vcol), (rate_s, rcol), (count_s, ccol) = toks[0], toks[-2], toks[-1]
         if not _FLOAT.fullmatch(rate_s):
             raise rep.error("fap-text-header", lineno, rcol + 1, f"frame rate {_clip(rate_s)} is not a number")
         rate = float(rate_s)
         if not (math.isfinite(rate) and rate > 0):
-            raise rep.error("fap-text-header", lineno, rcol + 1,
-                            f"frame rate {_clip(rate_s)} is not a positive finite number")
+            raise rep.error(
+                "fap-text-header", lineno, rcol + 1, f"frame rate {_clip(rate_s)} is not a positive finite number"
+            )
         if not _INT.fullmatch(count_s) or count_s.startswith("-"):
-            raise rep.error("fap-text-header", lineno, ccol + 1,
-                            f"frame count {_clip(count_s)} is not a non-negative integer")
+            raise rep.error(
+                "fap-text-header", lineno, ccol + 1, f"frame count {_clip(count_s)} is not a non-negative integer"
+            )
         if len(count_s) > _MAX_COUNT_CHARS:
             raise rep.error("fap-text-header", lineno, ccol + 1, f"frame count {_clip(count_s)} is absurdly large")
         count = int(count_s)
-        name = content[vcol + len(version):rcol].strip(" \t\f\v")
+        name = content[vcol + len(version) : rcol].strip(" \t\f\v")
         if version not in KNOWN_VERSIONS:
-            rep.warn("fap-text-version", lineno, vcol + 1,
-                     f"version {_clip(version)} is not one of {', '.join(KNOWN_VERSIONS)}; read as 2.x")
+            rep.warn(
+                "fap-text-version",
+                lineno,
+                vcol + 1,
+                f"version {_clip(version)} is not one of {', '.join(KNOWN_VERSIONS)}; read as 2.x",
+            )
         if not name:
             rep.warn("fap-text-name", lineno, rcol + 1, "name field is empty")
         elif len(toks) > 4:
-            rep.warn("fap-text-name", lineno, toks[1][1] + 1,
-                     f"name field {_clip(name, 60)} contains whitespace ({len(toks) - 3} tokens); "
-                     "read as one name (version = first token, rate/count = last two)")
+            rep.warn(
+                "fap-text-name",
+                lineno,
+                toks[1][1] + 1,
+                f"name field {_clip(name, 60)} contains whitespace ({len(toks) - 3} tokens); "
+                "read as one name (version = first token, rate/count = last two)",
+            )
         return i, FapFileHeader(version, name, rate, count), (lineno, ccol + 1)
     last = len(lines)
-    raise rep.error("fap-text-header", last, len(lines[-1]) + 1 if lines else 1,
-                    "no header line: the file holds no tokens outside comments")
+    raise rep.error(
+        "fap-text-header",
+        last,
+        len(lines[-1]) + 1 if lines else 1,
+        "no header line: the file holds no tokens outside comments",
+    )
 
 
-def read_fap_text(text: str, *, file: str | None = None,
-                  strict: bool = False) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:
+def read_fap_text(
+    text: str, *, file: str | None = None, strict: bool = False
+) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:
     """Read the text of a .fap file. Returns (frames, header, warnings); raises
     TextFormatError for unreadable input (and for any warning when ``strict``)."""
     if not isinstance(text, str):
@@ -186,8 +218,9 @@ def read_fap_text(text: str, *, file: str | None = None,
     return _read(text, _Reporter(file, strict))
 
 
-def check_fap_text(text: str, *, file: str | None = None
-                   ) -> tuple[list[TextWarning], FapFrames | None, FapFileHeader | None]:
+def check_fap_text(
+    text: str, *, file: str | None = None
+) -> tuple[list[TextWarning], FapFrames | None, FapFileHeader | None]:
     """Every rule the text of a .fap file breaks, in file order (line, column): the reader's
     warnings and its errors, with the frames read (complete ones) and the header (None when the
     header is broken). Reading goes on after an error inside a frame (the bad token keeps its
@@ -237,14 +270,18 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
     pos = 0
     truncated = False  # (recover) the file ended inside the frame being read: it is dropped
 
-    def take_int(what: str, frame_start: tuple[int, int], lo: int | None,
-                 hi: int | None) -> tuple[int | None, int, int]:
+    def take_int(
+        what: str, frame_start: tuple[int, int], lo: int | None, hi: int | None
+    ) -> tuple[int | None, int, int]:
         nonlocal pos, truncated
         if pos >= ntok:
             if not truncated:
-                rep.fail("fap-text-truncated", *eof_loc,
-                         f"truncated: end of file where {what} was expected (frame starting at "
-                         f"{frame_start[0]}:{frame_start[1]})")
+                rep.fail(
+                    "fap-text-truncated",
+                    *eof_loc,
+                    f"truncated: end of file where {what} was expected (frame starting at "
+                    f"{frame_start[0]}:{frame_start[1]})",
+                )
             truncated = True
             return (0 if lo is not None else None), *eof_loc
         tok, line, col = tt[pos], tl[pos], tc[pos]
@@ -280,11 +317,15 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
             extra = tt[pos + NUM_FAPS]
             if _INT.fullmatch(extra) and len(extra) <= _MAX_INT_CHARS and int(extra) == 0:
                 width = NUM_FAPS + 1
-                rep.warn("fap-text-mask-length", tl[pos + NUM_FAPS], tc[pos + NUM_FAPS],
-                         f"mask line has {NUM_FAPS + 1} entries (Greta quirk); the extra 69th entry is "
-                         f"dropped, entries 1..68 are FAP1..FAP68")
+                rep.warn(
+                    "fap-text-mask-length",
+                    tl[pos + NUM_FAPS],
+                    tc[pos + NUM_FAPS],
+                    f"mask line has {NUM_FAPS + 1} entries (Greta quirk); the extra 69th entry is "
+                    f"dropped, entries 1..68 are FAP1..FAP68",
+                )
         mask = np.zeros(NUM_FAPS, bool)
-        chunk = tt[pos:pos + width]
+        chunk = tt[pos : pos + width]
         if len(chunk) == width and all(t == "0" or t == "1" for t in chunk):  # the common case
             mask[:] = [t == "1" for t in chunk[:NUM_FAPS]]
             pos += width
@@ -293,8 +334,9 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
                 what = f"mask entry {k + 1}" + (f" (FAP{k + 1})" if k < NUM_FAPS else " (extra)")
                 v, line, col = take_int(what, start, None, None)
                 if v not in (0, 1) and not truncated and (v is not None or _INT.fullmatch(tt[pos - 1])):
-                    rep.fail("fap-text-mask-value", line, col,
-                             f"{what} is {_clip(tt[pos - 1])}; mask entries must be 0 or 1")
+                    rep.fail(
+                        "fap-text-mask-value", line, col, f"{what} is {_clip(tt[pos - 1])}; mask entries must be 0 or 1"
+                    )
                 if k < NUM_FAPS:
                     mask[k] = v == 1
         fn, fline, fcol = take_int("frame number", start, 0, _FRAME_MAX)
@@ -305,8 +347,12 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
         elif prev_fn is not None and fn < prev_fn:
             rep.warn("fap-text-frame-order", fline, fcol, f"frame number {fn} follows frame number {prev_fn}")
         if fn > header.declared_frames:
-            rep.warn("fap-text-frame-beyond", fline, fcol,
-                     f"frame number {fn} is beyond the header's declared count {header.declared_frames}")
+            rep.warn(
+                "fap-text-frame-beyond",
+                fline,
+                fcol,
+                f"frame number {fn} is beyond the header's declared count {header.declared_frames}",
+            )
         seen.add(fn)
         prev_fn = fn
 
@@ -317,8 +363,12 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
                     lo, hi = _HIGH_RANGES[j]
                     v, line, col = take_int(f"FAP{fap + 1} {HIGH_LEVEL_FIELDS[j]}", start, _INT32_MIN, _INT32_MAX)
                     if not lo <= v <= hi:
-                        rep.warn("fap-text-high-level-range", line, col,
-                                 f"{HIGH_LEVEL_FIELDS[j]} = {v} is outside {lo}..{hi}")
+                        rep.warn(
+                            "fap-text-high-level-range",
+                            line,
+                            col,
+                            f"{HIGH_LEVEL_FIELDS[j]} = {v} is outside {lo}..{hi}",
+                        )
                     high[j] = v
         values = last_values.copy()
         for fap in np.nonzero(mask[2:])[0] + 2:
@@ -335,8 +385,9 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
 
     n = len(frame_numbers)
     if n != header.declared_frames:
-        rep.warn("fap-text-frame-count", *count_loc,
-                 f"header declares {header.declared_frames} frame(s), the file holds {n}")
+        rep.warn(
+            "fap-text-frame-count", *count_loc, f"header declares {header.declared_frames} frame(s), the file holds {n}"
+        )
 
     fnum = np.array(frame_numbers, dtype=np.int64)
     with np.errstate(over="ignore"):  # absurdly small frame rates give inf times, not warnings
@@ -352,15 +403,17 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
     return frames, header, rep.finish()
 
 
-def read_fap_file(path, *, strict: bool = False,
-                  file: str | None = None) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:
+def read_fap_file(
+    path, *, strict: bool = False, file: str | None = None
+) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:
     """Read a .fap file (decoded as UTF-8, undecodable bytes replaced). OSError propagates."""
     data = Path(path).read_bytes()
     return read_fap_text(data.decode("utf-8", errors="replace"), file=file or str(path), strict=strict)
 
 
-def read_fap(source, *, file: str | None = None,
-             strict: bool = False) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:
+def read_fap(
+    source, *, file: str | None = None, strict: bool = False
+) -> tuple[FapFrames, FapFileHeader, list[TextWarning]]:
     """Read from a path (``os.PathLike``, or a ``str`` without line breaks), from ``bytes``, or
     from the text itself (a ``str`` containing a line break)."""
     if isinstance(source, (bytes, bytearray)):
@@ -390,8 +443,9 @@ def write_fap(frames: FapFrames, *, name: str = "fbaconf", version: str = "2.1")
     is not positive and finite, or frame numbers outside 0..2^31-1."""
     for label, word in (("name", name), ("version", version)):
         if not isinstance(word, str) or not _WORD.fullmatch(word):
-            raise EncodeError(f".fap {label} {word!r} must be one token without whitespace or '#'",
-                              rule="fap-text-write")
+            raise EncodeError(
+                f".fap {label} {word!r} must be one token without whitespace or '#'", rule="fap-text-write"
+            )
     rate = float(frames.frame_rate)
     if not (math.isfinite(rate) and rate > 0):
         raise EncodeError(f"frame rate {frames.frame_rate!r} is not a positive finite number", rule="fap-text-write")

@@ -15,6 +15,7 @@ the last one set), else FREE. A FAP not coded under type 10 is FREE (the decoder
 interpolate; ``values`` still holds the last value set, 0 if never set). DERIVED is
 written only by the animation stage (left/right fill, FIT), never by the bitstream decoder.
 """
+
 from __future__ import annotations
 
 import io
@@ -32,9 +33,16 @@ DERIVED = 3
 STATUS_NAMES = {FREE: "FREE", SET: "SET", RETAINED: "RETAINED", DERIVED: "DERIVED"}
 
 HIGH_LEVEL_FIELDS = (
-    "viseme_select1", "viseme_select2", "viseme_blend", "viseme_def",
-    "expression_select1", "expression_intensity1", "expression_select2", "expression_intensity2",
-    "init_face", "expression_def",
+    "viseme_select1",
+    "viseme_select2",
+    "viseme_blend",
+    "viseme_def",
+    "expression_select1",
+    "expression_intensity1",
+    "expression_select2",
+    "expression_intensity2",
+    "init_face",
+    "expression_def",
 )
 VISEME_FIELDS = HIGH_LEVEL_FIELDS[:4]
 EXPRESSION_FIELDS = HIGH_LEVEL_FIELDS[4:]
@@ -64,8 +72,12 @@ class FapFrames:
         self.high = np.asarray(self.high, dtype=np.int32).reshape(n, len(HIGH_LEVEL_FIELDS))
         self.frame_number = np.asarray(self.frame_number, dtype=np.int64).reshape(n)
         self.time_ms = np.asarray(self.time_ms, dtype=np.float64).reshape(n)
-        defaults = {"is_intra": (bool, False), "fap_quant": (np.int16, 0), "coding_type": (np.int8, 0),
-                    "bit_offset": (np.int64, -1)}
+        defaults = {
+            "is_intra": (bool, False),
+            "fap_quant": (np.int16, 0),
+            "coding_type": (np.int8, 0),
+            "bit_offset": (np.int64, -1),
+        }
         for name, (dt, fill) in defaults.items():
             v = getattr(self, name)
             setattr(self, name, np.full(n, fill, dtype=dt) if v is None else np.asarray(v, dtype=dt).reshape(n))
@@ -73,10 +85,14 @@ class FapFrames:
     # ------------------------------------------------------------------ construction
     @classmethod
     def empty(cls, n: int, frame_rate: float = 25.0) -> FapFrames:
-        return cls(values=np.zeros((n, NUM_FAPS), np.int32), status=np.zeros((n, NUM_FAPS), np.uint8),
-                   high=np.zeros((n, len(HIGH_LEVEL_FIELDS)), np.int32),
-                   frame_number=np.arange(n, dtype=np.int64),
-                   time_ms=np.arange(n, dtype=np.float64) * (1000.0 / frame_rate), frame_rate=frame_rate)
+        return cls(
+            values=np.zeros((n, NUM_FAPS), np.int32),
+            status=np.zeros((n, NUM_FAPS), np.uint8),
+            high=np.zeros((n, len(HIGH_LEVEL_FIELDS)), np.int32),
+            frame_number=np.arange(n, dtype=np.int64),
+            time_ms=np.arange(n, dtype=np.float64) * (1000.0 / frame_rate),
+            frame_rate=frame_rate,
+        )
 
     def __len__(self) -> int:
         return self.values.shape[0]
@@ -91,13 +107,21 @@ class FapFrames:
         return self.status == SET
 
     def copy(self) -> FapFrames:
-        kw = {f.name: (getattr(self, f.name).copy() if isinstance(getattr(self, f.name), np.ndarray)
-                       else getattr(self, f.name)) for f in fields(self)}
+        kw = {
+            f.name: (
+                getattr(self, f.name).copy() if isinstance(getattr(self, f.name), np.ndarray) else getattr(self, f.name)
+            )
+            for f in fields(self)
+        }
         return FapFrames(**kw)
 
     def select(self, idx) -> FapFrames:
-        kw = {f.name: (getattr(self, f.name)[idx] if isinstance(getattr(self, f.name), np.ndarray)
-                       else getattr(self, f.name)) for f in fields(self)}
+        kw = {
+            f.name: (
+                getattr(self, f.name)[idx] if isinstance(getattr(self, f.name), np.ndarray) else getattr(self, f.name)
+            )
+            for f in fields(self)
+        }
         return FapFrames(**kw)
 
     # ------------------------------------------------------------------ comparison
@@ -110,8 +134,13 @@ class FapFrames:
     def to_npz_bytes(self) -> bytes:
         buf = io.BytesIO()
         arrays = {f.name: getattr(self, f.name) for f in fields(self) if isinstance(getattr(self, f.name), np.ndarray)}
-        np.savez_compressed(buf, **arrays, frame_rate=np.float64(self.frame_rate), gender=np.int64(self.gender),
-                            format=np.array("fbaconf.FapFrames/1"))
+        np.savez_compressed(
+            buf,
+            **arrays,
+            frame_rate=np.float64(self.frame_rate),
+            gender=np.int64(self.gender),
+            format=np.array("fbaconf.FapFrames/1"),
+        )
         return buf.getvalue()
 
     def save_npz(self, path) -> None:
@@ -133,8 +162,12 @@ def first_difference(expected: FapFrames, got: FapFrames) -> dict | None:
     high-level fields of frames where FAP 1 / FAP 2 is not FREE. Returns a dict naming
     frame, FAP / field, expected and got."""
     if len(expected) != len(got):
-        return {"frame": min(len(expected), len(got)), "what": "frame count", "expected": len(expected),
-                "got": len(got)}
+        return {
+            "frame": min(len(expected), len(got)),
+            "what": "frame count",
+            "expected": len(expected),
+            "got": len(got),
+        }
     if len(expected) == 0:
         return None
     bad_fn = np.nonzero(expected.frame_number != got.frame_number)[0]
@@ -145,23 +178,44 @@ def first_difference(expected: FapFrames, got: FapFrames) -> dict | None:
     hl_exp = np.repeat(normative[:, [1]], len(EXPRESSION_FIELDS), axis=1)
     hl_norm = np.concatenate([hl_vis, hl_exp], axis=1)
     bad_hl = np.nonzero(((expected.high != got.high) & hl_norm).any(axis=1))[0]
-    candidates = [(int(a[0]), k) for k, a in (("frame_number", bad_fn), ("status", bad_st), ("value", bad_val),
-                                               ("high", bad_hl)) if len(a)]
+    candidates = [
+        (int(a[0]), k)
+        for k, a in (("frame_number", bad_fn), ("status", bad_st), ("value", bad_val), ("high", bad_hl))
+        if len(a)
+    ]
     if not candidates:
         return None
     frame, kind = min(candidates)
     if kind == "frame_number":
-        return {"frame": frame, "what": "frame number", "expected": int(expected.frame_number[frame]),
-                "got": int(got.frame_number[frame])}
+        return {
+            "frame": frame,
+            "what": "frame number",
+            "expected": int(expected.frame_number[frame]),
+            "got": int(got.frame_number[frame]),
+        }
     if kind == "status":
         fap = int(np.nonzero(expected.status[frame] != got.status[frame])[0][0])
-        return {"frame": frame, "fap": fap + 1, "what": "status",
-                "expected": STATUS_NAMES.get(int(expected.status[frame, fap]), "?"),
-                "got": STATUS_NAMES.get(int(got.status[frame, fap]), str(int(got.status[frame, fap])))}
+        return {
+            "frame": frame,
+            "fap": fap + 1,
+            "what": "status",
+            "expected": STATUS_NAMES.get(int(expected.status[frame, fap]), "?"),
+            "got": STATUS_NAMES.get(int(got.status[frame, fap]), str(int(got.status[frame, fap]))),
+        }
     if kind == "value":
         fap = int(np.nonzero((expected.values[frame] != got.values[frame]) & normative[frame])[0][0])
-        return {"frame": frame, "fap": fap + 1, "what": "value", "expected": int(expected.values[frame, fap]),
-                "got": int(got.values[frame, fap])}
+        return {
+            "frame": frame,
+            "fap": fap + 1,
+            "what": "value",
+            "expected": int(expected.values[frame, fap]),
+            "got": int(got.values[frame, fap]),
+        }
     k = int(np.nonzero((expected.high[frame] != got.high[frame]) & hl_norm[frame])[0][0])
-    return {"frame": frame, "fap": 1 if k < len(VISEME_FIELDS) else 2, "what": HIGH_LEVEL_FIELDS[k],
-            "expected": int(expected.high[frame, k]), "got": int(got.high[frame, k])}
+    return {
+        "frame": frame,
+        "fap": 1 if k < len(VISEME_FIELDS) else 2,
+        "what": HIGH_LEVEL_FIELDS[k],
+        "expected": int(expected.high[frame, k]),
+        "got": int(got.high[frame, k]),
+    }

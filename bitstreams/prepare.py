@@ -1,5 +1,6 @@
 """Preparing an encoder's input: resampling to another frame rate, the group mask types the
 encoder derives (D3), and the checks on what it is given."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -68,13 +69,24 @@ def _check_input(frames: FapFrames) -> None:
     bad = np.nonzero(np.diff(fn) <= 0)[0]
     if len(bad):
         k = int(bad[0]) + 1
-        raise EncodeError(f"frame numbers must increase (frame {int(fn[k - 1])} is followed by {int(fn[k])})",
-                          rule="frame-order", frame=k, value=int(fn[k]))
-    limits = {"viseme_select1": VISEME_SELECT_MAX, "viseme_select2": VISEME_SELECT_MAX,
-              "viseme_blend": INTENSITY_MAX, "viseme_def": 1,
-              "expression_select1": EXPRESSION_SELECT_MAX, "expression_intensity1": INTENSITY_MAX,
-              "expression_select2": EXPRESSION_SELECT_MAX, "expression_intensity2": INTENSITY_MAX,
-              "init_face": 1, "expression_def": 1}
+        raise EncodeError(
+            f"frame numbers must increase (frame {int(fn[k - 1])} is followed by {int(fn[k])})",
+            rule="frame-order",
+            frame=k,
+            value=int(fn[k]),
+        )
+    limits = {
+        "viseme_select1": VISEME_SELECT_MAX,
+        "viseme_select2": VISEME_SELECT_MAX,
+        "viseme_blend": INTENSITY_MAX,
+        "viseme_def": 1,
+        "expression_select1": EXPRESSION_SELECT_MAX,
+        "expression_intensity1": INTENSITY_MAX,
+        "expression_select2": EXPRESSION_SELECT_MAX,
+        "expression_intensity2": INTENSITY_MAX,
+        "init_face": 1,
+        "expression_def": 1,
+    }
     for j, name in enumerate(HIGH_LEVEL_FIELDS):
         fap = 1 if j < 4 else 2
         col = frames.high[:, j]
@@ -82,5 +94,10 @@ def _check_input(frames: FapFrames) -> None:
         bad = np.nonzero(live & ((col < 0) | (col > limits[name])))[0]
         if len(bad):
             k = int(bad[0])
-            raise EncodeError(f"{name} = {int(col[k])} outside 0..{limits[name]}", rule="high-level-range",
-                              frame=k, fap=fap, value=int(col[k]))
+            raise EncodeError(
+                f"{name} = {int(col[k])} outside 0..{limits[name]}",
+                rule="high-level-range",
+                frame=k,
+                fap=fap,
+                value=int(col[k]),
+            )

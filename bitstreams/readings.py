@@ -16,6 +16,7 @@ The switch is process-wide: it exists so that ``fbaconf golden regenerate`` can 
 each case's goldens, what another reading gives (and the reference decoder program can decode by
 one, ``--reading``). Nothing turns a reading on while a harness decodes for a verdict.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -53,8 +54,14 @@ def catalogue() -> dict[str, Reading]:
     data = tomllib.loads(resources.files("fbaconf.bitstreams").joinpath("data/readings.toml").read_text("utf-8"))
     out = {}
     for r in data["reading"]:
-        out[r["id"]] = Reading(id=r["id"], decision=r["decision"], text=r["text"], source=r["source"],
-                               warning=r["warning"], pure=bool(r.get("pure", False)))
+        out[r["id"]] = Reading(
+            id=r["id"],
+            decision=r["decision"],
+            text=r["text"],
+            source=r["source"],
+            warning=r["warning"],
+            pure=bool(r.get("pure", False)),
+        )
     return out
 
 

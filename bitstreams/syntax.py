@@ -12,6 +12,7 @@ decision id of ../shared/spec/fap-bitstream.md (D1-D7):
   a stream depends on D5).
 - D6 timing.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -104,6 +105,7 @@ def quantise(x: int, step: int) -> int:
 
 # ---------------------------------------------------------------------------- frame rate
 
+
 @dataclass(frozen=True)
 class FrameRateCode:
     frame_rate: int  # 8 bits
@@ -145,6 +147,7 @@ def frame_rate_code(rate: float | Fraction | str) -> FrameRateCode:
 
 # ---------------------------------------------------------------------------- skip frames
 
+
 def skip_chunks(total: int) -> list[int]:
     """4-bit chunks of number_of_frames_to_skip: 15 continues, the last chunk < 15."""
     return [15] * (total // 15) + [total % 15]
@@ -152,9 +155,11 @@ def skip_chunks(total: int) -> list[int]:
 
 # ---------------------------------------------------------------------------- plane records
 
+
 @dataclass
 class PlaneInfo:
     """What the decoder read for one plane (for the checker, the trace and reports)."""
+
     index: int
     bit_offset: int  # first bit of the plane (of its start code when present)
     header_offset: int = 0  # first bit of is_intra

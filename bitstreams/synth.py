@@ -6,6 +6,7 @@ visemes and expressions when asked. Pure functions of (frame index, rate): the s
 arguments give the same sequence on every platform (values are rounded from float64
 expressions with no data-dependent branching).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,8 +21,15 @@ def _amplitude(fap: int) -> float:
     return 0.45 * f.intra_range * f.quant_step
 
 
-def synthetic_sequence(n_frames: int, rate: float = 25.0, *, visemes: bool = True, expressions: bool = True,
-                       faps: list[int] | None = None, seed: int = 0) -> FapFrames:
+def synthetic_sequence(
+    n_frames: int,
+    rate: float = 25.0,
+    *,
+    visemes: bool = True,
+    expressions: bool = True,
+    faps: list[int] | None = None,
+    seed: int = 0,
+) -> FapFrames:
     """A FAP sequence of ``n_frames`` frames at ``rate`` Hz with every requested FAP coded in
     every frame. ``seed`` shifts the phases (different but equally deterministic content)."""
     t = np.arange(n_frames, dtype=np.float64) / rate
@@ -31,7 +39,7 @@ def synthetic_sequence(n_frames: int, rate: float = 25.0, *, visemes: bool = Tru
     # shared drivers
     speech = np.maximum(0.0, np.sin(2 * np.pi * 3.1 * t + phase)) * (0.6 + 0.4 * np.sin(2 * np.pi * 0.23 * t))
     blink_period = 3.3
-    blink = np.exp(np.maximum(-60.0, -(((t + phase) % blink_period) - 0.15) ** 2 / (2 * 0.05 ** 2)))
+    blink = np.exp(np.maximum(-60.0, -((((t + phase) % blink_period) - 0.15) ** 2) / (2 * 0.05**2)))
     gaze = np.sin(2 * np.pi * 0.17 * t + phase)
     brow = np.maximum(0.0, np.sin(2 * np.pi * 0.11 * t + 1.3 + phase)) ** 2
     for fap in chosen:

@@ -3,6 +3,7 @@
 Nothing here hard-codes a table value: every number comes from a CSV file that names
 its provenance, so a normative correction is a data change only.
 """
+
 from __future__ import annotations
 
 import csv
@@ -72,12 +73,22 @@ class FapuInfo:
 def fap_table() -> tuple[FapInfo, ...]:
     out = []
     for r in _rows("fap_table.csv"):
-        out.append(FapInfo(
-            number=int(r["number"]), name=r["name"], bifs_name=r["bifs_name"], fapu=r["fapu"],
-            direction=r["direction"], positive_motion=r["positive_motion"], group=int(r["group"]),
-            feature_points=tuple(p for p in r["feature_point"].split(";") if p),
-            quant_step=int(r["quant_step"]), intra_range=int(r["intra_range"] or 0),
-            pred_range=int(r["pred_range"] or 0), provenance=r["provenance"]))
+        out.append(
+            FapInfo(
+                number=int(r["number"]),
+                name=r["name"],
+                bifs_name=r["bifs_name"],
+                fapu=r["fapu"],
+                direction=r["direction"],
+                positive_motion=r["positive_motion"],
+                group=int(r["group"]),
+                feature_points=tuple(p for p in r["feature_point"].split(";") if p),
+                quant_step=int(r["quant_step"]),
+                intra_range=int(r["intra_range"] or 0),
+                pred_range=int(r["pred_range"] or 0),
+                provenance=r["provenance"],
+            )
+        )
     if [f.number for f in out] != list(range(1, NUM_FAPS + 1)):
         raise RuntimeError("fap_table.csv must list FAPs 1..68 in order")
     return tuple(out)
@@ -85,8 +96,10 @@ def fap_table() -> tuple[FapInfo, ...]:
 
 @lru_cache(maxsize=1)
 def groups() -> tuple[GroupInfo, ...]:
-    out = tuple(GroupInfo(int(r["group"]), int(r["first_fap"]), int(r["last_fap"]), int(r["size"]),
-                          r["description"]) for r in _rows("groups.csv"))
+    out = tuple(
+        GroupInfo(int(r["group"]), int(r["first_fap"]), int(r["last_fap"]), int(r["size"]), r["description"])
+        for r in _rows("groups.csv")
+    )
     table = fap_table()
     for g in out:
         if g.size != g.last_fap - g.first_fap + 1 or any(table[n - 1].group != g.group for n in g.faps):
@@ -100,9 +113,16 @@ def groups() -> tuple[GroupInfo, ...]:
 def fapu_table() -> dict[str, FapuInfo]:
     out = {}
     for r in _rows("fapu.csv"):
-        out[r["fapu"]] = FapuInfo(r["fapu"], r["description"], r["point_a"], r["point_b"], r["axis"],
-                                  float(r["divisor"] or 0), float(r["unit_value"]) if r["unit_value"] else None,
-                                  r["provenance"])
+        out[r["fapu"]] = FapuInfo(
+            r["fapu"],
+            r["description"],
+            r["point_a"],
+            r["point_b"],
+            r["axis"],
+            float(r["divisor"] or 0),
+            float(r["unit_value"]) if r["unit_value"] else None,
+            r["provenance"],
+        )
     return out
 
 

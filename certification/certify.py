@@ -18,6 +18,7 @@ decoder view; a ``python =`` adapter is accepted only from the bundled manifests
 bubblewrap or writable cgroups ``certify`` refuses (naming what is missing) unless
 ``--allow-unisolated``, and the statement then says "not isolated: …".
 """
+
 from __future__ import annotations
 
 import json
@@ -62,8 +63,23 @@ from .package import (
     verify,
 )
 
-__all__ = ["certify", "CertifyOptions", "verify", "verify_package", "keygen", "Verification", "SignatureError",
-           "CERTIFICATE", "SUMS", "SIGNATURE", "FORMAT", "KEY_FILE", "PUB_FILE", "prepare_output", "claim_basis"]
+__all__ = [
+    "certify",
+    "CertifyOptions",
+    "verify",
+    "verify_package",
+    "keygen",
+    "Verification",
+    "SignatureError",
+    "CERTIFICATE",
+    "SUMS",
+    "SIGNATURE",
+    "FORMAT",
+    "KEY_FILE",
+    "PUB_FILE",
+    "prepare_output",
+    "claim_basis",
+]
 
 
 @dataclass
@@ -71,6 +87,7 @@ class CertifyOptions:
     """How ``certify`` runs: parallelism, the speed phase, the signing key, replacing a package,
     certifying without isolation, a Dask cluster, ``strict`` (provisional differences fail the
     claim) and the lab's extra read-only folders for the decoder's runtime (``--sandbox-ro``)."""
+
     jobs: int | None = None
     speed: bool = True
     key: Path | None = None
@@ -94,32 +111,42 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
     adapter = resolve(decoder, untrusted=True, ceilings=o.ceilings)
     claim = resolve_claim(claim, adapter)
     if not any(claim_covers(c, claim) for c in adapter.claims):
-        print(f"fbaconf certify: error: the decoder does not claim {claim} (claims: {', '.join(adapter.claims)})",
-              file=sys.stderr)
+        print(
+            f"fbaconf certify: error: the decoder does not claim {claim} (claims: {', '.join(adapter.claims)})",
+            file=sys.stderr,
+        )
         return 2
     if isinstance(adapter, CommandAdapter):
         adapter.lab_read_only = lab_folders(o.sandbox_ro)
     preflight(adapter, claim)
     if adapter.is_player:
-        print(f"fbaconf certify: error: {adapter.name} reads only the .fap text form (inputs: "
-              f"{', '.join(adapter.inputs)}): it is a FAP player, not a decoder. An MPEG-4 profile certificate "
-              f"requires decoding the binary face-object stream (inputs must include \"fba\"). Test a player "
-              f"with `fbaconf run` (docs/harness.md, \"Players\").", file=sys.stderr)
+        print(
+            f"fbaconf certify: error: {adapter.name} reads only the .fap text form (inputs: "
+            f"{', '.join(adapter.inputs)}): it is a FAP player, not a decoder. An MPEG-4 profile certificate "
+            f'requires decoding the binary face-object stream (inputs must include "fba"). Test a player '
+            f'with `fbaconf run` (docs/harness.md, "Players").',
+            file=sys.stderr,
+        )
         return 2
     isolated = report(adapter)
     gaps = [] if isolated.complete else list(isolated.missing)
     if gaps and not o.allow_unisolated:
-        print("fbaconf certify: error: the decoder cannot be isolated on this machine: " + "; ".join(gaps) +
-              ". Install bubblewrap (Debian: apt-get install bubblewrap) and run where cgroups are writable (as "
-              "root, or in a delegated cgroup), or give --allow-unisolated (the statement then says \"not "
-              "isolated\")", file=sys.stderr)
+        print(
+            "fbaconf certify: error: the decoder cannot be isolated on this machine: "
+            + "; ".join(gaps)
+            + ". Install bubblewrap (Debian: apt-get install bubblewrap) and run where cgroups are writable (as "
+            'root, or in a delegated cgroup), or give --allow-unisolated (the statement then says "not '
+            'isolated")',
+            file=sys.stderr,
+        )
         return 2
     suites = load_suites()
     cases = select_cases(suites, claim, [], [], only_required=True, adapter=adapter)
     out = Path(out).resolve()
     prepare_output(out, o.force)
-    record = execute(adapter, claim, cases, suites, out,
-                     RunOptions(jobs=o.jobs, speed=o.speed, cluster=o.cluster, strict=o.strict))
+    record = execute(
+        adapter, claim, cases, suites, out, RunOptions(jobs=o.jobs, speed=o.speed, cluster=o.cluster, strict=o.strict)
+    )
     write_reports(record, out, heading="fbaconf certification")
     if record.exit_code >= 128:
         print(f"fbaconf certify: interrupted: no certificate written; partial report in {out}", file=sys.stderr)
@@ -148,21 +175,35 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
     basis["unofficial"] = unofficial
     notices = [f"NOT ISOLATED: {basis['isolation']}"] * bool(gaps) + [
         f"UNOFFICIAL SUITES (not the suites and goldens this fbaconf ships; the verdict is not the release's "
-        f"claim): {'; '.join(unofficial)}"] * bool(unofficial)
+        f"claim): {'; '.join(unofficial)}"
+    ] * bool(unofficial)
     for n in notices:
         print(f"fbaconf certify: {n}", file=sys.stderr)
     summary = "".join(f"{n}\n" for n in notices) + reports.terminal_summary(record, color=False)
     atomic_write_text(out / "summary.txt", summary + "\n")
     atomic_write_text(out / "statement.md", _statement(record, cv, o.speed, basis))
     counts = {k: n for k, n in record.counts().items() if n}
-    cert = {"format": FORMAT, "decoder": adapter.name, "decoder_manifest_sha256": adapter.digest(),
-            "claim": claim, "verdict": verdict, "exit_code": code, "strict": o.strict,
-            "readings": list(adapter.readings), "provisional_differences": cv.differences,
-            "unverified": cv.unverified, "cases": len(results), "counts": counts,
-            "isolated": not gaps, "unofficial": unofficial,
-            "speed": speed if speed is not None else "not measured",
-            "suites": record.suites, "provisional": record.provisional, "issued": record.finished,
-            "rests_on": basis}
+    cert = {
+        "format": FORMAT,
+        "decoder": adapter.name,
+        "decoder_manifest_sha256": adapter.digest(),
+        "claim": claim,
+        "verdict": verdict,
+        "exit_code": code,
+        "strict": o.strict,
+        "readings": list(adapter.readings),
+        "provisional_differences": cv.differences,
+        "unverified": cv.unverified,
+        "cases": len(results),
+        "counts": counts,
+        "isolated": not gaps,
+        "unofficial": unofficial,
+        "speed": speed if speed is not None else "not measured",
+        "suites": record.suites,
+        "provisional": record.provisional,
+        "issued": record.finished,
+        "rests_on": basis,
+    }
     atomic_write_text(out / CERTIFICATE, json.dumps(cert, indent=1) + "\n")
     seal(out, key)
     print(summary)
@@ -175,8 +216,11 @@ def timing_note(record, adapter) -> dict:
     times (time codes, rate changes) the text cannot carry."""
     if adapter.faps_format != "fap" or "faps" not in adapter.outputs:
         return {"verified": True, "cases_not_verified": []}
-    cases = [r.case_id for r in record.results
-             if any(st.stage == "faps" and st.metrics.get("times_unverified", 0) > 0 for st in r.stages)]
+    cases = [
+        r.case_id
+        for r in record.results
+        if any(st.stage == "faps" and st.metrics.get("times_unverified", 0) > 0 for st in r.stages)
+    ]
     return {"verified": False, "cases_not_verified": cases}
 
 
@@ -193,52 +237,78 @@ def claim_basis(record, cases, claim: str) -> dict:
         possible |= pts
         if case.full_id in ok:
             exercised |= pts
-    return {"tools": sorted(ps.profiles[c.profile].tools),
-            "coverage_points_exercised": len(exercised), "coverage_points_of_claim": len(possible),
-            "not_exercised": sorted(possible - exercised),
-            "cases_not_taken": list(record.missing)}
+    return {
+        "tools": sorted(ps.profiles[c.profile].tools),
+        "coverage_points_exercised": len(exercised),
+        "coverage_points_of_claim": len(possible),
+        "not_exercised": sorted(possible - exercised),
+        "cases_not_taken": list(record.missing),
+    }
 
 
 def _statement(record, cv, speed: bool, basis: dict) -> str:
     c = record.counts()
-    lines = [f"# fbaconf certification: {record.decoder['name']} — {record.claim}", "",
-             f"**Verdict: {cv.verdict}**", "",
-             f"- decoder manifest sha256: `{record.decoder.get('manifest_sha256')}`",
-             f"- cases run: {len(record.results)} (" + ", ".join(f"{k} {v}" for k, v in c.items() if v) + ")",
-             "- suites: " + ", ".join(f"{s['name']} {s['version']}" for s in record.suites),
-             f"- issued: {record.finished}", ""]
+    lines = [
+        f"# fbaconf certification: {record.decoder['name']} — {record.claim}",
+        "",
+        f"**Verdict: {cv.verdict}**",
+        "",
+        f"- decoder manifest sha256: `{record.decoder.get('manifest_sha256')}`",
+        f"- cases run: {len(record.results)} (" + ", ".join(f"{k} {v}" for k, v in c.items() if v) + ")",
+        "- suites: " + ", ".join(f"{s['name']} {s['version']}" for s in record.suites),
+        f"- issued: {record.finished}",
+        "",
+    ]
     if speed:
         lines.append("## Speed")
         for s in record.speed:
             word = {"pass": "pass", "inconclusive": "INCONCLUSIVE"}.get(s.verdict, "FAIL")
-            lines.append(f"- {s.operation}: {s.rate_fps:.1f} frames/s measured, {s.required_fps:g} required "
-                         f"({s.provenance}) — {word}" + (f": {s.reason}" if s.reason else ""))
+            lines.append(
+                f"- {s.operation}: {s.rate_fps:.1f} frames/s measured, {s.required_fps:g} required "
+                f"({s.provenance}) — {word}" + (f": {s.reason}" if s.reason else "")
+            )
     else:
         lines.append("Speed was not measured (--no-speed): this certificate does not cover the level's minimum rates.")
-    lines += ["", "## What this verdict rests on", "",
-              f"- isolation of the decoder: {basis.get('isolation', 'unknown')}",
-              "- limits in force: " + ("; ".join(basis.get("limits") or []) or "none (in-process)"),
-              "- suites and goldens: " + ("UNOFFICIAL: " + "; ".join(basis["unofficial"]) if basis.get("unofficial")
-                                          else "the ones this fbaconf ships"),
-              "- read-only folders the lab added (--sandbox-ro): " + (", ".join(basis.get("sandbox_ro") or [])
-                                                                      or "none"),
-              f"- tools the claim requires: {', '.join(basis['tools'])}",
-              f"- coverage points exercised by passing cases: {basis['coverage_points_exercised']} of the "
-              f"{basis['coverage_points_of_claim']} the claim's cases exercise"]
+    lines += [
+        "",
+        "## What this verdict rests on",
+        "",
+        f"- isolation of the decoder: {basis.get('isolation', 'unknown')}",
+        "- limits in force: " + ("; ".join(basis.get("limits") or []) or "none (in-process)"),
+        "- suites and goldens: "
+        + (
+            "UNOFFICIAL: " + "; ".join(basis["unofficial"])
+            if basis.get("unofficial")
+            else "the ones this fbaconf ships"
+        ),
+        "- read-only folders the lab added (--sandbox-ro): " + (", ".join(basis.get("sandbox_ro") or []) or "none"),
+        f"- tools the claim requires: {', '.join(basis['tools'])}",
+        f"- coverage points exercised by passing cases: {basis['coverage_points_exercised']} of the "
+        f"{basis['coverage_points_of_claim']} the claim's cases exercise",
+    ]
     if basis["not_exercised"]:
-        lines.append(f"- not exercised (their cases did not pass): {', '.join(basis['not_exercised'][:40])}"
-                     + (" …" if len(basis["not_exercised"]) > 40 else ""))
+        lines.append(
+            f"- not exercised (their cases did not pass): {', '.join(basis['not_exercised'][:40])}"
+            + (" …" if len(basis["not_exercised"]) > 40 else "")
+        )
     if basis["cases_not_taken"]:
-        lines += ["- required cases the decoder could not take (each fails the claim, unless its tool is named "
-                  "unverified below):"]
+        lines += [
+            "- required cases the decoder could not take (each fails the claim, unless its tool is named "
+            "unverified below):"
+        ]
         lines += [f"  - {m}" for m in basis["cases_not_taken"]]
     else:
         lines.append("- the decoder took every required case")
     lines += _timing_lines(basis.get("timing") or {})
     lines += _provisional_lines(record, cv)
-    lines += ["", "## Provisional rules and limits", "",
-              "The ISO/IEC 14496 text was not available to fbaconf. This verdict rests on these provisional "
-              "decisions and limits:", ""]
+    lines += [
+        "",
+        "## Provisional rules and limits",
+        "",
+        "The ISO/IEC 14496 text was not available to fbaconf. This verdict rests on these provisional "
+        "decisions and limits:",
+        "",
+    ]
     lines += [f"- {p}" for p in record.provisional]
     return "\n".join(lines) + "\n"
 
@@ -247,31 +317,44 @@ def _timing_lines(timing: dict) -> list[str]:
     if timing.get("verified", True):
         return []
     cases = timing.get("cases_not_verified") or []
-    out = ["", "## Timing", "",
-           "- timing not verified (.fap output): a .fap file carries frame numbers (with the skips, checked) and one "
-           "header rate (checked), not plane times. Write .npz output (faps_format = \"npz\") to have plane times "
-           "verified."]
+    out = [
+        "",
+        "## Timing",
+        "",
+        "- timing not verified (.fap output): a .fap file carries frame numbers (with the skips, checked) and one "
+        'header rate (checked), not plane times. Write .npz output (faps_format = "npz") to have plane times '
+        "verified.",
+    ]
     if cases:
-        out.append(f"- {len(cases)} case(s) whose plane times .fap cannot carry (time codes, rate changes): "
-                   + ", ".join(cases))
+        out.append(
+            f"- {len(cases)} case(s) whose plane times .fap cannot carry (time codes, rate changes): "
+            + ", ".join(cases)
+        )
     return out
 
 
 def _provisional_lines(record, cv) -> list[str]:
     declared = list(record.decoder.get("readings") or [])
-    out = ["", "## Tools and provisional decisions", "",
-           "Per tool and per decision: verified, differs (judged by a reading the decoder declared), declined, "
-           "unverified, or fails (docs/harness.md, \"Provisional requirements\"). A difference counts as "
-           "provisional only where the decoder declared the other reading and its result is that reading's, value "
-           "for value; a tool whose every case rests on an open decision (D8) and that the decoder does not decode "
-           "as fbaconf does is named unverified. --strict fails both" +
-           (" (this certificate was made with --strict)." if record.strict else "."), "",
-           f"- other readings the decoder declares: {', '.join(declared) if declared else 'none'}"]
+    out = [
+        "",
+        "## Tools and provisional decisions",
+        "",
+        "Per tool and per decision: verified, differs (judged by a reading the decoder declared), declined, "
+        'unverified, or fails (docs/harness.md, "Provisional requirements"). A difference counts as '
+        "provisional only where the decoder declared the other reading and its result is that reading's, value "
+        "for value; a tool whose every case rests on an open decision (D8) and that the decoder does not decode "
+        "as fbaconf does is named unverified. --strict fails both"
+        + (" (this certificate was made with --strict)." if record.strict else "."),
+        "",
+        f"- other readings the decoder declares: {', '.join(declared) if declared else 'none'}",
+    ]
     out += [f"- {line}" for line in describe(cv.to_json())]
     if cv.differences:
         out += ["", f"Provisional differences ({len(cv.differences)}):"]
-        out += [f"- {d['case_id']} (rests on {', '.join(d['rests_on'])}; judged by the declared reading "
-                f"{d['reading']})" for d in cv.differences]
+        out += [
+            f"- {d['case_id']} (rests on {', '.join(d['rests_on'])}; judged by the declared reading {d['reading']})"
+            for d in cv.differences
+        ]
     return out
 
 
@@ -290,12 +373,15 @@ def prepare_output(out: Path, force: bool) -> None:
         return
     try:
         is_pkg = str(json.loads(read_regular(out / CERTIFICATE, 1 << 20)).get("format")).startswith(
-            "fbaconf.certificate/")
+            "fbaconf.certificate/"
+        )
     except (FbaconfInputError, ValueError, AttributeError, RecursionError):
         is_pkg = False
     if not is_pkg:
-        raise UsageError(f"-o {out}: the folder is not empty and is not an fbaconf certification package; "
-                         f"give an empty or new folder")
+        raise UsageError(
+            f"-o {out}: the folder is not empty and is not an fbaconf certification package; "
+            f"give an empty or new folder"
+        )
     if not force:
         raise UsageError(f"-o {out}: holds a certification package already; give --force to replace it")
     remove_tree(out)

@@ -8,6 +8,7 @@ line says so), or ``--unsigned-ok`` accepts a signature left unchecked — and t
 and goldens are the ones this fbaconf ships (or ``--unofficial-ok``; the line says UNOFFICIAL
 SUITES); 1 otherwise. A certificate made ``--allow-unisolated`` verifies with UNISOLATED in its line.
 """
+
 from __future__ import annotations
 
 import sys
@@ -23,32 +24,47 @@ from .package import NOT_CHECKED, SIGNED, UNSIGNED, verify
 
 
 def register(sub) -> None:
-    c = sub.add_parser("certify", help="certify a decoder for a claim (or verify a certificate, make a key)",
-                       description="`fbaconf certify --decoder D --claim P@L -o DIR [--key K]` runs exactly the "
-                                   "cases the claim requires plus the speed measurement and writes a certification "
-                                   "package (sha256 digests of every file, signed with an Ed25519 key when --key is "
-                                   "given). `fbaconf certify verify DIR [--pubkey P]` re-checks a package. "
-                                   "`fbaconf certify keygen -o DIR` makes a key pair.")
+    c = sub.add_parser(
+        "certify",
+        help="certify a decoder for a claim (or verify a certificate, make a key)",
+        description="`fbaconf certify --decoder D --claim P@L -o DIR [--key K]` runs exactly the "
+        "cases the claim requires plus the speed measurement and writes a certification "
+        "package (sha256 digests of every file, signed with an Ed25519 key when --key is "
+        "given). `fbaconf certify verify DIR [--pubkey P]` re-checks a package. "
+        "`fbaconf certify keygen -o DIR` makes a key pair.",
+    )
     c.add_argument("action", nargs="?", choices=("verify", "keygen"), help="verify a package / make a key pair")
     c.add_argument("package", nargs="?", type=Path, help="(verify) the package folder")
     c.add_argument("--key", type=Path, help="sign the package with this Ed25519 private key (PEM)")
     c.add_argument("--pubkey", type=Path, help="(verify) check the package's signature with this public key")
-    c.add_argument("--unofficial-ok", action="store_true",
-                   help="(verify) accept a package whose suites or goldens are not the ones this fbaconf ships "
-                        "(exit 0, its line says UNOFFICIAL SUITES)")
-    c.add_argument("--unsigned-ok", action="store_true",
-                   help="(verify) accept a signed package without checking its signature (no --pubkey): exit 0 "
-                        "when digests and verdict hold")
+    c.add_argument(
+        "--unofficial-ok",
+        action="store_true",
+        help="(verify) accept a package whose suites or goldens are not the ones this fbaconf ships "
+        "(exit 0, its line says UNOFFICIAL SUITES)",
+    )
+    c.add_argument(
+        "--unsigned-ok",
+        action="store_true",
+        help="(verify) accept a signed package without checking its signature (no --pubkey): exit 0 "
+        "when digests and verdict hold",
+    )
     c.add_argument("--force", action="store_true", help="replace an existing certification package in -o")
-    c.add_argument("--allow-unisolated", action="store_true",
-                   help="certify even without bubblewrap or writable cgroups (the statement says \"not isolated: "
-                        "…\", naming what is missing)")
+    c.add_argument(
+        "--allow-unisolated",
+        action="store_true",
+        help='certify even without bubblewrap or writable cgroups (the statement says "not isolated: '
+        '…", naming what is missing)',
+    )
     c.add_argument("--decoder", help="decoder manifest .toml or bundled adapter name")
     c.add_argument("--claim", help="profile@level to certify (default: the decoder's highest claim)")
     c.add_argument("-o", "--output", type=Path, help="package folder to write")
     c.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
-    c.add_argument("--cluster", metavar="local[:N]|tcp://HOST:PORT",
-                   help="run the cases as tasks on a Dask cluster instead of the local pool")
+    c.add_argument(
+        "--cluster",
+        metavar="local[:N]|tcp://HOST:PORT",
+        help="run the cases as tasks on a Dask cluster instead of the local pool",
+    )
     c.add_argument("--no-speed", action="store_true", help="skip the speed measurement (certificate says so)")
     lab_options(c)
     c.set_defaults(func=cmd_certify)
@@ -67,9 +83,17 @@ def cmd_certify(args) -> int:
         return _verify(args)
     if not args.decoder or not args.output:
         raise UsageError("--decoder and -o/--output are required")
-    options = certify.CertifyOptions(jobs=args.jobs, speed=not args.no_speed, key=args.key, force=args.force,
-                                     allow_unisolated=args.allow_unisolated, cluster=args.cluster, strict=args.strict,
-                                     sandbox_ro=args.sandbox_ro, ceilings=ceilings_from(args))
+    options = certify.CertifyOptions(
+        jobs=args.jobs,
+        speed=not args.no_speed,
+        key=args.key,
+        force=args.force,
+        allow_unisolated=args.allow_unisolated,
+        cluster=args.cluster,
+        strict=args.strict,
+        sandbox_ro=args.sandbox_ro,
+        ceilings=ceilings_from(args),
+    )
     return certify.certify(args.decoder, args.claim, args.output.resolve(), options)
 
 
@@ -92,8 +116,10 @@ def _verify(args) -> int:
         print(f"certify verify: FAILED ({len(v.problems)} problem(s); {v.state})")
         return 1
     if v.unofficial and not args.unofficial_ok:
-        print(f"certify verify: NOT VERIFIED (made with suites or goldens this fbaconf does not ship; "
-              f"--unofficial-ok accepts them) — {what}: {verdict}")
+        print(
+            f"certify verify: NOT VERIFIED (made with suites or goldens this fbaconf does not ship; "
+            f"--unofficial-ok accepts them) — {what}: {verdict}"
+        )
         return 1
     if v.state == SIGNED:
         print(f"certify verify: OK ({SIGNED} with {args.pubkey}) — {what}: {verdict}")
@@ -104,6 +130,8 @@ def _verify(args) -> int:
     if v.state == NOT_CHECKED and args.unsigned_ok:
         print(f"certify verify: OK ({NOT_CHECKED}; accepted by --unsigned-ok) — {what}: {verdict}")
         return 0
-    print(f"certify verify: NOT VERIFIED ({v.state}: give --pubkey, or --unsigned-ok to accept the digests "
-          f"alone) — {what}: {verdict}")
+    print(
+        f"certify verify: NOT VERIFIED ({v.state}: give --pubkey, or --unsigned-ok to accept the digests "
+        f"alone) — {what}: {verdict}"
+    )
     return 1

@@ -16,6 +16,7 @@ the file — on a changed, missing, added or uncovered file, a bad signature, an
 disagree with what ``results.jsonl``, ``report.json`` and the claim rules (the cases the
 claim requires, from the packaged suites) give.
 """
+
 from __future__ import annotations
 
 import base64
@@ -73,13 +74,13 @@ def keygen(out_dir: Path) -> tuple[Path, Path]:
     if key_path.exists() or pub_path.exists():
         raise SignatureError(f"{key_path} or {pub_path} exists already: not overwriting a key", file=str(out_dir))
     key = Ed25519PrivateKey.generate()
-    pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
-                            serialization.NoEncryption())
+    pem = key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
     fd = os.open(key_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     with os.fdopen(fd, "wb") as f:
         f.write(pem)
-    pub_path.write_bytes(key.public_key().public_bytes(serialization.Encoding.PEM,
-                                                       serialization.PublicFormat.SubjectPublicKeyInfo))
+    pub_path.write_bytes(
+        key.public_key().public_bytes(serialization.Encoding.PEM, serialization.PublicFormat.SubjectPublicKeyInfo)
+    )
     return key_path, pub_path
 
 
@@ -88,8 +89,11 @@ def load_key(path: Path, private: bool):
     ``certify --key`` reads its key with this before any decoder starts."""
     try:
         data = read_regular(path, 64 * 1024)
-        key = (serialization.load_pem_private_key(data, password=None) if private
-               else serialization.load_pem_public_key(data))
+        key = (
+            serialization.load_pem_private_key(data, password=None)
+            if private
+            else serialization.load_pem_public_key(data)
+        )
     except (FbaconfInputError, ValueError, TypeError) as e:
         why = e.message if isinstance(e, FbaconfInputError) else str(e)[:QUOTE_CHARS]
         raise SignatureError(f"not a PEM {'private' if private else 'public'} key: {why}", file=str(path)) from None
@@ -118,8 +122,9 @@ def seal(pkg: Path, key=None) -> bytes:
 
 
 # ------------------------------------------------------------------ the verdict, from the results
-def derive_verdict(results: list[dict], *, strict: bool, speed: list[dict] | None,
-                   declared: list[str] | tuple[str, ...] = ()) -> ClaimVerdict:
+def derive_verdict(
+    results: list[dict], *, strict: bool, speed: list[dict] | None, declared: list[str] | tuple[str, ...] = ()
+) -> ClaimVerdict:
     """A claim's verdict from its required cases' result lines, the speed results (None: not
     measured) and the decoder's declared other readings (:mod:`fbaconf.harness.verdict`): the
     one rule ``certify`` writes and ``verify`` re-derives."""
@@ -164,8 +169,7 @@ def _json(data: bytes, what: str):
     except (UnicodeDecodeError, ValueError) as e:
         raise FbaconfInputError(f"not JSON: {_quote(str(e))}", rule="certificate-json", file=what) from None
     except RecursionError:
-        raise FbaconfInputError(f"nested more than {MAX_JSON_DEPTH} deep", rule="certificate-json",
-                                file=what) from None
+        raise FbaconfInputError(f"nested more than {MAX_JSON_DEPTH} deep", rule="certificate-json", file=what) from None
     if _depth(value) > MAX_JSON_DEPTH:
         raise FbaconfInputError(f"nested more than {MAX_JSON_DEPTH} deep", rule="certificate-json", file=what)
     return value
@@ -196,8 +200,9 @@ def verify(pkg: Path, pubkey: Path | None = None) -> Verification:
     files, listed = _read_listed(pkg, sums, v.problems)
     _check_signature(pkg, sums, pubkey, v)
     if CERTIFICATE not in listed:
-        v.problems.append(f"{CERTIFICATE}: not covered by {SUMS}" if os.path.lexists(pkg / CERTIFICATE)
-                          else f"{CERTIFICATE}: missing")
+        v.problems.append(
+            f"{CERTIFICATE}: not covered by {SUMS}" if os.path.lexists(pkg / CERTIFICATE) else f"{CERTIFICATE}: missing"
+        )
     if CERTIFICATE not in files:
         return v
     try:
@@ -280,8 +285,10 @@ def _check_signature(pkg: Path, sums: bytes, pubkey: Path | None, v: Verificatio
         key.verify(base64.b64decode(sig_text.strip(), validate=True), sums)
     except (InvalidSignature, ValueError):
         v.state = INVALID
-        v.problems.append(f"{SIGNATURE}: does not verify {SUMS} with {pubkey}: the package was changed after "
-                          f"signing, or signed with another key")
+        v.problems.append(
+            f"{SIGNATURE}: does not verify {SUMS} with {pubkey}: the package was changed after "
+            f"signing, or signed with another key"
+        )
         return
     v.state = SIGNED
 
@@ -322,13 +329,20 @@ def _check_verdict(files: dict[str, bytes], cert: dict, problems: list[str]) -> 
         return
     for cid, r in sorted(by_id.items()):
         if r.get("reading") is not None and r.get("reading") not in declared:
-            problems.append(f"results.jsonl: {_quote(cid)} was judged by the reading {_quote(r.get('reading'))}, "
-                            f"which the decoder does not declare")
+            problems.append(
+                f"results.jsonl: {_quote(cid)} was judged by the reading {_quote(r.get('reading'))}, "
+                f"which the decoder does not declare"
+            )
     cv = derive_verdict(list(by_id.values()), strict=bool(cert.get("strict")), speed=speed, declared=declared)
     verdict, code = cv.verdict, cv.exit_code
-    for key, want in (("verdict", verdict), ("exit_code", code), ("provisional_differences", cv.differences),
-                      ("unverified", cv.unverified),
-                      ("counts", counts(list(by_id.values()))), ("cases", len(by_id))):
+    for key, want in (
+        ("verdict", verdict),
+        ("exit_code", code),
+        ("provisional_differences", cv.differences),
+        ("unverified", cv.unverified),
+        ("counts", counts(list(by_id.values()))),
+        ("cases", len(by_id)),
+    ):
         got = cert.get(key)
         if key == "counts" and isinstance(got, dict):
             got = {k: n for k, n in got.items() if n}
@@ -355,8 +369,10 @@ def _declared_readings(files: dict[str, bytes], report: dict, problems: list[str
             problems.append("decoder.toml: not TOML")
             return declared
         if list(manifest.get("readings", [])) != declared:
-            problems.append(f"report.json: the decoder's readings {_quote(declared)} are not decoder.toml's "
-                            f"{_quote(manifest.get('readings', []))}")
+            problems.append(
+                f"report.json: the decoder's readings {_quote(declared)} are not decoder.toml's "
+                f"{_quote(manifest.get('readings', []))}"
+            )
     return declared
 
 
@@ -366,8 +382,10 @@ def _check_cases(by_id: dict[str, dict], required: dict[str, Case], problems: li
     for cid in sorted(set(by_id) & set(required)):
         r, case = by_id[cid], required[cid]
         if r.get("kind") != case.kind.value or sorted(r.get("tools") or []) != sorted(case.tools):
-            problems.append(f"results.jsonl: {_quote(cid)} says kind {_quote(r.get('kind'))}, tools "
-                            f"{_quote(r.get('tools'))}; its suite says {case.kind.value}, {sorted(case.tools)}")
+            problems.append(
+                f"results.jsonl: {_quote(cid)} says kind {_quote(r.get('kind'))}, tools "
+                f"{_quote(r.get('tools'))}; its suite says {case.kind.value}, {sorted(case.tools)}"
+            )
 
 
 def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) -> dict[str, Case] | None:
@@ -385,8 +403,9 @@ def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) ->
         rel = f"suites/{name}.json"
         data = files.get(rel) if isinstance(name, str) else None
         if data is None:
-            problems.append(f"{rel if isinstance(name, str) else CERTIFICATE}: a suite the certificate names is "
-                            f"not in the package")
+            problems.append(
+                f"{rel if isinstance(name, str) else CERTIFICATE}: a suite the certificate names is not in the package"
+            )
             continue
         if hashlib.sha256(data).hexdigest() != s.get("sha256"):
             problems.append(f"{rel}: not the suite the certificate names (sha256)")
@@ -410,8 +429,7 @@ def _check_rests_on(by_id: dict[str, dict], files: dict[str, bytes], problems: l
         suites = load_suites()
     except FbaconfInputError:
         return
-    same = {s.name for s in suites
-            if hashlib.sha256(files.get(f"suites/{s.name}.json", b"")).hexdigest() == s.digest()}
+    same = {s.name for s in suites if hashlib.sha256(files.get(f"suites/{s.name}.json", b"")).hexdigest() == s.digest()}
     local = {c.full_id: c for s in suites if s.name in same for c in s.cases}
     for cid in sorted(by_id):
         case = local.get(cid)
@@ -419,8 +437,10 @@ def _check_rests_on(by_id: dict[str, dict], files: dict[str, bytes], problems: l
             continue
         derived = rests_on(case)
         if derived != list(by_id[cid].get("rests_on") or []):
-            problems.append(f"results.jsonl: {_quote(cid)} rests on {derived} (from its goldens and tools), "
-                            f"not {_quote(by_id[cid].get('rests_on'))}")
+            problems.append(
+                f"results.jsonl: {_quote(cid)} rests on {derived} (from its goldens and tools), "
+                f"not {_quote(by_id[cid].get('rests_on'))}"
+            )
 
 
 def _walk_files(root: Path):

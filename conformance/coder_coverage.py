@@ -11,6 +11,7 @@
   position p (1..14) of a block's 14-bit look-ahead, the bit after it a '1' (the decoder removes it
   as a stuffing bit and must hand it back) or a '0' (a violation that is no error, D7).
 """
+
 from __future__ import annotations
 
 from contextlib import contextmanager
@@ -68,9 +69,12 @@ def _observed(hits: set[str]):
         s = orig(self, model)
         hi_c, lo_c, total = table(s)
         length = high - low + 1
-        hits.update(f"arith.renorm-tie.{t}" for t in
-                    renorm_ties(low + (length * lo_c) // total, low - 1 + (length * hi_c) // total))
+        hits.update(
+            f"arith.renorm-tie.{t}"
+            for t in renorm_ties(low + (length * lo_c) // total, low - 1 + (length * hi_c) // total)
+        )
         return s
+
     ArithDecoder.decode = decode  # the native fast path stands aside while the class is patched
     try:
         yield

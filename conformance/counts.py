@@ -2,6 +2,7 @@
 print (docs/suites.md, between the ``counts`` markers), written by ``fbaconf suites counts
 --write`` and checked against the built suites by a test, so no hand-counted number goes stale.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -29,13 +30,17 @@ def required(suites: list[Suite], claim: str) -> int:
 
 def table(suites: list[Suite]) -> str:
     """The markdown block: every suite's cases by kind, then each claim's required cases."""
-    rows = ["| suite | claim | cases | decode | multi-face | error | with images |",
-            "|---|---|---:|---:|---:|---:|---:|"]
+    rows = [
+        "| suite | claim | cases | decode | multi-face | error | with images |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
     for s in suites:
         kinds = [c.kind for c in s.cases]
-        rows.append(f"| {s.name} | {s.claim} | {len(s.cases)} | {kinds.count(CaseKind.DECODE)} | "
-                    f"{kinds.count(CaseKind.MULTI)} | {kinds.count(CaseKind.ERROR)} | "
-                    f"{sum(1 for c in s.cases if 'images' in (c.stages or []))} |")
+        rows.append(
+            f"| {s.name} | {s.claim} | {len(s.cases)} | {kinds.count(CaseKind.DECODE)} | "
+            f"{kinds.count(CaseKind.MULTI)} | {kinds.count(CaseKind.ERROR)} | "
+            f"{sum(1 for c in s.cases if 'images' in (c.stages or []))} |"
+        )
     rows.append(f"| all | | {sum(len(s.cases) for s in suites)} | | | | |")
     rows += ["", "| claim | required cases (a decoder of the binary stream) |", "|---|---:|"]
     rows += [f"| {c} | {required(suites, c)} |" for c in CLAIMS]

@@ -11,6 +11,7 @@ compared with every level's limits; error streams are classified by the checker'
 
 ``fbaconf suites coverage [--json]`` prints point -> cases and ends with ``coverage: K/N points``.
 """
+
 from __future__ import annotations
 
 import re
@@ -61,15 +62,20 @@ def _values(spec) -> list:
 
 
 def _names() -> dict[str, dict]:
-    return {"fap": {str(f.number): f.name for f in tables.fap_table()},
-            "viseme": {str(n): p for n, p, _ in tables.visemes()},
-            "expression": {str(n): name for n, name in tables.expressions()}}
+    return {
+        "fap": {str(f.number): f.name for f in tables.fap_table()},
+        "viseme": {str(n): p for n, p, _ in tables.visemes()},
+        "expression": {str(n): name for n, name in tables.expressions()},
+    }
 
 
 def load_model(path: Path | None = None) -> list[Point]:
     """Every coverage point of the model, in file order."""
-    text = Path(path).read_text("utf-8") if path else \
-        resources.files("fbaconf.conformance").joinpath("data/coverage.toml").read_text("utf-8")
+    text = (
+        Path(path).read_text("utf-8")
+        if path
+        else resources.files("fbaconf.conformance").joinpath("data/coverage.toml").read_text("utf-8")
+    )
     d = tomllib.loads(text)
     if d.get("format") != FORMAT:
         raise ValueError(f"coverage model: format must be {FORMAT}")
@@ -143,8 +149,15 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
             q = p.fap_quant
             if not dct:
                 quants.add(q)
-                hits.add("fap_quant.0" if q == 0 else "fap_quant.1" if q == 1 else
-                         "fap_quant.31" if q == 31 else "fap_quant.mid")
+                hits.add(
+                    "fap_quant.0"
+                    if q == 0
+                    else "fap_quant.1"
+                    if q == 1
+                    else "fap_quant.31"
+                    if q == 31
+                    else "fap_quant.mid"
+                )
             for t in p.group_types:
                 hits.add(f"mask.type-{t}")
             if prev_coded is not None and not np.array_equal(prev_coded, p.coded):
@@ -155,8 +168,9 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
             if p.frame_rate is not None:
                 any_rate = True
                 fr = p.frame_rate
-                hits.add("rate.offset" if fr.frequency_offset else "rate.integer" if fr.seconds == 0
-                         else "rate.sixteenths")
+                hits.add(
+                    "rate.offset" if fr.frequency_offset else "rate.integer" if fr.seconds == 0 else "rate.sixteenths"
+                )
                 if fr.seconds and fr.frequency_offset:
                     hits.add("rate.sixteenths")
                 if prev_rate is not None and fr.rate != prev_rate:
@@ -317,7 +331,7 @@ def raw_text_points(path: Path) -> set[str]:
 
 def _has_stuffing(data: bytes, start: int, length: int) -> bool:
     bits = np.unpackbits(np.frombuffer(data, dtype=np.uint8))
-    seg = bits[start:start + length]
+    seg = bits[start : start + length]
     zeros = 0
     k = 0
     while k < len(seg):
@@ -447,8 +461,13 @@ def scene_points(scene_path: Path | None, frames) -> set[str]:  # noqa: C901
             hits.add("facedef.interval.single")
         else:
             k = int(np.nonzero(b == 0)[0][0])
-            hits.add("facedef.interval.zero-bottom" if k == 0 else "facedef.interval.zero-top" if k == n
-                     else "facedef.interval.zero-inner")
+            hits.add(
+                "facedef.interval.zero-bottom"
+                if k == 0
+                else "facedef.interval.zero-top"
+                if k == n
+                else "facedef.interval.zero-inner"
+            )
     for t in model.transform_tables:
         hits.add(f"facedef.transform.{t.field}")
         if t.fap == 1:
@@ -494,6 +513,7 @@ def _transform_depth(scene, graph) -> int:
         if n.type in ("Transform", "Group"):
             for c in n.get("children"):
                 visit(c, d)
+
     for v in graph:
         visit(v, 0)
     return best
@@ -551,8 +571,9 @@ def claim_points(data: bytes | None, scene_path: Path | None, faces: int = 1, fa
     if smallest:
         need = max(smallest)
         for c in ps.claims():
-            if c >= need and all(measures[lim.id] <= lim.value(c.level) + 1e-9 for lim in ps.limits_for(c)
-                                 if lim.id == "faces"):
+            if c >= need and all(
+                measures[lim.id] <= lim.value(c.level) + 1e-9 for lim in ps.limits_for(c) if lim.id == "faces"
+            ):
                 hits.add(f"claim.{c}")
                 break
     for lim in ps.limits_for(top):
@@ -669,12 +690,26 @@ def compute(suites=None, model: list[Point] | None = None, computed: list[tuple]
             else:
                 unknown.setdefault(pid, []).append(cc.case)
     covered = sum(1 for v in by_point.values() if v)
-    return {"format": "fbaconf.coverage-report/1", "total": len(model), "covered": covered,
-            "points": [{"id": p.id, "clause": p.clause, "description": p.description, "cases": by_point[p.id]}
-                       for p in model],
-            "cases": [{"case": c.case, "claim": c.claim, "points": sorted(c.points & ids), "codes": sorted(c.codes),
-                       "measures": c.measures, "problems": c.problems} for c in cases],
-            "unknown": unknown}
+    return {
+        "format": "fbaconf.coverage-report/1",
+        "total": len(model),
+        "covered": covered,
+        "points": [
+            {"id": p.id, "clause": p.clause, "description": p.description, "cases": by_point[p.id]} for p in model
+        ],
+        "cases": [
+            {
+                "case": c.case,
+                "claim": c.claim,
+                "points": sorted(c.points & ids),
+                "codes": sorted(c.codes),
+                "measures": c.measures,
+                "problems": c.problems,
+            }
+            for c in cases
+        ],
+        "unknown": unknown,
+    }
 
 
 def format_table(rep: dict, width: int = 100) -> str:
@@ -696,5 +731,13 @@ def format_table(rep: dict, width: int = 100) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["Point", "load_model", "case_points", "case_coverages", "compute", "format_table", "stream_points",
-           "scene_points"]
+__all__ = [
+    "Point",
+    "load_model",
+    "case_points",
+    "case_coverages",
+    "compute",
+    "format_table",
+    "stream_points",
+    "scene_points",
+]

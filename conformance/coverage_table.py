@@ -13,6 +13,7 @@ table makes certify faster, never different. The extractors' code is not in the 
 ``tests/suites/test_coverage.py`` checks every entry against a fresh computation, and
 ``fbaconf suites coverage --write`` rewrites the file.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -54,8 +55,13 @@ def case_key(case) -> str | None:
                 files[role] = _sha(case.suite_dir / rel)
             else:
                 files[role] = rel
-        doc = {"kind": str(case.kind), "group": case.group, "stages": sorted(case.stages), "inputs": files,
-               "model": _model_digest()}
+        doc = {
+            "kind": str(case.kind),
+            "group": case.group,
+            "stages": sorted(case.stages),
+            "inputs": files,
+            "model": _model_digest(),
+        }
     except (OSError, TypeError):
         return None
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
@@ -107,11 +113,13 @@ def table(computed: list[tuple[object, CaseCoverage]]) -> dict:
         if key is None or cc.problems:
             continue
         cases[case.full_id] = {"key": key, "points": sorted(cc.points)}
-    return {"format": TABLE_FORMAT,
-            "about": "Coverage points of each committed case (conformance/coverage_table.py); written by "
-                     "`fbaconf suites coverage --write`, checked against a fresh computation by "
-                     "tests/suites/test_coverage.py.",
-            "cases": dict(sorted(cases.items()))}
+    return {
+        "format": TABLE_FORMAT,
+        "about": "Coverage points of each committed case (conformance/coverage_table.py); written by "
+        "`fbaconf suites coverage --write`, checked against a fresh computation by "
+        "tests/suites/test_coverage.py.",
+        "cases": dict(sorted(cases.items())),
+    }
 
 
 def write(computed: list[tuple[object, CaseCoverage]], path: Path | None = None) -> tuple[Path, int]:

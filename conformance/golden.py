@@ -18,6 +18,7 @@ for byte -- or, where a value crosses a rounding step on this platform (numpy, B
 PNG encoder builds differ in their last digits and bytes), within one step (the file is named
 and the tolerance said: conformance/precision.py).
 """
+
 from __future__ import annotations
 
 import io
@@ -131,7 +132,8 @@ def _same(a, b) -> bool:
         return isinstance(a, FbaconfInputError) and isinstance(b, FbaconfInputError)
     return len(a) == len(b) and all(
         x.frame_rate == y.frame_rate and all(np.array_equal(getattr(x, k), getattr(y, k)) for k in _COMPARED)
-        for x, y in zip(a, b))
+        for x, y in zip(a, b)
+    )
 
 
 def reading_goldens(case, root: Path | None = None) -> dict[str, Path]:
@@ -188,9 +190,11 @@ def regenerate(suites: list[Suite], root: Path | None = None, log=print) -> dict
             for p in generate_case(c, c.golden_dir(root)) + generate_readings(c, c.golden_dir(root)):
                 files[p.relative_to(root).as_posix()] = sha256_file(p)
         log(f"goldens for {s.name}: {sum(1 for k in files if k.startswith(s.name + '/'))} file(s)")
-    manifest = {"format": FORMAT, "suites": {s.name: {"version": s.version, "manifest_sha256": s.digest()}
-                                             for s in suites},
-                "files": dict(sorted(files.items()))}
+    manifest = {
+        "format": FORMAT,
+        "suites": {s.name: {"version": s.version, "manifest_sha256": s.digest()} for s in suites},
+        "files": dict(sorted(files.items())),
+    }
     atomic_write_text(root / MANIFEST, json.dumps(manifest, indent=1) + "\n")
     return manifest
 
@@ -202,8 +206,9 @@ def _not_a_golden(rel: str) -> bool:
     return rel in (MANIFEST, "__init__.py") or parts[0] == "__pycache__" or Path(rel).name.startswith(".")
 
 
-def compare_regenerated(files: dict[str, str], root: Path, regen: dict[str, str], regen_root: Path
-                        ) -> tuple[list[str], list[str]]:
+def compare_regenerated(
+    files: dict[str, str], root: Path, regen: dict[str, str], regen_root: Path
+) -> tuple[list[str], list[str]]:
     """(problems, files within tolerance): the committed goldens ``files`` (relative path ->
     sha256, under ``root``) against a regeneration ``regen`` (under ``regen_root``). A file
     whose bytes differ is accepted when :func:`precision.within_tolerance` says how it still
@@ -223,8 +228,9 @@ def compare_regenerated(files: dict[str, str], root: Path, regen: dict[str, str]
     return problems, near
 
 
-def verify(root: Path | None = None, *, regenerate_check: bool = True, only: list[str] | None = None,
-           log=print) -> list[str]:
+def verify(
+    root: Path | None = None, *, regenerate_check: bool = True, only: list[str] | None = None, log=print
+) -> list[str]:
     """Problems found (empty list = goldens verified). ``only``: regenerate only these suites (the
     digests of every golden and suite input are checked all the same)."""
     root = root or golden_root()
@@ -237,8 +243,7 @@ def verify(root: Path | None = None, *, regenerate_check: bool = True, only: lis
         return [f"golden manifest {mp} is not valid JSON: {e}"]
     problems: list[str] = []
     files = manifest.get("files", {})
-    missing, modified, extra = digest_problems(
-        root, files, ignore=_not_a_golden)
+    missing, modified, extra = digest_problems(root, files, ignore=_not_a_golden)
     problems += [f"missing golden file {rel}" for rel in missing]
     problems += [f"golden file {rel} does not match its sha256" for rel in modified]
     problems += [f"golden file {rel} is not in the manifest" for rel in extra]
@@ -271,10 +276,15 @@ def verify(root: Path | None = None, *, regenerate_check: bool = True, only: lis
             regen = regenerate(suites, t, log=lambda *_: None)
             bad, near = compare_regenerated(files, root, regen["files"], t)
             problems += bad
-        log(f"regeneration: {len(files)} file(s) compared: {len(files) - len(near)} byte for byte"
-            + (f", {len(near)} within tolerance (a value across a rounding step on this platform: vertex "
-               f"arrays +-1e-6 and one float32 ulp, images +-1 of 255; see conformance/precision.py)"
-               if near else ""))
+        log(
+            f"regeneration: {len(files)} file(s) compared: {len(files) - len(near)} byte for byte"
+            + (
+                f", {len(near)} within tolerance (a value across a rounding step on this platform: vertex "
+                f"arrays +-1e-6 and one float32 ulp, images +-1 of 255; see conformance/precision.py)"
+                if near
+                else ""
+            )
+        )
         for n in near:
             log(f"  within tolerance: {n}")
     return problems

@@ -7,6 +7,7 @@ the golden manifest; :func:`differences` compares them with the suites and golde
 with this fbaconf (never the environment's), which ``certify`` records and ``certify verify``
 checks.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -43,8 +44,10 @@ def differences(suites: list[dict], golden_manifest: bytes | None) -> list[str]:
         if ours is None:
             out.append(f"suite {name}: not a suite this fbaconf ships")
         elif ours != s.get("sha256"):
-            out.append(f"suite {name}: not this fbaconf's (its suite.json sha256 {str(s.get('sha256'))[:12]}…, "
-                       f"this fbaconf's {ours[:12]}…)")
+            out.append(
+                f"suite {name}: not this fbaconf's (its suite.json sha256 {str(s.get('sha256'))[:12]}…, "
+                f"this fbaconf's {ours[:12]}…)"
+            )
     if golden_manifest is not None:
         ours = _sha(golden_folder() / GOLDEN_MANIFEST)
         if ours != hashlib.sha256(golden_manifest).hexdigest():

@@ -23,6 +23,7 @@ the same arrays with floats at most one rounding step apart (``STEP`` plus one f
 for float32 arrays), everything else equal; images with the same size and every channel at
 most ``IMAGE_LEVELS`` = 1 of 255 apart (or pixel-identical: another PNG encoder's bytes).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -37,7 +38,7 @@ from fbaconf.rendering.render import Renderer
 from fbaconf.rendering.scenario import Scenario
 
 DECIMALS = 6
-STEP = 10.0 ** -DECIMALS
+STEP = 10.0**-DECIMALS
 # FaceState arrays stored at the rounding step, with the dtype they are stored as
 ROUNDED = {"vertices": np.float32, "extra_feature_points": np.float32, "extra_fap_values": np.float64}
 IMAGE_LEVELS = 1
@@ -92,8 +93,15 @@ def _case_margins(case, supersample: int) -> list[Margin]:
         for name, a in arrays.items():
             if name in ROUNDED and (key is None or name == key):
                 u = vertex_ulps_to_flip(a)
-                out.append(Margin(f"{where}/{case.goldens['vertices']}:{name}", "vertices", u.size,
-                                  float(u.min()), int((u < RISK_ULPS).sum())))
+                out.append(
+                    Margin(
+                        f"{where}/{case.goldens['vertices']}:{name}",
+                        "vertices",
+                        u.size,
+                        float(u.min()),
+                        int((u < RISK_ULPS).sum()),
+                    )
+                )
     if "images" in case.stages:
         sc = Scenario.load(case.input_path("scenario")).with_(supersample=supersample)
         scene = case.input_path("scene")
@@ -102,8 +110,11 @@ def _case_margins(case, supersample: int) -> list[Margin]:
             lin = np.clip(r.render(k), 0.0, 1.0)
             e = np.asarray(colour_science().cctf_encoding(lin, function="sRGB"), dtype=np.float64)
             u = image_ulps_to_flip(e)
-            out.append(Margin(f"{where}/{r.frame_path('', k).name}", "image", u.size, float(u.min()),
-                              int((u < RISK_ULPS).sum())))
+            out.append(
+                Margin(
+                    f"{where}/{r.frame_path('', k).name}", "image", u.size, float(u.min()), int((u < RISK_ULPS).sum())
+                )
+            )
     return out
 
 
@@ -127,10 +138,12 @@ def summary(rows: list[Margin]) -> str:
             continue
         worst = min(rs, key=lambda r: r.ulps)
         risky = [r for r in rs if r.near]
-        lines.append(f"{kind}: {len(rs)} golden array(s), {sum(r.values for r in rs):,} values at step {step}; "
-                     f"smallest margin {worst.ulps:.3g} ulps ({worst.golden}); "
-                     f"{sum(r.near for r in rs)} value(s) in {len(risky)} golden(s) within {RISK_ULPS} ulps "
-                     f"of a boundary")
+        lines.append(
+            f"{kind}: {len(rs)} golden array(s), {sum(r.values for r in rs):,} values at step {step}; "
+            f"smallest margin {worst.ulps:.3g} ulps ({worst.golden}); "
+            f"{sum(r.near for r in rs)} value(s) in {len(risky)} golden(s) within {RISK_ULPS} ulps "
+            f"of a boundary"
+        )
         lines += [f"  near a boundary: {r.golden}: {r.near} value(s), smallest {r.ulps:.3g} ulps" for r in risky]
     return "\n".join(lines)
 
@@ -164,8 +177,11 @@ def _npz_within(a: Path, b: Path) -> str | None:
             if not np.all(diff <= allowed):
                 return None
             moved += int((diff > 0).sum())
-    return (f"{moved} value(s) differ, each by at most one rounding step ({STEP:g})" if moved
-            else "equal arrays, other bytes")
+    return (
+        f"{moved} value(s) differ, each by at most one rounding step ({STEP:g})"
+        if moved
+        else "equal arrays, other bytes"
+    )
 
 
 def _png_within(a: Path, b: Path) -> str | None:

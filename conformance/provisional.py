@@ -16,6 +16,7 @@ A decision no case's result depends on under any known reading (D1, D2, D6's fra
 viseme/expression select ranges) is no excuse for anything: what the verdict makes of these is
 :mod:`fbaconf.harness.verdict`.
 """
+
 from __future__ import annotations
 
 import functools
@@ -66,6 +67,8 @@ def statements(claim: str | None) -> list[str]:
         c = Claim.parse(claim, ps)
         for lim in ps.limits_for(c):
             if lim.provenance == "provisional" and c.level in lim.values:
-                out.append(f"level limit {lim.id} = {lim.value(c.level):g} {lim.unit} at {claim} "
-                           f"({lim.description}) is provisional")
+                out.append(
+                    f"level limit {lim.id} = {lim.value(c.level):g} {lim.unit} at {claim} "
+                    f"({lim.description}) is provisional"
+                )
     return out

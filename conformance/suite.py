@@ -30,6 +30,7 @@ deep, every field of the kind the schema above gives it, every claim a known pro
 anything else is one :class:`SuiteError` naming the file, the case and the field, never a
 traceback later in a run.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -47,9 +48,12 @@ from fbaconf.safefs import confined, read_regular, safe_name
 SUITE_FORMAT = "fbaconf.suite/1"
 MAX_MANIFEST_BYTES = 64 << 20
 MAX_DEPTH = 32
+
+
 class CaseKind(StrEnum):
     """What a case asks of a decoder: decode a valid stream, reject an invalid one, or decode
     several faces at once."""
+
     DECODE = "decode"
     ERROR = "error"
     MULTI = "multi"
@@ -88,6 +92,7 @@ def _check_case(d: dict, suite: str) -> None:
 
     def bad(what: str) -> SuiteError:
         return SuiteError(f"{where}: {what}", rule="suite-case")
+
     for k in ("id", "claim", "group", "kind", "description"):
         if k in d and not isinstance(d[k], str):
             raise bad(f"{k} must be a string, not {type(d[k]).__name__}")
@@ -107,11 +112,14 @@ def _check_case(d: dict, suite: str) -> None:
             raise bad(f"inputs: unknown key {_quote(k)} (known: {', '.join(INPUT_KEYS)})")
         ok = (isinstance(v, list) and all(isinstance(x, str) for x in v)) if k == "faces" else isinstance(v, str)
         if not ok:
-            raise bad(f"inputs.{k} must be {'a list of file names' if k == 'faces' else 'a file name'}, "
-                      f"not {_quote(v)}")
+            raise bad(
+                f"inputs.{k} must be {'a list of file names' if k == 'faces' else 'a file name'}, not {_quote(v)}"
+            )
     sha = d.get("sha256", {})
-    if not isinstance(sha, dict) or not all(isinstance(k, str) and isinstance(v, str) and len(v) == 64 and
-                                            all(c in "0123456789abcdef" for c in v) for k, v in sha.items()):
+    if not isinstance(sha, dict) or not all(
+        isinstance(k, str) and isinstance(v, str) and len(v) == 64 and all(c in "0123456789abcdef" for c in v)
+        for k, v in sha.items()
+    ):
         raise bad("sha256 must be a table of file name = 64 lowercase hex digits")
     if "claim" not in d or "id" not in d:
         raise bad("a case needs an id and a claim")
@@ -193,17 +201,36 @@ class Case:
         return (root or golden_root()) / self.suite / self.id
 
     def to_json(self) -> dict:
-        d = {k: getattr(self, k) for k in ("id", "claim", "group", "kind", "description", "tools", "covers",
-                                            "inputs", "sha256", "frames", "stages", "goldens", "tolerances",
-                                            "expect")}
+        d = {
+            k: getattr(self, k)
+            for k in (
+                "id",
+                "claim",
+                "group",
+                "kind",
+                "description",
+                "tools",
+                "covers",
+                "inputs",
+                "sha256",
+                "frames",
+                "stages",
+                "goldens",
+                "tolerances",
+                "expect",
+            )
+        }
         return d
 
     @classmethod
     def from_json(cls, d: dict, suite: str, suite_dir: Path | None) -> Case:
         _check_case(d, suite)
         try:
-            c = cls(suite=suite, suite_dir=suite_dir, **{k: d[k] for k in d if k in cls.__dataclass_fields__
-                                                         and k not in ("suite", "suite_dir")})
+            c = cls(
+                suite=suite,
+                suite_dir=suite_dir,
+                **{k: d[k] for k in d if k in cls.__dataclass_fields__ and k not in ("suite", "suite_dir")},
+            )
         except TypeError as e:
             raise SuiteError(f"suite {suite}: malformed case {d.get('id')!r}: {e}", rule="suite-case") from None
         safe_name(str(c.id), what=f"suite {suite}: case id")
@@ -230,8 +257,15 @@ class Suite:
     path: Path | None = None
 
     def to_json(self) -> dict:
-        return {"format": SUITE_FORMAT, "name": self.name, "description": self.description, "claim": self.claim,
-                "group": self.group, "version": self.version, "cases": [c.to_json() for c in self.cases]}
+        return {
+            "format": SUITE_FORMAT,
+            "name": self.name,
+            "description": self.description,
+            "claim": self.claim,
+            "group": self.group,
+            "version": self.version,
+            "cases": [c.to_json() for c in self.cases],
+        }
 
     def manifest_path(self) -> Path:
         if self.path is None:
@@ -252,27 +286,34 @@ class Suite:
         except FbaconfInputError as e:
             raise SuiteError(f"unreadable suite manifest: {e.message}", rule="suite-manifest", file=str(mf)) from None
         except (ValueError, RecursionError) as e:  # not UTF-8, not JSON, nested past the parser's depth
-            raise SuiteError(f"unreadable suite manifest: {str(e)[:200] or type(e).__name__}", rule="suite-manifest",
-                             file=str(mf)) from None
+            raise SuiteError(
+                f"unreadable suite manifest: {str(e)[:200] or type(e).__name__}", rule="suite-manifest", file=str(mf)
+            ) from None
         if not isinstance(d, dict) or d.get("format") != SUITE_FORMAT:
             raise SuiteError(f"not an {SUITE_FORMAT} manifest", rule="suite-manifest", file=str(mf))
         if _depth(d) > MAX_DEPTH:
-            raise SuiteError(f"malformed manifest: nested deeper than {MAX_DEPTH}", rule="suite-manifest",
-                             file=str(mf))
+            raise SuiteError(f"malformed manifest: nested deeper than {MAX_DEPTH}", rule="suite-manifest", file=str(mf))
         try:
             name = safe_name(d["name"], what="suite name")
             claim, cases = d["claim"], d["cases"]
             if not isinstance(claim, str) or not isinstance(cases, list) or not all(isinstance(c, dict) for c in cases):
                 raise TypeError("claim must be a string and cases a list of objects")
             check_claim(claim, f"suite {name}")
-            suite = cls(name=name, description=str(d.get("description", "")), claim=claim,
-                        group=str(d.get("group", "")), version=str(d.get("version", "")), path=directory,
-                        cases=[Case.from_json(c, name, directory) for c in cases])
+            suite = cls(
+                name=name,
+                description=str(d.get("description", "")),
+                claim=claim,
+                group=str(d.get("group", "")),
+                version=str(d.get("version", "")),
+                path=directory,
+                cases=[Case.from_json(c, name, directory) for c in cases],
+            )
         except KeyError as e:
             raise SuiteError(f"manifest lacks {e.args[0]!r}", rule="suite-manifest", file=str(mf)) from None
         except (TypeError, FbaconfInputError) as e:
-            raise SuiteError(f"malformed manifest: {getattr(e, 'message', e)}", rule="suite-manifest",
-                             file=str(mf)) from None
+            raise SuiteError(
+                f"malformed manifest: {getattr(e, 'message', e)}", rule="suite-manifest", file=str(mf)
+            ) from None
         return suite
 
     def verify_inputs(self) -> list[str]:
@@ -306,14 +347,14 @@ def _depth(obj) -> int:
 def load_suites(root: Path | None = None, names: list[str] | None = None) -> list[Suite]:
     root = root or suites_root()
     if not root.is_dir():
-        raise SuiteError(f"no suites at {root}: run `fbaconf suites build` first", rule="suite-missing",
-                         file=str(root))
+        raise SuiteError(f"no suites at {root}: run `fbaconf suites build` first", rule="suite-missing", file=str(root))
     suites = [Suite.load(p) for p in sorted(root.iterdir()) if (p / "suite.json").is_file()]
     if names:
         known = {s.name for s in suites}
         missing = [n for n in names if n not in known]
         if missing:
-            raise SuiteError(f"unknown suite(s): {', '.join(missing)} (known: {', '.join(sorted(known))})",
-                             rule="suite-missing")
+            raise SuiteError(
+                f"unknown suite(s): {', '.join(missing)} (known: {', '.join(sorted(known))})", rule="suite-missing"
+            )
         suites = [s for s in suites if s.name in names]
     return suites

@@ -6,6 +6,7 @@ The default head neutral, with each of the 6 expressions at full intensity (FAP 
 expression_intensity1 = 63), with 4 visemes (FAP 1, blend 63), and calibrated to a set of
 received feature points (a broader, shorter face). 256x256, the bundled default scenario.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

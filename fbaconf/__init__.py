@@ -7,4 +7,5 @@ Every top-level stage folder of the repository (``bitstreams/``, ``scenes/``, ``
 ``setup.py`` discovers them. This folder itself holds the small core: the error types, the
 rule registry, the reference pipeline and the command line (docs/architecture.md).
 """
+
 __version__ = "0.1.0"

@@ -2,6 +2,7 @@
 
 Every writer of an output file goes through here so that an error half-way never
 leaves a partial file behind that looks complete."""
+
 from __future__ import annotations
 
 import os

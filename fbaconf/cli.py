@@ -5,6 +5,7 @@ Each stage package contributes its verbs through a ``cli.py`` module exposing
 Typed input errors (:class:`FbaconfInputError`) become a one-line message and exit
 code 2 — never a traceback.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,8 +30,8 @@ VERB_MODULES = (
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="fbaconf",
-        description="Conformance and profile test suite for MPEG-4 Face Animation decoders.")
+        prog="fbaconf", description="Conformance and profile test suite for MPEG-4 Face Animation decoders."
+    )
     parser.add_argument("--version", action="version", version=f"fbaconf {__version__}")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     for name in VERB_MODULES:

@@ -8,6 +8,7 @@ These are the root error types of every stage; stage-specific errors (``renderin
 ``scenes.bifs.BifsError``) derive from them. Every rule id is registered in
 :mod:`fbaconf.rules`.
 """
+
 from __future__ import annotations
 
 
@@ -52,9 +53,18 @@ class BitstreamError(FbaconfInputError):
 
     rule = "bitstream"
 
-    def __init__(self, message: str, *, bit_offset: int, rule: str, plane: int | None = None,
-                 frame: int | None = None, fap: int | None = None, file: str | None = None,
-                 partial=None) -> None:
+    def __init__(
+        self,
+        message: str,
+        *,
+        bit_offset: int,
+        rule: str,
+        plane: int | None = None,
+        frame: int | None = None,
+        fap: int | None = None,
+        file: str | None = None,
+        partial=None,
+    ) -> None:
         super().__init__(message, rule=rule, file=file)
         self.bit_offset = int(bit_offset)
         self.plane = plane
@@ -67,13 +77,18 @@ class BitstreamError(FbaconfInputError):
         return self.bit_offset // 8
 
     def location(self) -> str:
-        return join_location(f"byte {self.byte_offset} bit {self.bit_offset % 8} (bit offset {self.bit_offset})",
-                             ("plane", self.plane), ("frame", self.frame), ("FAP", self.fap))
+        return join_location(
+            f"byte {self.byte_offset} bit {self.bit_offset % 8} (bit offset {self.bit_offset})",
+            ("plane", self.plane),
+            ("frame", self.frame),
+            ("FAP", self.fap),
+        )
 
     def to_dict(self) -> dict:
         d = super().to_dict()
-        d.update(bit_offset=self.bit_offset, byte_offset=self.byte_offset, plane=self.plane, frame=self.frame,
-                 fap=self.fap)
+        d.update(
+            bit_offset=self.bit_offset, byte_offset=self.byte_offset, plane=self.plane, frame=self.frame, fap=self.fap
+        )
         return d
 
 
@@ -82,8 +97,9 @@ class TextFormatError(FbaconfInputError):
 
     rule = "text"
 
-    def __init__(self, message: str, *, line: int, column: int, rule: str, file: str | None = None,
-                 node_path: str | None = None) -> None:
+    def __init__(
+        self, message: str, *, line: int, column: int, rule: str, file: str | None = None, node_path: str | None = None
+    ) -> None:
         super().__init__(message, rule=rule, file=file)
         self.line = line
         self.column = column
@@ -104,8 +120,16 @@ class EncodeError(FbaconfInputError):
 
     rule = "encode"
 
-    def __init__(self, message: str, *, rule: str, frame: int | None = None, fap: int | None = None,
-                 value: int | None = None, file: str | None = None) -> None:
+    def __init__(
+        self,
+        message: str,
+        *,
+        rule: str,
+        frame: int | None = None,
+        fap: int | None = None,
+        value: int | None = None,
+        file: str | None = None,
+    ) -> None:
         super().__init__(message, rule=rule, file=file)
         self.frame = frame
         self.fap = fap

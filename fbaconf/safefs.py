@@ -10,6 +10,7 @@ their folder.
   leave it (``..``, an absolute path, a symlink on the way), for names that come from data
   (manifest names, case ids, suite files, package entries, fuzz findings).
 """
+
 from __future__ import annotations
 
 import errno
@@ -23,11 +24,13 @@ from fbaconf.errors import FbaconfInputError
 
 class UnsafeFileError(FbaconfInputError):
     """A file a decoder produced is not a regular file, or is larger than allowed."""
+
     rule = "output-unsafe"
 
 
 class PathEscapeError(FbaconfInputError):
     """A path taken from data would leave the folder it belongs to."""
+
     rule = "path-escape"
 
 
@@ -217,9 +220,17 @@ def open_regular(path: Path | str, max_bytes: int):
     st = os.fstat(fd)
     if not stat.S_ISREG(st.st_mode):
         os.close(fd)
-        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device" if stat.S_ISCHR(st.st_mode) or
-                stat.S_ISBLK(st.st_mode) else "a socket" if stat.S_ISSOCK(st.st_mode) else
-                "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file")
+        kind = (
+            "a FIFO"
+            if stat.S_ISFIFO(st.st_mode)
+            else "a device"
+            if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode)
+            else "a socket"
+            if stat.S_ISSOCK(st.st_mode)
+            else "a directory"
+            if stat.S_ISDIR(st.st_mode)
+            else "not a regular file"
+        )
         raise UnsafeFileError(f"is {kind} (outputs must be regular files)", file=str(path))
     if st.st_size > max_bytes:
         os.close(fd)
@@ -269,6 +280,7 @@ def safe_name(name: str, *, what: str = "name") -> str:
     """A single path component made of letters, digits, ``.``, ``_``, ``-`` and ``@``
     (not starting with a dot): safe as a folder or file name."""
     if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z0-9_@+-][A-Za-z0-9._@+-]{0,127}", name):
-        raise PathEscapeError(f"{what} {name!r} must be 1-128 letters, digits, '.', '_', '-', '+' or '@' "
-                              f"(not starting with '.')")
+        raise PathEscapeError(
+            f"{what} {name!r} must be 1-128 letters, digits, '.', '_', '-', '+' or '@' (not starting with '.')"
+        )
     return name

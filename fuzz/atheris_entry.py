@@ -19,6 +19,7 @@ Run with atheris (``pip install atheris``)::
 
 OSS-Fuzz: a ``fuzz_fbaconf.py`` that imports this module and calls :func:`main`.
 """
+
 from __future__ import annotations
 
 import random
@@ -37,6 +38,7 @@ def _target():
         from .choosers import RandomChooser
         from .inputs import gen_valid
         from .targets import SelfTarget
+
         stream = gen_valid(RandomChooser(random.Random(0))).data
         _TARGET = SelfTarget(checker_every=4, scene_stream=stream)
     return _TARGET
@@ -47,6 +49,7 @@ def fuzz_one_input(data: bytes) -> None:
     from .choosers import RandomChooser
     from .inputs import Entry, gen_valid
     from .mutators import mutate_stream
+
     t = _target()
     sel = data[0] % 8 if data else 0
     body = bytes(data[1:])
@@ -75,8 +78,9 @@ def main(argv: list[str] | None = None) -> None:  # pragma: no cover - needs ath
     try:
         import atheris
     except ImportError:
-        sys.exit("fuzz_entry: atheris is not installed (pip install atheris); "
-                 "`fbaconf fuzz --self` needs nothing extra")
+        sys.exit(
+            "fuzz_entry: atheris is not installed (pip install atheris); `fbaconf fuzz --self` needs nothing extra"
+        )
     with atheris.instrument_imports():
         import fbaconf.bitstreams.decoder
         import fbaconf.profiles.checker

@@ -15,6 +15,7 @@ The cluster is the harness's (mutual TLS, :mod:`fbaconf.harness.cluster`); task 
 random, and a shard's or a minimisation's report travels as JSON text (inputs as base64),
 parsed and checked as plain data here before it is merged (:func:`shard_report`).
 """
+
 from __future__ import annotations
 
 import base64
@@ -54,9 +55,16 @@ class ShardSpec:
 
 
 def _target(spec: ShardSpec, work: Path):
-    return DecoderTarget(resolve(spec.manifest), work, kind=spec.kind, timeout_s=spec.timeout_s,
-                         expected_exit=spec.expected_exit, oracle=spec.oracle,
-                         fork_server=not spec.spawn, persistent=not spec.spawn)
+    return DecoderTarget(
+        resolve(spec.manifest),
+        work,
+        kind=spec.kind,
+        timeout_s=spec.timeout_s,
+        expected_exit=spec.expected_exit,
+        oracle=spec.oracle,
+        fork_server=not spec.spawn,
+        persistent=not spec.spawn,
+    )
 
 
 def _b64(data: bytes) -> str:
@@ -74,8 +82,9 @@ def _unb64(text, what: str) -> bytes:
 
 def _json(doc: dict) -> str:
     """A worker's report as JSON text (numbers that numpy made become plain ones)."""
-    return json.dumps(doc, default=lambda o: o.item() if hasattr(o, "item") else
-                      o.tolist() if hasattr(o, "tolist") else str(o))
+    return json.dumps(
+        doc, default=lambda o: o.item() if hasattr(o, "item") else o.tolist() if hasattr(o, "tolist") else str(o)
+    )
 
 
 def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -> str:
@@ -85,30 +94,77 @@ def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -
     try:
         target = _target(spec, work)
         seeds = default_seeds() + [Entry(b, origin=f"merged#{i}") for i, b in enumerate(merged)]
-        fz = Fuzzer(target, seeds,
-                    FuzzConfig(seed=seed, seconds=seconds, jobs=1, progress=False, kinds=(spec.kind,),
-                               coverage_every=spec.coverage_every, minimise_findings=False))
+        fz = Fuzzer(
+            target,
+            seeds,
+            FuzzConfig(
+                seed=seed,
+                seconds=seconds,
+                jobs=1,
+                progress=False,
+                kinds=(spec.kind,),
+                coverage_every=spec.coverage_every,
+                minimise_findings=False,
+            ),
+        )
         fz.run()
         st = fz.stats
-        return _json({"seed": seed, "execs": st.execs, "fuzz_seconds": st.elapsed - st.minimise_s,
-                      "features": sorted(st.features), "universe": list(st.universe),
-                      "corpus": [_b64(e.data) for e in fz.new_corpus],
-                      "findings": [{"key": f.verdict.key, "cls": f.verdict.cls, "signature": f.verdict.signature,
-                                    "message": f.verdict.message, "detail": f.verdict.detail,
-                                    "data": _b64(f.original.data), "kind": f.original.kind,
-                                    "origin": f.original.origin, "index": f.index,
-                                    "corpus_size": f.original.corpus_size, "hits": f.hits, "seed": seed,
-                                    "found_at_s": f.found_at_s}
-                                   for f in fz.findings.values()]})
+        return _json(
+            {
+                "seed": seed,
+                "execs": st.execs,
+                "fuzz_seconds": st.elapsed - st.minimise_s,
+                "features": sorted(st.features),
+                "universe": list(st.universe),
+                "corpus": [_b64(e.data) for e in fz.new_corpus],
+                "findings": [
+                    {
+                        "key": f.verdict.key,
+                        "cls": f.verdict.cls,
+                        "signature": f.verdict.signature,
+                        "message": f.verdict.message,
+                        "detail": f.verdict.detail,
+                        "data": _b64(f.original.data),
+                        "kind": f.original.kind,
+                        "origin": f.original.origin,
+                        "index": f.index,
+                        "corpus_size": f.original.corpus_size,
+                        "hits": f.hits,
+                        "seed": seed,
+                        "found_at_s": f.found_at_s,
+                    }
+                    for f in fz.findings.values()
+                ],
+            }
+        )
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
-_SHARD_FIELDS = {"seed": int, "execs": int, "fuzz_seconds": (int, float), "features": list, "universe": list,
-                 "corpus": list, "findings": list}
-_FINDING_FIELDS = {"key": str, "cls": str, "signature": str, "message": str, "detail": dict, "data": str,
-                   "kind": str, "origin": str, "index": int, "corpus_size": (int, type(None)), "hits": int,
-                   "seed": int, "found_at_s": (int, float)}
+_SHARD_FIELDS = {
+    "seed": int,
+    "execs": int,
+    "fuzz_seconds": (int, float),
+    "features": list,
+    "universe": list,
+    "corpus": list,
+    "findings": list,
+}
+_FINDING_FIELDS = {
+    "key": str,
+    "cls": str,
+    "signature": str,
+    "message": str,
+    "detail": dict,
+    "data": str,
+    "kind": str,
+    "origin": str,
+    "index": int,
+    "corpus_size": (int, type(None)),
+    "hits": int,
+    "seed": int,
+    "found_at_s": (int, float),
+}
 
 
 def _fields(d: dict, want: dict, what: str) -> None:
@@ -141,18 +197,29 @@ def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: fl
     target = _target(spec, work)
     last = {}
     try:
+
         def test(cand: bytes, run=target.settled) -> bool:  # its ending bound to it (DecoderTarget.settled)
             v = run(Entry(cand, kind=kind, origin="minimise")).verdict
             if v is not None and v.key == key:
                 last["v"] = v
                 return True
             return False
-        minimal, stats = minimise(data, test, max_tests=tests, max_seconds=seconds,
-                                  check=lambda c: test(c, target.alone))
+
+        minimal, stats = minimise(
+            data, test, max_tests=tests, max_seconds=seconds, check=lambda c: test(c, target.alone)
+        )
         v = last.get("v")
-        return _json({"minimal": _b64(minimal), "tests": stats.tests, "seconds": stats.seconds,
-                      "reproduced": stats.reproduced, "flaky": stats.flaky,
-                      "message": v.message if v else None, "detail": v.detail if v else None})
+        return _json(
+            {
+                "minimal": _b64(minimal),
+                "tests": stats.tests,
+                "seconds": stats.seconds,
+                "reproduced": stats.reproduced,
+                "flaky": stats.flaky,
+                "message": v.message if v else None,
+                "detail": v.detail if v else None,
+            }
+        )
     finally:
         target.close()
         shutil.rmtree(work, ignore_errors=True)
@@ -161,6 +228,7 @@ def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: fl
 @dataclass
 class Campaign:
     """What the coordinator has merged so far."""
+
     execs: int = 0
     fuzz_seconds: float = 0.0
     shards: int = 0
@@ -189,25 +257,52 @@ class Campaign:
                 have["hits"] += f["hits"]
                 have["shards"] += 1
                 if len(f["data"]) < len(have["data"]):  # keep the smaller original
-                    have.update(data=f["data"], seed=f["seed"], index=f["index"], corpus_size=f["corpus_size"],
-                                origin=f["origin"])
+                    have.update(
+                        data=f["data"],
+                        seed=f["seed"],
+                        index=f["index"],
+                        corpus_size=f["corpus_size"],
+                        origin=f["origin"],
+                    )
         return new
 
 
 def minimise_report(text) -> dict:
     """A minimisation's JSON report, checked, its input decoded."""
     m = from_data(text, "minimisation report")
-    _fields(m, {"minimal": str, "tests": int, "seconds": (int, float), "reproduced": (bool, type(None)),
-                "flaky": bool, "message": (str, type(None)), "detail": (dict, type(None))}, "a minimisation report")
+    _fields(
+        m,
+        {
+            "minimal": str,
+            "tests": int,
+            "seconds": (int, float),
+            "reproduced": (bool, type(None)),
+            "flaky": bool,
+            "message": (str, type(None)),
+            "detail": (dict, type(None)),
+        },
+        "a minimisation report",
+    )
     m["minimal"] = _unb64(m["minimal"], "a minimised input")
     return m
 
 
-def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int, out: Path,  # noqa: PLR0913
-                 minimise_seconds: float, progress=print, round_s: float = ROUND_S) -> tuple[Campaign, list]:
+def run_campaign(  # noqa: PLR0913 - one shard's whole configuration, sent to a worker as arguments
+    c,
+    spec: ShardSpec,
+    *,
+    workers: int,
+    seconds: float,
+    seed: int,
+    out: Path,
+    minimise_seconds: float,
+    progress=print,
+    round_s: float = ROUND_S,
+) -> tuple[Campaign, list]:
     """Rounds of one shard per worker until ``seconds`` have passed; then each distinct finding
     minimised once and written to ``out/findings``. Returns the campaign and its Findings."""
     from distributed import as_completed  # noqa: PLC0415 (Dask: optional (the cluster extra))
+
     camp = Campaign()
     t0 = time.perf_counter()
     rnd = 0
@@ -217,20 +312,44 @@ def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int,
             break
         length = max(1.0, min(round_s, left))
         merged = list(camp.corpus.values())
-        futs = [c.submit(run_shard, spec, seed * 1_000_003 + rnd * 1009 + i, length, merged,
-                         key=task_key("shard"), pure=False, retries=3)
-                for i in range(workers)]
+        futs = [
+            c.submit(
+                run_shard,
+                spec,
+                seed * 1_000_003 + rnd * 1009 + i,
+                length,
+                merged,
+                key=task_key("shard"),
+                pure=False,
+                retries=3,
+            )
+            for i in range(workers)
+        ]
         for _fut, r in as_completed(futs, with_results=True):
             for f in camp.merge(shard_report(r)):
                 progress(f"finding {f['cls']} ({f['signature']}) in shard seed {f['seed']}: {f['message'][:120]}")
         rnd += 1
-        progress(f"[{time.perf_counter() - t0:6.1f}s] round {rnd}: {camp.execs} execs, "
-                 f"{len(camp.findings)} finding(s), corpus +{len(camp.corpus)}")
+        progress(
+            f"[{time.perf_counter() - t0:6.1f}s] round {rnd}: {camp.execs} execs, "
+            f"{len(camp.findings)} finding(s), corpus +{len(camp.corpus)}"
+        )
     wall = time.perf_counter() - t0
     # each distinct finding minimised once, on the cluster
-    mins = {k: c.submit(minimise_task, spec, f["data"], f["kind"], k, minimise_seconds, 600,
-                        key=task_key("min"), pure=False, retries=2)
-            for k, f in camp.findings.items()}
+    mins = {
+        k: c.submit(
+            minimise_task,
+            spec,
+            f["data"],
+            f["kind"],
+            k,
+            minimise_seconds,
+            600,
+            key=task_key("min"),
+            pure=False,
+            retries=2,
+        )
+        for k, f in camp.findings.items()
+    }
     findings = _write(camp, {k: minimise_report(fut.result()) for k, fut in mins.items()}, spec, out)
     camp.wall_s = wall
     return camp, findings
@@ -239,8 +358,11 @@ def run_campaign(c, spec: ShardSpec, *, workers: int, seconds: float, seed: int,
 def _write(camp: Campaign, mins: dict, spec: ShardSpec, out: Path) -> list:
     out.mkdir(parents=True, exist_ok=True)
     local = _target(spec, Path(tempfile.mkdtemp(prefix="fbaconf-campaign-", dir=out)))
-    info = {"name": local.adapter.name, "manifest": str(local.adapter.manifest_path or spec.manifest),
-            "mode": "campaign"}
+    info = {
+        "name": local.adapter.name,
+        "manifest": str(local.adapter.manifest_path or spec.manifest),
+        "mode": "campaign",
+    }
     written = []
     try:
         for k, f in camp.findings.items():
@@ -252,9 +374,14 @@ def _write(camp: Campaign, mins: dict, spec: ShardSpec, out: Path) -> list:
             m = mins.get(k) or {}
             if m.get("minimal") is not None:
                 fd.minimal = m["minimal"]
-                fd.min_stats = MinimiseStats(bytes_before=len(f["data"]), bytes_after=len(m["minimal"]),
-                                             tests=m["tests"], seconds=m["seconds"], reproduced=m["reproduced"],
-                                             flaky=m["flaky"])
+                fd.min_stats = MinimiseStats(
+                    bytes_before=len(f["data"]),
+                    bytes_after=len(m["minimal"]),
+                    tests=m["tests"],
+                    seconds=m["seconds"],
+                    reproduced=m["reproduced"],
+                    flaky=m["flaky"],
+                )
                 if m.get("message"):
                     fd.min_verdict = Verdict(f["cls"], f["signature"], m["message"], m["detail"] or {})
             write_finding(out, fd, SimpleNamespace(target=local, decoder_info=info, seed=f["seed"]))

@@ -1,4 +1,5 @@
 """Choosers: where random decisions come from (a seeded RNG, or hypothesis' draw)."""
+
 from __future__ import annotations
 
 import random
@@ -31,6 +32,7 @@ class RandomChooser(Chooser):
 class DrawChooser(Chooser):
     def __init__(self, draw) -> None:
         from hypothesis import strategies as st  # noqa: PLC0415 (test-only dependency)
+
         self.draw, self.st = draw, st
 
     def int(self, lo: int, hi: int) -> int:

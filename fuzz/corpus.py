@@ -1,4 +1,5 @@
 """The seed corpus: the conformance suites' streams, short prefixes, generated streams and scenes."""
+
 from __future__ import annotations
 
 import random

@@ -1,5 +1,6 @@
 """The fuzzing loop: batches of reproducible inputs, the corpus grown by new syntax features, findings
 deduplicated and minimised."""
+
 from __future__ import annotations
 
 import collections
@@ -60,8 +61,10 @@ class Stats:
 
     def line(self) -> str:
         c, n = self.coverage()
-        return (f"[{self.elapsed:6.1f}s] execs {self.execs} ({self.rate:,.0f}/s)  findings {self.findings}"
-                f" ({self.hits} hits)  syntax coverage {c}/{n} ({100.0 * c / max(1, n):.0f}%)  corpus {self.corpus}")
+        return (
+            f"[{self.elapsed:6.1f}s] execs {self.execs} ({self.rate:,.0f}/s)  findings {self.findings}"
+            f" ({self.hits} hits)  syntax coverage {c}/{n} ({100.0 * c / max(1, n):.0f}%)  corpus {self.corpus}"
+        )
 
 
 class Progress:
@@ -103,6 +106,7 @@ class Progress:
 class FuzzConfig:
     """How a fuzz run goes: its seed and budget (``seconds``, ``max_execs``), parallelism, the
     input kinds, the corpus and valid-stream policy, minimisation, and where findings go."""
+
     seed: int = 0
     seconds: float = 60.0
     jobs: int = 1
@@ -127,15 +131,30 @@ class Fuzzer:
     parallel), then, in input order, record coverage, grow the corpus and handle findings
     (dedup, minimise, write)."""
 
-    def __init__(self, target, seeds: list[Entry], config: FuzzConfig | None = None, *,
-                 scene_seeds_: list[Entry] | None = None, decoder_info: dict | None = None,
-                 stop_on: Callable[[Finding], bool] | None = None) -> None:
+    def __init__(
+        self,
+        target,
+        seeds: list[Entry],
+        config: FuzzConfig | None = None,
+        *,
+        scene_seeds_: list[Entry] | None = None,
+        decoder_info: dict | None = None,
+        stop_on: Callable[[Finding], bool] | None = None,
+    ) -> None:
         c = config or FuzzConfig()
         seed, seconds, jobs, out_dir, kind, kinds = c.seed, c.seconds, c.jobs, c.out_dir, c.kind, c.kinds
-        progress, valid_pool, fresh_valid_share, prefer_short = c.progress, c.valid_pool, c.fresh_valid_share, \
-            c.prefer_short
-        run_seeds_first, minimise_seconds, minimise_tests, max_execs = c.run_seeds_first, c.minimise_seconds, \
-            c.minimise_tests, c.max_execs
+        progress, valid_pool, fresh_valid_share, prefer_short = (
+            c.progress,
+            c.valid_pool,
+            c.fresh_valid_share,
+            c.prefer_short,
+        )
+        run_seeds_first, minimise_seconds, minimise_tests, max_execs = (
+            c.run_seeds_first,
+            c.minimise_seconds,
+            c.minimise_tests,
+            c.max_execs,
+        )
         max_corpus, coverage_every, minimise_findings = c.max_corpus, c.coverage_every, c.minimise_findings
         if not seeds and kind == "stream" and "stream" in (kinds or (kind,)):
             raise FuzzSetupError("no seed streams (build the suites: fbaconf suites build)")
@@ -145,8 +164,12 @@ class Fuzzer:
         self.jobs = max(1, int(jobs))
         self.out_dir = Path(out_dir) if out_dir else None
         self.kinds = kinds or (kind,)
-        self.corpus: dict[str, list[Entry]] = {"stream": list(seeds), "scene": list(scene_seeds_ or []),
-                                               "bifs": [], "text": []}
+        self.corpus: dict[str, list[Entry]] = {
+            "stream": list(seeds),
+            "scene": list(scene_seeds_ or []),
+            "bifs": [],
+            "text": [],
+        }
         if "text" in self.kinds:
             self.corpus["text"] = text_seeds()
             if not self.corpus["text"]:
@@ -173,9 +196,13 @@ class Fuzzer:
         self.minimise_findings = minimise_findings  # a campaign's shards leave it to the coordinator
         self.new_corpus: list[Entry] = []  # what this run added to the corpus (merged across shards)
         self.findings: dict[str, Finding] = {}
-        self.stats = Stats(universe=tuple(u for k in self.kinds for u in
-                                          (STREAM_FEATURES if k == "stream" else SCENE_FEATURES if k == "scene"
-                                           else ())))
+        self.stats = Stats(
+            universe=tuple(
+                u
+                for k in self.kinds
+                for u in (STREAM_FEATURES if k == "stream" else SCENE_FEATURES if k == "scene" else ())
+            )
+        )
         self.decoder_info = decoder_info or {}
         self.stats.corpus = sum(len(v) for v in self.corpus.values())
 
@@ -245,8 +272,9 @@ class Fuzzer:
         return st
 
     def _more(self, index: int, deadline: float) -> bool:
-        return (time.perf_counter() < deadline and not self.stopped
-                and (self.max_execs is None or index < self.max_execs))
+        return (
+            time.perf_counter() < deadline and not self.stopped and (self.max_execs is None or index < self.max_execs)
+        )
 
     def _run_pipelined(self, deadline: float) -> None:
         """One decoder at a time, overlapped with the loop's own work: targets with ``start``
@@ -296,9 +324,13 @@ class Fuzzer:
         st = self.stats
         st.execs += 1
         feats = out.features
-        measure = (not feats and not isinstance(self.target, SelfTarget)
-                   and (index % self.coverage_every == 0 or inp.model is not None
-                        or (inp.kind == "stream" and parsed(inp.data))))  # the oracle's parse: free
+        measure = (
+            not feats
+            and not isinstance(self.target, SelfTarget)
+            and (
+                index % self.coverage_every == 0 or inp.model is not None or (inp.kind == "stream" and parsed(inp.data))
+            )
+        )  # the oracle's parse: free
         if measure and inp.kind == "stream":
             # coverage of the syntax model by what we sent the decoder
             feats = inp.model.features if inp.model is not None else features_of(inp.data)
@@ -331,8 +363,10 @@ class Fuzzer:
         f = Finding(fid, v, inp, index, st.elapsed)
         self.findings[v.key] = f
         st.findings += 1
-        self.progress.message(f"finding {fid}: {v.cls} ({v.signature}): {v.message[:160]} — input #{index}, "
-                              f"{len(inp.data)} bytes, {inp.origin[:80]}")
+        self.progress.message(
+            f"finding {fid}: {v.cls} ({v.signature}): {v.message[:160]} — input #{index}, "
+            f"{len(inp.data)} bytes, {inp.origin[:80]}"
+        )
         if self.minimise_findings:
             t0 = time.perf_counter()
             self._minimise(f, deadline)
@@ -356,6 +390,7 @@ class Fuzzer:
             if ok:
                 last["v"] = out.verdict
             return ok
+
         bounds = None
         if kind == "stream":
             try:
@@ -363,26 +398,49 @@ class Fuzzer:
             except Exception:  # noqa: BLE001
                 bounds = None
         budget = max(min(self.minimise_seconds, deadline - time.perf_counter()), min(10.0, self.minimise_seconds))
-        f.minimal, f.min_stats = minimise(f.original.data, test, max_tests=self.minimise_tests,
-                                          max_seconds=budget, boundaries=bounds, check=lambda c: test(c, alone))
+        f.minimal, f.min_stats = minimise(
+            f.original.data,
+            test,
+            max_tests=self.minimise_tests,
+            max_seconds=budget,
+            boundaries=bounds,
+            check=lambda c: test(c, alone),
+        )
         f.min_verdict = last.get("v", f.verdict)
-        self.progress.message(f"  minimised {f.id}: {f.min_stats.bytes_before} -> {f.min_stats.bytes_after} bytes "
-                              f"({f.min_stats.tests} tests, {f.min_stats.seconds:.1f} s)"
-                              + ("  FLAKY: does not repeat on a fresh process" if f.min_stats.flaky else ""))
+        self.progress.message(
+            f"  minimised {f.id}: {f.min_stats.bytes_before} -> {f.min_stats.bytes_after} bytes "
+            f"({f.min_stats.tests} tests, {f.min_stats.seconds:.1f} s)"
+            + ("  FLAKY: does not repeat on a fresh process" if f.min_stats.flaky else "")
+        )
 
     def summary(self) -> dict:
         st = self.stats
         c, n = st.coverage()
-        return {"format": "fbaconf.fuzz/1", "target": getattr(self.target, "name", "?"), "seed": self.seed,
-                "seconds": round(st.elapsed, 2), "fuzz_seconds": round(st.elapsed - st.minimise_s, 2),
-                "execs": st.execs, "execs_per_s": round(st.rate, 1), "jobs": self.jobs,
-                "cpu_seconds": round(st.cpu_s, 2), "execs_per_cpu_s": round(st.execs / max(1e-9, st.cpu_s), 1),
-                "findings": st.findings, "finding_hits": st.hits,
-                "syntax_coverage": {"covered": c, "total": n, "features": sorted(st.features),
-                                    "measured_inputs": st.measured, "coverage_every": self.coverage_every,
-                                    "missing": sorted(set(st.universe) - st.features)},
-                "corpus": st.corpus, "decoder": self.decoder_info,
-                "finding_ids": [f.id for f in self.findings.values()]}
+        return {
+            "format": "fbaconf.fuzz/1",
+            "target": getattr(self.target, "name", "?"),
+            "seed": self.seed,
+            "seconds": round(st.elapsed, 2),
+            "fuzz_seconds": round(st.elapsed - st.minimise_s, 2),
+            "execs": st.execs,
+            "execs_per_s": round(st.rate, 1),
+            "jobs": self.jobs,
+            "cpu_seconds": round(st.cpu_s, 2),
+            "execs_per_cpu_s": round(st.execs / max(1e-9, st.cpu_s), 1),
+            "findings": st.findings,
+            "finding_hits": st.hits,
+            "syntax_coverage": {
+                "covered": c,
+                "total": n,
+                "features": sorted(st.features),
+                "measured_inputs": st.measured,
+                "coverage_every": self.coverage_every,
+                "missing": sorted(set(st.universe) - st.features),
+            },
+            "corpus": st.corpus,
+            "decoder": self.decoder_info,
+            "finding_ids": [f.id for f in self.findings.values()],
+        }
 
 
 def _scene_feats_of(inp: Entry) -> set[str]:

@@ -12,6 +12,7 @@ Layout::
     DIR/fuzz_target.c                   a libFuzzer target template (LLVMFuzzerTestOneInput)
     DIR/README.md                       how to use them
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -151,6 +152,9 @@ def export(out: Path, n_valid: int = 64, seed: int = 0) -> dict:
     (out / "oss-fuzz" / "build.sh").write_text(BUILD_SH)
     (out / "fuzz_target.c").write_text(TARGET_C)
     n = len(seen)
-    (out / "README.md").write_text(README.format(n=n, suite=counts["suite"], prefixes=counts["prefixes"],
-                                                 generated=counts["generated"], tokens=len(tokens)))
+    (out / "README.md").write_text(
+        README.format(
+            n=n, suite=counts["suite"], prefixes=counts["prefixes"], generated=counts["generated"], tokens=len(tokens)
+        )
+    )
     return {"seeds": n, **counts, "tokens": len(tokens), "dir": str(out)}

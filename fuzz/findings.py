@@ -1,4 +1,5 @@
 """Findings on disk (input, minimised input, reproduce script, JSON) and their replay."""
+
 from __future__ import annotations
 
 import hashlib
@@ -39,29 +40,45 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
     atomic_write_bytes(d / f"minimal.{ext}", minimal)
     target = fz.target
     info = fz.decoder_info
-    replay = ["fbaconf", "fuzz"] + (["--self"] if isinstance(target, SelfTarget) else
-                                    ["--decoder", str(info.get("manifest") or info.get("name", "?"))])
+    replay = ["fbaconf", "fuzz"] + (
+        ["--self"]
+        if isinstance(target, SelfTarget)
+        else ["--decoder", str(info.get("manifest") or info.get("name", "?"))]
+    )
     if f.original.kind != "stream":
         replay += ["--target", f.original.kind]
     replay += ["--replay", str((d / f"minimal.{ext}").resolve())]
     command = None
     if isinstance(target, DecoderTarget) and target.is_command:
         wd = "/tmp/fbaconf-repro"  # noqa: S108 - the reproduce script runs the decoder in a fixed folder it creates
-        values = {"input": str((d / f"minimal.{ext}").resolve()), "fba": str((d / f"minimal.{ext}").resolve()),
-                  "faps_out": f"{wd}/faps.{'fap' if target.adapter.faps_format == 'fap' else 'npz'}",
-                  "vertices_out": f"{wd}/vertices.npz", "images_dir": f"{wd}/images", "faps_out_dir": f"{wd}/faces"}
+        values = {
+            "input": str((d / f"minimal.{ext}").resolve()),
+            "fba": str((d / f"minimal.{ext}").resolve()),
+            "faps_out": f"{wd}/faps.{'fap' if target.adapter.faps_format == 'fap' else 'npz'}",
+            "vertices_out": f"{wd}/vertices.npz",
+            "images_dir": f"{wd}/images",
+            "faps_out_dir": f"{wd}/faces",
+        }
         if f.original.kind == "scene":
-            values.update(scene=values["input"], scene_bt=values["input"], input=str((d / "stream.fba").resolve()),
-                          fba=str((d / "stream.fba").resolve()))
+            values.update(
+                scene=values["input"],
+                scene_bt=values["input"],
+                input=str((d / "stream.fba").resolve()),
+                fba=str((d / "stream.fba").resolve()),
+            )
             atomic_write_bytes(d / "stream.fba", target.scene_stream or b"")
         try:
             command = target.adapter.argv("decode", Job(Path(wd), values))
         except KeyError:
             command = None
         lim = target.limits
-        script = ["#!/bin/sh", f"# reproduce finding {f.id}: {f.verdict.cls} ({f.verdict.signature})",
-                  f"# limits: timeout {lim.timeout_s:g} s, memory {lim.memory_mb} MB ({lim.memory_kind}), "
-                  f"output {lim.output_mb} MB", f"mkdir -p {wd}/images {wd}/faces"]
+        script = [
+            "#!/bin/sh",
+            f"# reproduce finding {f.id}: {f.verdict.cls} ({f.verdict.signature})",
+            f"# limits: timeout {lim.timeout_s:g} s, memory {lim.memory_mb} MB ({lim.memory_kind}), "
+            f"output {lim.output_mb} MB",
+            f"mkdir -p {wd}/images {wd}/faces",
+        ]
         if lim.memory_kind == "address-space" and lim.memory_mb:
             script.append(f"ulimit -v {lim.memory_mb * 1024}")
         if command:
@@ -72,23 +89,46 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
         os.chmod(d / "reproduce.sh", 0o755)  # noqa: S103 - an executable script, as its name says
     mv = f.min_verdict or f.verdict
     doc = {
-        "format": "fbaconf.fuzz-finding/1", "id": f.id, "class": f.verdict.cls, "signature": f.verdict.signature,
-        "message": f.verdict.message, "minimal_message": mv.message, "target": getattr(target, "name", "?"),
-        "input_kind": f.original.kind, "decoder": info, "seed": fz.seed, "input_index": f.index,
+        "format": "fbaconf.fuzz-finding/1",
+        "id": f.id,
+        "class": f.verdict.cls,
+        "signature": f.verdict.signature,
+        "message": f.verdict.message,
+        "minimal_message": mv.message,
+        "target": getattr(target, "name", "?"),
+        "input_kind": f.original.kind,
+        "decoder": info,
+        "seed": fz.seed,
+        "input_index": f.index,
         "corpus_size": f.original.corpus_size,
-        "origin": f.original.origin, "input_valid": bool(f.original.valid),
-        "found_at_s": round(f.found_at_s, 2), "hits": f.hits,
-        "original": {"file": f"original.{ext}", "bytes": len(f.original.data),
-                     "sha256": hashlib.sha256(f.original.data).hexdigest()},
+        "origin": f.original.origin,
+        "input_valid": bool(f.original.valid),
+        "found_at_s": round(f.found_at_s, 2),
+        "hits": f.hits,
+        "original": {
+            "file": f"original.{ext}",
+            "bytes": len(f.original.data),
+            "sha256": hashlib.sha256(f.original.data).hexdigest(),
+        },
         "minimal": {"file": f"minimal.{ext}", "bytes": len(minimal), "sha256": hashlib.sha256(minimal).hexdigest()},
-        "minimisation": ({"tests": f.min_stats.tests, "seconds": round(f.min_stats.seconds, 2),
-                          "reproduced": f.min_stats.reproduced, "flaky": f.min_stats.flaky}
-                         if f.min_stats else None),
+        "minimisation": (
+            {
+                "tests": f.min_stats.tests,
+                "seconds": round(f.min_stats.seconds, 2),
+                "reproduced": f.min_stats.reproduced,
+                "flaky": f.min_stats.flaky,
+            }
+            if f.min_stats
+            else None
+        ),
         # a finding whose input does not do it again on a fresh process, or that no input did alone
         "flaky": bool((f.min_stats and f.min_stats.flaky) or (f.verdict.detail or {}).get("flaky")),
         "detail": {k: v for k, v in (mv.detail or {}).items()},
-        "reproduce": {"fbaconf": shlex.join(replay), "command": command,
-                      "regenerate": f"input #{f.index} of seed {fz.seed} (corpus size {f.original.corpus_size})"},
+        "reproduce": {
+            "fbaconf": shlex.join(replay),
+            "command": command,
+            "regenerate": f"input #{f.index} of seed {fz.seed} (corpus size {f.original.corpus_size})",
+        },
     }
     atomic_write_text(d / "finding.json", json.dumps(doc, indent=1, default=str) + "\n")
     f.path = d

@@ -1,5 +1,6 @@
 """Fuzz inputs: the :class:`Entry` type (an input and where it came from) and valid face-object
 streams made from scratch through the reference encoder (:func:`gen_valid`)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -22,6 +23,7 @@ RATES = (25.0, 30.0, 15.0, 12.5, 10.0, 60.0, 7.5, 24.0, 30000 / 1001, 50.0)
 class InputKind(StrEnum):
     """What an input is: a face-object stream, a BT scene (text), a binary BIFS scene, or
     ``.fap`` text."""
+
     STREAM = "stream"
     SCENE = "scene"
     BIFS = "bifs"
@@ -31,6 +33,7 @@ class InputKind(StrEnum):
 @dataclass
 class Entry:
     """A corpus entry / an input: bytes (stream, BIFS) or text encoded UTF-8 (scene, .fap)."""
+
     data: bytes
     kind: InputKind = InputKind.STREAM
     origin: str = "seed"
@@ -57,8 +60,7 @@ def gen_valid(ch: Chooser) -> Entry:
         faps = None
     else:
         faps = sorted({ch.int(3, 68) for _ in range(ch.int(1, 12))})
-    frames = synthetic_sequence(n, rate, visemes=ch.bool(0.4), expressions=ch.bool(0.4), faps=faps,
-                                seed=ch.int(0, 50))
+    frames = synthetic_sequence(n, rate, visemes=ch.bool(0.4), expressions=ch.bool(0.4), faps=faps, seed=ch.int(0, 50))
     if n > 1 and ch.bool(0.3):  # sparse coding: masks, retained/free FAPs
         k = ch.int(2, 4)
         for row in range(1, n):
@@ -71,19 +73,23 @@ def gen_valid(ch: Chooser) -> Entry:
         frames.time_ms[:] = frames.frame_number * 1000.0 / rate
     coding = "dct" if ch.bool(0.15) else "arithmetic"
     opts = EncoderOptions(
-        fap_quant=ch.choice((0, 1, 1, 2, 4, 8, 16, 31)), intra_period=ch.choice((0, 0, 1, 2, 5)),
-        time_codes=ch.bool(0.3), plane_start_codes=ch.choice(("none", "intra", "all")),
-        ranges=ch.choice(("auto", "persist")), partial_mask_type=ch.choice((None, 1, 2)),
-        gender=ch.int(0, 1), coding=coding, end_code=ch.bool(0.85),
-        frame_rate=None if ch.bool(0.8) else ch.choice(("30000/1001", 12.5, 25)))
+        fap_quant=ch.choice((0, 1, 1, 2, 4, 8, 16, 31)),
+        intra_period=ch.choice((0, 0, 1, 2, 5)),
+        time_codes=ch.bool(0.3),
+        plane_start_codes=ch.choice(("none", "intra", "all")),
+        ranges=ch.choice(("auto", "persist")),
+        partial_mask_type=ch.choice((None, 1, 2)),
+        gender=ch.int(0, 1),
+        coding=coding,
+        end_code=ch.bool(0.85),
+        frame_rate=None if ch.bool(0.8) else ch.choice(("30000/1001", 12.5, 25)),
+    )
     if coding == "arithmetic" and n >= 4 and ch.bool(0.1):
         run = ch.int(1, 3)
         opts.coding_per_frame = ["arithmetic" if (k // run) % 2 == 0 else "dct" for k in range(n)]
     try:
         res = encode(frames, opts)
     except FbaconfInputError:
-        res = encode(synthetic_sequence(2, 25.0, visemes=False, expressions=False, faps=[3, 19]),
-                     EncoderOptions())
+        res = encode(synthetic_sequence(2, 25.0, visemes=False, expressions=False, faps=[3, 19]), EncoderOptions())
         return Entry(res.data, origin="generate:valid(fallback)", valid=True, recon=res.recon)
-    return Entry(res.data, origin=f"generate:valid(n={n},q={opts.fap_quant},{coding})", valid=True,
-                 recon=res.recon)
+    return Entry(res.data, origin=f"generate:valid(n={n},q={opts.fap_quant},{coding})", valid=True, recon=res.recon)

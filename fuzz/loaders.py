@@ -19,6 +19,7 @@ prints inputs/s and findings per target and writes each finding (the input and i
 traceback) under ``--out``; exit 1 when a finding was made. ``tests/unit/test_loader_fuzz.py``
 runs every target for a few seconds with a fixed seed.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,10 +41,47 @@ from fbaconf.errors import FbaconfInputError
 from fbaconf.harness.adapters import load_manifest
 
 ROOT = Path(__file__).resolve().parent.parent
-_STRANGE = [None, True, 0, -1, 2**63, -(2**64), 1e308, float("nan"), "", "x" * 5000, "\u202e\x00\udcff", [], {},
-            [[[[[[[[[[[[[[[[]]]]]]]]]]]]]]]], {"a": {"b": {"c": {}}}}, "../../etc/passwd", "simple@99", "{python}"]
-_BYTES = [b"\x00", b"\xff", b"\xef\xbb\xbf", b"\n", b"\r", b"\"", b"[", b"]", b"{", b"}", b"=", b"#", b"\\",
-          b"[[", b"\xc3", b"1e999", b"-0", b"inf", b"nan"]
+_STRANGE = [
+    None,
+    True,
+    0,
+    -1,
+    2**63,
+    -(2**64),
+    1e308,
+    float("nan"),
+    "",
+    "x" * 5000,
+    "\u202e\x00\udcff",
+    [],
+    {},
+    [[[[[[[[[[[[[[[[]]]]]]]]]]]]]]]],
+    {"a": {"b": {"c": {}}}},
+    "../../etc/passwd",
+    "simple@99",
+    "{python}",
+]
+_BYTES = [
+    b"\x00",
+    b"\xff",
+    b"\xef\xbb\xbf",
+    b"\n",
+    b"\r",
+    b'"',
+    b"[",
+    b"]",
+    b"{",
+    b"}",
+    b"=",
+    b"#",
+    b"\\",
+    b"[[",
+    b"\xc3",
+    b"1e999",
+    b"-0",
+    b"inf",
+    b"nan",
+]
 
 
 @dataclass
@@ -61,16 +99,16 @@ def mutate_bytes(rng: random.Random, data: bytes, pool: list[bytes]) -> bytes:
         if op == 0 and b:
             b[min(at, len(b) - 1)] ^= 1 << rng.randrange(8)
         elif op == 1 and b:
-            del b[at:at + rng.randint(1, 64)]
+            del b[at : at + rng.randint(1, 64)]
         elif op == 2:
             b[at:at] = rng.choice(_BYTES) * rng.choice((1, 1, 2, 100, 5000))
         elif op == 3 and b:
             n = rng.randint(1, 256)
-            b[at:at] = b[at:at + n] * rng.randint(2, 8)
+            b[at:at] = b[at : at + n] * rng.randint(2, 8)
         elif op == 4 and pool:
             other = rng.choice(pool)
             j = rng.randrange(len(other) + 1)
-            b[at:] = other[j:j + rng.randint(1, 4096)]
+            b[at:] = other[j : j + rng.randint(1, 4096)]
         else:
             b[at:at] = rng.choice(_BYTES)
     return bytes(b)
@@ -148,9 +186,17 @@ def mutate_toml(rng: random.Random, data: bytes, pool: list[bytes]) -> bytes:
             lines[i], lines[j] = lines[j], lines[i]
         return b"\n".join(lines)
     if r < 0.55:  # a table or key that is not the schema's
-        extra = rng.choice([b"[sandbox]\nread_only = [\"/\"]", b"python = \"subprocess:Popen\"", b"[limits]\nx = 1",
-                            b"tools = 3", b"[commands]\nserve = []", b"serve_equivalent = \"yes\"",
-                            b"a = " + b"[" * 3000 + b"]" * 3000])
+        extra = rng.choice(
+            [
+                b'[sandbox]\nread_only = ["/"]',
+                b'python = "subprocess:Popen"',
+                b"[limits]\nx = 1",
+                b"tools = 3",
+                b"[commands]\nserve = []",
+                b'serve_equivalent = "yes"',
+                b"a = " + b"[" * 3000 + b"]" * 3000,
+            ]
+        )
         lines.insert(rng.randrange(len(lines) + 1), extra)
         return b"\n".join(lines)
     return mutate_bytes(rng, data, pool)
@@ -159,6 +205,7 @@ def mutate_toml(rng: random.Random, data: bytes, pool: list[bytes]) -> bytes:
 # ------------------------------------------------------------------ targets
 class Target:
     """One loader: ``seeds`` (inputs), ``mutate`` and ``load`` (one input in a scratch folder)."""
+
     name = "?"
 
     def __init__(self, scratch: Path) -> None:
@@ -213,6 +260,7 @@ class SuiteTarget(Target):
 class PackageTarget(Target):
     """Inputs are one package file replaced, encoded as ``name\\0`` + a flag byte + the new bytes; the
     flag ``S`` updates the file's digest in ``SHA256SUMS``, ``K`` keeps the listed one."""
+
     name = "package"
 
     def __init__(self, scratch: Path, package: Path) -> None:
@@ -285,8 +333,24 @@ def fuzz(target: Target, seconds: float, seed: int, *, max_inputs: int | None = 
 
 def make_package(out: Path) -> Path:
     """``certify --decoder reference-inprocess --claim simple@1 --no-speed`` into ``out``."""
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", "reference-inprocess", "--claim",
-                        "simple@1", "--no-speed", "-o", str(out)], capture_output=True, text=True, timeout=1800)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "certify",
+            "--decoder",
+            "reference-inprocess",
+            "--claim",
+            "simple@1",
+            "--no-speed",
+            "-o",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
     if r.returncode != 0 or not (out / CERTIFICATE).is_file():
         raise FbaconfInputError(f"cannot make a package to fuzz: {r.stderr.strip()[-300:]}", rule="fuzz-setup")
     return out
@@ -310,8 +374,10 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 target = {"manifest": ManifestTarget, "suite": SuiteTarget}[name](scratch)
             st = fuzz(target, args.seconds, args.seed)
-            print(f"{name}: {st.inputs} inputs in {args.seconds:g} s ({st.inputs / args.seconds:,.0f}/s), "
-                  f"{len(st.findings)} traceback(s)")
+            print(
+                f"{name}: {st.inputs} inputs in {args.seconds:g} s ({st.inputs / args.seconds:,.0f}/s), "
+                f"{len(st.findings)} traceback(s)"
+            )
             for sig, (data, tb) in st.findings.items():
                 found += 1
                 d = args.out / name / hashlib.sha256(sig.encode()).hexdigest()[:12]

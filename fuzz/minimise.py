@@ -1,5 +1,6 @@
 """Minimisation of a finding's input (ddmin over bytes, then bits), checked: a minimised input
 is reported only once it has done again, on a fresh run, what it was kept for."""
+
 from __future__ import annotations
 
 import math
@@ -20,7 +21,7 @@ def ddmin(units: list, test: Callable[[list], bool], *, budget: Callable[[], boo
         for i in reversed(range(0, len(units), chunk)):
             if not budget():
                 break
-            cand = units[:i] + units[i + chunk:]
+            cand = units[:i] + units[i + chunk :]
             if cand and test(cand):
                 units = cand
                 n = max(n - 1, 2)
@@ -43,9 +44,16 @@ class MinimiseStats:
     flaky: bool = False  # a re-run of the original or the minimal input did not do it again
 
 
-def minimise(data: bytes, test: Callable[[bytes], bool], *, max_tests: int = 600, max_seconds: float = 30.0,
-             boundaries: list[int] | None = None, bits: bool = True,
-             check: Callable[[bytes], bool] | None = None) -> tuple[bytes, MinimiseStats]:
+def minimise(
+    data: bytes,
+    test: Callable[[bytes], bool],
+    *,
+    max_tests: int = 600,
+    max_seconds: float = 30.0,
+    boundaries: list[int] | None = None,
+    bits: bool = True,
+    check: Callable[[bytes], bool] | None = None,
+) -> tuple[bytes, MinimiseStats]:
     """The smallest input found that still passes ``test`` (same classification): prefixes at
     plane boundaries, then ddmin on bytes, then on bits (inputs up to 512 bytes).
 

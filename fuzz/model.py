@@ -1,5 +1,6 @@
 """The syntax model of a face-object stream for fuzzing: start codes and header fields found in the
 bytes, the features a run reports as its coverage."""
+
 from __future__ import annotations
 
 import collections
@@ -42,25 +43,90 @@ DICTIONARY: list[tuple[int, int, str]] = [
     (0x0000, 16, "zeros (arithmetic coder)"),
 ]
 
-ERROR_RULES = ("truncated", "start-code", "object-mask", "first-plane-intra", "frame-rate-zero", "marker",
-               "viseme-select-range", "expression-select-range", "value-overflow", "arith-state", "stuffing",
-               "invalid-vlc", "coefficient-overflow", "run-overflow", "intensity-range", "segment-length")
+ERROR_RULES = (
+    "truncated",
+    "start-code",
+    "object-mask",
+    "first-plane-intra",
+    "frame-rate-zero",
+    "marker",
+    "viseme-select-range",
+    "expression-select-range",
+    "value-overflow",
+    "arith-state",
+    "stuffing",
+    "invalid-vlc",
+    "coefficient-overflow",
+    "run-overflow",
+    "intensity-range",
+    "segment-length",
+)
 
 # The syntax model's features: what --self and --decoder report as "coverage of the syntax model".
 STREAM_FEATURES = (
-    "plane:intra", "plane:predicted", "plane:start-code", "plane:frame-rate", "plane:frame-rate-offset",
-    "plane:frame-rate-sixteenths", "plane:time-code", "plane:skip", "plane:skip-chain", "plane:gender",
-    "plane:fap_quant-0", "plane:fap_quant-31", "mask:00", "mask:01", "mask:10", "mask:11",
-    "list:i_max", "list:i_min", "list:p_max", "list:p_min", "coding:arithmetic", "coding:dct",
-    "block:viseme", "block:expression", "block:low-level", "stream:end-code", "stream:no-end-code",
-    "stream:other-end-code", "stream:several-intra", "stream:ok",
-    *(f"rule:{r}" for r in ERROR_RULES))
-SCENE_FEATURES = ("scene:ok", "scene:Face", "scene:FDP", "scene:FIT", "scene:FaceDefTables", "scene:FaceDefMesh",
-                  "scene:FaceDefTransform", "scene:FAP", "scene:IndexedFaceSet", "scene:DEF", "scene:USE",
-                  *(f"rule:{r}" for r in ("bt-token", "bt-eof", "bt-syntax", "bt-number", "bt-string",
-                                           "bt-unknown-node", "bt-unknown-field", "bt-node-type", "bt-bool",
-                                           "bt-use-undefined", "bt-def-duplicate", "bt-depth",
-                                           "bt-duplicate-field")))
+    "plane:intra",
+    "plane:predicted",
+    "plane:start-code",
+    "plane:frame-rate",
+    "plane:frame-rate-offset",
+    "plane:frame-rate-sixteenths",
+    "plane:time-code",
+    "plane:skip",
+    "plane:skip-chain",
+    "plane:gender",
+    "plane:fap_quant-0",
+    "plane:fap_quant-31",
+    "mask:00",
+    "mask:01",
+    "mask:10",
+    "mask:11",
+    "list:i_max",
+    "list:i_min",
+    "list:p_max",
+    "list:p_min",
+    "coding:arithmetic",
+    "coding:dct",
+    "block:viseme",
+    "block:expression",
+    "block:low-level",
+    "stream:end-code",
+    "stream:no-end-code",
+    "stream:other-end-code",
+    "stream:several-intra",
+    "stream:ok",
+    *(f"rule:{r}" for r in ERROR_RULES),
+)
+SCENE_FEATURES = (
+    "scene:ok",
+    "scene:Face",
+    "scene:FDP",
+    "scene:FIT",
+    "scene:FaceDefTables",
+    "scene:FaceDefMesh",
+    "scene:FaceDefTransform",
+    "scene:FAP",
+    "scene:IndexedFaceSet",
+    "scene:DEF",
+    "scene:USE",
+    *(
+        f"rule:{r}"
+        for r in (
+            "bt-token",
+            "bt-eof",
+            "bt-syntax",
+            "bt-number",
+            "bt-string",
+            "bt-unknown-node",
+            "bt-unknown-field",
+            "bt-node-type",
+            "bt-bool",
+            "bt-use-undefined",
+            "bt-def-duplicate",
+            "bt-depth",
+            "bt-duplicate-field",
+        )
+    ),
+)
 
 
 @dataclass
@@ -75,6 +141,7 @@ class Field:
 @dataclass
 class StreamModel:
     """What the syntax model knows of one stream."""
+
     data: bytes
     planes: list  # PlaneInfo records of the planes decoded completely
     fields: list[Field]
@@ -145,8 +212,15 @@ def _parse(data: bytes):
 def stream_model(data: bytes) -> StreamModel:
     """Parse ``data`` with the reference decoder (planes survive an error) and walk the headers."""
     planes, rule, end_code, end_offset = _parse(data)
-    return StreamModel(data, planes, header_fields(data, planes), rule, end_code, end_offset,
-                       stream_features(planes, end_code, rule, nbytes=len(data)))
+    return StreamModel(
+        data,
+        planes,
+        header_fields(data, planes),
+        rule,
+        end_code,
+        end_offset,
+        stream_features(planes, end_code, rule, nbytes=len(data)),
+    )
 
 
 def features_of(data: bytes) -> set[str]:
@@ -169,6 +243,7 @@ def header_fields(data: bytes, planes) -> list[Field]:
             v = r.read(w)
             out.append(Field(name, at, w, idx, v))
             return v
+
         try:
             if info.start_code:
                 out.append(Field("plane_start_code", info.header_offset - 32, 32, idx, START_CODES["plane"]))

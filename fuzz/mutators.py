@@ -1,4 +1,5 @@
 """Mutators of streams: structure-aware (field-level) and byte-level, with a dictionary of the syntax's tokens."""
+
 from __future__ import annotations
 
 import random
@@ -197,10 +198,18 @@ def m_dictionary(rng, e: Entry, corpus) -> bytes | None:
 
 
 FIELD_MUTATORS: dict[str, Callable] = {
-    "field-value": m_field_value, "zero-frame-rate": m_zero_frame_rate, "skip-chain": m_skip_chain,
-    "mask": m_mask, "lists": m_lists, "out-of-range-symbols": m_out_of_range, "time-code": m_time_code,
-    "stuffing": m_stuffing, "truncate-plane": m_truncate_plane, "splice": m_splice,
-    "drop-dup-plane": m_drop_dup_plane, "dictionary": m_dictionary,
+    "field-value": m_field_value,
+    "zero-frame-rate": m_zero_frame_rate,
+    "skip-chain": m_skip_chain,
+    "mask": m_mask,
+    "lists": m_lists,
+    "out-of-range-symbols": m_out_of_range,
+    "time-code": m_time_code,
+    "stuffing": m_stuffing,
+    "truncate-plane": m_truncate_plane,
+    "splice": m_splice,
+    "drop-dup-plane": m_drop_dup_plane,
+    "dictionary": m_dictionary,
 }
 
 
@@ -219,10 +228,12 @@ def b_insdel(rng, data: bytes, corpus) -> bytes:
     for _ in range(rng.randint(1, 4)):
         i = rng.randrange(len(b) + 1)
         if rng.random() < 0.5 and b:
-            del b[i:i + rng.choice((1, 1, 2, 4, 16))]
+            del b[i : i + rng.choice((1, 1, 2, 4, 16))]
         else:
-            b[i:i] = bytes(rng.choice((0x00, 0x01, 0xBA, 0xBB, 0xB1, 0xFF, 0x7F, rng.randrange(256)))
-                           for _ in range(rng.choice((1, 1, 2, 4))))
+            b[i:i] = bytes(
+                rng.choice((0x00, 0x01, 0xBA, 0xBB, 0xB1, 0xFF, 0x7F, rng.randrange(256)))
+                for _ in range(rng.choice((1, 1, 2, 4)))
+            )
     return bytes(b)
 
 
@@ -241,17 +252,22 @@ def b_chunk(rng, data: bytes, corpus) -> bytes:
     if not src:
         return data
     a = rng.randrange(len(src))
-    chunk = src[a:a + rng.randint(1, 64)]
+    chunk = src[a : a + rng.randint(1, 64)]
     i = rng.randrange(len(data) + 1)
-    return data[:i] + chunk + (data[i:] if rng.random() < 0.5 else data[i + len(chunk):])
+    return data[:i] + chunk + (data[i:] if rng.random() < 0.5 else data[i + len(chunk) :])
 
 
 def b_truncate(rng, data: bytes, corpus) -> bytes:
-    return data[:rng.randrange(len(data) + 1)]
+    return data[: rng.randrange(len(data) + 1)]
 
 
-BYTE_MUTATORS: dict[str, Callable] = {"bitflip": b_bitflip, "insdel": b_insdel, "overwrite": b_overwrite,
-                                      "chunk": b_chunk, "truncate": b_truncate}
+BYTE_MUTATORS: dict[str, Callable] = {
+    "bitflip": b_bitflip,
+    "insdel": b_insdel,
+    "overwrite": b_overwrite,
+    "chunk": b_chunk,
+    "truncate": b_truncate,
+}
 
 
 def mutate_stream(rng: random.Random, e: Entry, corpus: list[Entry], *, field_share: float = 0.7) -> tuple[bytes, str]:

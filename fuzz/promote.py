@@ -1,4 +1,5 @@
 """Promotion of findings into the regression suite (conformance/data/regression.toml)."""
+
 from __future__ import annotations
 
 import json
@@ -85,20 +86,31 @@ def promote(fuzz_dir: Path, data_dir: Path | None = None, *, log: Callable[[str]
         atomic_write_bytes(data_dir / rel, data)
         dec = doc.get("decoder") or {}
         origin = str(doc.get("origin", "")).split("<-")[-1]
-        desc = (f"fuzz finding {doc.get('id')}: {doc.get('class')} ({doc.get('signature')}) of decoder "
-                f"{dec.get('name', doc.get('target', '?'))}; minimal input of {len(data)} bytes "
-                f"(from {origin})")[:300]
-        lines = ["", "[[case]]", f"suite = {_toml_str(REGRESSION_SUITE)}", f"id = {_toml_str(cid)}",
-                 f"description = {_toml_str(desc)}", 'generator = "file"', f"file = {_toml_str(rel)}"]
+        desc = (
+            f"fuzz finding {doc.get('id')}: {doc.get('class')} ({doc.get('signature')}) of decoder "
+            f"{dec.get('name', doc.get('target', '?'))}; minimal input of {len(data)} bytes "
+            f"(from {origin})"
+        )[:300]
+        lines = [
+            "",
+            "[[case]]",
+            f"suite = {_toml_str(REGRESSION_SUITE)}",
+            f"id = {_toml_str(cid)}",
+            f"description = {_toml_str(desc)}",
+            'generator = "file"',
+            f"file = {_toml_str(rel)}",
+        ]
         if not valid:
             lines.append("expect = [" + ", ".join(_toml_str(c) for c in codes) + "]")
         text = text.rstrip("\n") + "\n" + "\n".join(lines) + "\n"
         existing.add(cid)
         case = {"id": cid, "file": rel, "valid": valid, "expect": None if valid else codes}
         added.append(case)
-        log(f"promoted {cid}: {rel} ({len(data)} bytes, " +
-            ("valid stream: decode case, run `fbaconf golden regenerate`" if valid else
-             f"error case, expect {codes}") + ")")
+        log(
+            f"promoted {cid}: {rel} ({len(data)} bytes, "
+            + ("valid stream: decode case, run `fbaconf golden regenerate`" if valid else f"error case, expect {codes}")
+            + ")"
+        )
     tomllib.loads(text)  # never write a file the suite builder cannot read
     atomic_write_text(reg, text)
     return added

@@ -1,4 +1,5 @@
 """BT scene inputs: generation and mutation for fuzzing the scene reader and scene compilation."""
+
 from __future__ import annotations
 
 import random
@@ -11,22 +12,82 @@ from .inputs import Entry
 from .mutators import BYTE_MUTATORS, _pick
 
 _BT_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|#[^\n]*|[\[\]{}]|[^\s\[\]{}"#,]+|\s+|.', re.S)
-BT_DICTIONARY = ("Face", "FDP", "FIT", "FAP", "Viseme", "Expression", "FaceDefTables", "FaceDefMesh",
-                 "FaceDefTransform", "Group", "Transform", "Shape", "IndexedFaceSet", "Coordinate",
-                 "TextureCoordinate", "DEF", "USE", "NULL", "TRUE", "FALSE", "[", "]", "{", "}", '"', '"\\',
-                 "fdp", "fit", "fap", "featurePointsCoord", "faceDefTables", "coordIndex", "point", "children",
-                 "numeratorTerms", "Graph", "FAPs", "intervalBorders", "displacements", "0x7fffffff",
-                 "-2147483649", "99999999999999999999", "1e309", "-1e-320", "nan", "inf", "-0", "0x", "1.5.5",
-                 "+", "-", "e", "\\", "\u00e9", "\x00", "#")
+BT_DICTIONARY = (
+    "Face",
+    "FDP",
+    "FIT",
+    "FAP",
+    "Viseme",
+    "Expression",
+    "FaceDefTables",
+    "FaceDefMesh",
+    "FaceDefTransform",
+    "Group",
+    "Transform",
+    "Shape",
+    "IndexedFaceSet",
+    "Coordinate",
+    "TextureCoordinate",
+    "DEF",
+    "USE",
+    "NULL",
+    "TRUE",
+    "FALSE",
+    "[",
+    "]",
+    "{",
+    "}",
+    '"',
+    '"\\',
+    "fdp",
+    "fit",
+    "fap",
+    "featurePointsCoord",
+    "faceDefTables",
+    "coordIndex",
+    "point",
+    "children",
+    "numeratorTerms",
+    "Graph",
+    "FAPs",
+    "intervalBorders",
+    "displacements",
+    "0x7fffffff",
+    "-2147483649",
+    "99999999999999999999",
+    "1e309",
+    "-1e-320",
+    "nan",
+    "inf",
+    "-0",
+    "0x",
+    "1.5.5",
+    "+",
+    "-",
+    "e",
+    "\\",
+    "\u00e9",
+    "\x00",
+    "#",
+)
 
 
 def _bt_value(ch: Chooser, ftype: str, allowed, depth: int, defs: list[str]) -> str:
     def num(intlike: bool) -> str:
         if intlike:
-            return str(ch.choice((0, 1, -1, 2, 5, 22, 68, ch.int(-300, 300), 2**31 - 1, -2**31)))
+            return str(ch.choice((0, 1, -1, 2, 5, 22, 68, ch.int(-300, 300), 2**31 - 1, -(2**31))))
         return repr(ch.choice((0.0, 1.0, -1.0, 0.5, ch.float(-100.0, 100.0), 1e-3, 3.4e38)))
-    sizes = {"SFVec2f": 2, "SFVec3f": 3, "SFColor": 3, "SFRotation": 4, "MFVec2f": 2, "MFVec3f": 3,
-             "MFColor": 3, "MFRotation": 4}
+
+    sizes = {
+        "SFVec2f": 2,
+        "SFVec3f": 3,
+        "SFColor": 3,
+        "SFRotation": 4,
+        "MFVec2f": 2,
+        "MFVec3f": 3,
+        "MFColor": 3,
+        "MFRotation": 4,
+    }
     if ftype == "SFInt32":
         return num(True)
     if ftype in ("SFFloat", "SFTime"):
@@ -96,8 +157,26 @@ def mutate_scene(rng: random.Random, e: Entry, corpus: list[Entry]) -> tuple[byt
     if r < 0.35:
         nums = [j for j in sig if re.match(r"[+-]?[0-9.]", toks[j])] or sig
         j = _pick(rng, nums)
-        toks[j] = rng.choice(("0", "-1", "2147483648", "-2147483649", "1e309", "nan", "1e-400", "0x10",
-                              "99999999999999999999999", "68", "69", "-2", "3.5", "1.", ".5e", "--1"))
+        toks[j] = rng.choice(
+            (
+                "0",
+                "-1",
+                "2147483648",
+                "-2147483649",
+                "1e309",
+                "nan",
+                "1e-400",
+                "0x10",
+                "99999999999999999999999",
+                "68",
+                "69",
+                "-2",
+                "3.5",
+                "1.",
+                ".5e",
+                "--1",
+            )
+        )
         what = "bt-number"
     elif r < 0.5:
         del toks[i]
@@ -128,8 +207,7 @@ def scene_features(scene=None, rule: str | None = None, text: str = "") -> set[s
         f.add(f"rule:{rule}")
         return f
     f.add("scene:ok")
-    for name in ("Face", "FDP", "FIT", "FaceDefTables", "FaceDefMesh", "FaceDefTransform", "FAP",
-                 "IndexedFaceSet"):
+    for name in ("Face", "FDP", "FIT", "FaceDefTables", "FaceDefMesh", "FaceDefTransform", "FAP", "IndexedFaceSet"):
         if re.search(rf"\b{name}\s*\{{", text):
             f.add(f"scene:{name}")
     if "DEF " in text:

@@ -1,4 +1,5 @@
 """Hypothesis strategies built from the generators and mutators, for property tests of any parser."""
+
 from __future__ import annotations
 
 import random
@@ -12,6 +13,7 @@ from .scenes import gen_scene, mutate_scene
 def valid_entries():
     """Hypothesis strategy: valid stream :class:`Entry` objects (with the encoder's reconstruction)."""
     from hypothesis import strategies as st  # noqa: PLC0415 (test-only dependency)
+
     return st.composite(lambda draw: gen_valid(DrawChooser(draw)))()
 
 
@@ -35,6 +37,7 @@ def near_valid_streams(seeds: list[bytes] | None = None):
         for _ in range(draw(st.integers(1, 3))):
             data, _how = mutate_stream(rng, Entry(data), [e])
         return data
+
     return strat()
 
 
@@ -50,4 +53,5 @@ def bt_scenes(mutated: bool = False):
             data, _ = mutate_scene(rng, e, [e])
             return data.decode("utf-8", "replace")
         return e.data.decode("utf-8")
+
     return strat()

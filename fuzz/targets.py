@@ -1,5 +1,6 @@
 """Targets and verdicts: the decoder under test (through the harness's sandbox and its one classifier
 of process endings) and fbaconf itself (--self)."""
+
 from __future__ import annotations
 
 import os
@@ -53,6 +54,7 @@ class Verdict:
 
 class FuzzSetupError(FbaconfInputError):
     """The fuzz run cannot start or continue (decoder not runnable, no seeds...)."""
+
     rule = "fuzz-setup"
 
 
@@ -77,6 +79,7 @@ _KEEP = {"case": frozenset(("in", "out", "tmp")), "out": frozenset(("images", "f
 @dataclass
 class _Slot:
     """One of a worker's case folders."""
+
     job: object
     input: Path
     dirs: list
@@ -87,6 +90,7 @@ class _Slot:
 @dataclass
 class _Worker:
     """One worker thread's case folders (used in turn) and fork server or persistent decoder."""
+
     root: Path
     slots: list = field(default_factory=list)
     turn: int = 0
@@ -118,20 +122,36 @@ class DecoderTarget:
     """A decoder adapter under its limits (command manifests through the sandbox; in-process
     Python adapters called directly)."""
 
-    def __init__(self, adapter, work_root: Path, *, kind: str = "stream", timeout_s: float | None = None,  # noqa: PLR0913
-                 expected_exit: Iterable[int] | None = None, oracle: bool = True,
-                 scene_stream: bytes | None = None, fork_server: bool = True, persistent: bool = True) -> None:
+    def __init__(  # noqa: PLR0913 - keyword options of a target
+        self,
+        adapter,
+        work_root: Path,
+        *,
+        kind: str = "stream",
+        timeout_s: float | None = None,
+        expected_exit: Iterable[int] | None = None,
+        oracle: bool = True,
+        scene_stream: bytes | None = None,
+        fork_server: bool = True,
+        persistent: bool = True,
+    ) -> None:
         self.adapter = adapter
         self.kind = kind
         self.work_root = Path(work_root).resolve()  # decoders run in their own folders: absolute paths
         self.work_root.mkdir(parents=True, exist_ok=True)
         lim = adapter.limits
-        self.limits = lim if timeout_s is None else Limits(min(lim.timeout_s, timeout_s), lim.memory_mb,
-                                                           lim.memory_kind, lim.output_mb, lim.processes)
+        self.limits = (
+            lim
+            if timeout_s is None
+            else Limits(min(lim.timeout_s, timeout_s), lim.memory_mb, lim.memory_kind, lim.output_mb, lim.processes)
+        )
         # The decoder's documented reject codes (manifest reject_exit_codes), unless overridden;
         # 0 (decoded) and 69 (not supported) are always expected endings.
-        self.reject_exit_codes = (frozenset(expected_exit) - {0, 69} if expected_exit is not None
-                                  else frozenset(getattr(adapter, "reject_exit_codes", (1, 2))))
+        self.reject_exit_codes = (
+            frozenset(expected_exit) - {0, 69}
+            if expected_exit is not None
+            else frozenset(getattr(adapter, "reject_exit_codes", (1, 2)))
+        )
         self.oracle = oracle and kind in ("stream", "text") and "faps" in adapter.outputs
         self.is_command = isinstance(adapter, CommandAdapter)
         self.scene_stream = scene_stream
@@ -142,8 +162,9 @@ class DecoderTarget:
         # (isolation/persistent.py) unless told otherwise.
         self.persistent = persistent and self.is_command and "serve" in adapter.commands
         if self.persistent and kind == "scene":
-            raise FuzzSetupError("the persistent protocol carries streams and .fap text, not scenes: "
-                                 "fuzz scenes with --spawn")
+            raise FuzzSetupError(
+                "the persistent protocol carries streams and .fap text, not scenes: fuzz scenes with --spawn"
+            )
         # Inputs a worker may have under way (queued to its server, running, or being judged):
         # a queue of a few absorbs the loop's slow inputs (a fresh valid stream takes ~8 ms
         # to encode) while the decoder keeps running; the spawning path runs one at a time.
@@ -155,8 +176,9 @@ class DecoderTarget:
         self._clean: bytes | None = None  # the shortest input answered cleanly (settled's follower)
         self._probed = False
         if kind == "stream" and "fba" not in adapter.inputs:
-            raise FuzzSetupError(f"decoder {adapter.name} does not accept binary streams (inputs: "
-                                 f"{', '.join(adapter.inputs)})")
+            raise FuzzSetupError(
+                f"decoder {adapter.name} does not accept binary streams (inputs: {', '.join(adapter.inputs)})"
+            )
         if kind == "text" and "fap" not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} accepts no .fap text (inputs: {', '.join(adapter.inputs)})")
         if kind == "scene" and "scene" not in adapter.inputs:
@@ -196,8 +218,12 @@ class DecoderTarget:
             fp.write_bytes(data)
             values.update(fba=str(fp), input=str(fp))
         ext = "fap" if self.adapter.faps_format == "fap" else "npz"
-        values.update(faps_out=str(outd / f"faps.{ext}"), vertices_out=str(outd / "vertices.npz"),
-                      images_dir=str(outd / "images"), faps_out_dir=str(outd / "faces"))
+        values.update(
+            faps_out=str(outd / f"faps.{ext}"),
+            vertices_out=str(outd / "vertices.npz"),
+            images_dir=str(outd / "images"),
+            faps_out_dir=str(outd / "faces"),
+        )
         (outd / "images").mkdir()
         (outd / "faces").mkdir()
         return Job(workdir=workdir, values=values, frames=0)
@@ -213,9 +239,13 @@ class DecoderTarget:
             for i in range(self.depth):
                 job = self._job(b"", root / f"case{i}")
                 d = job.workdir
-                w.slots.append(_Slot(job, Path(job.values["input"] if self.kind != "scene" else job.values["scene"]),
-                                     [str(d), str(d / "out"), str(d / "out" / "images"), str(d / "out" / "faces"),
-                                      str(d / "tmp")]))
+                w.slots.append(
+                    _Slot(
+                        job,
+                        Path(job.values["input"] if self.kind != "scene" else job.values["scene"]),
+                        [str(d), str(d / "out"), str(d / "out" / "images"), str(d / "out" / "faces"), str(d / "tmp")],
+                    )
+                )
             with self._workers_lock:
                 self._workers.append(w)
         return w
@@ -286,8 +316,14 @@ class DecoderTarget:
                 self._serve(w)
             elif w.server is None:
                 w.argv = [self.argv_for(s.job) for s in w.slots]  # a slot's paths never change
-                w.server = ForkServer(w.root, self._view(w, w.argv[0]), self.limits, env=self.adapter.env,
-                                      sum_outputs_every=16, slots=len(w.slots))
+                w.server = ForkServer(
+                    w.root,
+                    self._view(w, w.argv[0]),
+                    self.limits,
+                    env=self.adapter.env,
+                    sum_outputs_every=16,
+                    slots=len(w.slots),
+                )
             if self.persistent:
                 pending = w.server.start(inp.data, job.values["faps_out"])
                 pending.on_late = lambda res, inp=inp, job=job: self._late_ending(inp, job, res)
@@ -300,8 +336,9 @@ class DecoderTarget:
             if self.is_command:
                 argv = self.argv_for(job)
                 view = self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders())
-                out = ExecResult(self._judge(inp, job, sandbox.run(argv, job.workdir, self.limits,
-                                                                    env=self.adapter.env, view=view)))
+                out = ExecResult(
+                    self._judge(inp, job, sandbox.run(argv, job.workdir, self.limits, env=self.adapter.env, view=view))
+                )
             else:
                 out = ExecResult(self._run_python(inp, job))
         finally:
@@ -314,16 +351,21 @@ class DecoderTarget:
     def _clean_if(self, inp: Entry, out: ExecResult) -> ExecResult:
         """``out`` as it is; a clean input of 4 KB at most, shorter than the last, is kept as
         :meth:`settled`'s follower."""
-        if (self.persistent and out.verdict is None and len(inp.data) <= 4096
-                and (self._clean is None or len(inp.data) < len(self._clean))):
+        if (
+            self.persistent
+            and out.verdict is None
+            and len(inp.data) <= 4096
+            and (self._clean is None or len(inp.data) < len(self._clean))
+        ):
             self._clean = inp.data
         return out
 
     def _serve(self, w: _Worker) -> None:
         """The worker's persistent decoder (``[commands] serve``), started at its first input."""
         w.argv = [self.adapter.argv("serve", w.slots[0].job)]
-        w.server = PersistentDecoder(w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]),
-                                     self.limits, env=self.adapter.env)
+        w.server = PersistentDecoder(
+            w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]), self.limits, env=self.adapter.env
+        )
 
     def alone(self, inp: Entry) -> ExecResult:
         """``inp`` on a decoder process of its own, whose whole life is this input's: how a
@@ -397,10 +439,15 @@ class DecoderTarget:
         ending = endings.classify(res, self.limits, self.reject_exit_codes)
         if ending.kind == "setup":  # the harness's own knowledge (endings.py), never the decoder's words
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
-        detail = {"exit_code": res.returncode, "signal": res.signal, "elapsed_s": round(res.elapsed_s, 3),
-                  **({"notes": list(res.notes)} if res.notes else {}),
-                  **({"harness": res.detail} if res.detail else {}), "maxrss_mb": round(res.maxrss_mb, 1),
-                  "stderr_tail": res.stderr_tail[-1500:]}
+        detail = {
+            "exit_code": res.returncode,
+            "signal": res.signal,
+            "elapsed_s": round(res.elapsed_s, 3),
+            **({"notes": list(res.notes)} if res.notes else {}),
+            **({"harness": res.detail} if res.detail else {}),
+            "maxrss_mb": round(res.maxrss_mb, 1),
+            "stderr_tail": res.stderr_tail[-1500:],
+        }
         v = self.verdict_for(ending, inp, job, detail)
         if v is not None and FLAKY in res.notes:  # no input reproduces it alone: its own key, said so
             v = Verdict(v.cls, f"flaky:{v.signature}", f"{v.message} {res.detail}", {**v.detail, "flaky": True})
@@ -418,13 +465,19 @@ class DecoderTarget:
         if k == "output-limit":
             return Verdict("output-blowup", "output-limit", ending.message, detail)
         if k == "crash":
-            sig = ":".join(x for x in (detail.get("signal") or "", rep.kind if rep else "",
-                                       rep.signature if rep else "") if x)
+            sig = ":".join(
+                x for x in (detail.get("signal") or "", rep.kind if rep else "", rep.signature if rep else "") if x
+            )
             return Verdict("crash", sig or "crash", ending.message, {**detail, "crash_kind": rep.kind if rep else None})
         if k == "unexpected":
             rc, notes = detail.get("exit_code"), detail.get("notes", ())
-            sig = ("fork-server-killed" if "supervisor-lost" in notes else "protocol-error" if "protocol-error" in notes
-                   else f"exit-{rc}")
+            sig = (
+                "fork-server-killed"
+                if "supervisor-lost" in notes
+                else "protocol-error"
+                if "protocol-error" in notes
+                else f"exit-{rc}"
+            )
             return Verdict("unexpected-exit", sig, ending.message, detail)
         rc = {"decoded": 0, "not-supported": 69}.get(k, detail.get("exit_code"))
         return self._oracle(inp, job, rc, detail)
@@ -435,8 +488,12 @@ class DecoderTarget:
         ex = self.adapter.execute(job)
         if ex.ending.kind == "setup":
             raise FuzzSetupError(f"cannot run the decoder: {ex.ending.message}")
-        return self.verdict_for(ex.ending, inp, job, {"exit_code": ex.exit_code, "elapsed_s": round(ex.elapsed_s, 3),
-                                                      "stderr_tail": ex.stderr_tail[-1500:]})
+        return self.verdict_for(
+            ex.ending,
+            inp,
+            job,
+            {"exit_code": ex.exit_code, "elapsed_s": round(ex.elapsed_s, 3), "stderr_tail": ex.stderr_tail[-1500:]},
+        )
 
     def _oracle(self, inp: Entry, job, rc: int, detail: dict) -> Verdict | None:
         if rc == 69:
@@ -444,8 +501,13 @@ class DecoderTarget:
         if rc == 0 and self.kind == "stream":
             rule = reference_rejection(inp)
             if rule is not None:  # as in the run's error cases: decoding garbage silently is a defect
-                return Verdict("accepted-invalid", f"rule:{rule}", f"exit code 0 on a stream the reference rejects "
-                               f"(rule {rule}): decoded an invalid stream without complaint", detail)
+                return Verdict(
+                    "accepted-invalid",
+                    f"rule:{rule}",
+                    f"exit code 0 on a stream the reference rejects "
+                    f"(rule {rule}): decoded an invalid stream without complaint",
+                    detail,
+                )
         if not self.oracle:
             return None
         # the reference's frames first; whether the stream's reading is decision-free (a second,
@@ -469,8 +531,9 @@ class DecoderTarget:
             got = cmp.load_output_faps(path)
         except cmp.OutputError as e:
             return Verdict("wrong-output", "unreadable-output", f"unreadable FAP output: {e}", detail)
-        r = cmp.compare_faps(expected, got, text_output=path.suffix.lower() == ".fap" or self.kind == "text",
-                             player=self.kind == "text")
+        r = cmp.compare_faps(
+            expected, got, text_output=path.suffix.lower() == ".fap" or self.kind == "text", player=self.kind == "text"
+        )
         if r.outcome.ok:
             return None
         what = (r.first_difference or {}).get("what", "value")
@@ -523,6 +586,7 @@ class SelfTarget:
     """fbaconf's own parsers in-process: the decoder (typed errors only, sane output, round trip of
     generated streams), the checker (never raises, no internal diagnostic), the BT scene reader
     and the binary BIFS reader (typed errors only)."""
+
     name = "self"
 
     def __init__(self, *, checker_every: int = 4, slow_s: float = 5.0, scene_stream: bytes | None = None) -> None:
@@ -547,12 +611,17 @@ class SelfTarget:
             tb = traceback.format_exc()
             st = stack_hash(tb)
             where = _innermost_fbaconf_frame(e)
-            v = Verdict("exception", f"{inp.kind}:{type(e).__name__}:{where}:{st[1] if st else ''}",
-                        f"{inp.kind} parser raised {type(e).__name__}: {e} (at {where})", {"traceback": tb[-3000:]})
+            v = Verdict(
+                "exception",
+                f"{inp.kind}:{type(e).__name__}:{where}:{st[1] if st else ''}",
+                f"{inp.kind} parser raised {type(e).__name__}: {e} (at {where})",
+                {"traceback": tb[-3000:]},
+            )
         dt = time.thread_time() - t0
         if v is None and dt > self.slow_s:
-            v = Verdict("slow", f"{inp.kind}", f"{inp.kind} input took {dt:.1f} s of CPU (> {self.slow_s:g} s)",
-                        {"seconds": dt})
+            v = Verdict(
+                "slow", f"{inp.kind}", f"{inp.kind} input took {dt:.1f} s of CPU (> {self.slow_s:g} s)", {"seconds": dt}
+            )
         return ExecResult(v, feats)
 
     def _stream(self, inp: Entry, feats: set[str]) -> Verdict | None:
@@ -563,33 +632,42 @@ class SelfTarget:
             rule = getattr(e, "rule", "?")
             feats.add(f"rule:{rule}")
             if rule == "internal":
-                return Verdict("internal-error", f"decoder:{e.message.split(':')[0][:80]}",
-                               f"decoder internal failure: {e}")
+                return Verdict(
+                    "internal-error", f"decoder:{e.message.split(':')[0][:80]}", f"decoder internal failure: {e}"
+                )
             res = None
         if res is not None:
             feats |= stream_features(res.planes, res.end_code, None)
             fr = res.frames
             if fr.values.dtype != np.int32 or not np.isfinite(fr.time_ms).all() or len(fr.values) != len(fr.status):
-                return Verdict("bad-output", "decoder:frames", "decoded FapFrames malformed (dtype, non-finite "
-                               "times or inconsistent lengths)")
+                return Verdict(
+                    "bad-output",
+                    "decoder:frames",
+                    "decoded FapFrames malformed (dtype, non-finite times or inconsistent lengths)",
+                )
             if inp.recon is not None:
                 r = compare_faps(inp.recon, fr, text_output=False)
                 if not r.outcome.ok:
-                    return Verdict("round-trip", f"decoder:{(r.first_difference or {}).get('what')}",
-                                   f"generated stream decodes differently from the encoder's reconstruction: "
-                                   f"{r.message}", {"first_difference": r.first_difference})
+                    return Verdict(
+                        "round-trip",
+                        f"decoder:{(r.first_difference or {}).get('what')}",
+                        f"generated stream decodes differently from the encoder's reconstruction: {r.message}",
+                        {"first_difference": r.first_difference},
+                    )
         if self.count % self.checker_every == 0:
             return self._check(data, None)
         return None
 
     def _check(self, data: bytes, scene) -> Verdict | None:
-        rep = self.checker.analyse(data, scene=scene, claim="simple@1" if scene is None else "predictable@2",
-                                   smallest_claim=True)
+        rep = self.checker.analyse(
+            data, scene=scene, claim="simple@1" if scene is None else "predictable@2", smallest_claim=True
+        )
         bad = [d for d in rep.diagnostics if d.code == R.CHECK_INTERNAL or d.code not in R.CODES]
         if bad:
             msg = bad[0].message
-            return Verdict("internal-error", f"checker:{re.sub(r'[0-9]+', 'N', msg)[:80]}",
-                           f"checker internal failure: {msg}")
+            return Verdict(
+                "internal-error", f"checker:{re.sub(r'[0-9]+', 'N', msg)[:80]}", f"checker internal failure: {msg}"
+            )
         return None
 
     def _scene(self, inp: Entry, feats: set[str]) -> Verdict | None:

@@ -2,6 +2,7 @@
 line-level (the forms real tools write and break: comments anywhere, CRLF, wrapped and joined
 lines, a 69th mask entry, fractional and huge numbers, frame numbers out of order or past the
 header's count, header count 0) and byte-level."""
+
 from __future__ import annotations
 
 import random
@@ -24,8 +25,21 @@ def _lines(rng: random.Random, lines: list[str]) -> tuple[list[str], str]:
     if not lines:
         return ["2.1 x 25 0"], "empty"
     i = rng.randrange(len(lines))
-    op = rng.choice(("delete", "duplicate", "swap", "comment", "number", "join", "split", "mask69", "count0",
-                     "frame-back", "frame-far"))
+    op = rng.choice(
+        (
+            "delete",
+            "duplicate",
+            "swap",
+            "comment",
+            "number",
+            "join",
+            "split",
+            "mask69",
+            "count0",
+            "frame-back",
+            "frame-far",
+        )
+    )
     if op == "delete":
         del lines[i]
     elif op == "duplicate":
@@ -40,11 +54,11 @@ def _lines(rng: random.Random, lines: list[str]) -> tuple[list[str], str]:
         toks[rng.randrange(len(toks))] = rng.choice(_NUMBERS)
         lines[i] = " ".join(toks)
     elif op == "join" and i + 1 < len(lines):
-        lines[i:i + 2] = [lines[i] + " " + lines[i + 1]]
+        lines[i : i + 2] = [lines[i] + " " + lines[i + 1]]
     elif op == "split":
         toks = lines[i].split(" ")
         k = rng.randrange(len(toks) + 1)
-        lines[i:i + 1] = [" ".join(toks[:k]), " ".join(toks[k:])]
+        lines[i : i + 1] = [" ".join(toks[:k]), " ".join(toks[k:])]
     elif op == "mask69" and i:
         lines[i] = lines[i] + " 0"
     elif op == "count0":

@@ -1,4 +1,5 @@
 """Suite content: procedural FAP sequences from a case's content spec, and the encoder options of a case."""
+
 from __future__ import annotations
 
 from fractions import Fraction
@@ -37,8 +38,12 @@ def sweep_content(groups: list[list[int]], scale: dict, rate: float = 25.0):
                     out.hl(name)[k] = v
             elif fap == 2:
                 out.status[k, 1] = SET
-                for name, v in (("expression_select1", 1), ("expression_intensity1", 63),
-                                ("expression_select2", 1), ("expression_intensity2", 0)):
+                for name, v in (
+                    ("expression_select1", 1),
+                    ("expression_intensity1", 63),
+                    ("expression_select2", 1),
+                    ("expression_intensity2", 0),
+                ):
                     out.hl(name)[k] = v
             else:
                 f = ft[fap - 1]
@@ -51,9 +56,14 @@ def make_content(c: dict):
     """Procedural FapFrames for a case's ``content`` table."""
     if "sweep" in c:
         return sweep_content(c["sweep"], c.get("sweep_scale", {"default": 0.2}), float(c.get("rate", 25.0)))
-    frames = synthetic_sequence(int(c.get("frames", 30)), float(c.get("rate", 25.0)),
-                                visemes=bool(c.get("visemes", True)), expressions=bool(c.get("expressions", True)),
-                                faps=c.get("faps"), seed=int(c.get("seed", 0)))
+    frames = synthetic_sequence(
+        int(c.get("frames", 30)),
+        float(c.get("rate", 25.0)),
+        visemes=bool(c.get("visemes", True)),
+        expressions=bool(c.get("expressions", True)),
+        faps=c.get("faps"),
+        seed=int(c.get("seed", 0)),
+    )
     scale = float(c.get("scale", 1.0))
     if scale != 1.0:
         frames.values[:] = np.round(frames.values * scale).astype(np.int32)
@@ -83,7 +93,7 @@ def make_content(c: dict):
     for fap, (a, b) in c.get("free_after", {}).items():  # FAP coded only in frames [a, b)
         j = int(fap) - 1
         keep = np.zeros(len(frames), bool)
-        keep[int(a):int(b)] = True
+        keep[int(a) : int(b)] = True
         frames.status[~keep, j] = FREE
     ext = [int(f) for f in c.get("extremes", [])]
     if ext:  # values at the ends of the widest range (+-1860 steps): 0, +M, 0, -M ... (alternating phase)
@@ -97,7 +107,7 @@ def make_content(c: dict):
     if drops:
         keep = np.ones(len(frames), bool)
         for a, n in drops:
-            keep[int(a):int(a) + int(n)] = False
+            keep[int(a) : int(a) + int(n)] = False
         frames = frames.select(np.nonzero(keep)[0])
     return frames
 

@@ -1,5 +1,6 @@
 """Generated FaceDefTables for the default head: FaceDefMesh (4-5 intervals per FAP) and
 FaceDefTransform (eyeballs, pupils, head rotation) for all 66 low-level FAPs."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -85,7 +86,7 @@ def head_tables(m: HeadModel, fapu) -> dict[int, list]:
     T: dict[int, list] = {}
 
     def gx(c, s):
-        return np.exp(-((x - c) / s) ** 2)
+        return np.exp(-(((x - c) / s) ** 2))
 
     def add_lin(fap, part, w, direction, verts=None):
         w = np.asarray(w, dtype=np.float64)
@@ -95,19 +96,20 @@ def head_tables(m: HeadModel, fapu) -> dict[int, list]:
         d = np.asarray(direction, dtype=np.float64)
         u = units[fap - 1]
         ww = w[idx]
-        spec = mesh_from_function(part, idx, lambda a: (a * u * saturate(a, fap)) * ww[:, None] * d[None, :],
-                                  fap_borders(fap), u)
+        spec = mesh_from_function(
+            part, idx, lambda a: (a * u * saturate(a, fap)) * ww[:, None] * d[None, :], fap_borders(fap), u
+        )
         if spec is not None:
             T.setdefault(fap, []).append(spec)
 
-    vin_u = np.exp(-((y - MOUTH_Y) / 3.0) ** 2) + 0.35 * np.exp(-((y - MOUTH_Y - 6.5) / 4.0) ** 2)
-    vin_l = np.exp(-((y - MOUTH_Y) / 3.0) ** 2) + 0.35 * np.exp(-((y - MOUTH_Y + 7.0) / 4.0) ** 2)
-    vout_u = np.exp(-((y - MOUTH_Y - 6.5) / 3.5) ** 2) + 0.5 * np.exp(-((y - MOUTH_Y) / 3.0) ** 2)
-    vout_l = np.exp(-((y - MOUTH_Y + 7.0) / 3.5) ** 2) + 0.5 * np.exp(-((y - MOUTH_Y) / 3.0) ** 2)
+    vin_u = np.exp(-(((y - MOUTH_Y) / 3.0) ** 2)) + 0.35 * np.exp(-(((y - MOUTH_Y - 6.5) / 4.0) ** 2))
+    vin_l = np.exp(-(((y - MOUTH_Y) / 3.0) ** 2)) + 0.35 * np.exp(-(((y - MOUTH_Y + 7.0) / 4.0) ** 2))
+    vout_u = np.exp(-(((y - MOUTH_Y - 6.5) / 3.5) ** 2)) + 0.5 * np.exp(-(((y - MOUTH_Y) / 3.0) ** 2))
+    vout_l = np.exp(-(((y - MOUTH_Y + 7.0) / 3.5) ** 2)) + 0.5 * np.exp(-(((y - MOUTH_Y) / 3.0) ** 2))
     xc = tags["corner_x"]
     corner = {s: np.exp(-(((x - s * xc) / 13.0) ** 2 + ((y - MOUTH_Y) / 9.0) ** 2)) * fr for s in (1, -1)}
     corner_o = {s: np.exp(-(((x - s * (xc + 2)) / 15.0) ** 2 + ((y - MOUTH_Y) / 12.0) ** 2)) * fr for s in (1, -1)}
-    lipx = np.exp(-(x / 22.0) ** 4) * fr
+    lipx = np.exp(-((x / 22.0) ** 4)) * fr
     # --- group 2: jaw, inner lip, corners, chin
     hinge = np.array([0.0, 0.0, -20.0])
     chin = m.world(*m.feature_points["2.1"])
@@ -130,8 +132,12 @@ def head_tables(m: HeadModel, fapu) -> dict[int, list]:
         d = q2 - q + (np.array([0.0, -drop, 0.0]) - chin_d)[None, :]
         return d * w[:, None]
 
-    jaw_parts = [("Skin", V, w_jaw), ("LowerTeeth", m.parts["LowerTeeth"].vertices, None),
-                 ("Tongue", m.parts["Tongue"].vertices, None), ("Cavity", m.parts["Cavity"].vertices, "cav")]
+    jaw_parts = [
+        ("Skin", V, w_jaw),
+        ("LowerTeeth", m.parts["LowerTeeth"].vertices, None),
+        ("Tongue", m.parts["Tongue"].vertices, None),
+        ("Cavity", m.parts["Cavity"].vertices, "cav"),
+    ]
     for part, P, w in jaw_parts:
         if w is None:
             w = np.ones(len(P))
@@ -206,29 +212,35 @@ def head_tables(m: HeadModel, fapu) -> dict[int, list]:
         bx = B[:, 0]
         above = (y > EYE_Y + 6.0).astype(float) * fr
         for fap, cx in zip((31, 33, 35) if s > 0 else (32, 34, 36), (14.0, 31.0, 48.0)):
-            add_lin(fap, f"{side}Brow", np.exp(-((bx - s * cx) / 10.0) ** 2), (0, 1, 0))
+            add_lin(fap, f"{side}Brow", np.exp(-(((bx - s * cx) / 10.0) ** 2)), (0, 1, 0))
             add_lin(fap, "Skin", above * np.exp(-(((x - s * cx) / 11.0) ** 2 + ((y - 40.0) / 10.0) ** 2)), (0, 1, 0))
         fap = 37 if s > 0 else 38
-        add_lin(fap, f"{side}Brow", np.exp(-((bx - s * 13.0) / 16.0) ** 2), (-s, 0, 0))
+        add_lin(fap, f"{side}Brow", np.exp(-(((bx - s * 13.0) / 16.0) ** 2)), (-s, 0, 0))
         add_lin(fap, "Skin", above * np.exp(-(((x - s * 16.0) / 11.0) ** 2 + ((y - 38.0) / 9.0) ** 2)), (-s, 0, 0))
     # --- group 5: cheeks
     for s, fp_, fl in ((1, 39, 41), (-1, 40, 42)):
-        add_lin(fp_, "Skin", np.exp(-(((x - s * 42.0) ** 2 + (y + 28.0) ** 2) / 16.0 ** 2)) * fr, (0.8 * s, 0, 0.6))
-        add_lin(fl, "Skin", np.exp(-(((x - s * 40.0) ** 2 + (y + 6.0) ** 2) / 14.0 ** 2)) * fr
-                * (y < EYE_Y - 3.0), (0, 1, 0))
+        add_lin(fp_, "Skin", np.exp(-(((x - s * 42.0) ** 2 + (y + 28.0) ** 2) / 16.0**2)) * fr, (0.8 * s, 0, 0.6))
+        add_lin(
+            fl, "Skin", np.exp(-(((x - s * 40.0) ** 2 + (y + 6.0) ** 2) / 14.0**2)) * fr * (y < EYE_Y - 3.0), (0, 1, 0)
+        )
     # --- group 6: tongue
     G = m.parts["Tongue"].vertices
     zt = (G[:, 2] - G[:, 2].min()) / np.ptp(G[:, 2])
-    tip = zt ** 2
+    tip = zt**2
     add_lin(43, "Tongue", tip, (-1, 0, 0))
     add_lin(44, "Tongue", tip, (0, 1, 0))
     add_lin(45, "Tongue", tip, (0, 0, 1))
-    add_lin(46, "Tongue", np.exp(-((zt - 0.5) / 0.3) ** 2), (0, 1, 0))
+    add_lin(46, "Tongue", np.exp(-(((zt - 0.5) / 0.3) ** 2)), (0, 1, 0))
     roll = np.abs(G[:, 0] - G[:, 0].mean())
-    spec = mesh_from_function("Tongue", np.nonzero(roll > 1.0)[0],
-                              lambda a, rr=roll[roll > 1.0]: np.stack(
-                                  [np.zeros_like(rr), a * units[46] * rr * saturate(a, 47), np.zeros_like(rr)], 1),
-                              fap_borders(47), units[46])
+    spec = mesh_from_function(
+        "Tongue",
+        np.nonzero(roll > 1.0)[0],
+        lambda a, rr=roll[roll > 1.0]: np.stack(
+            [np.zeros_like(rr), a * units[46] * rr * saturate(a, 47), np.zeros_like(rr)], 1
+        ),
+        fap_borders(47),
+        units[46],
+    )
     T.setdefault(47, []).append(spec)
     # --- group 7: head rotation about the skull base (7.1)
     T[48] = [TransformSpec("Head", 1, rotation=(1.0, 0.0, 0.0, 1.0))]
@@ -249,14 +261,22 @@ def head_tables(m: HeadModel, fapu) -> dict[int, list]:
     add_lin(61, "Skin", np.exp(-(((x - 11.0) / 5.0) ** 2 + ((y + 15.0) / 6.0) ** 2)) * fr, (1, 0, 0))
     add_lin(62, "Skin", np.exp(-(((x + 11.0) / 5.0) ** 2 + ((y + 15.0) / 6.0) ** 2)) * fr, (-1, 0, 0))
     add_lin(63, "Skin", np.exp(-((x / 9.0) ** 2 + ((y + 11.0) / 8.0) ** 2)) * fr, (0, 1, 0))
-    add_lin(64, "Skin", np.exp(-((x / 10.0) ** 2 + ((y + 9.0) / 11.0) ** 2)) * fr
-            * np.clip((z - 95.0) / 15.0, 0.0, 1.0), (-1, 0, 0))
+    add_lin(
+        64,
+        "Skin",
+        np.exp(-((x / 10.0) ** 2 + ((y + 9.0) / 11.0) ** 2)) * fr * np.clip((z - 95.0) / 15.0, 0.0, 1.0),
+        (-1, 0, 0),
+    )
     # --- group 10: ears
     for side, s, (fr_, fpull) in (("Left", 1, (65, 67)), ("Right", -1, (66, 68))):
         E = m.parts[f"{side}Ear"].vertices
         add_lin(fr_, f"{side}Ear", np.clip((E[:, 1] - E[:, 1].min()) / np.ptp(E[:, 1]), 0.3, 1.0), (0, 1, 0))
-        add_lin(fpull, f"{side}Ear", np.clip(s * (E[:, 0] - E[:, 0].min() if s > 0 else E[:, 0] - E[:, 0].max())
-                                             / np.ptp(E[:, 0]), 0.2, 1.0), (s, 0, 0))
+        add_lin(
+            fpull,
+            f"{side}Ear",
+            np.clip(s * (E[:, 0] - E[:, 0].min() if s > 0 else E[:, 0] - E[:, 0].max()) / np.ptp(E[:, 0]), 0.2, 1.0),
+            (s, 0, 0),
+        )
     missing = [f for f in range(3, 69) if f not in T]
     if missing:
         raise RuntimeError(f"default head has no table for FAPs {missing}")

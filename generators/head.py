@@ -1,6 +1,7 @@
 """The generated default head: skull, skin with nose, lips and eye openings, eyeballs, eyebrows, teeth,
 tongue, mouth cavity, ears and neck, and its 84 feature points on real vertices (deterministic: no
 randomness, no files read)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -12,10 +13,18 @@ from fbaconf.animation.faceparams import FEATURE_POINTS
 PREDICTABLE_L1_MAX_VERTICES = 5000  # profiles-and-levels.md, Predictable L1 (provisional)
 
 COLORS = {
-    "skin": (0.80, 0.58, 0.47), "lips": (0.70, 0.30, 0.30), "eye_white": (0.93, 0.93, 0.90),
-    "iris": (0.25, 0.42, 0.62), "pupil": (0.03, 0.03, 0.03), "brows": (0.22, 0.14, 0.09),
-    "teeth": (0.92, 0.90, 0.82), "tongue": (0.72, 0.35, 0.36), "cavity": (0.18, 0.05, 0.05),
-    "ears": (0.78, 0.56, 0.45), "neck": (0.76, 0.55, 0.45), "logo": (0.15, 0.45, 0.80),
+    "skin": (0.80, 0.58, 0.47),
+    "lips": (0.70, 0.30, 0.30),
+    "eye_white": (0.93, 0.93, 0.90),
+    "iris": (0.25, 0.42, 0.62),
+    "pupil": (0.03, 0.03, 0.03),
+    "brows": (0.22, 0.14, 0.09),
+    "teeth": (0.92, 0.90, 0.82),
+    "tongue": (0.72, 0.35, 0.36),
+    "cavity": (0.18, 0.05, 0.05),
+    "ears": (0.78, 0.56, 0.45),
+    "neck": (0.76, 0.55, 0.45),
+    "logo": (0.15, 0.45, 0.80),
 }
 
 # Face layout (neutral), millimetres.
@@ -51,14 +60,14 @@ def _features(x, y):
     ny = [-26.0, -20.0, -14.0, -9.0, 0.0, 12.0, 24.0, 32.0]
     nh = [0.0, 9.0, 20.0, 23.0, 17.0, 10.0, 4.0, 0.0]
     nw = [13.0, 12.0, 10.0, 8.0, 6.5, 5.5, 5.0, 5.0]
-    h = np.interp(y, ny, nh, left=0.0, right=0.0) * np.exp(-(x / np.interp(y, ny, nw)) ** 2)
+    h = np.interp(y, ny, nh, left=0.0, right=0.0) * np.exp(-((x / np.interp(y, ny, nw)) ** 2))
     # nostril wings
     h += 5.0 * np.exp(-(((ax - 10.0) / 4.5) ** 2 + ((y + 16.0) / 4.5) ** 2))
-    h += 5.0 * np.exp(-((y - 39.0) / 6.0) ** 2) * np.exp(-((ax - 28.0) / 22.0) ** 2)  # brow ridge
-    h += 6.0 * np.exp(-(((ax - 40.0) ** 2 + (y + 10.0) ** 2) / 18.0 ** 2))  # cheeks
-    lips = np.exp(-(x / 24.0) ** 4)
-    h += 6.0 * lips * np.exp(-((y + 41.5) / 4.5) ** 2) + 6.5 * lips * np.exp(-((y + 49.0) / 5.0) ** 2)
-    h += 3.0 * np.exp(-(x / 28.0) ** 2) * np.exp(-((y + 45.0) / 12.0) ** 2)  # mouth region
+    h += 5.0 * np.exp(-(((y - 39.0) / 6.0) ** 2)) * np.exp(-(((ax - 28.0) / 22.0) ** 2))  # brow ridge
+    h += 6.0 * np.exp(-(((ax - 40.0) ** 2 + (y + 10.0) ** 2) / 18.0**2))  # cheeks
+    lips = np.exp(-((x / 24.0) ** 4))
+    h += 6.0 * lips * np.exp(-(((y + 41.5) / 4.5) ** 2)) + 6.5 * lips * np.exp(-(((y + 49.0) / 5.0) ** 2))
+    h += 3.0 * np.exp(-((x / 28.0) ** 2)) * np.exp(-(((y + 45.0) / 12.0) ** 2))  # mouth region
     h += 7.0 * np.exp(-((x / 20.0) ** 2 + ((y + 76.0) / 10.0) ** 2))  # chin
     h -= 4.0 * np.exp(-((x / 22.0) ** 2 + ((y + 62.0) / 5.0) ** 2))  # groove under the lip
     return h
@@ -67,8 +76,8 @@ def _features(x, y):
 def eye_open(xrel):
     """Neutral upper and lower lid offsets from the eye line (almond), xrel in [-1, 1]."""
     u = np.clip(np.abs(xrel), 0.0, 1.0)
-    base = np.sqrt(np.clip(1.0 - u ** 2, 0.0, 1.0))
-    return IRIS_R * base ** 0.9, IRIS_R * base
+    base = np.sqrt(np.clip(1.0 - u**2, 0.0, 1.0))
+    return IRIS_R * base**0.9, IRIS_R * base
 
 
 @dataclass
@@ -146,8 +155,16 @@ def _build_skin(n_lon: int, density: float):
         cols = np.nonzero(fr & (xe > lo + 1e-6) & (xe < hi - 1e-6))[0]
         c_mid = cols[np.argmin(np.abs(np.abs(xe[cols]) - EYE_X))]
         eye_cols[side] = cols
-        eye_info[side] = dict(lo=lo, hi=hi, xc=float(xe[c_mid]), half=(hi - lo) / 2, mid=(hi + lo) / 2,
-                              c_mid=int(c_mid), c_in=c_in, c_out=c_out)
+        eye_info[side] = dict(
+            lo=lo,
+            hi=hi,
+            xc=float(xe[c_mid]),
+            half=(hi - lo) / 2,
+            mid=(hi + lo) / 2,
+            c_mid=int(c_mid),
+            c_in=c_in,
+            c_out=c_out,
+        )
         hu_c, hl_c = eye_open((xe[c_mid] - (hi + lo) / 2) / ((hi - lo) / 2))
         eye_info[side]["irisd0"] = float(hu_c + hl_c)  # eyelid distance at the pupil = iris diameter
     # open the eyes: move rows above/below the eye line apart (monotonic, no folds)
@@ -223,14 +240,32 @@ def _build_skin(n_lon: int, density: float):
         for lo_i, up_i in slit[name]:
             is_lower[lo_i] = True
             is_upper[up_i] = True
-    phis = np.concatenate([np.tile(phi, R), phi[np.array([g[0] % C for g in slit.get("mouth", [])] +
-                                                         [g[0] % C for n in slit if n != "mouth" for g in slit[n]],
-                                                         dtype=int)], [0.0, 0.0]])
+    phis = np.concatenate(
+        [
+            np.tile(phi, R),
+            phi[
+                np.array(
+                    [g[0] % C for g in slit.get("mouth", [])]
+                    + [g[0] % C for n in slit if n != "mouth" for g in slit[n]],
+                    dtype=int,
+                )
+            ],
+            [0.0, 0.0],
+        ]
+    )
     u = (phis / (2 * np.pi) + 0.5) % 1.0
     v = (V[:, 1] - V[:, 1].min()) / np.ptp(V[:, 1])
-    tags = dict(slit=slit, eye_info=eye_info, eye_shell=eye_shell, mouth_row_y=MOUTH_Y, upper_copy=is_upper,
-                lower_copy=is_lower,
-                front=np.cos(phis), corner_x=float(xcm), grid=(idx, upper, r_m, r_e, mouth_cols))
+    tags = dict(
+        slit=slit,
+        eye_info=eye_info,
+        eye_shell=eye_shell,
+        mouth_row_y=MOUTH_Y,
+        upper_copy=is_upper,
+        lower_copy=is_lower,
+        front=np.cos(phis),
+        corner_x=float(xcm),
+        grid=(idx, upper, r_m, r_e, mouth_cols),
+    )
     return V, np.array(tris, dtype=np.int64), np.stack([u, v], axis=1), tags, eye_z, eye_shell
 
 
@@ -246,10 +281,18 @@ def _uv_sphere(center, radii, n_lat, n_lon, inward=False, lat_range=(-np.pi / 2,
     lat = np.linspace(lat_range[0], lat_range[1], n_lat + 1)[1:-1]
     lon = np.linspace(-np.pi, np.pi, n_lon, endpoint=False)
     cl, sl = np.cos(lat)[:, None], np.sin(lat)[:, None]
-    pts = np.stack([cl * np.sin(lon)[None, :], np.broadcast_to(sl, (len(lat), n_lon)),
-                    cl * np.cos(lon)[None, :]], axis=-1).reshape(-1, 3)
-    pts = np.vstack([pts, [[0, np.sin(lat_range[0]) if lat_range[0] > -np.pi / 2 else -1, 0],
-                           [0, np.sin(lat_range[1]) if lat_range[1] < np.pi / 2 else 1, 0]]])
+    pts = np.stack(
+        [cl * np.sin(lon)[None, :], np.broadcast_to(sl, (len(lat), n_lon)), cl * np.cos(lon)[None, :]], axis=-1
+    ).reshape(-1, 3)
+    pts = np.vstack(
+        [
+            pts,
+            [
+                [0, np.sin(lat_range[0]) if lat_range[0] > -np.pi / 2 else -1, 0],
+                [0, np.sin(lat_range[1]) if lat_range[1] < np.pi / 2 else 1, 0],
+            ],
+        ]
+    )
     V = np.asarray(center) + pts * np.asarray(radii)
     rows = len(lat)
     idx = np.arange(rows * n_lon).reshape(rows, n_lon)
@@ -337,10 +380,12 @@ def build_head(n_lon: int = 48, density: float = 1.0, filler_vertices: int = 0) 
         parts[f"{side}Iris"] = Part(f"{side}Iris", iv, it, "iris", parent=f"{side}Eye")
         pv, pt = _cap(EYE_R + 0.12, np.arcsin(iris_r / 3 / (EYE_R + 0.12)), 1, 12)  # pupil = IRISD0 / 3
         parts[f"{side}PupilDisc"] = Part(f"{side}PupilDisc", pv, pt, "pupil", parent=f"{side}Pupil")
+
     # eyebrows: strips hugging the skin
     def skin_z(x, y):
         k = _nearest(V[:, :2], (x, y), mask=front > 0.2)
         return V[k, 2]
+
     for side, sx in (("Left", 1.0), ("Right", -1.0)):
         xs = np.linspace(13.0, 50.0, 10)
         mid = 39.0 + 4.0 * np.sin(np.pi * (xs - 13.0) / 37.0) - 1.5 * (xs - 13) / 37
@@ -404,8 +449,9 @@ def build_head(n_lon: int = 48, density: float = 1.0, filler_vertices: int = 0) 
     if filler_vertices:
         k = filler_vertices
         a = 2 * np.pi * np.arange(k - 1) / (k - 1)
-        fv = np.vstack([[0.0, -120.0, 24.5], np.stack([6 * np.sin(a), -120.0 + 6 * np.cos(a),
-                                                      np.full(k - 1, 24.5)], 1)])
+        fv = np.vstack(
+            [[0.0, -120.0, 24.5], np.stack([6 * np.sin(a), -120.0 + 6 * np.cos(a), np.full(k - 1, 24.5)], 1)]
+        )
         ft = np.array([(0, 1 + i, 1 + (i + 1) % (k - 1)) for i in range(k - 1)], dtype=np.int64)[:, [0, 2, 1]]
         parts["Badge"] = Part("Badge", fv, ft, "iris", parent="root")
     model = HeadModel(parts, transforms, {}, eye_z)
@@ -447,8 +493,10 @@ def _feature_points(m: HeadModel, tags, eye_z) -> dict[str, tuple[str, int]]:
     skin("2.12", (-16, -74, 200))
     skin("2.13", (55, -45, 20), tags["front"] > 0)
     skin("2.14", (-55, -45, 20), tags["front"] > 0)
-    for side, s, lab in (("l", 1, ("3.1", "3.3", "3.7", "3.11", "3.9", "3.13")),
-                         ("r", -1, ("3.2", "3.4", "3.8", "3.12", "3.10", "3.14"))):
+    for side, s, lab in (
+        ("l", 1, ("3.1", "3.3", "3.7", "3.11", "3.9", "3.13")),
+        ("r", -1, ("3.2", "3.4", "3.8", "3.12", "3.10", "3.14")),
+    ):
         info = tags["eye_info"][side]
         eye_slit = np.zeros(len(S), bool)
         for a, b in tags["slit"]["eye_" + side]:
@@ -463,10 +511,16 @@ def _feature_points(m: HeadModel, tags, eye_z) -> dict[str, tuple[str, int]]:
         skin(lab[5], (info["xc"], EYE_Y + 11, 200), front & ~on_slit)
     fp["3.5"] = ("LeftPupilDisc", 0)
     fp["3.6"] = ("RightPupilDisc", 0)
-    for label, (part, x) in {"4.1": ("LeftBrow", 13), "4.2": ("RightBrow", -13), "4.3": ("LeftBrow", 31),
-                             "4.4": ("RightBrow", -31), "4.5": ("LeftBrow", 50), "4.6": ("RightBrow", -50)}.items():
+    for label, (part, x) in {
+        "4.1": ("LeftBrow", 13),
+        "4.2": ("RightBrow", -13),
+        "4.3": ("LeftBrow", 31),
+        "4.4": ("RightBrow", -31),
+        "4.5": ("LeftBrow", 50),
+        "4.6": ("RightBrow", -50),
+    }.items():
         B = m.parts[part].vertices
-        fp[label] = (part, _nearest(B[len(B) // 2:, :1], (x,)) + len(B) // 2)  # upper edge of the brow
+        fp[label] = (part, _nearest(B[len(B) // 2 :, :1], (x,)) + len(B) // 2)  # upper edge of the brow
     skin("5.1", (38, -38, 200))
     skin("5.2", (-38, -38, 200))
     skin("5.3", (42, -2, 200))
@@ -504,8 +558,10 @@ def _feature_points(m: HeadModel, tags, eye_z) -> dict[str, tuple[str, int]]:
     skin("9.13", (8, 4, 200))
     skin("9.14", (-8, 4, 200))
     fp["9.15"] = ("Skin", _nearest(S[:, :2], (0, NOSE_BASE_Y), front & (np.abs(S[:, 0]) < 0.5)))
-    for side, s, labs in (("Left", 1, ("10.1", "10.3", "10.5", "10.7", "10.9")),
-                          ("Right", -1, ("10.2", "10.4", "10.6", "10.8", "10.10"))):
+    for side, s, labs in (
+        ("Left", 1, ("10.1", "10.3", "10.5", "10.7", "10.9")),
+        ("Right", -1, ("10.2", "10.4", "10.6", "10.8", "10.10")),
+    ):
         E = m.parts[f"{side}Ear"].vertices
         cx = E[:, 0].mean()
         out = s * (E[:, 0] - cx) > -1

@@ -13,6 +13,7 @@ suite or data file does not change with a numpy/libm build's last digit.
 
     python -m fbaconf.generators.models [--check]    # rewrite (or check) the model data files
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,8 +35,10 @@ from .head import COLORS, PREDICTABLE_L1_MAX_VERTICES, HeadModel, Part, build_he
 def _ifs(part: Part, colors: dict) -> bt.Node:
     tri = np.asarray(part.triangles, dtype=np.int64)
     ci = np.concatenate([tri, -np.ones((len(tri), 1), np.int64)], axis=1).reshape(-1)
-    f = {"coord": bt.Node("Coordinate", {"point": np.round(np.asarray(part.vertices, np.float64), 6)}),
-         "coordIndex": ci}
+    f = {
+        "coord": bt.Node("Coordinate", {"point": np.round(np.asarray(part.vertices, np.float64), 6)}),
+        "coordIndex": ci,
+    }
     if part.texcoords is not None:
         f["texCoord"] = bt.Node("TextureCoordinate", {"point": np.round(part.texcoords, 6)})
     if part.tags.get("lips") is not None:
@@ -55,8 +58,10 @@ def _shape(part: Part, colors: dict) -> bt.Node:
     elif part.color == "skin":  # a broad, weak sheen: large specular areas the image stage can judge
         mat["specularColor"] = (0.3, 0.3, 0.3)
         mat["shininess"] = 0.08
-    return bt.Node("Shape", {"appearance": bt.Node("Appearance", {"material": bt.Node("Material", mat)}),
-                             "geometry": _ifs(part, colors)})
+    return bt.Node(
+        "Shape",
+        {"appearance": bt.Node("Appearance", {"material": bt.Node("Material", mat)}), "geometry": _ifs(part, colors)},
+    )
 
 
 def _tables_nodes(tables: dict[int, list]) -> list[bt.Node]:
@@ -65,10 +70,17 @@ def _tables_nodes(tables: dict[int, list]) -> list[bt.Node]:
         meshes, trs = [], []
         for spec in tables[fap]:
             if isinstance(spec, MeshSpec):
-                meshes.append(bt.Node("FaceDefMesh", {
-                    "faceSceneGraphNode": bt.Use(spec.part), "intervalBorders": np.array(spec.borders, np.int64),
-                    "coordIndex": np.asarray(spec.indices, np.int64),
-                    "displacements": spec.displacements.reshape(-1, 3)}))
+                meshes.append(
+                    bt.Node(
+                        "FaceDefMesh",
+                        {
+                            "faceSceneGraphNode": bt.Use(spec.part),
+                            "intervalBorders": np.array(spec.borders, np.int64),
+                            "coordIndex": np.asarray(spec.indices, np.int64),
+                            "displacements": spec.displacements.reshape(-1, 3),
+                        },
+                    )
+                )
             else:
                 f = {"faceSceneGraphNode": bt.Use(spec.target), "fieldId": spec.field_id}
                 if spec.field_id == 1:
@@ -109,8 +121,13 @@ def head_scene_graph(m: HeadModel, colors=COLORS) -> list[bt.Node]:
     return [bt.Node("Group", {"children": root_kids})]
 
 
-def face_scene(scene_graph: list[bt.Node], fp_positions: np.ndarray, tables: dict[int, list], *,
-               texture_coords: np.ndarray | None = None) -> bt.Scene:
+def face_scene(
+    scene_graph: list[bt.Node],
+    fp_positions: np.ndarray,
+    tables: dict[int, list],
+    *,
+    texture_coords: np.ndarray | None = None,
+) -> bt.Scene:
     fdp = {"featurePointsCoord": bt.Node("Coordinate", {"point": np.round(np.asarray(fp_positions, np.float64), 6)})}
     if texture_coords is not None:
         fdp["textureCoord"] = bt.Node("TextureCoordinate", {"point": texture_coords})
@@ -186,8 +203,10 @@ def logo_model() -> tuple[dict[str, Part], dict[str, dict]]:
     parts["TopBar"] = Part("TopBar", v, t, "logo", parent="Logo")
     v, t = _subdivided_box(-15, 35, -5, 18, -10, 10, 6, 2)
     parts["MidBar"] = Part("MidBar", v, t, "logo", parent="MidBarT")
-    transforms = {"Logo": dict(translation=(0.0, 0.0, 0.0), center=(0.0, 0.0, 0.0), parent="root"),
-                  "MidBarT": dict(translation=(0.0, 0.0, 0.0), center=(-15.0, 6.5, 0.0), parent="Logo")}
+    transforms = {
+        "Logo": dict(translation=(0.0, 0.0, 0.0), center=(0.0, 0.0, 0.0), parent="root"),
+        "MidBarT": dict(translation=(0.0, 0.0, 0.0), center=(-15.0, 6.5, 0.0), parent="Logo"),
+    }
     return parts, transforms
 
 
@@ -216,12 +235,19 @@ def logo_scene() -> bt.Scene:
     T[3] = [mesh_from_function("Stem", idx, stem, fap_borders(3), u[2])]
     B = parts["TopBar"].vertices
     for fap, cx in ((31, 0.0), (33, 25.0), (35, 60.0), (32, 0.0), (34, 25.0), (36, 60.0)):
-        wb = np.exp(-((B[:, 0] - cx) / 20.0) ** 2)
+        wb = np.exp(-(((B[:, 0] - cx) / 20.0) ** 2))
         ib = np.nonzero(wb > 0.02)[0]
-        T.setdefault(fap, []).append(mesh_from_function(
-            "TopBar", ib, lambda a, ib=ib, wb=wb, fap=fap: np.stack(
-                [np.zeros(len(ib)), a * u[fap - 1] * wb[ib] * saturate(a, fap), np.zeros(len(ib))], 1),
-            fap_borders(fap), u[fap - 1]))
+        T.setdefault(fap, []).append(
+            mesh_from_function(
+                "TopBar",
+                ib,
+                lambda a, ib=ib, wb=wb, fap=fap: np.stack(
+                    [np.zeros(len(ib)), a * u[fap - 1] * wb[ib] * saturate(a, fap), np.zeros(len(ib))], 1
+                ),
+                fap_borders(fap),
+                u[fap - 1],
+            )
+        )
     T[6] = [TransformSpec("MidBarT", 2, scale=(1.0 + 1.0 / 50.0, 1.0, 1.0))]
     T[12] = [TransformSpec("MidBarT", 1, rotation=(0.0, 0.0, 1.0, 0.02))]
     T[14] = [TransformSpec("MidBarT", 3, translation=(0.0, 0.0, 1.0))]
@@ -240,8 +266,11 @@ def logo_scene() -> bt.Scene:
 
 
 def bundled_scenes() -> dict[str, bt.Scene]:
-    return {"default_head.bt": default_head_scene(), "logo.bt": logo_scene(),
-            "level_limit_head.bt": level_limit_scene()}
+    return {
+        "default_head.bt": default_head_scene(),
+        "logo.bt": logo_scene(),
+        "level_limit_head.bt": level_limit_scene(),
+    }
 
 
 def write_bundled_scenes(directory) -> list[Path]:
@@ -249,8 +278,10 @@ def write_bundled_scenes(directory) -> list[Path]:
     d = Path(directory)
     out = []
     for name, scene in bundled_scenes().items():
-        header = (f"# {name}: generated by fbaconf.generators.models (do not edit; regenerate with\n"
-                  f"# write_bundled_scenes). Units: millimetre-like, y up, +z towards the viewer.\n")
+        header = (
+            f"# {name}: generated by fbaconf.generators.models (do not edit; regenerate with\n"
+            f"# write_bundled_scenes). Units: millimetre-like, y up, +z towards the viewer.\n"
+        )
         atomic_write_text(d / name, header + bt.write(scene))
         out.append(d / name)
     return out
@@ -263,13 +294,17 @@ DECIMALS = 6
 def model_data_files() -> dict[str, str]:
     """The text of every model data file, as the generator makes it."""
     head = default_head()
-    header = ("# default-head.bt: the bundled default head, generated by fbaconf.generators.models\n"
-              "# (do not edit; regenerate with python -m fbaconf.generators.models). Units: millimetre-like,\n"
-              "# y up, +z towards the viewer; coordinates at 6 decimals.\n")
+    header = (
+        "# default-head.bt: the bundled default head, generated by fbaconf.generators.models\n"
+        "# (do not edit; regenerate with python -m fbaconf.generators.models). Units: millimetre-like,\n"
+        "# y up, +z towards the viewer; coordinates at 6 decimals.\n"
+    )
     features = {label: list(head.feature_points[label]) for label in FEATURE_POINTS}
-    return {"default-head.bt": header + bt.write(bt.rounded(default_head_scene(), DECIMALS)),
-            "default-head.features.json": json.dumps({"format": "fbaconf.features/1", "feature_points": features},
-                                                     indent=1) + "\n"}
+    return {
+        "default-head.bt": header + bt.write(bt.rounded(default_head_scene(), DECIMALS)),
+        "default-head.features.json": json.dumps({"format": "fbaconf.features/1", "feature_points": features}, indent=1)
+        + "\n",
+    }
 
 
 def main(argv=None) -> int:
@@ -286,8 +321,10 @@ def main(argv=None) -> int:
             atomic_write_text(p, text)
             print(f"wrote {p}")
     if stale:
-        print(f"stale model data: {', '.join(stale)} (regenerate with python -m fbaconf.generators.models)",
-              file=sys.stderr)
+        print(
+            f"stale model data: {', '.join(stale)} (regenerate with python -m fbaconf.generators.models)",
+            file=sys.stderr,
+        )
         return 1
     return 0
 

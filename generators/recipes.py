@@ -6,6 +6,7 @@ Each recipe builds its FAP frames by hand and encodes them with the reference en
 recipe asserts the property it exists for (a bit pattern, a mask type), so an encoder change
 that loses it fails the build instead of silently weakening the case.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -42,8 +43,11 @@ def mask_00_after_set() -> bytes:
     gt[10:20, 0] = 1
     data = _encode(fr, fap_quant=1, group_types=gt)
     out = decode(data).frames
-    _need(bool((out.status[10:20, 2:18] == RETAINED).all() and (out.status[10:20, 0] == RETAINED).all()),
-          "mask-00-after-set", "group 2 and FAP 1 RETAINED in frames 10-19")
+    _need(
+        bool((out.status[10:20, 2:18] == RETAINED).all() and (out.status[10:20, 0] == RETAINED).all()),
+        "mask-00-after-set",
+        "group 2 and FAP 1 RETAINED in frames 10-19",
+    )
     return data
 
 
@@ -132,8 +136,12 @@ def block_end_stuffing() -> bytes:
     fr.values[1, 2] += 8
     fr.values[2, 3] -= 4
     data = _encode(fr, fap_quant=1, bounds=b, plane_start_codes="all")
-    at_end = [(s, ln) for p in decode(data).planes for _n, s, ln in p.blocks
-              if stuffing_positions(data, s, ln) and stuffing_positions(data, s, ln)[-1] == s + ln - 1]
+    at_end = [
+        (s, ln)
+        for p in decode(data).planes
+        for _n, s, ln in p.blocks
+        if stuffing_positions(data, s, ln) and stuffing_positions(data, s, ln)[-1] == s + ln - 1
+    ]
     _need(bool(at_end), "block-end-stuffing", "a block whose last bit is a stuffing bit")
     return data
 
@@ -208,10 +216,16 @@ def pred_beyond_intra_range() -> bytes:
     joined = splice((a, 0, pa[0].end_offset), (b, pb[1].bit_offset, pb[-1].end_offset))
     data = end_stream(joined, pa[0].end_offset + pb[-1].end_offset - pb[1].bit_offset)
     out = decode(data).frames
-    _need(bool((out.values[:, 3] == fr.values[:, 3]).all() and (out.values[:, 18] == fr.values[:, 18]).all()),
-          "pred-beyond-intra-range", "the spliced stream decodes to the encoded values")
-    _need(int(out.values[-1, 3]) > 60 * qp[3] and int(out.values[-1, 18]) < -60 * qp[18],
-          "pred-beyond-intra-range", "FAPs 4 and 19 end outside their intra ranges")
+    _need(
+        bool((out.values[:, 3] == fr.values[:, 3]).all() and (out.values[:, 18] == fr.values[:, 18]).all()),
+        "pred-beyond-intra-range",
+        "the spliced stream decodes to the encoded values",
+    )
+    _need(
+        int(out.values[-1, 3]) > 60 * qp[3] and int(out.values[-1, 18]) < -60 * qp[18],
+        "pred-beyond-intra-range",
+        "FAPs 4 and 19 end outside their intra ranges",
+    )
     return data
 
 

@@ -1,4 +1,5 @@
 """Error and special streams of the suites: mutations of valid streams, edits, and streams no encoder option makes."""
+
 from __future__ import annotations
 
 import random
@@ -38,8 +39,11 @@ def _intra_then_p(a: bytes, b: bytes) -> bytes:
 
 
 # a predicted high-level field leaves its range: (FAP, the intra plane's fields, the predicted planes' fields)
-_HIGH_LEVEL = {"viseme-select": (1, {0: [14]}, {0: [0, 5]}), "expression-select": (2, {4: [6]}, {4: [0, 4]}),
-               "intensity": (1, {2: [63]}, {2: [0, 30]})}
+_HIGH_LEVEL = {
+    "viseme-select": (1, {0: [14]}, {0: [0, 5]}),
+    "expression-select": (2, {4: [6]}, {4: [0, 4]}),
+    "intensity": (1, {2: [63]}, {2: [0, 30]}),
+}
 
 
 def mutate(data: bytes, mutation: str, seed: int) -> bytes:
@@ -188,10 +192,32 @@ def special_stream(name: str) -> bytes:
         f.values[0, 2], f.values[0, 3] = 1860 * 4, 1860 * 2
         return encode(f, EncoderOptions(fap_quant=1, bounds=b, plane_start_codes="none")).data
     if name == "splice-rates":
-        a = encode(make_content({"frames": 12, "rate": 25, "seed": 31, "visemes": False, "expressions": False,
-                                 "faps": list(range(3, 20))}), EncoderOptions(fap_quant=2, plane_start_codes="none"))
-        b = encode(make_content({"frames": 8, "rate": 12.5, "seed": 32, "visemes": False, "expressions": False,
-                                 "faps": list(range(3, 20))}), EncoderOptions(fap_quant=2, plane_start_codes="none"))
+        a = encode(
+            make_content(
+                {
+                    "frames": 12,
+                    "rate": 25,
+                    "seed": 31,
+                    "visemes": False,
+                    "expressions": False,
+                    "faps": list(range(3, 20)),
+                }
+            ),
+            EncoderOptions(fap_quant=2, plane_start_codes="none"),
+        )
+        b = encode(
+            make_content(
+                {
+                    "frames": 8,
+                    "rate": 12.5,
+                    "seed": 32,
+                    "visemes": False,
+                    "expressions": False,
+                    "faps": list(range(3, 20)),
+                }
+            ),
+            EncoderOptions(fap_quant=2, plane_start_codes="none"),
+        )
         pa, pb = decode(a.data).planes, decode(b.data).planes
         joined = splice((a.data, 0, pa[-1].end_offset), (b.data, pb[0].bit_offset, pb[-1].end_offset))
         return end_stream(joined, pa[-1].end_offset + pb[-1].end_offset - pb[0].bit_offset)

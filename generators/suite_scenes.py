@@ -1,5 +1,6 @@
 """Scenes of the suites: the bundled models, calibration subsets, FIT graphs and FaceDefTable interval
 grids (written at a fixed precision)."""
+
 from __future__ import annotations
 
 import struct
@@ -39,8 +40,33 @@ def make_scene(name: str):
 # Feature point subsets for calibration (labels, 14496-2 Annex C groups)
 CALIBRATION_SUBSETS = {
     # mouth, eyes, brows, nose, head outline: what a face tracker typically sends
-    "subset": ["2.1", "2.2", "2.3", "2.10", "3.5", "3.6", "3.9", "3.10", "3.11", "3.12", "4.1", "4.2", "4.3",
-               "4.4", "4.5", "4.6", "8.1", "8.2", "8.3", "8.4", "9.3", "9.15", "10.9", "10.10", "11.1"],
+    "subset": [
+        "2.1",
+        "2.2",
+        "2.3",
+        "2.10",
+        "3.5",
+        "3.6",
+        "3.9",
+        "3.10",
+        "3.11",
+        "3.12",
+        "4.1",
+        "4.2",
+        "4.3",
+        "4.4",
+        "4.5",
+        "4.6",
+        "8.1",
+        "8.2",
+        "8.3",
+        "8.4",
+        "9.3",
+        "9.15",
+        "10.9",
+        "10.10",
+        "11.1",
+    ],
     "few": ["3.5", "3.6", "2.1"],
 }
 
@@ -58,7 +84,7 @@ def _calibration_scene(subset: str):
     target = fps * np.array([1.12, 1.05, 0.9]) + np.array([0.0, 2.0, 0.0])
     yr = (fps[:, 1] - fps[:, 1].min()) / np.ptp(fps[:, 1])
     target[:, 0] *= 1.0 + 0.12 * (1.0 - yr)
-    target[:, 2] += 4.0 * np.exp(-((fps[:, 1] - fps[:, 1].mean()) / 25.0) ** 2)
+    target[:, 2] += 4.0 * np.exp(-(((fps[:, 1] - fps[:, 1].mean()) / 25.0) ** 2))
     if subset != "all":
         if subset not in CALIBRATION_SUBSETS:
             raise SuiteError(f"unknown calibration subset {subset!r}", rule="suite-spec")
@@ -76,8 +102,16 @@ def _calibration_scene(subset: str):
         # scene, docs/animation.md), in a Shape without geometry that draws nothing; 64 x 64 texels
         # over a face about 100 px high: magnified, never minified
         files[CALIBRATION_TEXTURE] = _pattern_png(64, 64)
-        nodes.append(bt.Node("Shape", {"appearance": bt.Node("Appearance", {
-            "texture": bt.Node("ImageTexture", {"url": [CALIBRATION_TEXTURE]})})}))
+        nodes.append(
+            bt.Node(
+                "Shape",
+                {
+                    "appearance": bt.Node(
+                        "Appearance", {"texture": bt.Node("ImageTexture", {"url": [CALIBRATION_TEXTURE]})}
+                    )
+                },
+            )
+        )
     return bt.Scene([bt.Node("Face", {"fdp": bt.Node("FDP", fdp)}, "FACE")] + nodes), files
 
 
@@ -136,6 +170,7 @@ def _fit_scene(which: str):
 
         def arr(xs):
             return " ".join(bt.fmt_float(x) if isinstance(x, float) else str(x) for x in xs)
+
         return bt.parse(f"""Face {{ fit FIT {{
             FAPs [{arr(fap_list)}]
             Graph [{arr([x for p in pairs for x in p])}]
@@ -180,8 +215,13 @@ def _pattern_png(width: int, height: int) -> bytes:
 
     def chunk(t, d):
         return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
-            + chunk(b"IDAT", zlib.compress(bytes(raw), 9)) + chunk(b"IEND", b""))
+
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(bytes(raw), 9))
+        + chunk(b"IEND", b"")
+    )
 
 
 def _grid_scene(kind: str):
@@ -215,8 +255,21 @@ def _grid_scene(kind: str):
         app["texture"] = bt.Node("ImageTexture", {"url": [tex]})
     gf = {"coord": bt.Node("Coordinate", {"point": V}), "coordIndex": np.array(ci, np.int64), "solid": False}
     if level is not None:  # per-vertex texture coordinates for the texture
-        gf["texCoord"] = bt.Node("TextureCoordinate", {"point": np.round(np.stack(
-            [2.0 * (V[:, 0] - V[:, 0].min()) / np.ptp(V[:, 0]), (V[:, 1] - V[:, 1].min()) / np.ptp(V[:, 1])], 1), 4)})
+        gf["texCoord"] = bt.Node(
+            "TextureCoordinate",
+            {
+                "point": np.round(
+                    np.stack(
+                        [
+                            2.0 * (V[:, 0] - V[:, 0].min()) / np.ptp(V[:, 0]),
+                            (V[:, 1] - V[:, 1].min()) / np.ptp(V[:, 1]),
+                        ],
+                        1,
+                    ),
+                    4,
+                )
+            },
+        )
     grid = bt.Node("IndexedFaceSet", gf, "Grid")
     kids = [bt.Node("Shape", {"appearance": bt.Node("Appearance", app), "geometry": grid})]
     if level is not None:
@@ -227,8 +280,20 @@ def _grid_scene(kind: str):
         assert per * parts == extra, (extra, parts)
         fill = bt.Node("Coordinate", {"point": np.zeros((per, 3))}, "FILL")
         for k in range(parts):
-            kids.append(bt.Node("Shape", {"geometry": bt.Node("IndexedFaceSet", {
-                "coord": fill if k == 0 else bt.Use("FILL"), "coordIndex": np.array([0, 1, 2, -1], np.int64)})}))
+            kids.append(
+                bt.Node(
+                    "Shape",
+                    {
+                        "geometry": bt.Node(
+                            "IndexedFaceSet",
+                            {
+                                "coord": fill if k == 0 else bt.Use("FILL"),
+                                "coordIndex": np.array([0, 1, 2, -1], np.int64),
+                            },
+                        )
+                    },
+                )
+            )
     inner_fields = {"center": (0.0, -20.0, 0.0), "children": kids}
     if kind == "transforms":  # a neutral scale other than 1 (a FAP's scale multiplies it)
         inner_fields["scale"] = (1.2, 0.9, 1.0)
@@ -241,14 +306,19 @@ def _grid_scene(kind: str):
         d = np.asarray(disp, np.float64).reshape(-1, 3)
         if len(d) == 1:
             d = np.tile(d, (len(idx) * n, 1))
-        return bt.Node("FaceDefMesh", {"faceSceneGraphNode": bt.Use("Grid"),
-                                       "intervalBorders": np.round(np.asarray(borders, np.float64)).astype(np.int64),
-                                       "coordIndex": idx, "displacements": np.round(d, 6)})
+        return bt.Node(
+            "FaceDefMesh",
+            {
+                "faceSceneGraphNode": bt.Use("Grid"),
+                "intervalBorders": np.round(np.asarray(borders, np.float64)).astype(np.int64),
+                "coordIndex": idx,
+                "displacements": np.round(d, 6),
+            },
+        )
 
     def xform(target, field_id, value):
         key = {1: "rotationDef", 2: "scaleDef", 3: "translationDef"}[field_id]
-        return bt.Node("FaceDefTransform", {"faceSceneGraphNode": bt.Use(target), "fieldId": field_id,
-                                            key: value})
+        return bt.Node("FaceDefTransform", {"faceSceneGraphNode": bt.Use(target), "fieldId": field_id, key: value})
 
     def table(fap, meshes=(), trs=(), hls=None):
         f = {"fapID": fap}
@@ -268,10 +338,21 @@ def _grid_scene(kind: str):
         col = g[:, 3]
         # interval layouts (borders in FAP units, relative to the content's amplitude)
         tables.append(table(3, [mesh(col, [0, a(3) / 3, 2 * a(3) / 3], [(0, -0.02, 0.01), (0, -0.03, 0)] * len(col))]))
-        tables.append(table(4, [mesh(g[:, 6], [-a(4) / 8, 0, a(4) / 3, 2 * a(4) / 3],
-                                     [(1.0, 0, 0), (0, 0.02, 0), (0, 0.01, 0.01)] * len(g[:, 6]))]))
-        tables.append(table(5, [mesh(g[:, 9], [-2 * a(5) / 3, -a(5) / 3, 0], [(0, 0.02, 0), (0.01, 0.01, 0)]
-                                     * len(g[:, 9]))]))
+        tables.append(
+            table(
+                4,
+                [
+                    mesh(
+                        g[:, 6],
+                        [-a(4) / 8, 0, a(4) / 3, 2 * a(4) / 3],
+                        [(1.0, 0, 0), (0, 0.02, 0), (0, 0.01, 0.01)] * len(g[:, 6]),
+                    )
+                ],
+            )
+        )
+        tables.append(
+            table(5, [mesh(g[:, 9], [-2 * a(5) / 3, -a(5) / 3, 0], [(0, 0.02, 0), (0.01, 0.01, 0)] * len(g[:, 9]))])
+        )
         tables.append(table(51, [mesh(g[:, 12], [-1, 1], [(0.0, 0.015, 0.005)])]))
         tables.append(table(6, trs=[xform("Inner", 2, (1.001, 1.0, 1.0))]))
         tables.append(table(14, trs=[xform("Inner", 3, (0.0, 0.01, 0.0))]))
@@ -306,15 +387,22 @@ def _grid_scene(kind: str):
                 break
             m = shared.get(f % 7)
             if m is None:
-                shared[f % 7] = m = bt.Node("FaceDefMesh", mesh([g[f % ny, f % nx]], [-1, 1],
-                                                                [(0.0, 0.0, 0.001)]).fields, f"M{f % 7}")
+                shared[f % 7] = m = bt.Node(
+                    "FaceDefMesh", mesh([g[f % ny, f % nx]], [-1, 1], [(0.0, 0.0, 0.001)]).fields, f"M{f % 7}"
+                )
                 first = [m] + [bt.Use(f"M{f % 7}")] * (n_here - 1)
             else:
                 first = [bt.Use(f"M{f % 7}")] * n_here
             tables.append(table(f, first))
     else:
         raise SuiteError(f"unknown grid scene {kind!r}", rule="suite-spec")
-    fdp = bt.Node("FDP", {"featurePointsCoord": bt.Node("Coordinate", {"point": fps_g}),
-                          "faceSceneGraph": [outer], "faceDefTables": tables})
+    fdp = bt.Node(
+        "FDP",
+        {
+            "featurePointsCoord": bt.Node("Coordinate", {"point": fps_g}),
+            "faceSceneGraph": [outer],
+            "faceDefTables": tables,
+        },
+    )
     del u
     return bt.Scene([bt.Node("Face", {"fdp": fdp}, "FACE")]), files

@@ -12,6 +12,7 @@ Each case folder-less: a suite folder holds ``suite.json`` and the case files na
 ``<case>.fba``, ``<case>.fap``, ``<case>.bt``, ``<case>.bifs`` (when the BIFS codec is
 available), ``scenario.toml`` (shared by the suite's image cases), ``<case>-face<i>.fba``.
 """
+
 from __future__ import annotations
 
 import json
@@ -61,8 +62,6 @@ def spec(data_dir: Path | None = None) -> dict:
     return s
 
 
-
-
 def scenario_names(sc_spec: dict) -> list[str]:
     """The scenarios image cases render under (suites.toml ``[scenario] scenarios``), first = the
     case's own, the others as ``<case>-<scenario>`` image-only cases."""
@@ -86,8 +85,9 @@ def compared_frames(frames, rule: str) -> list[int]:
 def _scenario_toml(sc_spec: dict, name: str, frames) -> str:
     path = resources.files("fbaconf.conformance").joinpath("data", "scenarios", f"{name}.toml")
     if not path.is_file():
-        raise SuiteError(f"[scenario] names scenario {name!r}: no conformance/data/scenarios/{name}.toml",
-                         rule="suite-spec")
+        raise SuiteError(
+            f"[scenario] names scenario {name!r}: no conformance/data/scenarios/{name}.toml", rule="suite-spec"
+        )
     d = tomllib.loads(Scenario.from_dict(tomllib.loads(path.read_text("utf-8")), file=str(path)).to_toml())
     d["width"], d["height"], d["supersample"] = sc_spec["width"], sc_spec["height"], sc_spec["supersample"]
     if sc_spec.get("frames"):
@@ -106,6 +106,7 @@ def _dump_toml(d: dict, prefix: str = "") -> str:
         if isinstance(v, float):
             return repr(v)
         return str(v)
+
     lines, tables, arrays = [], [], []
     for k, v in d.items():
         if isinstance(v, dict):
@@ -154,8 +155,10 @@ def _share_scene(d: Path, case: Case, other: str) -> None:
     for key, ext in (("scene", "bt"), ("bifs", "bifs")):
         name = f"{other}.{ext}"
         if not (d / name).is_file():
-            raise SuiteError(f"case {case.id}: scene_of names {other!r}, which has no {name} (it must come first "
-                             "in its suite)", rule="suite-spec")
+            raise SuiteError(
+                f"case {case.id}: scene_of names {other!r}, which has no {name} (it must come first in its suite)",
+                rule="suite-spec",
+            )
         case.inputs[key] = name
         case.sha256[name] = sha256_file(d / name)
 
@@ -196,10 +199,17 @@ def build_case(c: dict, suite: dict, d: Path, sc_spec: dict) -> list[Case]:
 
 def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> Case:
     gen = c.get("generator", "stream")
-    case = Case(id=c["id"], suite=suite["name"], claim=c.get("claim", suite["claim"]), group=suite["group"],
-                kind=_CASE_KIND[gen],
-                description=c.get("description", ""), tools=list(c.get("tools", [])), covers=list(c.get("covers", [])),
-                suite_dir=d)
+    case = Case(
+        id=c["id"],
+        suite=suite["name"],
+        claim=c.get("claim", suite["claim"]),
+        group=suite["group"],
+        kind=_CASE_KIND[gen],
+        description=c.get("description", ""),
+        tools=list(c.get("tools", [])),
+        covers=list(c.get("covers", [])),
+        suite_dir=d,
+    )
     if gen == "file":
         # a committed input (e.g. a promoted fuzz finding, conformance/data/regression/): an error
         # case, or a valid stream decoded by the reference for the goldens
@@ -219,10 +229,22 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
                 _write(d, f"{case.id}.fap", write_fap(sparse_text(decoded), name=case.id), case, "fap")
                 case.frames = len(decoded)
         return case
-    if gen == "error" and c.get("mutation") in ("too-short", "not-face", "stuffing", "viseme-select",
-                                                 "expression-select", "intensity", "value-overflow",
-                                                 "first-predicted-decodable", "trailing-zero-byte") \
-            and "content" not in c:
+    if (
+        gen == "error"
+        and c.get("mutation")
+        in (
+            "too-short",
+            "not-face",
+            "stuffing",
+            "viseme-select",
+            "expression-select",
+            "intensity",
+            "value-overflow",
+            "first-predicted-decodable",
+            "trailing-zero-byte",
+        )
+        and "content" not in c
+    ):
         c = dict(c, content={"frames": 5, "faps": [3, 4]})
     content = make_content(c.get("content", {}))
     opts = encoder_options(c.get("options", {}), len(content))
@@ -236,8 +258,9 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
             fo = per_face[i] if i < len(per_face) else {}
             if "frame_rate" in fo:
                 cc["rate"] = fo["frame_rate"]
-            res = encode(make_content(cc), encoder_options({**c.get("options", {}), **fo}, len(content))
-                         if fo else opts)
+            res = encode(
+                make_content(cc), encoder_options({**c.get("options", {}), **fo}, len(content)) if fo else opts
+            )
             faces.append(_write(d, f"{case.id}-face{i}.fba", res.data, case, None))
         case.inputs["faces"] = faces
         case.frames = len(content)
@@ -246,8 +269,9 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
         return case
     res = encode(content, opts)
     if gen == "error":
-        data = mutate(res.data, c["mutation"], int(c.get("content", {}).get("seed", 0))) \
-            if c.get("mutation") else res.data
+        data = (
+            mutate(res.data, c["mutation"], int(c.get("content", {}).get("seed", 0))) if c.get("mutation") else res.data
+        )
         _write(d, f"{case.id}.fba", data, case, "fba")
         if "scene" in c:  # a valid stream with an invalid scene: the decoder must load it to see
             _write_scene(d, case, c["scene"])
@@ -277,8 +301,10 @@ def _build(c: dict, suite: dict, d: Path, sc_spec: dict, views: list[Case]) -> C
         if c.get("image_frames"):  # the case's own rule for the frames its images compare
             sc_spec = dict(sc_spec, frames=c["image_frames"])
         _image_goldens(case, d, _scenario_toml(sc_spec, scenario_names(sc_spec)[0], decoded))
-        views += [_view(case, d, _scenario_toml(sc_spec, n, decoded), n)
-                  for n in scenario_names(sc_spec)[1:] + list(c.get("extra_scenarios", []))]
+        views += [
+            _view(case, d, _scenario_toml(sc_spec, n, decoded), n)
+            for n in scenario_names(sc_spec)[1:] + list(c.get("extra_scenarios", []))
+        ]
     return case
 
 
@@ -290,11 +316,22 @@ def _image_goldens(case: Case, d: Path, text: str) -> None:
 
 def _view(case: Case, d: Path, text: str, name: str) -> Case:
     """An image-only case: ``case``'s inputs (the same files, not copies) under another scenario."""
-    v = Case(id=f"{case.id}-{name}", suite=case.suite, claim=case.claim, group=case.group, kind="decode",
-             description=f"{case.id} rendered under scenario {name!r}", tools=list(case.tools),
-             covers=[], inputs={k: x for k, x in case.inputs.items() if k != "scenario"},
-             sha256={k: x for k, x in case.sha256.items() if not k.endswith("-scenario.toml")},
-             frames=case.frames, stages=["images"], goldens={}, suite_dir=d)
+    v = Case(
+        id=f"{case.id}-{name}",
+        suite=case.suite,
+        claim=case.claim,
+        group=case.group,
+        kind="decode",
+        description=f"{case.id} rendered under scenario {name!r}",
+        tools=list(case.tools),
+        covers=[],
+        inputs={k: x for k, x in case.inputs.items() if k != "scenario"},
+        sha256={k: x for k, x in case.sha256.items() if not k.endswith("-scenario.toml")},
+        frames=case.frames,
+        stages=["images"],
+        goldens={},
+        suite_dir=d,
+    )
     _image_goldens(v, d, text)
     return v
 
@@ -315,8 +352,9 @@ def reference_conditioning(cases: list[Case]) -> list[tuple[str, str, str, float
             try:
                 seen[key] = compile_scene(load_scene(path)).extras.get("conditioning", {})
             except FbaconfInputError as e:
-                raise SuiteError(f"case {case.suite}/{case.id}: the reference cannot compile its scene: {e}",
-                                 rule="suite-reference") from None
+                raise SuiteError(
+                    f"case {case.suite}/{case.id}: the reference cannot compile its scene: {e}", rule="suite-reference"
+                ) from None
         out += [(case.suite, case.id, system, cond) for system, cond in seen[key].items()]
     return out
 
@@ -326,8 +364,10 @@ def worst_conditioning(rows: list[tuple[str, str, str, float]]) -> str:
     if not rows:
         return "reference conditioning: no linear system solved"
     suite, case, system, cond = max(rows, key=lambda r: r[3])
-    return (f"reference conditioning: worst condition number {cond:.3g} ({suite}/{case}, {system}) of "
-            f"{len(rows)} system(s); bound {CONDITION_BOUND:.0e} (animation/rbf.py)")
+    return (
+        f"reference conditioning: worst condition number {cond:.3g} ({suite}/{case}, {system}) of "
+        f"{len(rows)} system(s); bound {CONDITION_BOUND:.0e} (animation/rbf.py)"
+    )
 
 
 def build(root: Path | None = None, names: list[str] | None = None, log=print) -> list[Suite]:
@@ -389,8 +429,15 @@ def build_external(src: Path, out: Path | None = None, log=print) -> Suite | Non
         stem = f"{f.parent.name}-{f.stem}".replace(" ", "_")
         # the file itself, as its tool wrote it, for players (group "text": informative for the
         # decoders of the binary stream); the golden is fbaconf's reading of it
-        raw = Case(id=f"{stem}-raw", suite=EXTERNAL_SUITE, claim="simple@1", group="text", kind="decode",
-                   description=f"real file {f.relative_to(src)} as written (players)", suite_dir=d)
+        raw = Case(
+            id=f"{stem}-raw",
+            suite=EXTERNAL_SUITE,
+            claim="simple@1",
+            group="text",
+            kind="decode",
+            description=f"real file {f.relative_to(src)} as written (players)",
+            suite_dir=d,
+        )
         _write(d, f"{raw.id}.fap", f.read_bytes(), raw, "fap")
         raw.frames = len(frames)
         raw.stages = ["faps"]
@@ -404,17 +451,31 @@ def build_external(src: Path, out: Path | None = None, log=print) -> Suite | Non
                 except FbaconfInputError as e:
                     log(f"external: {cid}: not codable ({e.message if hasattr(e, 'message') else e})")
                     continue
-                case = Case(id=cid, suite=EXTERNAL_SUITE, claim="simple@2", group="real", kind="decode",
-                            description=f"real file {f.relative_to(src)} at fap_quant {q}"
-                                        + (f", {rate:g} Hz" if rate else ""), tools=["arithmetic"], suite_dir=d)
+                case = Case(
+                    id=cid,
+                    suite=EXTERNAL_SUITE,
+                    claim="simple@2",
+                    group="real",
+                    kind="decode",
+                    description=f"real file {f.relative_to(src)} at fap_quant {q}" + (f", {rate:g} Hz" if rate else ""),
+                    tools=["arithmetic"],
+                    suite_dir=d,
+                )
                 _write(d, f"{cid}.fba", res.data, case, "fba")
                 _write(d, f"{cid}.fap", write_fap(res.recon, name=cid), case, "fap")
                 case.frames = len(res.recon)
                 case.stages = ["faps"]
                 case.goldens = {"faps": "faps.npz"}
                 cases.append(case)
-    suite = Suite(EXTERNAL_SUITE, f"EXTERNAL: the real .fap files of {src} (not committed)", "simple@2", "real",
-                  spec()["version"], cases, d)
+    suite = Suite(
+        EXTERNAL_SUITE,
+        f"EXTERNAL: the real .fap files of {src} (not committed)",
+        "simple@2",
+        "real",
+        spec()["version"],
+        cases,
+        d,
+    )
     atomic_write_text(d / "suite.json", json.dumps(suite.to_json(), indent=1) + "\n")
     regenerate([suite], out / "golden", log=lambda *_: None)
     log(f"built external suite {EXTERNAL_SUITE}: {len(cases)} case(s) from {len(files)} file(s) in {out}")

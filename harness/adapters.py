@@ -16,6 +16,7 @@ the case compares that output (``["--images-dir", "{images_dir}"]`` is dropped f
 without image goldens, so the decoder need not render them). One command is run per case; it
 must write every output whose placeholder it names.
 """
+
 from __future__ import annotations
 
 import difflib
@@ -42,8 +43,24 @@ from fbaconf.safefs import read_regular
 INPUT_KINDS = ("fba", "fap", "scene", "bifs")
 OUTPUT_KINDS = ("faps", "vertices", "images")
 FAPS_FORMATS = ("fap", "npz")
-PLACEHOLDERS = ("input", "fba", "fap", "scene", "scene_bt", "scene_bifs", "scenario", "faps_out", "vertices_out",
-                "images_dir", "frames", "workdir", "manifest_dir", "python", "faps_out_dir", "inputs")
+PLACEHOLDERS = (
+    "input",
+    "fba",
+    "fap",
+    "scene",
+    "scene_bt",
+    "scene_bifs",
+    "scenario",
+    "faps_out",
+    "vertices_out",
+    "images_dir",
+    "frames",
+    "workdir",
+    "manifest_dir",
+    "python",
+    "faps_out_dir",
+    "inputs",
+)
 # decode: one process per input; decode_multi: one per multi-face case; serve: the persistent
 # protocol (isolation/persistent.py), one process for many inputs, each sent on stdin.
 COMMANDS = ("decode", "decode_multi", "serve")
@@ -59,12 +76,14 @@ class ManifestError(FbaconfInputError):
 
 class ViewError(FbaconfInputError):
     """A folder the sandbox would show a decoder shows too much (set-up error, exit 2)."""
+
     rule = "sandbox-view"
 
 
 @dataclass
 class Job:
     """One decoder invocation's files: inputs copied into its own directory, output paths."""
+
     workdir: Path
     values: dict[str, str]  # placeholder -> value (only those available)
     faces: list[str] = field(default_factory=list)  # multi-face input paths
@@ -80,6 +99,7 @@ class Job:
 
 class Adapter:
     """Common interface of decoder adapters."""
+
     name: str = "decoder"
     description: str = ""
     claims: list[str]
@@ -106,15 +126,27 @@ class Adapter:
         return hashlib.sha256(self.manifest_text.encode("utf-8")).hexdigest()
 
     def describe(self) -> dict:
-        return {"name": self.name, "kind": self.kind, "description": self.description, "claims": list(self.claims),
-                "tools": self.tools, "readings": list(self.readings), "inputs": list(self.inputs),
-                "outputs": list(self.outputs),
-                "faps_format": self.faps_format, "manifest": str(self.manifest_path) if self.manifest_path else None,
-                "reject_exit_codes": sorted(self.reject_exit_codes),
-                "env": dict(getattr(self, "env", None) or {}),
-                "manifest_sha256": self.digest(),
-                "limits": {"timeout_s": self.limits.timeout_s, "memory_mb": self.limits.memory_mb,
-                           "memory_kind": self.limits.memory_kind, "output_mb": self.limits.output_mb}}
+        return {
+            "name": self.name,
+            "kind": self.kind,
+            "description": self.description,
+            "claims": list(self.claims),
+            "tools": self.tools,
+            "readings": list(self.readings),
+            "inputs": list(self.inputs),
+            "outputs": list(self.outputs),
+            "faps_format": self.faps_format,
+            "manifest": str(self.manifest_path) if self.manifest_path else None,
+            "reject_exit_codes": sorted(self.reject_exit_codes),
+            "env": dict(getattr(self, "env", None) or {}),
+            "manifest_sha256": self.digest(),
+            "limits": {
+                "timeout_s": self.limits.timeout_s,
+                "memory_mb": self.limits.memory_mb,
+                "memory_kind": self.limits.memory_kind,
+                "output_mb": self.limits.output_mb,
+            },
+        }
 
 
 class PythonAdapter(Adapter):
@@ -125,6 +157,7 @@ class PythonAdapter(Adapter):
     crash. In-process decoders share the harness's process: the timeout is checked after the call
     returns, and memory is not limited — use a command manifest for untrusted code.
     :meth:`execute` is the one way ``run``, the speed phase and ``fuzz`` call it."""
+
     kind = "python"
 
     def __init__(self) -> None:
@@ -148,24 +181,41 @@ class PythonAdapter(Adapter):
         try:
             self.run(job)
         except NotSupportedError as e:
-            return Execution(Ending(EndingKind.NOT_SUPPORTED, f"decoder: not supported: {e}"), 69, "",
-                             time.perf_counter() - t0)
+            return Execution(
+                Ending(EndingKind.NOT_SUPPORTED, f"decoder: not supported: {e}"), 69, "", time.perf_counter() - t0
+            )
         except MemoryError:
-            return Execution(Ending(EndingKind.MEMORY, "in-process decoder raised MemoryError"), None, "",
-                             time.perf_counter() - t0)
+            return Execution(
+                Ending(EndingKind.MEMORY, "in-process decoder raised MemoryError"), None, "", time.perf_counter() - t0
+            )
         except FbaconfInputError as e:
-            kind, what = ((EndingKind.SETUP, "could not read its input") if e.rule == "io" else
-                          (EndingKind.REJECT, "rejected the stream"))
-            return Execution(Ending(kind, f"in-process decoder {what}: {e}"), 2, str(e)[-2000:],
-                             time.perf_counter() - t0)
+            kind, what = (
+                (EndingKind.SETUP, "could not read its input")
+                if e.rule == "io"
+                else (EndingKind.REJECT, "rejected the stream")
+            )
+            return Execution(
+                Ending(kind, f"in-process decoder {what}: {e}"), 2, str(e)[-2000:], time.perf_counter() - t0
+            )
         except Exception as e:  # noqa: BLE001 - the decoder's own crash, judged as one
             tb = traceback.format_exc()
-            return Execution(Ending(EndingKind.CRASH, f"in-process decoder raised {type(e).__name__}: {e}",
-                                    crash_report(tb)), 1, tb[-2000:], time.perf_counter() - t0)
+            return Execution(
+                Ending(EndingKind.CRASH, f"in-process decoder raised {type(e).__name__}: {e}", crash_report(tb)),
+                1,
+                tb[-2000:],
+                time.perf_counter() - t0,
+            )
         dt = time.perf_counter() - t0
         if dt > self.limits.timeout_s:
-            return Execution(Ending(EndingKind.TIMEOUT, f"in-process decoder took {dt:.1f} s, over the "
-                                                        f"{self.limits.timeout_s:g} s limit"), None, "", dt)
+            return Execution(
+                Ending(
+                    EndingKind.TIMEOUT,
+                    f"in-process decoder took {dt:.1f} s, over the {self.limits.timeout_s:g} s limit",
+                ),
+                None,
+                "",
+                dt,
+            )
         return Execution(Ending(EndingKind.DECODED, "in-process decoder returned"), 0, "", dt)
 
 
@@ -173,6 +223,7 @@ class PythonAdapter(Adapter):
 class Execution:
     """One call of an in-process decoder: how it ended, its "exit code" (0 decoded, 2 rejected,
     69 not supported, 1 crashed), what it said and how long it took."""
+
     ending: Ending
     exit_code: int | None
     stderr_tail: str
@@ -186,8 +237,9 @@ class NotSupportedError(Exception):
 class CommandAdapter(Adapter):
     kind = "command"
 
-    def __init__(self, data: dict, path: Path | None, text: str,
-                 ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> None:
+    def __init__(
+        self, data: dict, path: Path | None, text: str, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS
+    ) -> None:
         self.manifest_path = path
         self.manifest_text = text
         self.name = data["name"]
@@ -226,9 +278,12 @@ class CommandAdapter(Adapter):
         shown += [(Path(p), "a folder the lab gave (--sandbox-ro)") for p in self.lab_read_only]
         v.read_only, bad = view.checked(shown, hidden, trusted=[BUNDLED_DIR])
         if bad:
-            raise ViewError(f"the sandbox would show the decoder {bad[1]} ({bad[0]}): {bad[2]}. Put the decoder's "
-                            f"files in a folder of their own", rule="sandbox-view",
-                            file=str(self.manifest_path or self.name))
+            raise ViewError(
+                f"the sandbox would show the decoder {bad[1]} ({bad[0]}): {bad[2]}. Put the decoder's "
+                f"files in a folder of their own",
+                rule="sandbox-view",
+                file=str(self.manifest_path or self.name),
+            )
         v.hidden += [Path(h) for h in hidden]
         if through_python:
             v.read_only += python_view()
@@ -256,9 +311,13 @@ def _limits(d: dict, path, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) 
     if not isinstance(d, dict):
         raise ManifestError("[limits] must be a table", rule="manifest-limits", file=str(path))
     try:
-        lim = Limits(timeout_s=d.get("timeout_s", 60), memory_mb=d.get("memory_mb", 2048),
-                     memory_kind=str(d.get("memory_kind", Limits.memory_kind)), output_mb=d.get("output_mb", 256),
-                     processes=d.get("processes", 64))
+        lim = Limits(
+            timeout_s=d.get("timeout_s", 60),
+            memory_mb=d.get("memory_mb", 2048),
+            memory_kind=str(d.get("memory_kind", Limits.memory_kind)),
+            output_mb=d.get("output_mb", 256),
+            processes=d.get("processes", 64),
+        )
     except (TypeError, ValueError, OverflowError) as e:
         raise ManifestError(f"[limits]: {e}", rule="manifest-limits", file=str(path)) from None
     problems = bounds.problems(lim, ceilings)
@@ -284,8 +343,11 @@ def expand(template: list, job: Job, manifest_path: Path | None) -> list[str]:
     for item in template:
         if isinstance(item, list):
             names = [n for s in item for n in _PH.findall(s)]
-            if all(n in values for n in names) and not (("inputs" in names) and not job.faces) \
-                    and not (set(names) & job.unwanted):
+            if (
+                all(n in values for n in names)
+                and not (("inputs" in names) and not job.faces)
+                and not (set(names) & job.unwanted)
+            ):
                 out.extend(fill(s) for s in item)
             continue
         if item == "{inputs}":
@@ -315,19 +377,31 @@ def _check_keys(data: dict, bad) -> None:
         if key not in data:
             raise bad(f"missing required key {key!r}", "manifest-key")
     if "sandbox" in data:
-        raise bad("[sandbox] is not a manifest key: the lab, not the decoder, sets what a decoder sees (a folder "
-                  "the decoder's runtime needs is the lab's `--sandbox-ro PATH`, recorded in the statement)",
-                  "manifest-sandbox")
+        raise bad(
+            "[sandbox] is not a manifest key: the lab, not the decoder, sets what a decoder sees (a folder "
+            "the decoder's runtime needs is the lab's `--sandbox-ro PATH`, recorded in the statement)",
+            "manifest-sandbox",
+        )
     for key in data:
         if key not in MANIFEST_KEYS:
             raise bad(f"unknown key {_quote(key)}{_did_you_mean(str(key), MANIFEST_KEYS)}", "manifest-key")
-    for key, kind, what in (("name", str, "a string"), ("description", str, "a string"),
-                            ("claims", list, "a list"), ("tools", list, "a list of tool names"),
-                            ("readings", list, "a list of reading ids"),
-                            ("inputs", list, "a list"), ("outputs", list, "a list"), ("faps_format", str, "a string"),
-                            ("commands", dict, "a table"), ("limits", dict, "a table"), ("env", dict, "a table"),
-                            ("python", str, "a string"), ("options", dict, "a table"),
-                            ("reject_exit_codes", list, "a list"), ("serve_equivalent", bool, "true or false")):
+    for key, kind, what in (
+        ("name", str, "a string"),
+        ("description", str, "a string"),
+        ("claims", list, "a list"),
+        ("tools", list, "a list of tool names"),
+        ("readings", list, "a list of reading ids"),
+        ("inputs", list, "a list"),
+        ("outputs", list, "a list"),
+        ("faps_format", str, "a string"),
+        ("commands", dict, "a table"),
+        ("limits", dict, "a table"),
+        ("env", dict, "a table"),
+        ("python", str, "a string"),
+        ("options", dict, "a table"),
+        ("reject_exit_codes", list, "a list"),
+        ("serve_equivalent", bool, "true or false"),
+    ):
         if key in data and not isinstance(data[key], kind):
             raise bad(f"{key} must be {what}, not {type(data[key]).__name__}", _KEY_RULE.get(key, "manifest-key"))
     if "tools" in data and not all(isinstance(t, str) for t in data["tools"]):
@@ -351,15 +425,24 @@ def _check_values(data: dict, bad) -> None:
     if "options" in data and not isinstance(data["options"], dict):
         raise bad("[options] must be a table", "manifest-options")
     rc = data.get("reject_exit_codes", [1])
-    if (not isinstance(rc, list) or not rc or
-            any(not isinstance(c, int) or isinstance(c, bool) or not 1 <= c <= 255 or c in (69, 126, 127) for c in rc)):
-        raise bad("reject_exit_codes must be a non-empty list of exit codes 1..255 other than 69 (not supported) "
-                  "and 126/127 (cannot execute)", "manifest-reject-codes")
+    if (
+        not isinstance(rc, list)
+        or not rc
+        or any(not isinstance(c, int) or isinstance(c, bool) or not 1 <= c <= 255 or c in (69, 126, 127) for c in rc)
+    ):
+        raise bad(
+            "reject_exit_codes must be a non-empty list of exit codes 1..255 other than 69 (not supported) "
+            "and 126/127 (cannot execute)",
+            "manifest-reject-codes",
+        )
     if not isinstance(data["name"], str) or not re.fullmatch(r"[A-Za-z0-9_@+-][A-Za-z0-9._@+-]{0,63}", data["name"]):
-        raise bad("name must be 1-64 letters, digits, '.', '_', '-', '+' or '@', not starting with '.' "
-                  "(it names the run folder)", "manifest-name")
+        raise bad(
+            "name must be 1-64 letters, digits, '.', '_', '-', '+' or '@', not starting with '.' "
+            "(it names the run folder)",
+            "manifest-name",
+        )
     if not isinstance(data["claims"], list) or not data["claims"]:
-        raise bad("claims must be a non-empty list like [\"simple@1\"]", "manifest-claims")
+        raise bad('claims must be a non-empty list like ["simple@1"]', "manifest-claims")
     for c in data["claims"]:
         try:
             Claim.parse(c)
@@ -380,8 +463,11 @@ def _check_values(data: dict, bad) -> None:
             raise bad(f"unknown tool(s) {_quote(unknown)} (known: {', '.join(known)})", "manifest-tools")
     unknown = [r for r in data.get("readings", []) if not isinstance(r, str) or r not in readings.catalogue()]
     if unknown:
-        raise bad(f"readings: unknown reading(s) {_quote(unknown)} (known: {', '.join(readings.catalogue())}; "
-                  f"docs/harness.md, \"Provisional requirements\")", "manifest-readings")
+        raise bad(
+            f"readings: unknown reading(s) {_quote(unknown)} (known: {', '.join(readings.catalogue())}; "
+            f'docs/harness.md, "Provisional requirements")',
+            "manifest-readings",
+        )
 
 
 def _check_commands(data: dict, bad) -> None:
@@ -389,8 +475,7 @@ def _check_commands(data: dict, bad) -> None:
     persistent ``serve`` only its own), every output's placeholder named by decode."""
     cmds = data.get("commands")
     if not isinstance(cmds, dict) or "decode" not in cmds:
-        raise bad("[commands] must define decode (an argv list), or give python = \"module:Class\"",
-                  "manifest-commands")
+        raise bad('[commands] must define decode (an argv list), or give python = "module:Class"', "manifest-commands")
     for cname, argv in cmds.items():
         if cname not in COMMANDS:
             raise bad(f"[commands] {_quote(cname)}: unknown command ({', '.join(COMMANDS)})", "manifest-commands")
@@ -399,8 +484,9 @@ def _check_commands(data: dict, bad) -> None:
         for item in argv:
             for s in item if isinstance(item, list) else [item]:
                 if not isinstance(s, str):
-                    raise bad(f"[commands] {cname}: argv items must be strings or lists of strings",
-                              "manifest-commands")
+                    raise bad(
+                        f"[commands] {cname}: argv items must be strings or lists of strings", "manifest-commands"
+                    )
                 _check_placeholders(cname, s, bad)
     text = " ".join(str(x) for x in _flatten(cmds["decode"]))
     for out in data["outputs"]:
@@ -413,21 +499,52 @@ def _check_placeholders(cname: str, s: str, bad) -> None:
     for n in _PH.findall(s):
         if cname == "serve" and n not in SERVE_PLACEHOLDERS:
             usable = ", ".join("{" + p + "}" for p in SERVE_PLACEHOLDERS)
-            raise bad(f"[commands] serve: {{{n}}} has no value for a persistent decoder, which gets "
-                      f"each input on stdin (usable: {usable})", "manifest-placeholder")
+            raise bad(
+                f"[commands] serve: {{{n}}} has no value for a persistent decoder, which gets "
+                f"each input on stdin (usable: {usable})",
+                "manifest-placeholder",
+            )
         if n not in PLACEHOLDERS:
-            raise bad(f"[commands] {cname}: unknown placeholder {_quote(n)} (known: "
-                      f"{', '.join('{' + p + '}' for p in PLACEHOLDERS)})", "manifest-placeholder")
+            raise bad(
+                f"[commands] {cname}: unknown placeholder {_quote(n)} (known: "
+                f"{', '.join('{' + p + '}' for p in PLACEHOLDERS)})",
+                "manifest-placeholder",
+            )
 
 
-MANIFEST_KEYS = ("name", "description", "claims", "tools", "readings", "inputs", "outputs", "faps_format", "commands",
-                 "limits", "env", "python", "options", "reject_exit_codes", "serve_equivalent")
+MANIFEST_KEYS = (
+    "name",
+    "description",
+    "claims",
+    "tools",
+    "readings",
+    "inputs",
+    "outputs",
+    "faps_format",
+    "commands",
+    "limits",
+    "env",
+    "python",
+    "options",
+    "reject_exit_codes",
+    "serve_equivalent",
+)
 LIMIT_KEYS = ("timeout_s", "memory_mb", "memory_kind", "output_mb", "processes")
-_KEY_RULE = {"name": "manifest-name", "claims": "manifest-claims", "tools": "manifest-tools",
-             "readings": "manifest-readings",
-             "inputs": "manifest-inputs", "outputs": "manifest-outputs", "faps_format": "manifest-faps-format",
-             "commands": "manifest-commands", "limits": "manifest-limits", "env": "manifest-env",
-             "python": "manifest-python", "options": "manifest-options", "reject_exit_codes": "manifest-reject-codes"}
+_KEY_RULE = {
+    "name": "manifest-name",
+    "claims": "manifest-claims",
+    "tools": "manifest-tools",
+    "readings": "manifest-readings",
+    "inputs": "manifest-inputs",
+    "outputs": "manifest-outputs",
+    "faps_format": "manifest-faps-format",
+    "commands": "manifest-commands",
+    "limits": "manifest-limits",
+    "env": "manifest-env",
+    "python": "manifest-python",
+    "options": "manifest-options",
+    "reject_exit_codes": "manifest-reject-codes",
+}
 _PYTHON_TARGET = re.compile(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*:[A-Za-z_][A-Za-z0-9_]*")
 MAX_MANIFEST_BYTES = 1 << 20
 MAX_MANIFEST_DEPTH = 6  # a table of commands of argv lists of optional groups: 4 levels suffice
@@ -466,8 +583,9 @@ def _flatten(argv):
             yield x
 
 
-def load_manifest(path: Path, *, untrusted: bool = False,
-                  ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> Adapter:
+def load_manifest(
+    path: Path, *, untrusted: bool = False, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS
+) -> Adapter:
     """The adapter a manifest describes. Any problem is a :class:`ManifestError` naming the file,
     the key and the rule — never another exception. ``untrusted`` (``certify``): an in-process
     ``python =`` adapter is accepted only from the bundled manifests (it runs inside the
@@ -477,8 +595,9 @@ def load_manifest(path: Path, *, untrusted: bool = False,
     try:
         raw = read_regular(path, MAX_MANIFEST_BYTES)
     except FbaconfInputError as e:
-        raise ManifestError(f"cannot read decoder manifest: {e.message}", rule="manifest-missing",
-                            file=str(path)) from None
+        raise ManifestError(
+            f"cannot read decoder manifest: {e.message}", rule="manifest-missing", file=str(path)
+        ) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
@@ -490,19 +609,27 @@ def load_manifest(path: Path, *, untrusted: bool = False,
     except RecursionError:
         data = None
     if data is None or _depth(data, MAX_MANIFEST_DEPTH) > MAX_MANIFEST_DEPTH:
-        raise ManifestError(f"nested more than {MAX_MANIFEST_DEPTH} tables/arrays deep", rule="manifest-toml",
-                            file=str(path))
+        raise ManifestError(
+            f"nested more than {MAX_MANIFEST_DEPTH} tables/arrays deep", rule="manifest-toml", file=str(path)
+        )
     _check_manifest(data, path)
     owner = reserved_names().get(data["name"].lower())
     if owner is not None and path.resolve() != owner.resolve():
-        raise ManifestError(f"name {_quote(data['name'])} is reserved: a bundled adapter of fbaconf uses it, and a "
-                            f"report or a certificate must never pass one decoder for another", rule="manifest-name",
-                            file=str(path))
+        raise ManifestError(
+            f"name {_quote(data['name'])} is reserved: a bundled adapter of fbaconf uses it, and a "
+            f"report or a certificate must never pass one decoder for another",
+            rule="manifest-name",
+            file=str(path),
+        )
     if "python" in data:
         if untrusted and path.resolve().parent != BUNDLED_DIR:
-            raise ManifestError("python = adapters run inside the harness's own process, unsandboxed: certify "
-                                "accepts them only from the bundled manifests; describe the decoder with "
-                                "[commands] (docs/harness.md)", rule="manifest-python", file=str(path))
+            raise ManifestError(
+                "python = adapters run inside the harness's own process, unsandboxed: certify "
+                "accepts them only from the bundled manifests; describe the decoder with "
+                "[commands] (docs/harness.md)",
+                rule="manifest-python",
+                file=str(path),
+            )
         return _python_adapter(data, path, text, ceilings)
     return CommandAdapter(data, path, text, ceilings)
 
@@ -513,20 +640,26 @@ def _python_adapter(data: dict, path: Path | None, text: str, ceilings: bounds.C
     try:
         cls = getattr(importlib.import_module(mod_name), cls_name)
     except (ImportError, AttributeError) as e:
-        raise ManifestError(f"python = {_quote(target)}: cannot import: {_quote(str(e))}", rule="manifest-python",
-                            file=str(path)) from None
+        raise ManifestError(
+            f"python = {_quote(target)}: cannot import: {_quote(str(e))}", rule="manifest-python", file=str(path)
+        ) from None
     except Exception as e:  # noqa: BLE001 - the module's own import failed: the manifest's problem
-        raise ManifestError(f"python = {_quote(target)}: importing it raised {type(e).__name__}",
-                            rule="manifest-python", file=str(path)) from None
+        raise ManifestError(
+            f"python = {_quote(target)}: importing it raised {type(e).__name__}", rule="manifest-python", file=str(path)
+        ) from None
     if not (isinstance(cls, type) and issubclass(cls, PythonAdapter)):
-        raise ManifestError(f"python = {_quote(target)} is not a subclass of "
-                            f"fbaconf.harness.adapters.PythonAdapter", rule="manifest-python", file=str(path))
+        raise ManifestError(
+            f"python = {_quote(target)} is not a subclass of fbaconf.harness.adapters.PythonAdapter",
+            rule="manifest-python",
+            file=str(path),
+        )
     kwargs = data.get("options", {})
     try:
         adapter = cls(**kwargs)
     except TypeError as e:
-        raise ManifestError(f"[options] do not fit {target}: {_quote(str(e))}", rule="manifest-options",
-                            file=str(path)) from None
+        raise ManifestError(
+            f"[options] do not fit {target}: {_quote(str(e))}", rule="manifest-options", file=str(path)
+        ) from None
     adapter.name = data["name"]
     adapter.description = data.get("description", getattr(adapter, "description", ""))
     adapter.claims = list(data["claims"])
@@ -564,8 +697,9 @@ def bundled() -> dict[str, Path]:
     return {p.stem: p for p in sorted(BUNDLED_DIR.glob("*.toml"))}
 
 
-def resolve(spec: str | Path, *, untrusted: bool = False,
-            ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> Adapter:
+def resolve(
+    spec: str | Path, *, untrusted: bool = False, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS
+) -> Adapter:
     """``--decoder`` value: a manifest path, or the name of a bundled adapter (``reference``,
     ``reference-inprocess``, ``dummy``...). ``untrusted``, ``ceilings``: see :func:`load_manifest`."""
     p = Path(spec)
@@ -574,5 +708,9 @@ def resolve(spec: str | Path, *, untrusted: bool = False,
     names = bundled()
     if str(spec) in names:
         return load_manifest(names[str(spec)], untrusted=untrusted, ceilings=ceilings)
-    raise ManifestError(f"no decoder manifest {_quote(str(spec))}: give a .toml path or one of the bundled adapters "
-                        f"({', '.join(names)})", rule="manifest-missing", file=str(spec)[:QUOTE_CHARS])
+    raise ManifestError(
+        f"no decoder manifest {_quote(str(spec))}: give a .toml path or one of the bundled adapters "
+        f"({', '.join(names)})",
+        rule="manifest-missing",
+        file=str(spec)[:QUOTE_CHARS],
+    )

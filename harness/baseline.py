@@ -32,6 +32,7 @@ After a run every result is classified:
 
 The summary line reads ``N new, N known, N fixed, N flaky``.
 """
+
 from __future__ import annotations
 
 import difflib
@@ -68,8 +69,11 @@ class Entry:
         """Whether ``r`` fails exactly as this line says (a Flake line matches any outcome)."""
         if self.outcome == FLAKE:
             return True
-        return not r.outcome.ok and r.outcome.value == self.outcome and \
-            (not self.signature or self.signature == signature(r))
+        return (
+            not r.outcome.ok
+            and r.outcome.value == self.outcome
+            and (not self.signature or self.signature == signature(r))
+        )
 
     def text(self) -> str:
         return f"{self.outcome},{self.signature}" if self.signature else self.outcome
@@ -79,6 +83,7 @@ class Entry:
 class Line:
     """One line of a baseline file as written: a comment or blank line (``case`` None), or an entry
     with its trailing comment (kept when the line is rewritten)."""
+
     raw: str
     case: str | None = None
     entry: Entry | None = None
@@ -113,15 +118,20 @@ def read_lines(path: Path) -> list[Line]:
         if len(parts) < 2 or not parts[0] or parts[1] not in valid:
             shown = raw.strip()[:200]
             close = difflib.get_close_matches(parts[1], sorted(valid), n=1) if len(parts) > 1 else []
-            raise BaselineError(f"line {n}: expected 'suite/case,Outcome[,signature]' with Outcome one of "
-                                f"{', '.join(sorted(valid))}; got \"{shown}\""
-                                + (f" (did you mean {close[0]}?)" if close else ""), rule="baseline", file=str(path))
+            raise BaselineError(
+                f"line {n}: expected 'suite/case,Outcome[,signature]' with Outcome one of "
+                f'{", ".join(sorted(valid))}; got "{shown}"' + (f" (did you mean {close[0]}?)" if close else ""),
+                rule="baseline",
+                file=str(path),
+            )
         if parts[0] in seen:
-            raise BaselineError(f"line {n}: {parts[0]} is listed again (first on line {seen[parts[0]]}): keep "
-                                f"one line per case", rule="baseline", file=str(path))
+            raise BaselineError(
+                f"line {n}: {parts[0]} is listed again (first on line {seen[parts[0]]}): keep one line per case",
+                rule="baseline",
+                file=str(path),
+            )
         seen[parts[0]] = n
-        out.append(Line(raw, parts[0], Entry(parts[1], parts[2] if len(parts) > 2 else ""),
-                        (hash_ + comment).strip()))
+        out.append(Line(raw, parts[0], Entry(parts[1], parts[2] if len(parts) > 2 else ""), (hash_ + comment).strip()))
     return out
 
 
@@ -172,8 +182,7 @@ def signature(r: CaseResult) -> str:
             continue
         fd = s.first_difference or {}
         if s.stage == "faps":
-            faps = [x["fap"] for x in fd.get("faps", []) if isinstance(x, dict)] or \
-                ([fd["fap"]] if "fap" in fd else [])
+            faps = [x["fap"] for x in fd.get("faps", []) if isinstance(x, dict)] or ([fd["fap"]] if "fap" in fd else [])
             parts.append(f"faps:{_items(faps)}" if faps else f"faps:{fd.get('what', 'differs')}")
         elif s.stage in ("vertices", "effective_faps"):
             parts.append(f"{s.stage}:{fd.get('part', fd.get('fap', 'differs'))}")
@@ -201,16 +210,16 @@ class Summary:
     flaky: list[CaseResult] = field(default_factory=list)
 
     def line(self) -> str:
-        return (f"{len(self.new)} new, {len(self.known)} known, {len(self.fixed)} fixed, "
-                f"{len(self.flaky)} flaky")
+        return f"{len(self.new)} new, {len(self.known)} known, {len(self.fixed)} fixed, {len(self.flaky)} flaky"
 
     def failing(self, allow_fixed: bool = False) -> list[CaseResult]:
         """What fails the run: new failures, and fixed cases unless allowed."""
         return self.new + ([] if allow_fixed else self.fixed)
 
 
-def classify(results: list[CaseResult], baseline: dict[str, Entry] | None = None,
-             flakes: list[re.Pattern] | None = None) -> Summary:
+def classify(
+    results: list[CaseResult], baseline: dict[str, Entry] | None = None, flakes: list[re.Pattern] | None = None
+) -> Summary:
     """Annotate ``results`` (``r.baseline``) and sort the required ones into a :class:`Summary`.
     A result already marked ``flake`` (by a passing retry) stays one. With a baseline or a flakes
     file, a required case failing and not excused is tagged ``new``."""
@@ -222,8 +231,10 @@ def classify(results: list[CaseResult], baseline: dict[str, Entry] | None = None
         if r.baseline != "flake":
             r.baseline = None
         entry = baseline.get(r.case_id)
-        if r.baseline == "flake" or (not r.outcome.ok and (
-                (entry is not None and entry.outcome == FLAKE) or any(p.search(r.case_id) for p in flakes))):
+        if r.baseline == "flake" or (
+            not r.outcome.ok
+            and ((entry is not None and entry.outcome == FLAKE) or any(p.search(r.case_id) for p in flakes))
+        ):
             r.baseline = "flake"
             if r.required:
                 s.flaky.append(r)
@@ -243,8 +254,7 @@ def classify(results: list[CaseResult], baseline: dict[str, Entry] | None = None
                 s.known.append(r)
         elif not r.outcome.ok and r.required:  # a case outside the claim fails nothing, whatever its line says
             r.baseline = "new"
-            r.message = (f"fails differently from the baseline ({entry.text()} -> "
-                         f"{entry_for(r).text()}): {r.message}")
+            r.message = f"fails differently from the baseline ({entry.text()} -> {entry_for(r).text()}): {r.message}"
             s.new.append(r)
     return s
 
@@ -258,6 +268,7 @@ def apply(results: list[CaseResult], baseline: dict[str, Entry], flakes=None, al
 @dataclass
 class WriteReport:
     """What :func:`write` did to the file: lines added, rewritten, kept as written, removed."""
+
     path: Path
     added: list[str] = field(default_factory=list)
     updated: list[str] = field(default_factory=list)
@@ -267,9 +278,12 @@ class WriteReport:
     def line(self) -> str:
         def named(xs: list[str]) -> str:
             return (": " + ", ".join(xs[:10]) + (f", +{len(xs) - 10} more" if len(xs) > 10 else "")) if xs else ""
-        return (f"baseline {self.path} written: {len(self.added)} case(s) added{named(self.added)}; "
-                f"{len(self.updated)} rewritten (failing differently now){named(self.updated)}; "
-                f"{len(self.removed)} removed (passing now){named(self.removed)}; {self.kept} line(s) kept as written")
+
+        return (
+            f"baseline {self.path} written: {len(self.added)} case(s) added{named(self.added)}; "
+            f"{len(self.updated)} rewritten (failing differently now){named(self.updated)}; "
+            f"{len(self.removed)} removed (passing now){named(self.removed)}; {self.kept} line(s) kept as written"
+        )
 
 
 def check_writable(path: Path) -> None:

@@ -9,6 +9,7 @@ output with one value changed: frame ``--frame``, FAP ``--fap``), ``notsupported
 ``reject`` (exit 1 with a message), ``alloc`` (allocates 8 GiB), ``startup`` (speed model:
 sleeps ``--startup`` s, then ``--per-frame`` s per decoded frame, then writes the output).
 """
+
 from __future__ import annotations
 
 import argparse

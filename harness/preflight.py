@@ -2,6 +2,7 @@
 exists and what its commands would show, and run the canary — the claim's simplest valid stream,
 exactly as a case runs — so that a decoder that cannot start is one set-up error, never a Fail per
 case (:mod:`fbaconf.isolation.setup`)."""
+
 from __future__ import annotations
 
 import os
@@ -34,17 +35,22 @@ def preflight(adapter, claim: str | None = None) -> float | None:
     prog = adapter.program()
     # the folders its commands would show (program, the files they name, manifest, --sandbox-ro), case files aside
     at = Path("/nonexistent-case")
-    job = Job(at, {p: str(at / p) for p in PLACEHOLDERS if p not in ("python", "manifest_dir", "workdir", "frames")},
-              faces=[str(at / "face.fba")], frames=1)
+    job = Job(
+        at,
+        {p: str(at / p) for p in PLACEHOLDERS if p not in ("python", "manifest_dir", "workdir", "frames")},
+        faces=[str(at / "face.fba")],
+        frames=1,
+    )
     for name in adapter.commands:
         adapter.sandbox_view(adapter.argv(name, job), at, hidden=hidden_from_decoders())
     if prog is None:
         first = str(adapter.commands["decode"][0])
         where = Path(adapter.manifest_path).resolve().parent if adapter.manifest_path is not None else None
         shown = os.path.normpath(first.replace("{manifest_dir}", str(where))) if where is not None else first
-        raise UsageError(f"decoder {adapter.name}: program {shown} not found (not a file, and not on PATH)"
-                         + (f"; [commands] decode names it \"{first}\": build the decoder first" if shown != first
-                            else ""))
+        raise UsageError(
+            f"decoder {adapter.name}: program {shown} not found (not a file, and not on PATH)"
+            + (f'; [commands] decode names it "{first}": build the decoder first' if shown != first else "")
+        )
     if not os.access(prog, os.X_OK):
         raise UsageError(f"decoder {adapter.name}: program {prog} is not executable")
     return canary(adapter, claim) if claim is not None else None
@@ -79,12 +85,17 @@ def canary(adapter, claim: str) -> float | None:
         except KeyError:  # a placeholder the case has no value for: NotSupported, no canary
             return None
         hidden = hidden_from_decoders() + ([case.suite_dir.resolve()] if case.suite_dir else [])
-        setup.probe(argv, job.workdir, adapter.limits, name=adapter.name, env=adapter.env,
-                    what=f"the claim's simplest valid stream ({case.full_id})",
-                    file=str(adapter.manifest_path or adapter.name), reject_exit_codes=adapter.reject_exit_codes,
-                    view=adapter.sandbox_view(argv, job.workdir, hidden=hidden))
+        setup.probe(
+            argv,
+            job.workdir,
+            adapter.limits,
+            name=adapter.name,
+            env=adapter.env,
+            what=f"the claim's simplest valid stream ({case.full_id})",
+            file=str(adapter.manifest_path or adapter.name),
+            reject_exit_codes=adapter.reject_exit_codes,
+            view=adapter.sandbox_view(argv, job.workdir, hidden=hidden),
+        )
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return time.perf_counter() - t0
-
-

@@ -32,6 +32,7 @@ before pytest's own failure sections (with ``--junitxml``, the file's ``baseline
 
 Select cases with pytest's own ``-k`` or by node id; parallelise with pytest-xdist if installed.
 """
+
 from __future__ import annotations
 
 import fnmatch
@@ -67,13 +68,25 @@ def pytest_addoption(parser) -> None:
     g.addoption("--fbaconf-baseline", default=None, help="baseline file of known failures/flakes")
     g.addoption("--fbaconf-flakes", default=None, help="file of regular expressions of flaky case ids")
     g.addoption("--fbaconf-retries", type=int, default=0, help="re-run a failing case up to N times (default 0)")
-    g.addoption("--fbaconf-allow-fixed", action="store_true", default=False,
-                help="a case the baseline lists as failing that passes now does not fail")
-    g.addoption("--fbaconf-strict", action="store_true", default=False,
-                help="a failing case that rests on a provisional decision fails (default: xfail)")
+    g.addoption(
+        "--fbaconf-allow-fixed",
+        action="store_true",
+        default=False,
+        help="a case the baseline lists as failing that passes now does not fail",
+    )
+    g.addoption(
+        "--fbaconf-strict",
+        action="store_true",
+        default=False,
+        help="a failing case that rests on a provisional decision fails (default: xfail)",
+    )
     g.addoption("--fbaconf-out", default=None, help="folder for artefacts of failing cases")
-    g.addoption("--fbaconf-keep-workdirs", action="store_true", default=False,
-                help="keep each case's work folder (under the --fbaconf-out folder), so its command can be rerun")
+    g.addoption(
+        "--fbaconf-keep-workdirs",
+        action="store_true",
+        default=False,
+        help="keep each case's work folder (under the --fbaconf-out folder), so its command can be rerun",
+    )
 
 
 class FbaconfCaseWarning(UserWarning):
@@ -140,14 +153,19 @@ class FbaconfItem(pytest.Item):
         if r.reading and r.outcome.ok:
             self.user_properties.append((_PROPERTY, "provisional"))
             if st.strict:
-                pytest.fail(f"provisional difference (judged by the declared reading {r.reading}; --fbaconf-strict "
-                            f"fails it): {clean_text(r.message)}", pytrace=False)
+                pytest.fail(
+                    f"provisional difference (judged by the declared reading {r.reading}; --fbaconf-strict "
+                    f"fails it): {clean_text(r.message)}",
+                    pytrace=False,
+                )
         opened = sorted(set(r.rests_on) & set(open_decisions()))
         if not st.strict and opened and r.outcome.value in ("Fail", "NotSupported"):
             self.user_properties.append((_PROPERTY, "unverified"))
-            pytest.xfail(f"rests on the open decision {', '.join(opened)}: the claim names its tool unverified when "
-                         f"none of the tool's cases passes (--fbaconf-strict fails it): {r.outcome.value}: "
-                         f"{clean_text(r.message)}")
+            pytest.xfail(
+                f"rests on the open decision {', '.join(opened)}: the claim names its tool unverified when "
+                f"none of the tool's cases passes (--fbaconf-strict fails it): {r.outcome.value}: "
+                f"{clean_text(r.message)}"
+            )
         summary = bl.classify([r], st.baseline, st.flakes)
         self._judge(r, summary)
 
@@ -162,15 +180,19 @@ class FbaconfItem(pytest.Item):
         if summary.known:
             entry = st.baseline[r.case_id]
             self.user_properties.append((_PROPERTY, "known"))
-            pytest.xfail(f"known failure (baseline: {r.case_id},{entry.text()}): {r.outcome.value}: "
-                         f"{clean_text(r.message)}")
+            pytest.xfail(
+                f"known failure (baseline: {r.case_id},{entry.text()}): {r.outcome.value}: {clean_text(r.message)}"
+            )
         if summary.fixed:
             self.user_properties.append((_PROPERTY, "fixed"))
             if st.allow_fixed:
                 return
             entry = st.baseline[r.case_id]
-            raise FbaconfCaseFailure(r, f"fixed: {r.case_id} passes now, but {st.baseline_path} lists it as "
-                                        f"{entry.text()}: remove its line (or --fbaconf-allow-fixed)")
+            raise FbaconfCaseFailure(
+                r,
+                f"fixed: {r.case_id} passes now, but {st.baseline_path} lists it as "
+                f"{entry.text()}: remove its line (or --fbaconf-allow-fixed)",
+            )
         if summary.new:
             self.user_properties.append((_PROPERTY, "new"))
             raise FbaconfCaseFailure(r, None)
@@ -235,7 +257,7 @@ def pytest_load_initial_conftests(early_config, parser, args) -> None:
     given = [str(a) for a in (getattr(ns, "file_or_dir", None) or [])]
     picked = [a for a in given if a.startswith(PREFIX)]
     if picked:
-        early_config.option.fbaconf_selected = [a[len(PREFIX):] for a in picked]  # an option: xdist workers get it
+        early_config.option.fbaconf_selected = [a[len(PREFIX) :] for a in picked]  # an option: xdist workers get it
         ns.file_or_dir = [a for a in given if a not in picked]
         args[:] = [a for a in args if a not in picked]
     _reroot(early_config, ns.file_or_dir)
@@ -248,10 +270,16 @@ def _reroot(config, paths: list[str]) -> None:
     where pytest's internals differ from the ones known here, leave them."""
     try:
         from _pytest.config.findpaths import determine_setup  # noqa: PLC0415 (pytest's internal, optional)
+
         params = inspect.signature(determine_setup).parameters
         ns = config.known_args_namespace
-        kw = {"inifile": ns.inifilename, "args": paths, "rootdir_cmd_arg": ns.rootdir or None,
-              "invocation_dir": config.invocation_params.dir, "override_ini": ns.override_ini}
+        kw = {
+            "inifile": ns.inifilename,
+            "args": paths,
+            "rootdir_cmd_arg": ns.rootdir or None,
+            "invocation_dir": config.invocation_params.dir,
+            "override_ini": ns.override_ini,
+        }
         got = determine_setup(**{k: v for k, v in kw.items() if k in params})
         rootpath, inipath, inicfg = got[0], got[1], got[2]
         if (rootpath, inipath) == (config.rootpath, config.inipath):
@@ -296,8 +324,10 @@ def pytest_report_header(config) -> list[str] | None:
     st = config.stash.get(_STATE, None)
     if st is None:
         return None
-    return [f"fbaconf: decoder {st.adapter.name}, claim {st.claim}"
-            + (f", baseline {st.baseline_path} ({len(st.baseline)} line(s))" if st.baseline is not None else "")]
+    return [
+        f"fbaconf: decoder {st.adapter.name}, claim {st.claim}"
+        + (f", baseline {st.baseline_path} ({len(st.baseline)} line(s))" if st.baseline is not None else "")
+    ]
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -306,9 +336,14 @@ def pytest_collection_modifyitems(session, config, items) -> None:
     st = config.stash.get(_STATE, None)
     if st is None:
         return
-    node = FbaconfCollector.from_parent(session, name="fbaconf", nodeid="fbaconf",
-                                        path=Path(config.invocation_params.dir), state=st,
-                                        selected=_selected(config))
+    node = FbaconfCollector.from_parent(
+        session,
+        name="fbaconf",
+        nodeid="fbaconf",
+        path=Path(config.invocation_params.dir),
+        state=st,
+        selected=_selected(config),
+    )
     added = list(node.collect())
     items.extend(added)
     # Count them as collected (the terminal's "collected N items").
@@ -326,8 +361,13 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 
 def _seen(tr) -> dict[str, str]:
     """Each item's class against the baseline (new, known, fixed, flaky, provisional, pass), from its reports."""
-    return {rep.nodeid: v for reports in tr.stats.values() for rep in reports
-            for name, v in getattr(rep, "user_properties", None) or [] if name == _PROPERTY}
+    return {
+        rep.nodeid: v
+        for reports in tr.stats.values()
+        for rep in reports
+        for name, v in getattr(rep, "user_properties", None) or []
+        if name == _PROPERTY
+    }
 
 
 def _line(seen: dict[str, str]) -> str:

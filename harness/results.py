@@ -9,6 +9,7 @@ Timeout, Crash, Error, Skipped. Only ``Pass``/``QualityWarning`` satisfy a case 
 requires: a required case that is NotSupported fails the claim too (a claim means all of
 it). NotSupported outside the claim is informative.
 """
+
 from __future__ import annotations
 
 import json
@@ -43,8 +44,16 @@ class Outcome(StrEnum):
 
 
 # Order used in summaries (worst first).
-OUTCOME_ORDER = (Outcome.CRASH, Outcome.TIMEOUT, Outcome.FAIL, Outcome.ERROR, Outcome.QUALITY_WARNING,
-                 Outcome.NOT_SUPPORTED, Outcome.SKIPPED, Outcome.PASS)
+OUTCOME_ORDER = (
+    Outcome.CRASH,
+    Outcome.TIMEOUT,
+    Outcome.FAIL,
+    Outcome.ERROR,
+    Outcome.QUALITY_WARNING,
+    Outcome.NOT_SUPPORTED,
+    Outcome.SKIPPED,
+    Outcome.PASS,
+)
 
 
 @dataclass
@@ -59,6 +68,7 @@ class StageResult:
     ``series`` per-frame error curves for the HTML plots (name -> list of floats);
     ``artefacts`` paths (relative to the run's output folder) of expected/got/diff images.
     """
+
     stage: str
     outcome: Outcome
     message: str = ""
@@ -82,6 +92,7 @@ class StageResult:
 @dataclass
 class CaseResult:
     """The verdict for one test case against one decoder."""
+
     case_id: str  # "<suite>/<case>"
     suite: str
     claim: str  # the profile@level the case belongs to, e.g. "simple@1"
@@ -128,6 +139,7 @@ class CaseResult:
 class SpeedResult:
     """Measured per-frame cost of one operation (decode or render) against a level minimum, and
     whether the machine gave the decoder its CPU meanwhile (harness/speed/measure.py, harness/speed/load.py)."""
+
     operation: str  # "decode" | "render"
     claim: str
     per_frame_s: float
@@ -166,6 +178,7 @@ class SpeedResult:
 @dataclass
 class RunRecord:
     """Everything a report needs: who ran what, on what, and the verdicts."""
+
     decoder: dict  # {"name", "manifest_sha256", "kind", "claims", "inputs", "outputs"}
     claim: str | None
     suites: list[dict]  # [{"name", "version", "sha256", "cases"}]
@@ -187,18 +200,27 @@ class RunRecord:
 
     def counts(self, results: Iterable[CaseResult] | None = None) -> dict[str, int]:
         c = {o.value: 0 for o in OUTCOME_ORDER}
-        for r in (self.results if results is None else results):
+        for r in self.results if results is None else results:
             c[r.outcome.value] += 1
         return c
 
     def to_json(self) -> dict:
         return {
             "format": "fbaconf.run/1",
-            "decoder": self.decoder, "claim": self.claim, "suites": self.suites, "system": self.system,
-            "started": self.started, "finished": self.finished, "duration_s": self.duration_s,
-            "counts": self.counts(), "exit_code": self.exit_code, "provisional": self.provisional,
-            "missing": self.missing, "baseline_summary": self.baseline_summary,
-            "provisional_differences": self.provisional_differences, "strict": self.strict,
+            "decoder": self.decoder,
+            "claim": self.claim,
+            "suites": self.suites,
+            "system": self.system,
+            "started": self.started,
+            "finished": self.finished,
+            "duration_s": self.duration_s,
+            "counts": self.counts(),
+            "exit_code": self.exit_code,
+            "provisional": self.provisional,
+            "missing": self.missing,
+            "baseline_summary": self.baseline_summary,
+            "provisional_differences": self.provisional_differences,
+            "strict": self.strict,
             "verdict": self.verdict,
             "results": [r.to_json() for r in self.results],
             "speed": [s.to_json() for s in self.speed],
@@ -206,15 +228,24 @@ class RunRecord:
 
     @classmethod
     def from_json(cls, d: dict) -> RunRecord:
-        return cls(decoder=d["decoder"], claim=d.get("claim"), suites=d.get("suites", []),
-                   system=d.get("system", {}), results=[CaseResult.from_json(r) for r in d.get("results", [])],
-                   speed=[SpeedResult.from_json(s) for s in d.get("speed", [])],
-                   started=d.get("started", ""), finished=d.get("finished", ""),
-                   duration_s=d.get("duration_s", 0.0), provisional=d.get("provisional", []),
-                   missing=d.get("missing", []), baseline_summary=d.get("baseline_summary",
-                                                                        ""), exit_code=d.get("exit_code", 0),
-                   provisional_differences=d.get("provisional_differences", []), strict=d.get("strict", False),
-                   verdict=d.get("verdict", {}))
+        return cls(
+            decoder=d["decoder"],
+            claim=d.get("claim"),
+            suites=d.get("suites", []),
+            system=d.get("system", {}),
+            results=[CaseResult.from_json(r) for r in d.get("results", [])],
+            speed=[SpeedResult.from_json(s) for s in d.get("speed", [])],
+            started=d.get("started", ""),
+            finished=d.get("finished", ""),
+            duration_s=d.get("duration_s", 0.0),
+            provisional=d.get("provisional", []),
+            missing=d.get("missing", []),
+            baseline_summary=d.get("baseline_summary", ""),
+            exit_code=d.get("exit_code", 0),
+            provisional_differences=d.get("provisional_differences", []),
+            strict=d.get("strict", False),
+            verdict=d.get("verdict", {}),
+        )
 
 
 _APPEND_LOCK = threading.Lock()
@@ -255,7 +286,7 @@ class ResultLog:
                 if end and os.pread(fd, 1, end - 1) != b"\n":  # a line cut short by an interruption
                     data = b"\n" + data  # must not swallow the next record
                 while data:
-                    data = data[os.write(fd, data):]
+                    data = data[os.write(fd, data) :]
                 os.fsync(fd)
             finally:
                 os.close(fd)

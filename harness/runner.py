@@ -15,6 +15,7 @@ documented reject exit codes; exit 0 on an invalid stream is a Fail unless the c
 concealment (then the outputs decide); crashes, hangs and blown limits fail as everywhere
 (:func:`.compare.ladder.outcome_for`).
 """
+
 from __future__ import annotations
 
 import os
@@ -76,8 +77,15 @@ def _remove_quietly(path: Path) -> None:
 def run_case(ctx: RunContext, case: Case) -> CaseResult:
     t0 = time.perf_counter()
     required = required_for(ctx.claim, case, ctx.adapter)
-    base = dict(case_id=case.full_id, suite=case.suite, claim=case.claim, required=required,
-                rests_on=rests_on(case, ctx.golden), kind=CaseKind(case.kind).value, tools=list(case.tools))
+    base = dict(
+        case_id=case.full_id,
+        suite=case.suite,
+        claim=case.claim,
+        required=required,
+        rests_on=rests_on(case, ctx.golden),
+        kind=CaseKind(case.kind).value,
+        tools=list(case.tools),
+    )
     why = capability(ctx.adapter, case)
     if why:
         return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED, message=why)
@@ -86,9 +94,12 @@ def run_case(ctx: RunContext, case: Case) -> CaseResult:
         job = prepare_job(ctx.adapter, case, workdir)
         result = _execute(ctx, case, job, base)
     except Exception as e:  # noqa: BLE001 - a harness problem, never the decoder's verdict
-        result = CaseResult(**base, outcome=Outcome.ERROR,
-                            message=f"harness error: {type(e).__name__}: {e}",
-                            stderr_tail=traceback.format_exc(limit=3)[-2000:])
+        result = CaseResult(
+            **base,
+            outcome=Outcome.ERROR,
+            message=f"harness error: {type(e).__name__}: {e}",
+            stderr_tail=traceback.format_exc(limit=3)[-2000:],
+        )
     finally:
         if not ctx.keep_workdirs:
             _remove_quietly(workdir)
@@ -104,15 +115,23 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
         try:
             argv = a.argv(cmd, job)
         except KeyError as e:
-            return CaseResult(**base, outcome=Outcome.NOT_SUPPORTED,
-                              message=f"[commands] {cmd} needs {{{e.args[0]}}}, which this case does not have")
+            return CaseResult(
+                **base,
+                outcome=Outcome.NOT_SUPPORTED,
+                message=f"[commands] {cmd} needs {{{e.args[0]}}}, which this case does not have",
+            )
         hidden = hidden_from_decoders(ctx) + ([case.suite_dir.resolve()] if case.suite_dir else [])
         view = a.sandbox_view(argv, job.workdir, hidden=hidden)
-        res = sandbox.run(argv, job.workdir, a.limits, env=a.env, view=view,
-                          keep_io=job.workdir if ctx.keep_workdirs else None)
+        res = sandbox.run(
+            argv, job.workdir, a.limits, env=a.env, view=view, keep_io=job.workdir if ctx.keep_workdirs else None
+        )
         ending = endings.classify(res, a.limits, a.reject_exit_codes, name=a.name)
-        proc = dict(command=argv, exit_code=res.returncode, signal=res.signal,
-                    stderr_tail=endings.kept_stderr(res.stderr_tail, ending))
+        proc = dict(
+            command=argv,
+            exit_code=res.returncode,
+            signal=res.signal,
+            stderr_tail=endings.kept_stderr(res.stderr_tail, ending),
+        )
     else:
         ex = a.execute(job)
         ending = ex.ending
@@ -130,8 +149,7 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
     return result
 
 
-def _judge(ctx: RunContext, case: Case, job: Job, ending, fields: dict, reading_dir: Path | None = None
-           ) -> CaseResult:
+def _judge(ctx: RunContext, case: Case, job: Job, ending, fields: dict, reading_dir: Path | None = None) -> CaseResult:
     """The case's result from the decoder's ending and outputs: against the case's goldens, or
     against what another reading gives (``reading_dir``: its outputs, or reject.json)."""
     if reading_dir is None:
@@ -143,17 +161,28 @@ def _judge(ctx: RunContext, case: Case, job: Job, ending, fields: dict, reading_
     if verdict is not None:
         outcome, msg = verdict
         return CaseResult(**fields, outcome=outcome, message=msg)
-    stages = compare_outputs(case, job, golden=ctx.golden, outputs=ctx.adapter.outputs, out_dir=ctx.out_dir,
-                             gdir=reading_dir, stages_of_case=stages_of_case)
+    stages = compare_outputs(
+        case,
+        job,
+        golden=ctx.golden,
+        outputs=ctx.adapter.outputs,
+        out_dir=ctx.out_dir,
+        gdir=reading_dir,
+        stages_of_case=stages_of_case,
+    )
     outcome = worst(s.outcome for s in stages)
     failing = [s for s in stages if s.outcome != Outcome.PASS]
-    msg = "; ".join(f"{s.stage}: {s.message}" for s in failing) if failing else \
-        f"{', '.join(s.stage for s in stages)} match"
+    msg = (
+        "; ".join(f"{s.stage}: {s.message}" for s in failing)
+        if failing
+        else f"{', '.join(s.stage for s in stages)} match"
+    )
     return CaseResult(**fields, outcome=outcome, message=msg, stages=stages)
 
 
-def _judge_by_declared(ctx: RunContext, case: Case, job: Job, ending, fields: dict,
-                       declared: dict[str, Path]) -> CaseResult:
+def _judge_by_declared(
+    ctx: RunContext, case: Case, job: Job, ending, fields: dict, declared: dict[str, Path]
+) -> CaseResult:
     """A case that a reading the decoder declared changes: judged by what that reading gives (the
     first declared one that the result equals; a decoder follows one reading)."""
     first = None
@@ -166,8 +195,10 @@ def _judge_by_declared(ctx: RunContext, case: Case, job: Job, ending, fields: di
     if first is None:  # declared is never empty here (the caller's condition)
         raise ValueError(f"{case.full_id}: no declared reading to judge by")
     if _judge(ctx, case, job, ending, dict(fields)).outcome.ok:
-        first.message = (f"decoded by fbaconf's reading, not the declared {', '.join(declared)} (which changes "
-                         f"this case): a decoder follows the reading it declares; {first.message}")
+        first.message = (
+            f"decoded by fbaconf's reading, not the declared {', '.join(declared)} (which changes "
+            f"this case): a decoder follows the reading it declares; {first.message}"
+        )
     else:
         first.message = f"judged by the declared reading {', '.join(declared)}: {first.message}"
     first.reading = None  # not a provisional difference: a failure
@@ -180,10 +211,11 @@ def _hint_other_reading(ctx: RunContext, case: Case, job: Job, ending, fields: d
     for rid, rdir in reading_goldens(case, ctx.golden).items():
         if _judge(ctx, case, job, ending, fields, rdir).outcome.ok:
             result.other_reading = rid
-            result.message += (f" — this is what the other reading {rid} gives ({readings.get(rid).text}); a "
-                               f"decoder that follows it declares readings = [\"{rid}\"] in its manifest")
+            result.message += (
+                f" — this is what the other reading {rid} gives ({readings.get(rid).text}); a "
+                f'decoder that follows it declares readings = ["{rid}"] in its manifest'
+            )
             return
-
 
 
 def hidden_from_decoders(ctx: RunContext | None = None) -> list[Path]:
@@ -231,17 +263,28 @@ class Progress:
                 return
             w = 30
             fill = int(w * self.done / max(1, self.total))
-            sys.stderr.write(f"\r[{'#' * fill}{'.' * (w - fill)}] {self.done}/{self.total} "
-                             f"({rate:.1f}/s) {counts}\x1b[K")
+            sys.stderr.write(
+                f"\r[{'#' * fill}{'.' * (w - fill)}] {self.done}/{self.total} ({rate:.1f}/s) {counts}\x1b[K"
+            )
             if self.done == self.total:
                 sys.stderr.write("\n")
             sys.stderr.flush()
 
 
-def run_cases(adapter: Adapter, cases: list[Case], *, claim: str | None, out_dir: Path, jobs: int | None = None,  # noqa: PLR0913
-              resume: bool = False, keep_workdirs: bool = False, progress: bool | None = None,
-              golden: Path | None = None, on_result: Callable[[CaseResult], None] | None = None,
-              cluster: str | None = None) -> list[CaseResult]:
+def run_cases(  # noqa: PLR0913 - keyword options of a run
+    adapter: Adapter,
+    cases: list[Case],
+    *,
+    claim: str | None,
+    out_dir: Path,
+    jobs: int | None = None,
+    resume: bool = False,
+    keep_workdirs: bool = False,
+    progress: bool | None = None,
+    golden: Path | None = None,
+    on_result: Callable[[CaseResult], None] | None = None,
+    cluster: str | None = None,
+) -> list[CaseResult]:
     """Run ``cases``; returns results in case order. ``out_dir/results.jsonl`` is the live log.
     Every path is made absolute first: decoders run in their own folders."""
     out_dir = Path(out_dir).resolve()

@@ -7,6 +7,7 @@
 * :func:`capability` — why a decoder cannot take a case (NotSupported before anything runs);
 * :func:`select_cases` — the cases a ``run``/``certify`` takes from the suites.
 """
+
 from __future__ import annotations
 
 import fnmatch
@@ -54,21 +55,25 @@ def capability(adapter: Adapter, case: Case) -> str | None:
         if "fba" not in adapter.inputs:
             return "multi-face cases are binary streams; the decoder does not accept fba"
     else:
-        if not (("fba" in adapter.inputs and case.inputs.get("fba")) or
-                ("fap" in adapter.inputs and case.inputs.get("fap"))):
+        if not (
+            ("fba" in adapter.inputs and case.inputs.get("fba")) or ("fap" in adapter.inputs and case.inputs.get("fap"))
+        ):
             forms = [k for k in ("fba", "fap") if case.inputs.get(k)]
             return f"case comes as {'/'.join(forms) or 'nothing'}; the decoder accepts {'/'.join(adapter.inputs)}"
         if case.inputs.get("scene") or case.inputs.get("bifs"):
-            if not (("scene" in adapter.inputs and case.inputs.get("scene")) or
-                    ("bifs" in adapter.inputs and case.inputs.get("bifs"))):
+            if not (
+                ("scene" in adapter.inputs and case.inputs.get("scene"))
+                or ("bifs" in adapter.inputs and case.inputs.get("bifs"))
+            ):
                 return "case carries a scene (FDP/FIT/FaceDefTables/model); the decoder accepts no scene input"
     if case.kind != CaseKind.ERROR and case.stages and not set(case.stages) & set(adapter.outputs):
         return f"case compares {', '.join(case.stages)}; the decoder outputs {', '.join(adapter.outputs)}"
     return None
 
 
-def select_cases(suites, claim: str | None, suite_names: list[str], case_globs: list[str], only_required: bool,
-                 adapter: Adapter) -> list[Case]:
+def select_cases(
+    suites, claim: str | None, suite_names: list[str], case_globs: list[str], only_required: bool, adapter: Adapter
+) -> list[Case]:
     """The cases of ``suites`` named by ``suite_names``/``case_globs`` (all when empty); with
     ``only_required``, just those the claim requires of ``adapter``."""
     cases = []

@@ -1,6 +1,7 @@
 """One harness session: run the selected cases of a claim (+ speed), judge the claim, write the
 reports. Used by ``fbaconf run`` and ``fbaconf certify`` alike; what comes before the cases is
 :mod:`.preflight`, the command line's values :mod:`.usage`."""
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -32,6 +33,7 @@ class RunOptions:
     """How ``run``/``certify`` run the selected cases: parallelism (``jobs`` or a Dask
     ``cluster``), resumption, kept case folders, progress, the baseline and flakes files,
     retries, and whether the speed phase runs."""
+
     jobs: int | None = None
     cluster: str | None = None
     resume: bool = False
@@ -62,8 +64,17 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
     started = _now()
     out_dir = Path(out_dir).resolve()
     with interruptible() as stop:
-        results = run_cases(adapter, cases, claim=claim, out_dir=out_dir, jobs=jobs, resume=o.resume,
-                            keep_workdirs=o.keep_workdirs, progress=o.progress, cluster=o.cluster)
+        results = run_cases(
+            adapter,
+            cases,
+            claim=claim,
+            out_dir=out_dir,
+            jobs=jobs,
+            resume=o.resume,
+            keep_workdirs=o.keep_workdirs,
+            progress=o.progress,
+            cluster=o.cluster,
+        )
     if stop.signum is not None:
         return _interrupted_record(adapter, claim, suites, cases, results, started, t0, stop.signum)
     same = setup.identical(adapter.name, adapter.limits, results, {c.full_id for c in cases if c.kind != "error"})
@@ -103,8 +114,14 @@ def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) ->
     for attempt in range(1, retries + 1):
         if not todo:
             return
-        again = run_cases(adapter, [by_id[r.case_id] for r in todo], claim=claim,
-                          out_dir=out_dir / "retries" / str(attempt), jobs=jobs, progress=False)
+        again = run_cases(
+            adapter,
+            [by_id[r.case_id] for r in todo],
+            claim=claim,
+            out_dir=out_dir / "retries" / str(attempt),
+            jobs=jobs,
+            progress=False,
+        )
         passed = {r.case_id for r in again if r.outcome.ok}
         for r in todo:
             if r.case_id in passed:
@@ -113,11 +130,15 @@ def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) ->
         todo = [r for r in todo if r.case_id not in passed]
 
 
-def write_reports(record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None,
-                  heading: str = "fbaconf run") -> dict[str, Path]:
+def write_reports(
+    record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None, heading: str = "fbaconf run"
+) -> dict[str, Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = {"json": json_path or out_dir / "report.json", "junit": junit_path or out_dir / "junit.xml",
-             "html": (html_dir or out_dir) / "index.html"}
+    paths = {
+        "json": json_path or out_dir / "report.json",
+        "junit": junit_path or out_dir / "junit.xml",
+        "html": (html_dir or out_dir) / "index.html",
+    }
     reports.write_json(record, paths["json"])
     reports.write_junit(record, paths["junit"])
     paths["html"] = reports.write_html(record, html_dir or out_dir, base_dir=out_dir, heading=heading)
@@ -145,9 +166,11 @@ class interruptible:
         self.old = {}
         sandbox.reset_stop()
         if threading.current_thread() is threading.main_thread():
+
             def handler(signum, _frame):
                 self.stop.signum = signum
                 sandbox.stop_all()
+
             for sig in (signal.SIGINT, signal.SIGTERM):
                 self.old[sig] = signal.signal(sig, handler)
         return self.stop
@@ -162,16 +185,33 @@ def _record(adapter, claim, suites, cases, results, started, t0):
     """The RunRecord of a session: decoder, claim, the suites that ran, system, results."""
     ran = {c.suite for c in cases}
     return RunRecord(
-        decoder=adapter.describe(), claim=claim,
-        suites=[{"name": s.name, "version": s.version, "sha256": s.digest(), "claim": s.claim, "group": s.group,
-                 "cases": len(s.cases)} for s in suites if s.name in ran],
-        system=system_info(), results=results, started=started, finished=_now(),
-        duration_s=time.perf_counter() - t0, provisional=provisional.statements(claim))
+        decoder=adapter.describe(),
+        claim=claim,
+        suites=[
+            {
+                "name": s.name,
+                "version": s.version,
+                "sha256": s.digest(),
+                "claim": s.claim,
+                "group": s.group,
+                "cases": len(s.cases),
+            }
+            for s in suites
+            if s.name in ran
+        ],
+        system=system_info(),
+        results=results,
+        started=started,
+        finished=_now(),
+        duration_s=time.perf_counter() - t0,
+        provisional=provisional.statements(claim),
+    )
 
 
 def _interrupted_record(adapter, claim, suites, cases, results, started, t0, signum):
     record = _record(adapter, claim, suites, cases, results, started, t0)
-    record.missing = [f"interrupted by signal {signum}: {len(cases) - len(results)} case(s) not run "
-                      f"(--resume continues)"]
+    record.missing = [
+        f"interrupted by signal {signum}: {len(cases) - len(results)} case(s) not run (--resume continues)"
+    ]
     record.exit_code = 128 + signum
     return record

@@ -13,6 +13,7 @@ process tree while it lives (:class:`TreeWatch`), the load average. :func:`machi
 the ones a window needs; the speed measurement (:mod:`.speed.load`) turns two of them into what
 others used meanwhile.
 """
+
 from __future__ import annotations
 
 import os
@@ -41,8 +42,13 @@ def _cpu_model() -> str:
         pass
     if sys.platform == "darwin":
         try:
-            out = subprocess.run(["sysctl", "-n", "machdep.cpu.brand_string"], capture_output=True,  # noqa: S607 - the macOS system tool, found where the system puts it
-                                 text=True, timeout=5, check=False).stdout.strip()
+            out = subprocess.run(
+                ["sysctl", "-n", "machdep.cpu.brand_string"],  # noqa: S607 - the macOS system tool, found where the system puts it
+                capture_output=True,
+                text=True,
+                timeout=5,
+                check=False,
+            ).stdout.strip()
             if out:
                 return out
         except (OSError, subprocess.SubprocessError):
@@ -89,6 +95,7 @@ def system_info(extra: dict | None = None) -> dict:
 
 
 # --------------------------------------------------------------------------- machine state
+
 
 def _read(path: str) -> str | None:
     try:
@@ -153,6 +160,7 @@ def thread_cpu_wait() -> tuple[float, float] | None:
 @dataclass(frozen=True)
 class MachineSample:
     """The machine's counters at one instant (None: not readable here)."""
+
     t: float  # time.perf_counter()
     busy_s: float | None  # busy_cpu_s()
     pressure_s: float | None  # cpu_pressure_some_s()
@@ -167,8 +175,13 @@ def machine_sample() -> MachineSample:
         load = os.getloadavg()[0]
     except OSError:
         load = None
-    return MachineSample(t=time.perf_counter(), busy_s=busy_cpu_s(), pressure_s=cpu_pressure_some_s(),
-                         own_s=s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime, load=load)
+    return MachineSample(
+        t=time.perf_counter(),
+        busy_s=busy_cpu_s(),
+        pressure_s=cpu_pressure_some_s(),
+        own_s=s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime,
+        load=load,
+    )
 
 
 class TreeWatch:
@@ -180,6 +193,7 @@ class TreeWatch:
 
     def __init__(self, pid: int, *, interval: float = 0.02, include_root: bool = False) -> None:
         import threading  # noqa: PLC0415 (only watches need it)
+
         self.pid, self.interval, self.include_root = pid, interval, include_root
         self._last: dict[tuple[int, int], tuple[float, float]] = {}
         self._base: dict[tuple[int, int], tuple[float, float]] = {}

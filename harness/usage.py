@@ -1,5 +1,6 @@
 """What the command line gives ``run``, ``certify`` and ``bench``, checked: the claim, the suites
 named, the lab's extra folders; a wrong value is one :class:`UsageError` line (exit 2)."""
+
 from __future__ import annotations
 
 import difflib
@@ -15,6 +16,7 @@ from .adapters import highest_claim
 
 class UsageError(FbaconfInputError):
     """A command-line value is wrong (exit 2, one line)."""
+
     rule = "usage"
 
 
@@ -51,7 +53,7 @@ def check_suites(suites, names: list[str]) -> None:
     for n in names:
         if n not in known:
             close = difflib.get_close_matches(n, known, n=1)
-            raise UsageError(f"--suite {n!r}: no such suite" + (f" (did you mean {close[0]!r}?)" if close else
-                             f" (known: {', '.join(known)})"))
-
-
+            raise UsageError(
+                f"--suite {n!r}: no such suite"
+                + (f" (did you mean {close[0]!r}?)" if close else f" (known: {', '.join(known)})")
+            )

@@ -27,6 +27,7 @@ Verdict words: ``PASS``; ``PASS (unverified: dct; provisional differences: 29)``
 The statement says, per tool and per decision, ``verified`` / ``differs`` (by a declared
 reading) / ``declined`` / ``unverified`` / ``fails``.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
@@ -73,9 +74,14 @@ class ClaimVerdict:
     decisions: dict[str, DecisionState]
 
     def to_json(self) -> dict:
-        return {"verdict": self.verdict, "exit_code": self.exit_code, "provisional_differences": self.differences,
-                "unverified": self.unverified, "tools": {k: asdict(v) for k, v in self.tools.items()},
-                "decisions": {k: asdict(v) for k, v in self.decisions.items()}}
+        return {
+            "verdict": self.verdict,
+            "exit_code": self.exit_code,
+            "provisional_differences": self.differences,
+            "unverified": self.unverified,
+            "tools": {k: asdict(v) for k, v in self.tools.items()},
+            "decisions": {k: asdict(v) for k, v in self.decisions.items()},
+        }
 
 
 def _ok(r: dict) -> bool:
@@ -101,23 +107,29 @@ def tool_state(tool: str, cases: list[dict]) -> ToolState:
     elif not hard and declined:
         taken = [r for r in valid if r.get("outcome") != "NotSupported"]
         st.state = "declined"
-        st.note = (f"every valid stream of it was rejected ({len(taken)} of {len(valid)})" if taken
-                   else f"not taken ({len(valid)} valid stream(s) NotSupported)")
+        st.note = (
+            f"every valid stream of it was rejected ({len(taken)} of {len(valid)})"
+            if taken
+            else f"not taken ({len(valid)} valid stream(s) NotSupported)"
+        )
     elif provisional and not hard and not all(_ok(r) for r in valid):
         # another table decodes some streams as fbaconf's does, others to other values, rejects others:
         # none of it can be told from a bug, so the tool as a whole is not verified
         ok = sum(_ok(r) for r in valid)
         rejected = sum(_declined(r) for r in valid)
         st.state = "unverified"
-        st.note = (f"{ok} of its {len(valid)} valid stream(s) decoded as fbaconf decodes them, {rejected} rejected "
-                   f"or not taken, {len(valid) - ok - rejected} decoded otherwise")
+        st.note = (
+            f"{ok} of its {len(valid)} valid stream(s) decoded as fbaconf decodes them, {rejected} rejected "
+            f"or not taken, {len(valid) - ok - rejected} decoded otherwise"
+        )
     else:
         st.note = f"{len(cases) - passed} of {len(cases)} case(s) not passed"
     return st
 
 
-def decision_state(decision: str, cases: list[dict], set_aside: set[str], tools: dict[str, ToolState],
-                   declared: list[str]) -> DecisionState:
+def decision_state(
+    decision: str, cases: list[dict], set_aside: set[str], tools: dict[str, ToolState], declared: list[str]
+) -> DecisionState:
     mine = [r for r in declared if readings.get(r).decision == decision]
     passed = sum(_ok(r) for r in cases)
     if not cases:
@@ -135,7 +147,7 @@ def decision_state(decision: str, cases: list[dict], set_aside: set[str], tools:
 
 
 def verdict_of(s: dict) -> str:
-    """"pass" | "fail" | "inconclusive" of one speed result's JSON. Only a result that says it
+    """ "pass" | "fail" | "inconclusive" of one speed result's JSON. Only a result that says it
     passed passes; one without a verdict (written before verdicts) is "pass" or "fail" by
     ``passed``; anything else that did not pass is a fail."""
     v = s.get("verdict")
@@ -160,8 +172,9 @@ def speed_verdict(speed: list[dict] | None) -> tuple[str, int] | None:
     return None
 
 
-def claim_verdict(results: list[dict], *, strict: bool, speed: list[dict] | None,
-                  declared: list[str] | tuple[str, ...] = ()) -> ClaimVerdict:
+def claim_verdict(
+    results: list[dict], *, strict: bool, speed: list[dict] | None, declared: list[str] | tuple[str, ...] = ()
+) -> ClaimVerdict:
     """The claim's verdict from its result lines (JSON form; only the required ones count) and the
     speed results (None: not measured); ``declared``: the decoder's declared other readings."""
     required = [r for r in results if r.get("required")]
@@ -183,12 +196,19 @@ def claim_verdict(results: list[dict], *, strict: bool, speed: list[dict] | None
         else:
             del tools[t]
     tools = dict(sorted(tools.items()))
-    differences = sorted(({"case_id": r["case_id"], "rests_on": list(r.get("rests_on") or ()),
-                           "reading": r["reading"]} for r in required if r.get("reading") and _ok(r)),
-                         key=lambda d: d["case_id"])
+    differences = sorted(
+        (
+            {"case_id": r["case_id"], "rests_on": list(r.get("rests_on") or ()), "reading": r["reading"]}
+            for r in required
+            if r.get("reading") and _ok(r)
+        ),
+        key=lambda d: d["case_id"],
+    )
     named = {d for r in required for d in r.get("rests_on") or ()} | {readings.get(r).decision for r in declared}
-    decisions = {d: decision_state(d, [r for r in required if d in (r.get("rests_on") or ())], set_aside, tools,
-                                   list(declared)) for d in sorted(named)}
+    decisions = {
+        d: decision_state(d, [r for r in required if d in (r.get("rests_on") or ())], set_aside, tools, list(declared))
+        for d in sorted(named)
+    }
     hard = [r for r in required if not _ok(r) and (strict or r["case_id"] not in set_aside)]
     cv = ClaimVerdict("PASS", 0, differences, unverified, set_aside, tools, decisions)
     if hard or (strict and differences):
@@ -199,7 +219,8 @@ def claim_verdict(results: list[dict], *, strict: bool, speed: list[dict] | None
         cv.verdict, cv.exit_code = blocked
         return cv
     qualifiers = ([f"unverified: {', '.join(unverified)}"] if unverified else []) + (
-        [f"provisional differences: {len(differences)}"] if differences else [])
+        [f"provisional differences: {len(differences)}"] if differences else []
+    )
     if qualifiers:
         cv.verdict = f"PASS ({'; '.join(qualifiers)})"
     return cv
@@ -219,21 +240,27 @@ def describe(verdict: dict) -> list[str]:
     line each: the statement, the terminal summary and the HTML report print these."""
     out = []
     for t in (verdict.get("tools") or {}).values():
-        line = f"tool {t['tool']}: {_TOOL_WORDS.get(t['state'], t['state'])} ({t['passed']} of {t['cases']} case(s) " \
-               f"passed{'; ' + t['note'] if t.get('note') else ''})"
+        line = (
+            f"tool {t['tool']}: {_TOOL_WORDS.get(t['state'], t['state'])} ({t['passed']} of {t['cases']} case(s) "
+            f"passed{'; ' + t['note'] if t.get('note') else ''})"
+        )
         if t["state"] in ("declined", "unverified") and t["provisional"]:
-            line += (" — every required case of it rests on an open provisional decision, so the claim passes with "
-                     "the tool named unverified; --strict fails it")
+            line += (
+                " — every required case of it rests on an open provisional decision, so the claim passes with "
+                "the tool named unverified; --strict fails it"
+            )
         elif t["state"] == "declined":
             line += " — a claim means all of it: its cases fail the claim"
         out.append(line)
     for d in (verdict.get("decisions") or {}).values():
-        how = {"verified": "verified: every case resting on it passed by fbaconf's reading",
-               "differs": f"differs: judged by the declared reading {', '.join(d['readings'])} where it changes the "
-                          f"result",
-               "declined": "declined: its tool was declined (not taken, or every valid stream rejected)",
-               "unverified": "unverified: its tool was decoded, never as fbaconf decodes it",
-               "fails": "fails: a case resting on it failed in a way no declared reading gives",
-               "not exercised": "not exercised by this claim's cases"}.get(d["state"], d["state"])
+        how = {
+            "verified": "verified: every case resting on it passed by fbaconf's reading",
+            "differs": f"differs: judged by the declared reading {', '.join(d['readings'])} where it changes the "
+            f"result",
+            "declined": "declined: its tool was declined (not taken, or every valid stream rejected)",
+            "unverified": "unverified: its tool was decoded, never as fbaconf decodes it",
+            "fails": "fails: a case resting on it failed in a way no declared reading gives",
+            "not exercised": "not exercised by this claim's cases",
+        }.get(d["state"], d["state"])
         out.append(f"decision {d['decision']}: {how} ({d['passed']} of {d['cases']} case(s) passed)")
     return out

@@ -14,6 +14,7 @@ sane bounds of :class:`~fbaconf.isolation.sandbox.Limits`.
 cgroup of its whole process tree, an rlimit per process, or sampling — so that a run without
 writable cgroups never reads as if memory were limited for the tree.
 """
+
 from __future__ import annotations
 
 import math
@@ -31,15 +32,19 @@ MANIFEST_MEMORY_KINDS = ("tree", "address-space", "rss")
 @dataclass(frozen=True)
 class Ceilings:
     """The most a manifest may ask for, per limit."""
+
     timeout_s: float = 600.0
     memory_mb: int = 4096
     output_mb: int = 1024
     processes: int = 256
 
     def __post_init__(self) -> None:
-        for name, v, hi in (("timeout_s", self.timeout_s, MAX_TIMEOUT_S), ("memory_mb", self.memory_mb, MAX_MEMORY_MB),
-                            ("output_mb", self.output_mb, MAX_OUTPUT_MB), ("processes", self.processes,
-                                                                           MAX_PROCESSES)):
+        for name, v, hi in (
+            ("timeout_s", self.timeout_s, MAX_TIMEOUT_S),
+            ("memory_mb", self.memory_mb, MAX_MEMORY_MB),
+            ("output_mb", self.output_mb, MAX_OUTPUT_MB),
+            ("processes", self.processes, MAX_PROCESSES),
+        ):
             ok = not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= hi
             if not ok or (name != "timeout_s" and not isinstance(v, int)):
                 kind = "number" if name == "timeout_s" else "whole number"
@@ -47,24 +52,34 @@ class Ceilings:
 
 
 DEFAULT_CEILINGS = Ceilings()
-FLAGS = {"timeout_s": "--max-timeout-s", "memory_mb": "--max-memory-mb", "output_mb": "--max-output-mb",
-         "processes": "--max-processes"}
+FLAGS = {
+    "timeout_s": "--max-timeout-s",
+    "memory_mb": "--max-memory-mb",
+    "output_mb": "--max-output-mb",
+    "processes": "--max-processes",
+}
 
 
 def problems(limits: Limits, ceilings: Ceilings = DEFAULT_CEILINGS) -> list[str]:
     """What in ``limits`` (a manifest's) the lab does not allow: no limit, or past a ceiling."""
     out = []
     if limits.memory_kind not in MANIFEST_MEMORY_KINDS:
-        out.append(f'memory_kind = "{limits.memory_kind}" is no limit: the lab always limits memory '
-                   f'(give {", ".join(repr(k) for k in MANIFEST_MEMORY_KINDS)})')
+        out.append(
+            f'memory_kind = "{limits.memory_kind}" is no limit: the lab always limits memory '
+            f"(give {', '.join(repr(k) for k in MANIFEST_MEMORY_KINDS)})"
+        )
     if limits.memory_mb <= 0:
-        out.append(f"memory_mb = {limits.memory_mb} is no limit: give the megabytes the decoder needs, at most "
-                   f"{ceilings.memory_mb}")
+        out.append(
+            f"memory_mb = {limits.memory_mb} is no limit: give the megabytes the decoder needs, at most "
+            f"{ceilings.memory_mb}"
+        )
     for f in fields(Ceilings):
         asked, most = getattr(limits, f.name), getattr(ceilings, f.name)
         if asked > most:
-            out.append(f"{f.name} = {_num(asked)} is over the lab's ceiling of {_num(most)} (the lab raises it "
-                       f"with {FLAGS[f.name]})")
+            out.append(
+                f"{f.name} = {_num(asked)} is over the lab's ceiling of {_num(most)} (the lab raises it "
+                f"with {FLAGS[f.name]})"
+            )
     return out
 
 
@@ -73,8 +88,10 @@ def limits_in_force(adapter) -> list[str]:
     enforced (:func:`in_force`; an in-process adapter: what it runs without): what ``run``
     prints and a certificate's statement records."""
     if getattr(adapter, "kind", None) != "command":
-        return [f"in-process: {adapter.name} runs inside fbaconf's own process: the timeout "
-                f"({adapter.limits.timeout_s:g} s) is checked after each call; no memory, output or process limit"]
+        return [
+            f"in-process: {adapter.name} runs inside fbaconf's own process: the timeout "
+            f"({adapter.limits.timeout_s:g} s) is checked after each call; no memory, output or process limit"
+        ]
     return in_force(adapter.limits)
 
 
@@ -91,31 +108,43 @@ def in_force(limits: Limits) -> list[str]:
     if limits.memory_kind == "tree" and tree:
         memory = f"memory: {mb} MB over the whole process tree (cgroup memory limit; OOM events read from the kernel)"
     elif limits.memory_kind == "tree":
-        memory = (f"memory: {mb} MB of address space per process (RLIMIT_AS) — no cgroup here, so NOT over the "
-                  f"whole tree: each process of the decoder may use {mb} MB")
+        memory = (
+            f"memory: {mb} MB of address space per process (RLIMIT_AS) — no cgroup here, so NOT over the "
+            f"whole tree: each process of the decoder may use {mb} MB"
+        )
     elif limits.memory_kind == "address-space":
         memory = f"memory: {mb} MB of address space per process (RLIMIT_AS, as the manifest asks)" + (
-            f", and {mb} MB over the whole tree (cgroup)" if tree else "")
+            f", and {mb} MB over the whole tree (cgroup)" if tree else ""
+        )
     elif limits.memory_kind == "rss":
         memory = f"memory: {mb} MB resident over the whole tree, sampled every 10 ms" + (
-            f", and {mb} MB over the whole tree (cgroup)" if tree else "")
+            f", and {mb} MB over the whole tree (cgroup)" if tree else ""
+        )
     else:
         memory = "memory: NOT limited"
-    processes = (f"processes: {limits.processes} in the tree (cgroup pids limit)" if "pids" in ctl else
-                 "processes: NOT limited (no writable pids cgroup here)")
-    filt = ("seccomp: no inotify/fanotify instances, no new namespaces" if sandboxed and seccomp.supported() else
-            "seccomp: none (no sandbox, or an architecture the filter does not know)")
-    return [f"time: {limits.timeout_s:g} s wall clock per run (the whole process group killed), "
-            f"{int(max(1, limits.timeout_s * 2 + 1))} s CPU per process (RLIMIT_CPU)",
-            memory,
-            f"output: {limits.output_mb} MB per file (RLIMIT_FSIZE) and in total in its folder (watched while it "
-            f"runs)",
-            processes,
-            f"descriptors: {seccomp.NOFILE} per process; no core dumps; {filt}"]
+    processes = (
+        f"processes: {limits.processes} in the tree (cgroup pids limit)"
+        if "pids" in ctl
+        else "processes: NOT limited (no writable pids cgroup here)"
+    )
+    filt = (
+        "seccomp: no inotify/fanotify instances, no new namespaces"
+        if sandboxed and seccomp.supported()
+        else "seccomp: none (no sandbox, or an architecture the filter does not know)"
+    )
+    return [
+        f"time: {limits.timeout_s:g} s wall clock per run (the whole process group killed), "
+        f"{int(max(1, limits.timeout_s * 2 + 1))} s CPU per process (RLIMIT_CPU)",
+        memory,
+        f"output: {limits.output_mb} MB per file (RLIMIT_FSIZE) and in total in its folder (watched while it runs)",
+        processes,
+        f"descriptors: {seccomp.NOFILE} per process; no core dumps; {filt}",
+    ]
 
 
 class CeilingError(FbaconfInputError):
     """A ceiling the lab gave on the command line is not a bound (exit 2)."""
+
     rule = "usage"
 
 
@@ -123,9 +152,13 @@ def add_ceiling_options(parser) -> None:
     """The lab's flags that raise the ceilings (``run``, ``certify``, ``bench``, ``fuzz``)."""
     for key, flag in FLAGS.items():
         dflt = getattr(DEFAULT_CEILINGS, key)
-        parser.add_argument(flag, type=float if key == "timeout_s" else int, default=dflt, metavar="N",
-                            help=f"the most a manifest's {key} may ask for (default {dflt:g}); a manifest asking "
-                                 f"more is refused")
+        parser.add_argument(
+            flag,
+            type=float if key == "timeout_s" else int,
+            default=dflt,
+            metavar="N",
+            help=f"the most a manifest's {key} may ask for (default {dflt:g}); a manifest asking more is refused",
+        )
 
 
 def ceilings_from(args) -> Ceilings:

@@ -15,6 +15,7 @@ count of OOM events (``memory.events`` ``oom``/``oom_kill`` on v2, ``memory.oom_
 ``oom_kill`` on v1), never from ``memory.failcnt`` or ``memory.events`` ``max``, which count
 every time reclaim ran at the limit.
 """
+
 from __future__ import annotations
 
 import os
@@ -56,7 +57,8 @@ def cgroup_bases() -> list[tuple[str, Path]]:
                 if kind == "v2":
                     have = (base.parent / "cgroup.controllers").read_text().split()
                     (base / "cgroup.subtree_control").write_text(
-                        " ".join(f"+{c}" for c in ("pids", "memory") if c in have))
+                        " ".join(f"+{c}" for c in ("pids", "memory") if c in have)
+                    )
                 probe = base / f"probe-{uuid.uuid4().hex[:8]}"
                 probe.mkdir()
                 probe.rmdir()

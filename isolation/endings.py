@@ -30,6 +30,7 @@ Every finished invocation of a decoder under test becomes one :class:`Ending`:
 The run maps kinds to outcomes (``harness/compare/ladder.py``: ``outcome_for``), the fuzzer to
 findings; both call :func:`classify`, so the same process ending is judged the same way everywhere.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -53,9 +54,11 @@ _JAVA_FRAME = re.compile(r"^\s+at (\S+)\(", re.M)
 _DOTNET_EXC = re.compile(r"Unhandled exception\. ([\w.]+)")
 _BWRAP = re.compile(r"^bwrap: ([^\n]*)", re.M)
 # A runtime that dies reserving address space at its start (under an address-space rlimit).
-_RESERVE = re.compile(r"failed to reserve page summary memory|cannot reserve arena virtual address space|"
-                      r"runtime: cannot (?:re)?map pages|Could not reserve enough space for [\w ]+|"
-                      r"Error occurred during initialization of VM|Failed to reserve virtual memory")
+_RESERVE = re.compile(
+    r"failed to reserve page summary memory|cannot reserve arena virtual address space|"
+    r"runtime: cannot (?:re)?map pages|Could not reserve enough space for [\w ]+|"
+    r"Error occurred during initialization of VM|Failed to reserve virtual memory"
+)
 
 
 @dataclass(frozen=True)
@@ -64,6 +67,7 @@ class CrashReport:
     ``signature`` a short hash of the top frames (deduplicates fuzz findings), ``line`` the
     report's first line as printed (the sanitizer's ``ERROR:`` line, ``panic: …``, the exception),
     ``where`` the innermost frame of the decoder's own code when the report names one."""
+
     kind: str
     signature: str
     line: str = ""
@@ -82,16 +86,16 @@ def _line_at(text: str, pos: int, *, join_next: bool = False) -> str:
     and ``join_next``: a Rust panic's message follows its location), at most 300 characters."""
     start = text.rfind("\n", 0, pos) + 1
     end = text.find("\n", pos)
-    line = text[start:end if end >= 0 else len(text)].strip()
+    line = text[start : end if end >= 0 else len(text)].strip()
     if join_next and line.endswith(":") and end >= 0:
-        nxt = text[end + 1:].split("\n", 1)[0].strip()
+        nxt = text[end + 1 :].split("\n", 1)[0].strip()
         line = f"{line} {nxt}" if nxt else line
     return line[:300]
 
 
 def _python_exception_line(text: str) -> str:
     """The exception line of the first Python traceback: the first unindented line after its frames."""
-    after = text[text.index("Traceback (most recent call last)"):].splitlines()[1:]
+    after = text[text.index("Traceback (most recent call last)") :].splitlines()[1:]
     return next((ln.strip() for ln in after if ln.strip() and not ln[:1].isspace()), "")[:300]
 
 
@@ -120,8 +124,12 @@ def crash_report(text: str) -> CrashReport | None:
     m = _JAVA_EXC.search(text)
     if m:
         frames = _JAVA_FRAME.findall(text)
-        return CrashReport(f"uncaught Java exception {m.group(1)}", _h(frames[:5] or [m.group(1)]),
-                           _line_at(text, m.start()), frames[0] if frames else "")
+        return CrashReport(
+            f"uncaught Java exception {m.group(1)}",
+            _h(frames[:5] or [m.group(1)]),
+            _line_at(text, m.start()),
+            frames[0] if frames else "",
+        )
     m = _DOTNET_EXC.search(text)
     if m:
         return CrashReport(f"unhandled .NET exception {m.group(1)}", _h([m.group(1)]), _line_at(text, m.start()))
@@ -130,13 +138,13 @@ def crash_report(text: str) -> CrashReport | None:
         frames = [f"{Path(f).name}:{ln}:{fn}" for f, ln, fn in found][-5:]
         line = _python_exception_line(text) or "?"
         exc = line.split(":")[0].strip()
-        return CrashReport(f"uncaught Python exception {exc}", _h(frames + [exc]), line,
-                           found[-1][2] if found else "")
+        return CrashReport(f"uncaught Python exception {exc}", _h(frames + [exc]), line, found[-1][2] if found else "")
     return None
 
 
 class EndingKind(StrEnum):
     """The fixed vocabulary of process endings (the table above)."""
+
     SETUP = "setup"
     TIMEOUT = "timeout"
     MEMORY = "memory"
@@ -176,9 +184,9 @@ def _setup(res, cmd: str, err: str) -> Ending | None:
         return Ending(EndingKind.SETUP, (res.detail or err).strip()[:300] or f"cannot execute {cmd}")
     if "sandbox-failed" in res.notes:  # bubblewrap never ran the program: its stderr is bubblewrap's own
         m = _BWRAP.search(err)
-        what = m.group(1) if m else (_last_line(err)[len("; stderr: "):] or "no message")
+        what = m.group(1) if m else (_last_line(err)[len("; stderr: ") :] or "no message")
         if what.startswith("execvp "):
-            prog, _, why = what[len("execvp "):].partition(": ")
+            prog, _, why = what[len("execvp ") :].partition(": ")
             return Ending(EndingKind.SETUP, f"sandbox: cannot execute {prog!r}: {why}")
         return Ending(EndingKind.SETUP, f"the sandbox (bubblewrap) could not start {cmd}: {what[:300]}")
     return None
@@ -191,11 +199,14 @@ def _reservation(res, limits, cmd: str, err: str) -> Ending | None:
     if m is None:
         return None
     line = next((ln.strip() for ln in err.splitlines() if m.group(0) in ln), m.group(0))[:200]
-    return Ending(EndingKind.SETUP, f"{cmd}'s runtime could not reserve its address space under the "
-                  f"{limits.memory_mb} MB address-space limit: {line!r}. Not a verdict on the stream: the "
-                  f"limit is wrong for this runtime. Fix: memory_kind = \"tree\" in the manifest's [limits] "
-                  f"(the default: the limit holds for what the process tree uses, where cgroups are writable), "
-                  f"or \"rss\"")
+    return Ending(
+        EndingKind.SETUP,
+        f"{cmd}'s runtime could not reserve its address space under the "
+        f"{limits.memory_mb} MB address-space limit: {line!r}. Not a verdict on the stream: the "
+        f'limit is wrong for this runtime. Fix: memory_kind = "tree" in the manifest\'s [limits] '
+        f"(the default: the limit holds for what the process tree uses, where cgroups are writable), "
+        f'or "rss"',
+    )
 
 
 def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES, *, name: str | None = None) -> Ending:
@@ -213,22 +224,36 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES, *, name: 
         return Ending(EndingKind.TIMEOUT, f"{cmd} did not finish within the {why} (killed after {res.elapsed_s:.2f} s)")
     if res.memory_limit_hit and (rc != 0 or "tree-memory-limit" in res.notes):
         how = f"killed by {res.signal}" if res.signal else f"exit code {rc}"
-        kind = ("whole-process-tree" if "tree-memory-limit" in res.notes else
-                "resident-set" if limits.memory_kind == "rss" else "address-space")
-        peak = (f"its process tree's resident set sampled at {res.rss_sampled_mb:.0f} MB" if res.rss_sampled_mb
-                else f"peak RSS {res.maxrss_mb:.0f} MB")
-        return Ending(EndingKind.MEMORY,
-                      f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; {peak})")
+        kind = (
+            "whole-process-tree"
+            if "tree-memory-limit" in res.notes
+            else "resident-set"
+            if limits.memory_kind == "rss"
+            else "address-space"
+        )
+        peak = (
+            f"its process tree's resident set sampled at {res.rss_sampled_mb:.0f} MB"
+            if res.rss_sampled_mb
+            else f"peak RSS {res.maxrss_mb:.0f} MB"
+        )
+        return Ending(
+            EndingKind.MEMORY, f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; {peak})"
+        )
     if "supervisor-lost" in res.notes:
-        return Ending(EndingKind.UNEXPECTED, f"the fork server running {cmd} died during this input (the decoder "
-                                    f"killed its parent process, or a process-tree limit did): its ending is unknown — "
-                                    f"a decoder must not signal processes it did not start{_last_line(err)}")
+        return Ending(
+            EndingKind.UNEXPECTED,
+            f"the fork server running {cmd} died during this input (the decoder "
+            f"killed its parent process, or a process-tree limit did): its ending is unknown — "
+            f"a decoder must not signal processes it did not start{_last_line(err)}",
+        )
     if "protocol-error" in res.notes:
         return Ending(EndingKind.UNEXPECTED, f"{cmd}: {res.detail or 'protocol error'}{_last_line(err)}")
     if res.output_limit_hit:
-        return Ending(EndingKind.OUTPUT_LIMIT, f"{cmd} wrote more than the {limits.output_mb} MB output limit "
-                                      f"({res.output_bytes / 2**20:.0f} MB seen" +
-                                      (f", killed by {res.signal})" if res.signal else ")"))
+        return Ending(
+            EndingKind.OUTPUT_LIMIT,
+            f"{cmd} wrote more than the {limits.output_mb} MB output limit "
+            f"({res.output_bytes / 2**20:.0f} MB seen" + (f", killed by {res.signal})" if res.signal else ")"),
+        )
     report = crash_report(err)
     # the crash report's own first line (sanitizer ERROR, panic, exception), not whatever stderr ended with
     said = f"; stderr: {report.line}" if report is not None and report.line else _last_line(err)
@@ -245,8 +270,9 @@ def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES, *, name: 
     if rc in reject_exit_codes:
         return Ending(EndingKind.REJECT, f"{cmd} exited with code {rc}, a reject{_last_line(err)}")
     codes = ", ".join(map(str, sorted(reject_exit_codes)))
-    return Ending(EndingKind.UNEXPECTED, f"{cmd} exited with code {rc}, not a documented reject code ({codes})"
-                                f"{_last_line(err)}")
+    return Ending(
+        EndingKind.UNEXPECTED, f"{cmd} exited with code {rc}, not a documented reject code ({codes}){_last_line(err)}"
+    )
 
 
 def kept_stderr(err: str, ending: Ending) -> str:
@@ -256,5 +282,5 @@ def kept_stderr(err: str, ending: Ending) -> str:
     line = ending.report.line if ending.report is not None else ""
     at = err.find(line) if line else -1
     if at >= 0:
-        return err[err.rfind("\n", 0, at) + 1:][:2000]
+        return err[err.rfind("\n", 0, at) + 1 :][:2000]
     return err[-2000:]

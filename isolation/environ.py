@@ -28,6 +28,7 @@ the vendor's code first. So the rule, in two parts, both required:
 
 ``ACME_MODE = "strict"``, ``BUG = "sign"``, ``ACME_MODELS = "/opt/acme/models"`` pass.
 """
+
 from __future__ import annotations
 
 import re
@@ -36,21 +37,90 @@ import re
 # one of these (compared in capitals) is refused. Exact names end with "=".
 RESERVED = (
     # the dynamic loader, the C library, locale and resolver
-    "LD_", "DYLD_", "GLIBC_", "MALLOC_", "GCONV_", "LOCPATH=", "NLSPATH=", "HOSTALIASES=", "RES_OPTIONS=",
-    "LOCALDOMAIN=", "TZDIR=",
+    "LD_",
+    "DYLD_",
+    "GLIBC_",
+    "MALLOC_",
+    "GCONV_",
+    "LOCPATH=",
+    "NLSPATH=",
+    "HOSTALIASES=",
+    "RES_OPTIONS=",
+    "LOCALDOMAIN=",
+    "TZDIR=",
     # what the harness sets itself
-    "PATH=", "HOME=", "TMPDIR=", "TMP=", "TEMP=", "LANG=", "LANGUAGE=", "LC_", "PWD=", "SHELL=", "USER=",
+    "PATH=",
+    "HOME=",
+    "TMPDIR=",
+    "TMP=",
+    "TEMP=",
+    "LANG=",
+    "LANGUAGE=",
+    "LC_",
+    "PWD=",
+    "SHELL=",
+    "USER=",
     # shells
-    "BASH", "ENV=", "SHELLOPTS=", "PS4=", "IFS=", "CDPATH=", "PROMPT_COMMAND=", "ZDOTDIR=",
+    "BASH",
+    "ENV=",
+    "SHELLOPTS=",
+    "PS4=",
+    "IFS=",
+    "CDPATH=",
+    "PROMPT_COMMAND=",
+    "ZDOTDIR=",
     # language runtimes
-    "PYTHON", "VIRTUAL_ENV=", "JAVA", "JDK_", "JVM_", "CLASSPATH=", "NODE_", "NPM_", "PERL", "RUBY", "GEM_",
-    "BUNDLE_", "GO", "CGO_", "DOTNET_", "COMPLUS_", "CORECLR_", "LUA", "R_", "PHP", "TCL", "TK_", "OCAML", "ERL_",
-    "ELIXIR_", "JULIA_", "RUST_", "CARGO_", "WASM",
+    "PYTHON",
+    "VIRTUAL_ENV=",
+    "JAVA",
+    "JDK_",
+    "JVM_",
+    "CLASSPATH=",
+    "NODE_",
+    "NPM_",
+    "PERL",
+    "RUBY",
+    "GEM_",
+    "BUNDLE_",
+    "GO",
+    "CGO_",
+    "DOTNET_",
+    "COMPLUS_",
+    "CORECLR_",
+    "LUA",
+    "R_",
+    "PHP",
+    "TCL",
+    "TK_",
+    "OCAML",
+    "ERL_",
+    "ELIXIR_",
+    "JULIA_",
+    "RUST_",
+    "CARGO_",
+    "WASM",
     # sanitizers (their reports are how the harness names a crash)
-    "ASAN_", "UBSAN_", "MSAN_", "TSAN_", "LSAN_", "HWASAN_",
+    "ASAN_",
+    "UBSAN_",
+    "MSAN_",
+    "TSAN_",
+    "LSAN_",
+    "HWASAN_",
     # graphics, plug-in and configuration loaders
-    "LIBGL_", "MESA_", "VK_", "EGL_", "GALLIUM_", "QT_", "GTK_", "GDK_", "GIO_", "GST_", "XDG_", "OPENSSL_",
-    "SSL_", "DBUS_",
+    "LIBGL_",
+    "MESA_",
+    "VK_",
+    "EGL_",
+    "GALLIUM_",
+    "QT_",
+    "GTK_",
+    "GDK_",
+    "GIO_",
+    "GST_",
+    "XDG_",
+    "OPENSSL_",
+    "SSL_",
+    "DBUS_",
 )
 _NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")
 
@@ -75,13 +145,17 @@ def env_problem(name: str, value: str) -> str | None:
         return f"{name[:40]!r} is not a variable name (a letter, then letters, digits or _; at most 64)"
     ns = _reserved(name)
     if ns is not None:
-        return (f"{name} is in the {ns} namespace, which the loader, a shell or a runtime reads its own settings "
-                f"from (code to run, options, a search path): [env] passes data to the decoder, never instructions "
-                f"to what starts it")
+        return (
+            f"{name} is in the {ns} namespace, which the loader, a shell or a runtime reads its own settings "
+            f"from (code to run, options, a search path): [env] passes data to the decoder, never instructions "
+            f"to what starts it"
+        )
     word = next((w for w in value.split() if w[:1] in "-@" or "=" in w), None)
     if word is not None:
-        return (f"{name}'s value holds {word[:40]!r}, an option, an argument file or a setting: [env] values are "
-                f"data for the decoder, never options to what starts it")
+        return (
+            f"{name}'s value holds {word[:40]!r}, an option, an argument file or a setting: [env] values are "
+            f"data for the decoder, never options to what starts it"
+        )
     if "\x00" in value or len(value) > 4096:
         return f"{name}'s value is not plain text of at most 4096 characters"
     return None

@@ -25,6 +25,7 @@ into its parent's descriptors), the server is restarted, and no reply is ever ta
 later input's. While an input runs its folder's size is watched (:mod:`.watch`): past
 ``output_mb`` the server is stopped and the input's ending is the output limit.
 """
+
 from __future__ import annotations
 
 import collections
@@ -47,8 +48,10 @@ from .watch import Watch
 SERVER_SCRIPT = Path(__file__).with_name("forkserver.py")
 GRACE_S = 5.0  # how long past the decoder's timeout the server may take to answer
 MAX_REPLY = 512  # bytes of one reply
-FORGED = ("protocol-error: the fork server's reply channel held {what} — the decoder (or a process it started) "
-          "wrote into its parent's descriptors; a decoder must not touch processes it did not start")
+FORGED = (
+    "protocol-error: the fork server's reply channel held {what} — the decoder (or a process it started) "
+    "wrote into its parent's descriptors; a decoder must not touch processes it did not start"
+)
 
 
 class ForkServerError(RuntimeError):
@@ -59,8 +62,15 @@ class ForkServer:
     """A long-lived fork server for one worker folder; :meth:`run` has the signature and the
     result of :func:`fbaconf.isolation.sandbox.run` for decoders run in that folder."""
 
-    def __init__(self, root: Path, view: View, limits: Limits, env: dict[str, str] | None = None,
-                 sum_outputs_every: int = 1, slots: int = 1) -> None:
+    def __init__(
+        self,
+        root: Path,
+        view: View,
+        limits: Limits,
+        env: dict[str, str] | None = None,
+        sum_outputs_every: int = 1,
+        slots: int = 1,
+    ) -> None:
         self.root = Path(root).resolve()
         self.view = view
         self.limits = limits
@@ -100,21 +110,29 @@ class ForkServer:
             if not script.exists():
                 shutil.copyfile(SERVER_SCRIPT, script)
             head, runtime = [py, "-I", "-S", str(script)], [Path(sys.base_prefix).resolve(), Path(py).parent]
-        self._files = [(open(self.io / f"stdout{i}", "wb+"), open(self.io / f"stderr{i}", "wb+"))
-                       for i in range(self.slots)]
+        self._files = [
+            (open(self.io / f"stdout{i}", "wb+"), open(self.io / f"stderr{i}", "wb+")) for i in range(self.slots)
+        ]
         fds = [os.dup(f.fileno()) for pair in self._files for f in pair]
         inner = [*head, "--fds", *map(str, fds)]
         sandbox_fds: list[int] = []
         if sandbox.isolation() == "bwrap":
-            v = View(read_only=[*self.view.read_only, self.srv, *runtime],
-                     writable=list(self.view.writable), hidden=list(self.view.hidden),
-                     read_only_inside=list(self.view.read_only_inside))
+            v = View(
+                read_only=[*self.view.read_only, self.srv, *runtime],
+                writable=list(self.view.writable),
+                hidden=list(self.view.hidden),
+                read_only_inside=list(self.view.read_only_inside),
+            )
             head, _status = sandbox.sandbox_argv(v, self.root, sandbox_fds, status=False)
             inner = head + inner + ["--reap-namespace"]
         try:  # the server gets the decoder's output files as descriptors (--fds)
             self.proc, self.cg = sandbox.launch_server(
-                inner, self.limits, cwd=self.root, pass_fds=tuple(fds + sandbox_fds),
-                env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LC_ALL": "C.UTF-8"})
+                inner,
+                self.limits,
+                cwd=self.root,
+                pass_fds=tuple(fds + sandbox_fds),
+                env={"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LC_ALL": "C.UTF-8"},
+            )
         except OSError as e:
             raise ForkServerError(f"cannot start the fork server: {e}") from e
         finally:
@@ -143,14 +161,28 @@ class ForkServer:
         self.close()
 
     # ---------------------------------------------------------------- one input
-    def run(self, argv: list[str], workdir: Path, limits: Limits | None = None, *,
-            env: dict[str, str] | None = None, measure_dirs: list[Path] | None = None) -> ProcResult:
+    def run(
+        self,
+        argv: list[str],
+        workdir: Path,
+        limits: Limits | None = None,
+        *,
+        env: dict[str, str] | None = None,
+        measure_dirs: list[Path] | None = None,
+    ) -> ProcResult:
         """Run ``argv`` in ``workdir`` (inside this server's root) and return how it ended."""
         return self.start(argv, workdir, limits, env=env, measure_dirs=measure_dirs).result()
 
-    def start(self, argv: list[str], workdir: Path, limits: Limits | None = None, *,
-              env: dict[str, str] | None = None, measure_dirs: list[Path] | None = None,
-              slot: int = 0) -> Pending:
+    def start(
+        self,
+        argv: list[str],
+        workdir: Path,
+        limits: Limits | None = None,
+        *,
+        env: dict[str, str] | None = None,
+        measure_dirs: list[Path] | None = None,
+        slot: int = 0,
+    ) -> Pending:
         """Send one input to the server; the :class:`Pending` waits for it (``wait``: the
         decoder has ended) and judges it (``result``: reads its stdout/stderr, which stay until
         the next input in the same ``slot``). An input sent while another runs waits in the
@@ -175,10 +207,19 @@ class ForkServer:
             wd = os.path.realpath(workdir)
             os.makedirs(os.path.join(wd, "tmp"), exist_ok=True)
             env_ = sandbox.decoder_env(Path(wd), {**(self.env or {}), **(env or {})})
-            fields = [slot, as_bytes,
-                      limits.output_mb * 2**20, int(max(1, limits.timeout_s * 2 + 1)), repr(float(limits.timeout_s)),
-                      repr(float(limits.memory_mb if limits.memory_kind == "rss" else 0)), wd, len(argv), *argv,
-                      len(env_), *(f"{k}={v}" for k, v in env_.items())]
+            fields = [
+                slot,
+                as_bytes,
+                limits.output_mb * 2**20,
+                int(max(1, limits.timeout_s * 2 + 1)),
+                repr(float(limits.timeout_s)),
+                repr(float(limits.memory_mb if limits.memory_kind == "rss" else 0)),
+                wd,
+                len(argv),
+                *argv,
+                len(env_),
+                *(f"{k}={v}" for k, v in env_.items()),
+            ]
             if any("\0" in str(f) for f in fields):
                 raise ValueError("a NUL in the decoder's environment or folder")
             data = b"".join(os.fsencode(str(f)) + b"\0" for f in fields)
@@ -271,6 +312,7 @@ class ForkServer:
                 continue
             return _parse_reply(reply, nonce)
 
+
 def _parse_reply(reply: bytes, nonce: str) -> dict | str:
     """A reply's fields, or the sentence saying why it is not the reply to ``nonce``."""
     f = reply.split()
@@ -278,8 +320,16 @@ def _parse_reply(reply: bytes, nonce: str) -> dict | str:
         what = "a reply for another request (a forged reply)" if len(f) == 9 else f"garbled bytes {reply[:40]!r}"
         return FORGED.format(what=what)
     try:
-        return {"status": int(f[1]), "utime": float(f[2]), "stime": float(f[3]), "maxrss_kb": int(f[4]),
-                "elapsed": float(f[5]), "timed_out": f[6] == b"1", "mem_hit": f[7] == b"1", "exec_errno": int(f[8])}
+        return {
+            "status": int(f[1]),
+            "utime": float(f[2]),
+            "stime": float(f[3]),
+            "maxrss_kb": int(f[4]),
+            "elapsed": float(f[5]),
+            "timed_out": f[6] == b"1",
+            "mem_hit": f[7] == b"1",
+            "exec_errno": int(f[8]),
+        }
     except ValueError:
         return FORGED.format(what=f"garbled bytes {reply[:40]!r}")
 
@@ -326,8 +376,9 @@ class Pending:
                 p.sent = srv._send(p)
                 p.files = srv._files[p.slot]
             if not self.sent:
-                self.res = ProcResult(self.argv, None, stderr_tail="cannot start the fork server",
-                                      notes=["harness-start-failed"])
+                self.res = ProcResult(
+                    self.argv, None, stderr_tail="cannot start the fork server", notes=["harness-start-failed"]
+                )
                 return
         begun = max(self.t0, srv._last_done)
         watch = Watch(self.limits, self.measure_dirs or [self.workdir], t0=begun)
@@ -338,9 +389,16 @@ class Pending:
             err = _tail_fd(self.files[1].fileno()) if self.files else ""
             out = self.reply == "output"
             self._close_server()
-            self.res = ProcResult(self.argv, None, elapsed_s=self.elapsed, stderr_tail=err,
-                                  output_limit_hit=out, output_bytes=watch.bytes,
-                                  notes=[] if out else ["protocol-error"], detail="" if out else self.reply)
+            self.res = ProcResult(
+                self.argv,
+                None,
+                elapsed_s=self.elapsed,
+                stderr_tail=err,
+                output_limit_hit=out,
+                output_bytes=watch.bytes,
+                notes=[] if out else ["protocol-error"],
+                detail="" if out else self.reply,
+            )
             return
         if self.reply is None:  # the server died or hung: judge this input, restart next time
             err = _tail_fd(self.files[1].fileno()) if self.files else ""
@@ -348,11 +406,18 @@ class Pending:
             oom, pids = srv._cgroup_events() if srv.cg is not None else (False, False)
             # a server that said hello and died under this input was ended by it (a decoder that
             # killed its parent, a tree memory or process limit): the input's ending, not set-up
-            notes = ([] if timed_out else ["supervisor-lost"] if srv.ready else ["harness-start-failed"])
+            notes = [] if timed_out else ["supervisor-lost"] if srv.ready else ["harness-start-failed"]
             notes += ["tree-memory-limit"] * oom + ["process-limit"] * pids
             self._close_server()
-            self.res = ProcResult(self.argv, None, timed_out=timed_out, memory_limit_hit=oom,
-                                  elapsed_s=self.elapsed, stderr_tail=err, notes=notes)
+            self.res = ProcResult(
+                self.argv,
+                None,
+                timed_out=timed_out,
+                memory_limit_hit=oom,
+                elapsed_s=self.elapsed,
+                stderr_tail=err,
+                notes=notes,
+            )
             return
         self.oom, self.pids_hit = srv._cgroup_events()
         if self.oom or self.pids_hit:  # the cgroup's counters are per server: start afresh after a hit
@@ -381,9 +446,17 @@ class Pending:
         if srv.sum_outputs_every > 1 and reply["status"] != 0 and srv._answers % srv.sum_outputs_every:
             dirs = []
         notes = (["exec-failed"] if reply["exec_errno"] else []) + (["as-limit"] if self.as_limit else [])
-        fin = Finish(reply["status"], (reply["utime"], reply["stime"], reply["maxrss_kb"]), reply["elapsed"],
-                     timed_out=reply["timed_out"], mem_hit=reply["mem_hit"], oom=self.oom, pids_hit=self.pids_hit,
-                     notes=tuple(notes))
-        self.res = result(self.argv, self.limits, fin, stdout_tail=self.out_tail, stderr_tail=self.err_tail,
-                          measure_dirs=dirs)
+        fin = Finish(
+            reply["status"],
+            (reply["utime"], reply["stime"], reply["maxrss_kb"]),
+            reply["elapsed"],
+            timed_out=reply["timed_out"],
+            mem_hit=reply["mem_hit"],
+            oom=self.oom,
+            pids_hit=self.pids_hit,
+            notes=tuple(notes),
+        )
+        self.res = result(
+            self.argv, self.limits, fin, stdout_tail=self.out_tail, stderr_tail=self.err_tail, measure_dirs=dirs
+        )
         return self.res

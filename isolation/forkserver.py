@@ -34,6 +34,7 @@ is garbled or does not echo its request's nonce is the running decoder's finding
 sandbox's processes alone): after each input every process but the sandbox's init and the
 server itself is killed — a decoder that forked away or left its session dies with its input.
 """
+
 import ctypes
 import os
 import resource
@@ -46,6 +47,7 @@ import time
 SLOTS = [(3, 4)]  # (stdout, stderr) descriptor pairs, from --fds OUT ERR [OUT ERR ...]
 NOFILE = 1024  # descriptors per decoder process (isolation/seccomp.py)
 
+
 def _read_exact(n):
     buf = b""
     while len(buf) < n:
@@ -57,12 +59,14 @@ def _read_exact(n):
 
 
 def _send(nonce, reply):
-    data = (f"{nonce} {reply['status']:d} {reply['utime']:.6f} {reply['stime']:.6f} {reply['maxrss_kb']:d} "
-            f"{reply['elapsed']:.6f} {reply['timed_out']:d} {reply['mem_hit']:d} "
-            f"{reply.get('exec_errno', 0):d}").encode()
+    data = (
+        f"{nonce} {reply['status']:d} {reply['utime']:.6f} {reply['stime']:.6f} {reply['maxrss_kb']:d} "
+        f"{reply['elapsed']:.6f} {reply['timed_out']:d} {reply['mem_hit']:d} "
+        f"{reply.get('exec_errno', 0):d}"
+    ).encode()
     data = struct.pack(">I", len(data)) + data
     while data:
-        data = data[os.write(1, data):]
+        data = data[os.write(1, data) :]
 
 
 def _set(which, value):
@@ -169,10 +173,17 @@ def _spawn(req, out_fd, err_fd):
         _applied["cwd"] = req["cwd"]
     try:
         return os.posix_spawn(
-            _find(argv[0], env), argv, env, setsid=True,
+            _find(argv[0], env),
+            argv,
+            env,
+            setsid=True,
             setsigdef=(signal.SIGPIPE, signal.SIGXCPU, signal.SIGXFSZ, signal.SIGINT, signal.SIGTERM),
-            file_actions=[(os.POSIX_SPAWN_OPEN, 0, "/dev/null", os.O_RDONLY, 0),
-                          (os.POSIX_SPAWN_DUP2, out_fd, 1), (os.POSIX_SPAWN_DUP2, err_fd, 2)])
+            file_actions=[
+                (os.POSIX_SPAWN_OPEN, 0, "/dev/null", os.O_RDONLY, 0),
+                (os.POSIX_SPAWN_DUP2, out_fd, 1),
+                (os.POSIX_SPAWN_DUP2, err_fd, 2),
+            ],
+        )
     except OSError as e:
         os.write(err_fd, f"fbaconf-limit: cannot execute {argv[0]!r}: {e.strerror}\n".encode())
         return -(e.errno or 8)
@@ -194,10 +205,18 @@ def _request(body):
     f = body.split(b"\0")[1:-1]  # (the nonce is the first field)
     argc = int(f[7])
     envc = int(f[8 + argc])
-    env = dict(e.decode("utf-8", "surrogateescape").partition("=")[::2] for e in f[9 + argc:9 + argc + envc])
-    return {"slot": int(f[0]), "as": int(f[1]), "fsize": int(f[2]), "cpu": int(f[3]), "timeout": float(f[4]),
-            "rss_mb": float(f[5]), "cwd": f[6].decode("utf-8", "surrogateescape"),
-            "argv": [a.decode("utf-8", "surrogateescape") for a in f[8:8 + argc]], "env": env}
+    env = dict(e.decode("utf-8", "surrogateescape").partition("=")[::2] for e in f[9 + argc : 9 + argc + envc])
+    return {
+        "slot": int(f[0]),
+        "as": int(f[1]),
+        "fsize": int(f[2]),
+        "cpu": int(f[3]),
+        "timeout": float(f[4]),
+        "rss_mb": float(f[5]),
+        "cwd": f[6].decode("utf-8", "surrogateescape"),
+        "argv": [a.decode("utf-8", "surrogateescape") for a in f[8 : 8 + argc]],
+        "env": env,
+    }
 
 
 def _fork(req, out_fd, err_fd):
@@ -231,8 +250,16 @@ def serve(req, reap):
     else:
         pid = _spawn(req, out_fd, err_fd)
     if pid < 0:
-        return {"status": 127 << 8, "utime": 0.0, "stime": 0.0, "maxrss_kb": 0,
-                "elapsed": time.monotonic() - t0, "timed_out": False, "mem_hit": False, "exec_errno": -pid}
+        return {
+            "status": 127 << 8,
+            "utime": 0.0,
+            "stime": 0.0,
+            "maxrss_kb": 0,
+            "elapsed": time.monotonic() - t0,
+            "timed_out": False,
+            "mem_hit": False,
+            "exec_errno": -pid,
+        }
     try:
         pfd = os.pidfd_open(pid)
     except (AttributeError, OSError):
@@ -270,8 +297,15 @@ def serve(req, reap):
         pass
     if reap:
         _reap_namespace()
-    return {"status": status, "utime": ru.ru_utime, "stime": ru.ru_stime, "maxrss_kb": ru.ru_maxrss,
-            "elapsed": elapsed, "timed_out": timed_out, "mem_hit": mem_hit}
+    return {
+        "status": status,
+        "utime": ru.ru_utime,
+        "stime": ru.ru_stime,
+        "maxrss_kb": ru.ru_maxrss,
+        "elapsed": elapsed,
+        "timed_out": timed_out,
+        "mem_hit": mem_hit,
+    }
 
 
 def main():
@@ -279,7 +313,7 @@ def main():
     reap = "--reap-namespace" in args
     if "--fds" in args:
         nums = []
-        for a in args[args.index("--fds") + 1:]:
+        for a in args[args.index("--fds") + 1 :]:
             if not a.isdigit():
                 break
             nums.append(int(a))

@@ -9,6 +9,7 @@ into a private temporary folder, removed at exit. Without a compiler, or with
 which speaks the same protocol
 and behaves the same (``tests/integration/test_spawner.py`` runs its cases through both).
 """
+
 from __future__ import annotations
 
 import atexit
@@ -59,8 +60,9 @@ def _build() -> Path | None:
     atexit.register(shutil.rmtree, folder, True)
     exe = folder / NAME
     try:
-        r = subprocess.run([cc, "-O2", "-o", str(exe), str(SOURCE)], stdin=subprocess.DEVNULL,
-                           capture_output=True, timeout=120)
+        r = subprocess.run(
+            [cc, "-O2", "-o", str(exe), str(SOURCE)], stdin=subprocess.DEVNULL, capture_output=True, timeout=120
+        )
         if r.returncode != 0 or not exe.is_file():
             return None
         # it must run here (a temporary folder mounted noexec, a cross compiler): with its

@@ -9,6 +9,7 @@ limit of 0 means "not set"; the descriptor count is always capped (``NOFILE``). 
 with a message on stderr when the program cannot be started (not found, not executable) or a
 cgroup cannot be joined.
 """
+
 import os
 import resource
 import signal
@@ -53,7 +54,7 @@ def main():
     # SIGXFSZ, and one writing to a closed pipe EPIPE instead of SIGPIPE.
     for s in (signal.SIGPIPE, signal.SIGXFSZ):
         signal.signal(s, signal.SIG_DFL)
-    argv = a[i + 1:]
+    argv = a[i + 1 :]
     try:
         os.execvp(argv[0], argv)
     except OSError as e:

@@ -63,6 +63,7 @@ later one is at worst one more hit of a finding already filed under its own inpu
 answer costs nothing; a new kind of crash, one process start (two when the input answered
 before it must be run alone); a hang, its timeout once more.
 """
+
 from __future__ import annotations
 
 import collections
@@ -96,24 +97,39 @@ def abnormal(res: ProcResult) -> bool:
     """Whether ``res`` is an ending, not an answer: the process ended or was stopped before it
     answered, or died or blew a limit after it, or printed a crash report, or broke the
     protocol — an answered code, whatever it is, is none."""
-    return (NO_ANSWER in res.notes or "protocol-error" in res.notes or res.signal is not None or res.timed_out
-            or res.memory_limit_hit or res.output_limit_hit or crash_report(res.stderr_tail) is not None)
+    return (
+        NO_ANSWER in res.notes
+        or "protocol-error" in res.notes
+        or res.signal is not None
+        or res.timed_out
+        or res.memory_limit_hit
+        or res.output_limit_hit
+        or crash_report(res.stderr_tail) is not None
+    )
 
 
 def ending_key(res: ProcResult) -> tuple:
     """What kind of ending ``res`` is (signal, limit, exit code, crash report): an ending of a
     kind already confirmed as the input-in-flight's is not confirmed again (module doc)."""
     rep = crash_report(res.stderr_tail)
-    return (res.signal, res.timed_out, res.memory_limit_hit, res.output_limit_hit, "protocol-error" in res.notes,
-            res.returncode if NO_ANSWER in res.notes else None, rep.kind if rep else None,
-            rep.signature if rep else None)
+    return (
+        res.signal,
+        res.timed_out,
+        res.memory_limit_hit,
+        res.output_limit_hit,
+        "protocol-error" in res.notes,
+        res.returncode if NO_ANSWER in res.notes else None,
+        rep.kind if rep else None,
+        rep.signature if rep else None,
+    )
 
 
 class PersistentDecoder:
     """One ``serve`` process for one worker folder; :meth:`run` sends one input."""
 
-    def __init__(self, argv: list[str], root: Path, workdir: Path, view: View, limits: Limits,
-                 env: dict[str, str] | None = None) -> None:
+    def __init__(
+        self, argv: list[str], root: Path, workdir: Path, view: View, limits: Limits, env: dict[str, str] | None = None
+    ) -> None:
         self.argv = list(argv)
         self.root = Path(root).resolve()
         self.workdir = Path(workdir).resolve()
@@ -155,8 +171,17 @@ class PersistentDecoder:
         cg = Cgroups(processes=lim.processes, memory_mb=lim.memory_mb if lim.memory_kind != "none" else 0)
         as_bytes = sandbox.as_bytes_for(lim, cg)
         try:
-            proc, cg = launch_server(inner, lim, cwd=self.workdir, env=env, stderr=err, pass_fds=tuple(fds),
-                                     as_bytes=as_bytes, fsize=lim.output_mb * 2**20, cg=cg)
+            proc, cg = launch_server(
+                inner,
+                lim,
+                cwd=self.workdir,
+                env=env,
+                stderr=err,
+                pass_fds=tuple(fds),
+                as_bytes=as_bytes,
+                fsize=lim.output_mb * 2**20,
+                cg=cg,
+            )
         except OSError as e:
             err.close()
             if status_r is not None:
@@ -258,8 +283,9 @@ class PersistentDecoder:
         """Read ``a``'s answer (``a`` is in flight) and judge it; then the next input goes out."""
         srv = self.server
         prev = srv.last  # the input this process answered before ``a``, if any
-        watch = Watch(self.limits, [self.workdir], pid=srv.proc.pid, procs=srv.cg.procs if srv.cg.dirs else None,
-                      t0=a.t0)
+        watch = Watch(
+            self.limits, [self.workdir], pid=srv.proc.pid, procs=srv.cg.procs if srv.cg.dirs else None, t0=a.t0
+        )
         got = srv.read_answer(a, a.t0 + self.limits.timeout_s, watch)
         a.elapsed = time.perf_counter() - a.t0
         self._inflight = None
@@ -325,7 +351,8 @@ class PersistentDecoder:
         res.notes.append(FLAKY)
         res.detail = (res.detail + " " if res.detail else "") + (
             "(flaky: neither this input nor the one the process answered before it ends so alone — it needs "
-            "what the process decoded before)")
+            "what the process decoded before)"
+        )
         if inflight is not None:
             inflight.res = res
         else:
@@ -339,7 +366,8 @@ class PersistentDecoder:
             return False
         before.detail = (before.detail + " " if before.detail else "") + (
             "(it answered before it had finished: the ending came while the next input was in flight, "
-            "and this input alone ends so)")
+            "and this input alone ends so)"
+        )
         self._file(prev, before)
         return True
 
@@ -371,8 +399,9 @@ class PersistentDecoder:
         try:
             srv.send(a, self.limits)
             deadline = a.t0 + self.limits.timeout_s
-            watch = Watch(self.limits, [self.workdir], pid=srv.proc.pid,
-                          procs=srv.cg.procs if srv.cg.dirs else None, t0=a.t0)
+            watch = Watch(
+                self.limits, [self.workdir], pid=srv.proc.pid, procs=srv.cg.procs if srv.cg.dirs else None, t0=a.t0
+            )
             got = srv.read_answer(a, deadline, watch)
             a.elapsed = time.perf_counter() - a.t0
             answered = got == "answered"
@@ -402,9 +431,14 @@ class PersistentDecoder:
 
     def _broken(self, a: Answer, srv: _Server, why: str) -> ProcResult:
         """The decoder broke the protocol during ``a``: that input's ending (a fresh process next)."""
-        return ProcResult(self.argv, None, elapsed_s=a.elapsed, stderr_tail=srv.err_since(a.err_start),
-                          notes=["protocol-error"],
-                          detail=f"broke the persistent protocol (version {PROTOCOL}, docs/fuzzing.md): {why}")
+        return ProcResult(
+            self.argv,
+            None,
+            elapsed_s=a.elapsed,
+            stderr_tail=srv.err_since(a.err_start),
+            notes=["protocol-error"],
+            detail=f"broke the persistent protocol (version {PROTOCOL}, docs/fuzzing.md): {why}",
+        )
 
     def _ended(self, a: Answer, srv: _Server, hit: str | None, *, answered: bool = False) -> ProcResult:
         """The process died (``hit`` None) or was stopped at a limit (``hit``) while decoding
@@ -428,11 +462,26 @@ class PersistentDecoder:
         notes = ["as-limit"] if srv.as_limit else []
         if srv.status_r is not None and hit is None and not exit_reported(srv.take_status()) and not stopping():
             notes.append("sandbox-failed")
-        fin = Finish(status, ru, a.elapsed, timed_out=hit == "timeout", mem_hit=hit == "memory",
-                     out_hit=hit == "output", oom=srv.cg.oom_killed(), pids_hit=srv.cg.pids_exhausted(),
-                     bwrap_status=sandbox.isolation() == "bwrap", notes=tuple(notes))
-        res = result(self.argv, self.limits, fin, stdout_tail="", stderr_tail=srv.err_since(a.err_start),
-                     measure_dirs=[self.workdir])
+        fin = Finish(
+            status,
+            ru,
+            a.elapsed,
+            timed_out=hit == "timeout",
+            mem_hit=hit == "memory",
+            out_hit=hit == "output",
+            oom=srv.cg.oom_killed(),
+            pids_hit=srv.cg.pids_exhausted(),
+            bwrap_status=sandbox.isolation() == "bwrap",
+            notes=tuple(notes),
+        )
+        res = result(
+            self.argv,
+            self.limits,
+            fin,
+            stdout_tail="",
+            stderr_tail=srv.err_since(a.err_start),
+            measure_dirs=[self.workdir],
+        )
         if not answered:
             res.notes.append(NO_ANSWER)
         if res.returncode == 0 and hit is None and not answered:  # it exited cleanly in the middle of an input
@@ -503,7 +552,7 @@ class _Server:
                 return
             if writable:
                 try:
-                    data = data[os.write(wfd, data):]
+                    data = data[os.write(wfd, data) :]
                 except BlockingIOError:
                     continue
                 except (BrokenPipeError, OSError):
@@ -527,8 +576,10 @@ class _Server:
             return False
         self.buf += chunk
         if len(self.buf) > MAX_ANSWER:
-            a.pending_end = ("this", f"sent {len(self.buf)}+ bytes where one answer line of at most {MAX_ANSWER} "
-                                     f"belongs")
+            a.pending_end = (
+                "this",
+                f"sent {len(self.buf)}+ bytes where one answer line of at most {MAX_ANSWER} belongs",
+            )
             return False
         return True
 
@@ -540,8 +591,11 @@ class _Server:
         if a.pending_end is not None:
             return a.pending_end
         if a.early:
-            return ("previous", f"wrote {self.buf[:60]!r} before request {a.id} was written in full (an answer "
-                                f"ahead of its request, or more than one answer)")
+            return (
+                "previous",
+                f"wrote {self.buf[:60]!r} before request {a.id} was written in full (an answer "
+                f"ahead of its request, or more than one answer)",
+            )
         while b"\n" not in self.buf:
             now = time.perf_counter()
             if now >= deadline:
@@ -561,8 +615,11 @@ class _Server:
         rid = int(head[0]) if len(head[0]) < 20 else -1
         if rid != a.id:
             prev = self.last.id if self.last is not None else None
-            what = (f"answered request {rid} more than once" if rid == prev else
-                    f"answered request {head[0][:20].decode()}, which was never sent (an answer ahead of its request)")
+            what = (
+                f"answered request {rid} more than once"
+                if rid == prev
+                else f"answered request {head[0][:20].decode()}, which was never sent (an answer ahead of its request)"
+            )
             return ("previous", what)
         if rest:
             return ("this", f"sent more than the one answer to request {a.id}: {rest[:80]!r}")
@@ -623,8 +680,9 @@ class Answer:
                 dec._dispatch()
                 if dec._inflight is None:  # not queued (a stop), or ended at its dispatch
                     if self.res is None:
-                        self.res = ProcResult(dec.argv, None, stderr_tail="harness stopping",
-                                              notes=["harness-start-failed"])
+                        self.res = ProcResult(
+                            dec.argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"]
+                        )
                     return
             dec._complete(dec._inflight)
 
@@ -633,8 +691,14 @@ class Answer:
         (whatever that brings, a repeated or early answer, is this input's doing)."""
         self.wait()
         dec, nxt = self.dec, self.dec._inflight
-        if (not self.consumed and nxt is not None and nxt.res is None and self.srv is not None
-                and nxt.srv is self.srv and self.srv.last is self):
+        if (
+            not self.consumed
+            and nxt is not None
+            and nxt.res is None
+            and self.srv is not None
+            and nxt.srv is self.srv
+            and self.srv.last is self
+        ):
             dec._complete(nxt)
             while nxt.res is None and nxt.suspect is not None and nxt.suspect[1] is self and dec._inflight is nxt:
                 dec._complete(nxt)  # its ending is being confirmed: it may be this input's

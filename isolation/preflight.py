@@ -9,6 +9,7 @@ only fail inside the sandbox (a path the sandbox does not show) is reported by b
 status (:mod:`.sandbox`: no ``exit-code`` from ``--json-status-fd`` means the decoder never ran)
 and, in the fork server, by the server itself.
 """
+
 from __future__ import annotations
 
 import os

@@ -5,6 +5,7 @@ a finished process, and the registry that kills every running decoder on an inte
 :mod:`.sandbox` decides what a decoder sees and runs one invocation; this module is what it,
 the fork server's client and the persistent protocol share.
 """
+
 from __future__ import annotations
 
 import os
@@ -54,6 +55,7 @@ class Finish:
     """How one decoder process finished, as the harness saw it: its raw wait status and rusage
     (a ``resource.struct_rusage`` or a (utime, stime, maxrss_kb) tuple), and the limits the
     harness (or the kernel, for the cgroup's) enforced."""
+
     status: int
     rusage: object = None
     elapsed: float = 0.0
@@ -67,12 +69,20 @@ class Finish:
     notes: tuple[str, ...] = ()
 
 
-_MEMORY_TEXT = ("memoryerror", "bad_alloc", "out of memory", "cannot allocate memory", "outofmemoryerror",
-                "memory allocation of", "failed to allocate")
+_MEMORY_TEXT = (
+    "memoryerror",
+    "bad_alloc",
+    "out of memory",
+    "cannot allocate memory",
+    "outofmemoryerror",
+    "memory allocation of",
+    "failed to allocate",
+)
 
 
-def result(argv: list[str], limits, fin: Finish, *, stdout_tail: str, stderr_tail: str,
-           measure_dirs: list[Path]) -> ProcResult:
+def result(
+    argv: list[str], limits, fin: Finish, *, stdout_tail: str, stderr_tail: str, measure_dirs: list[Path]
+) -> ProcResult:
     """The :class:`ProcResult` of one finished decoder process: signal names, the limit that
     ended it, the output it left — shared by the one-shot launcher, the fork server and the
     persistent protocol."""
@@ -83,11 +93,20 @@ def result(argv: list[str], limits, fin: Finish, *, stdout_tail: str, stderr_tai
     if ru is not None and not isinstance(ru, tuple):
         ru = (ru.ru_utime, ru.ru_stime, ru.ru_maxrss)
     killed = fin.timed_out or fin.mem_hit or fin.out_hit
-    res = ProcResult(argv, None if killed else (rc if rc >= 0 else None), elapsed_s=fin.elapsed,
-                     timed_out=fin.timed_out, memory_limit_hit=fin.mem_hit or fin.oom,
-                     output_limit_hit=fin.out_hit, cpu_s=(ru[0] + ru[1]) if ru else 0.0,
-                     maxrss_mb=(ru[2] / 1024.0) if ru else 0.0, rss_sampled_mb=fin.rss_sampled_mb,
-                     stdout_tail=stdout_tail, stderr_tail=stderr_tail, notes=list(fin.notes))
+    res = ProcResult(
+        argv,
+        None if killed else (rc if rc >= 0 else None),
+        elapsed_s=fin.elapsed,
+        timed_out=fin.timed_out,
+        memory_limit_hit=fin.mem_hit or fin.oom,
+        output_limit_hit=fin.out_hit,
+        cpu_s=(ru[0] + ru[1]) if ru else 0.0,
+        maxrss_mb=(ru[2] / 1024.0) if ru else 0.0,
+        rss_sampled_mb=fin.rss_sampled_mb,
+        stdout_tail=stdout_tail,
+        stderr_tail=stderr_tail,
+        notes=list(fin.notes),
+    )
     if fin.pids_hit:
         res.notes.append("process-limit")
     if fin.oom:
@@ -151,6 +170,7 @@ def _rlimit_arg(which: int, value: int) -> str:
     """prlimit's SOFT:HARD for ``value`` as ``launcher._set`` sets it: capped by the current
     hard limit, which it lowers to the value only when it was unlimited."""
     import resource  # noqa: PLC0415 (POSIX only)
+
     _soft, hard = resource.getrlimit(which)
     if hard == resource.RLIM_INFINITY:
         return f"{value}:{value}"
@@ -162,15 +182,33 @@ def launch_argv(as_bytes: int, fsize: int, cpu: int, cgroups: list[Path], inner:
     ``inner``, and whether it waits for the harness to move it into ``cgroups`` (then write a
     line to its stdin)."""
     import resource  # noqa: PLC0415 (POSIX only)
+
     # FBACONF_LAUNCHER=python: always the Python launcher (benchmarks/bench_run.py compares the two)
     prlimit = None if os.environ.get("FBACONF_LAUNCHER", "").lower() == "python" else shutil.which("prlimit")
     if prlimit is None:
         cg = [x for d in cgroups for x in ("--cgroup", str(d))]
-        return [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize),
-                str(cpu), *cg, "--", *inner], False
-    lim = [f"--{name}={_rlimit_arg(which, v)}" for name, which, v in
-           (("as", resource.RLIMIT_AS, as_bytes), ("fsize", resource.RLIMIT_FSIZE, fsize),
-            ("cpu", resource.RLIMIT_CPU, cpu), ("nofile", resource.RLIMIT_NOFILE, NOFILE)) if v > 0]
+        return [
+            os.path.realpath(sys.executable),
+            "-I",
+            "-S",
+            str(LIMIT_LAUNCHER),
+            str(as_bytes),
+            str(fsize),
+            str(cpu),
+            *cg,
+            "--",
+            *inner,
+        ], False
+    lim = [
+        f"--{name}={_rlimit_arg(which, v)}"
+        for name, which, v in (
+            ("as", resource.RLIMIT_AS, as_bytes),
+            ("fsize", resource.RLIMIT_FSIZE, fsize),
+            ("cpu", resource.RLIMIT_CPU, cpu),
+            ("nofile", resource.RLIMIT_NOFILE, NOFILE),
+        )
+        if v > 0
+    ]
     argv = [prlimit, *lim, "--core=0:0", "--", *inner]
     if cgroups:
         return ["/bin/sh", "-c", _HOLD, "fbaconf-launch", *argv], True
@@ -195,9 +233,18 @@ def release(proc, cgroups: list[Path]) -> str | None:
     return None
 
 
-def launch_server(inner: list[str], limits, *, cwd: Path, env: dict[str, str], stderr=None,  # noqa: PLR0913
-                  pass_fds: tuple[int, ...] = (), as_bytes: int = 0, fsize: int = 0,
-                  cg: Cgroups | None = None) -> tuple[subprocess.Popen, Cgroups]:
+def launch_server(  # noqa: PLR0913 - what starts a server, as sandbox.run takes it
+    inner: list[str],
+    limits,
+    *,
+    cwd: Path,
+    env: dict[str, str],
+    stderr=None,
+    pass_fds: tuple[int, ...] = (),
+    as_bytes: int = 0,
+    fsize: int = 0,
+    cg: Cgroups | None = None,
+) -> tuple[subprocess.Popen, Cgroups]:
     """Start a long-lived process (a fork server, a persistent decoder) through the limit
     launcher, in its own cgroups (``cg``, or new ones for ``limits``) and session, with
     stdin/stdout as pipes; registered so :func:`stop_all` kills it. ``as_bytes``/``fsize``:
@@ -205,11 +252,30 @@ def launch_server(inner: list[str], limits, *, cwd: Path, env: dict[str, str], s
     inputs). Raises OSError."""
     if cg is None:
         cg = Cgroups(processes=limits.processes, memory_mb=limits.memory_mb if limits.memory_kind != "none" else 0)
-    full = [os.path.realpath(sys.executable), "-I", "-S", str(LIMIT_LAUNCHER), str(as_bytes), str(fsize), "0",
-            *cg.launcher_args(), "--", *inner]
+    full = [
+        os.path.realpath(sys.executable),
+        "-I",
+        "-S",
+        str(LIMIT_LAUNCHER),
+        str(as_bytes),
+        str(fsize),
+        "0",
+        *cg.launcher_args(),
+        "--",
+        *inner,
+    ]
     try:
-        proc = subprocess.Popen(full, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=stderr, cwd=cwd,
-                                start_new_session=True, close_fds=True, pass_fds=pass_fds, env=env)
+        proc = subprocess.Popen(
+            full,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=stderr,
+            cwd=cwd,
+            start_new_session=True,
+            close_fds=True,
+            pass_fds=pass_fds,
+            env=env,
+        )
     except OSError:
         cg.close()
         raise

@@ -5,6 +5,7 @@ by or records in its statement, and ``certify verify`` repeats (it was worded by
 controllers, the seccomp filter — and, for a decoder, the limits in force
 (:func:`.bounds.limits_in_force`). An in-process adapter runs inside fbaconf: no sandbox applies.
 """
+
 from __future__ import annotations
 
 import os
@@ -17,6 +18,7 @@ from . import bounds, cgroups, sandbox, seccomp
 class IsolationReport:
     """What isolates a decoder here; ``missing`` says, in words, what is not there and what that
     leaves open (empty when everything is)."""
+
     bubblewrap: bool
     switched_off: bool  # FBACONF_SANDBOX=none: bubblewrap there, but not used
     controllers: frozenset[str]
@@ -40,13 +42,16 @@ class IsolationReport:
     def notice(self) -> str:
         """The line ``run`` and ``certify`` print before any case."""
         if self.bubblewrap:
-            here = ("decoders run in a bubblewrap sandbox on this machine" +
-                    ("" if not self.missing else " — NOT fully isolated: " + "; ".join(self.missing)))
+            here = "decoders run in a bubblewrap sandbox on this machine" + (
+                "" if not self.missing else " — NOT fully isolated: " + "; ".join(self.missing)
+            )
         else:
             why = "switched off (FBACONF_SANDBOX=none)" if self.switched_off else "not available"
-            here = (f"WARNING: bubblewrap (bwrap) is {why}: decoders run UNISOLATED on this machine — they can "
-                    "read the goldens and write outside their folder. Install it (Debian: apt-get install "
-                    "bubblewrap); certify refuses to run a decoder without it unless told --allow-unisolated")
+            here = (
+                f"WARNING: bubblewrap (bwrap) is {why}: decoders run UNISOLATED on this machine — they can "
+                "read the goldens and write outside their folder. Install it (Debian: apt-get install "
+                "bubblewrap); certify refuses to run a decoder without it unless told --allow-unisolated"
+            )
         if self.in_process:
             return f"fbaconf: isolation: {self.name} runs inside fbaconf (no sandbox applies); {here}"
         return f"fbaconf: isolation: {here}; limits in force: " + "; ".join(self.limits)
@@ -67,18 +72,29 @@ def report(adapter=None) -> IsolationReport:
     ctl = cgroups.controllers()
     missing = []
     if not bw:
-        missing.append("bubblewrap (bwrap): decoders run unsandboxed, seeing the whole machine, its network and "
-                       "its processes")
+        missing.append(
+            "bubblewrap (bwrap): decoders run unsandboxed, seeing the whole machine, its network and its processes"
+        )
     if "memory" not in ctl:
-        missing.append("writable cgroups with the memory controller: no memory limit on a decoder's whole process "
-                       "tree (an address-space limit per process instead: three 800 MB children pass a 1 GB limit)")
+        missing.append(
+            "writable cgroups with the memory controller: no memory limit on a decoder's whole process "
+            "tree (an address-space limit per process instead: three 800 MB children pass a 1 GB limit)"
+        )
     if "pids" not in ctl:
         missing.append("writable cgroups with the pids controller: no limit on the processes a decoder starts")
     if bw and not seccomp.supported():
-        missing.append("the seccomp filter (an architecture it does not know): a decoder can take the host user's "
-                       "inotify instances")
+        missing.append(
+            "the seccomp filter (an architecture it does not know): a decoder can take the host user's "
+            "inotify instances"
+        )
     in_process = adapter is not None and getattr(adapter, "kind", None) != "command"
-    return IsolationReport(bw, os.environ.get("FBACONF_SANDBOX") == "none", frozenset(ctl),
-                           bw and seccomp.supported(), tuple(missing), in_process,
-                           getattr(adapter, "name", ""),
-                           tuple(bounds.limits_in_force(adapter)) if adapter is not None else ())
+    return IsolationReport(
+        bw,
+        os.environ.get("FBACONF_SANDBOX") == "none",
+        frozenset(ctl),
+        bw and seccomp.supported(),
+        tuple(missing),
+        in_process,
+        getattr(adapter, "name", ""),
+        tuple(bounds.limits_in_force(adapter)) if adapter is not None else (),
+    )

@@ -49,6 +49,7 @@ one is the sandbox's or the exec's failure, whatever the decoder could have prin
 The result names what happened — exit code, signal name, timeout, output limit, memory
 limit — and :mod:`.endings` turns it into an outcome with a useful message.
 """
+
 from __future__ import annotations
 
 import functools
@@ -114,12 +115,13 @@ class Limits:
         if self.memory_kind not in MEMORY_KINDS:
             raise ValueError(f"memory_kind must be one of {', '.join(MEMORY_KINDS)}, not {self.memory_kind!r}")
         t = self.timeout_s
-        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or \
-                not 0 < t <= MAX_TIMEOUT_S:
+        if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t) or not 0 < t <= MAX_TIMEOUT_S:
             raise ValueError(f"timeout_s must be a number of seconds in (0, {MAX_TIMEOUT_S:g}], not {t!r}")
-        for name, v, lo, hi in (("memory_mb", self.memory_mb, 0, MAX_MEMORY_MB),
-                                ("output_mb", self.output_mb, 1, MAX_OUTPUT_MB),
-                                ("processes", self.processes, 1, MAX_PROCESSES)):
+        for name, v, lo, hi in (
+            ("memory_mb", self.memory_mb, 0, MAX_MEMORY_MB),
+            ("output_mb", self.output_mb, 1, MAX_OUTPUT_MB),
+            ("processes", self.processes, 1, MAX_PROCESSES),
+        ):
             if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
                 raise ValueError(f"{name} must be a whole number in [{lo}, {hi}], not {v!r}")
 
@@ -128,6 +130,7 @@ class Limits:
 class View:
     """What a sandboxed decoder sees: read-only paths, writable paths, and paths hidden (an
     empty tmpfs) inside the read-only ones. Paths that do not exist are skipped."""
+
     read_only: list[Path] = field(default_factory=list)
     writable: list[Path] = field(default_factory=list)
     hidden: list[Path] = field(default_factory=list)
@@ -151,8 +154,11 @@ def isolation() -> str:
             exe = shutil.which("bwrap")
             if exe and os.environ.get("FBACONF_SANDBOX", "") != "none":
                 try:
-                    r = subprocess.run([exe, "--unshare-all", "--die-with-parent", "--ro-bind", "/", "/", "--",
-                                        "/bin/true"], capture_output=True, timeout=10)
+                    r = subprocess.run(
+                        [exe, "--unshare-all", "--die-with-parent", "--ro-bind", "/", "/", "--", "/bin/true"],
+                        capture_output=True,
+                        timeout=10,
+                    )
                     if r.returncode == 0:
                         _ISOLATION = "bwrap"
                 except (OSError, subprocess.SubprocessError):
@@ -165,8 +171,7 @@ def _under_any(p: Path, roots: list[Path]) -> bool:
 
 
 def _bwrap_argv(view: View, workdir: Path) -> list[str]:
-    out = [shutil.which("bwrap") or "bwrap", "--die-with-parent", "--new-session", "--unshare-all",
-           "--cap-drop", "ALL"]
+    out = [shutil.which("bwrap") or "bwrap", "--die-with-parent", "--new-session", "--unshare-all", "--cap-drop", "ALL"]
     for top in SYSTEM_TOPS:
         p = Path(top)
         if p.is_symlink():
@@ -290,8 +295,15 @@ def decoder_env(workdir: Path, env: dict[str, str] | None) -> dict[str, str]:
     """The minimal environment a decoder gets: PATH, a UTF-8 C locale, HOME and TMPDIR in its
     folder, a few runtime variables kept from the harness's, and the manifest's ``[env]``."""
     tmp = Path(workdir) / "tmp"
-    out = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8",
-           "HOME": str(workdir), "TMPDIR": str(tmp), "TMP": str(tmp), "TEMP": str(tmp)}
+    out = {
+        "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
+        "LANG": "C.UTF-8",
+        "LC_ALL": "C.UTF-8",
+        "HOME": str(workdir),
+        "TMPDIR": str(tmp),
+        "TMP": str(tmp),
+        "TEMP": str(tmp),
+    }
     for keep in ("SYSTEMROOT", "LD_LIBRARY_PATH", "JAVA_HOME", "PYTHONPATH", "VIRTUAL_ENV"):
         if keep in os.environ:
             out[keep] = os.environ[keep]
@@ -301,14 +313,16 @@ def decoder_env(workdir: Path, env: dict[str, str] | None) -> dict[str, str]:
 
 # ------------------------------------------------------------------ one invocation
 
+
 def as_bytes_for(limits: Limits, cg: Cgroups | None) -> int:
     """The address-space rlimit (bytes, 0 = none) a decoder process gets: always for
     ``memory_kind = "address-space"``; for ``"tree"`` only where no cgroup holds the tree's
     memory (``cg`` has no memory limit), the fallback."""
     if not limits.memory_mb:
         return 0
-    if limits.memory_kind == "address-space" or (limits.memory_kind == "tree" and not (cg is not None and
-                                                                                      cg.has_memory)):
+    if limits.memory_kind == "address-space" or (
+        limits.memory_kind == "tree" and not (cg is not None and cg.has_memory)
+    ):
         return limits.memory_mb * 2**20
     return 0
 
@@ -332,8 +346,16 @@ def sandbox_argv(view: View, workdir: Path, fds: list[int], *, status: bool = Tr
     return argv[:1] + extra + argv[1:], status_r
 
 
-def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] | None = None,
-        measure_dirs: list[Path] | None = None, view: View | None = None, keep_io: Path | None = None) -> ProcResult:
+def run(
+    argv: list[str],
+    workdir: Path,
+    limits: Limits,
+    *,
+    env: dict[str, str] | None = None,
+    measure_dirs: list[Path] | None = None,
+    view: View | None = None,
+    keep_io: Path | None = None,
+) -> ProcResult:
     """Run ``argv`` in ``workdir`` under ``limits`` (sandboxed when :func:`isolation` allows);
     never raises for the decoder's behaviour. ``keep_io``: a folder to keep the whole stdout and
     stderr in (``stdout.txt``, ``stderr.txt``; ``--keep-workdirs``), written once the decoder's
@@ -357,17 +379,24 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
         head, status_r = sandbox_argv(view or default_view(argv, workdir), workdir, fds)
         inner = head + inner
     cg_dirs = [d for _k, d in cg.dirs]
-    full, held = launch_argv(as_bytes, limits.output_mb * 2**20, int(max(1, limits.timeout_s * 2 + 1)), cg_dirs,
-                             inner)
+    full, held = launch_argv(as_bytes, limits.output_mb * 2**20, int(max(1, limits.timeout_s * 2 + 1)), cg_dirs, inner)
     io_dir = Path(tempfile_dir())
     out_path, err_path = io_dir / "stdout", io_dir / "stderr"
     t0 = time.perf_counter()
     try:
         with open(out_path, "wb") as fo, open(err_path, "wb") as fe:
             try:
-                proc = subprocess.Popen(full, cwd=workdir, stdin=subprocess.PIPE if held else subprocess.DEVNULL,
-                                        stdout=fo, stderr=fe, env=base_env, start_new_session=True, close_fds=True,
-                                        pass_fds=tuple(fds))
+                proc = subprocess.Popen(
+                    full,
+                    cwd=workdir,
+                    stdin=subprocess.PIPE if held else subprocess.DEVNULL,
+                    stdout=fo,
+                    stderr=fe,
+                    env=base_env,
+                    start_new_session=True,
+                    close_fds=True,
+                    pass_fds=tuple(fds),
+                )
             except OSError as e:  # the launcher itself could not start: a harness problem
                 cg.close()
                 return ProcResult(argv, None, stderr_tail=f"cannot start: {e}", notes=["harness-start-failed"])
@@ -391,11 +420,22 @@ def run(argv: list[str], workdir: Path, limits: Limits, *, env: dict[str, str] |
         ran, status_r = exit_reported(status_r), None
         if not ran and hit is None and not oom and not stopping():
             notes.append("sandbox-failed")  # bubblewrap never saw the program run: its set-up or exec failed
-        fin = Finish(status, rusage, time.perf_counter() - t0, timed_out=hit == "timeout", mem_hit=hit == "memory",
-                     out_hit=hit == "output", oom=oom, pids_hit=pids_hit, rss_sampled_mb=watch.rss_peak_mb,
-                     bwrap_status=sandboxed, notes=tuple(notes))
-        res = result(argv, limits, fin, stdout_tail=read_tail(out_path), stderr_tail=read_tail(err_path),
-                     measure_dirs=measure)
+        fin = Finish(
+            status,
+            rusage,
+            time.perf_counter() - t0,
+            timed_out=hit == "timeout",
+            mem_hit=hit == "memory",
+            out_hit=hit == "output",
+            oom=oom,
+            pids_hit=pids_hit,
+            rss_sampled_mb=watch.rss_peak_mb,
+            bwrap_status=sandboxed,
+            notes=tuple(notes),
+        )
+        res = result(
+            argv, limits, fin, stdout_tail=read_tail(out_path), stderr_tail=read_tail(err_path), measure_dirs=measure
+        )
         if keep_io is not None:
             for src in (out_path, err_path):
                 keep_file(src, Path(keep_io) / f"{src.name}.txt")

@@ -27,6 +27,7 @@ The filter is classic BPF, written here (no libseccomp): it checks the calling c
 refused with ``ENOSYS``), the call number and, for ``clone``/``unshare``, the low 32 bits of the
 first argument (the flags, on all three).
 """
+
 from __future__ import annotations
 
 import errno
@@ -76,11 +77,18 @@ def _instructions() -> list[tuple]:
         ins.append((_JEQ, "flags", None, calls["clone"]))
         ins.append((_JEQ, "flags", None, calls["unshare"]))
         ins.append((_RET, 0, 0, _ALLOW))
-    ins += [("label", "flags"), (_LD_W_ABS, 0, 0, _ARG0), (_JSET, "eperm", None, NAMESPACE_FLAGS),
-            (_RET, 0, 0, _ALLOW),
-            ("label", "emfile"), (_RET, 0, 0, _ERRNO | errno.EMFILE),
-            ("label", "eperm"), (_RET, 0, 0, _ERRNO | errno.EPERM),
-            ("label", "enosys"), (_RET, 0, 0, _ERRNO | errno.ENOSYS)]
+    ins += [
+        ("label", "flags"),
+        (_LD_W_ABS, 0, 0, _ARG0),
+        (_JSET, "eperm", None, NAMESPACE_FLAGS),
+        (_RET, 0, 0, _ALLOW),
+        ("label", "emfile"),
+        (_RET, 0, 0, _ERRNO | errno.EMFILE),
+        ("label", "eperm"),
+        (_RET, 0, 0, _ERRNO | errno.EPERM),
+        ("label", "enosys"),
+        (_RET, 0, 0, _ERRNO | errno.ENOSYS),
+    ]
     return ins
 
 

@@ -19,6 +19,7 @@ stdout and stderr, the limits in force and the likely fix (:func:`report`):
   ending, exit code and signal, the same stderr once each case's file names are normalised.
   An invalid stream's reject passes and a valid one's fails: endings are compared, not outcomes.
 """
+
 from __future__ import annotations
 
 import re
@@ -34,6 +35,7 @@ _FINE = (endings.EndingKind.DECODED, endings.EndingKind.NOT_SUPPORTED)
 
 class SetupError(FbaconfInputError):
     """The decoder cannot run here as set up (exit 2): its own words, the limits, the fix."""
+
     rule = "decoder-setup"
 
 
@@ -50,24 +52,30 @@ def probe(argv, workdir, limits, *, name: str, what: str, file: str, **run) -> N
     if "as-limit" in res.notes:
         again = endings.classify(sandbox.run(argv, workdir, replace(limits, memory_kind="rss"), **run), limits, codes)
         if again.kind in _FINE:
-            fixes.append(f"it decodes the same stream without the address-space limit: the runtime cannot start "
-                         f"under {limits.memory_mb} MB of address space per process (it reserves address space up "
-                         f"front). Fix: memory_kind = \"tree\" in [limits] (the whole tree's use, where cgroups are "
-                         f"writable) or \"rss\" (sampled)")
-    raise SetupError(report(name, limits, f"{what} did not decode: {ending.message}", res.stdout_tail,
-                            res.stderr_tail, fixes), file=file)
+            fixes.append(
+                f"it decodes the same stream without the address-space limit: the runtime cannot start "
+                f"under {limits.memory_mb} MB of address space per process (it reserves address space up "
+                f'front). Fix: memory_kind = "tree" in [limits] (the whole tree\'s use, where cgroups are '
+                f'writable) or "rss" (sampled)'
+            )
+    raise SetupError(
+        report(name, limits, f"{what} did not decode: {ending.message}", res.stdout_tail, res.stderr_tail, fixes),
+        file=file,
+    )
 
 
 def report(name: str, limits, what: str, stdout: str, stderr: str, fixes: list[str]) -> str:
     """The set-up error's text: what happened, the program's own words, the limits, the fix."""
     if not fixes:
-        fixes = ["a runtime or library outside the folders the sandbox shows (the program's folder, the folders "
-                 "of the files its command names, the manifest's folder, /usr, /etc, /bin, /lib*): the lab gives "
-                 "its folder with --sandbox-ro DIR",
-                 "a file the decoder opens that its command does not name (a jar on a Class-Path, a model, an "
-                 "argument file): name it in [commands] (its folder is then shown, checked) or keep it beside the "
-                 "program",
-                 f"memory: memory_kind (now \"{limits.memory_kind}\") and memory_mb (now {limits.memory_mb})"]
+        fixes = [
+            "a runtime or library outside the folders the sandbox shows (the program's folder, the folders "
+            "of the files its command names, the manifest's folder, /usr, /etc, /bin, /lib*): the lab gives "
+            "its folder with --sandbox-ro DIR",
+            "a file the decoder opens that its command does not name (a jar on a Class-Path, a model, an "
+            "argument file): name it in [commands] (its folder is then shown, checked) or keep it beside the "
+            "program",
+            f'memory: memory_kind (now "{limits.memory_kind}") and memory_mb (now {limits.memory_mb})',
+        ]
     lines = [f"{name} cannot run as set up: {what}. No case was counted; this is not a verdict on a stream."]
     for which, text in (("stdout", stdout), ("stderr", stderr)):
         said = [ln for ln in (text or "").splitlines() if ln.strip()]
@@ -96,9 +104,19 @@ def identical(name: str, limits, results, valid: set[str]) -> str | None:
     """The set-up error's text when every result that ran the decoder ended the same way and
     none decoded (module doc), else None. ``valid``: the ids of the valid-stream cases."""
     ran = [r for r in results if r.outcome.value != "NotSupported"]
-    if len(ran) < 2 or not any(r.case_id in valid for r in ran) or len({_key(r) for r in ran}) != 1 or \
-            any(r.exit_code == 0 and r.signal is None and r.crash_kind is None for r in ran):
+    if (
+        len(ran) < 2
+        or not any(r.case_id in valid for r in ran)
+        or len({_key(r) for r in ran}) != 1
+        or any(r.exit_code == 0 and r.signal is None and r.crash_kind is None for r in ran)
+    ):
         return None
     first = next(r for r in ran if r.case_id in valid)
-    return report(name, limits, f"every one of the {len(ran)} cases it ran ended the same way, none decoded "
-                  f"({first.case_id}: {first.message})", "", first.stderr_tail, [])
+    return report(
+        name,
+        limits,
+        f"every one of the {len(ran)} cases it ran ended the same way, none decoded ({first.case_id}: {first.message})",
+        "",
+        first.stderr_tail,
+        [],
+    )

@@ -1,6 +1,7 @@
 """What a decoder's case folder holds: exactly the input forms its manifest accepts, copied in
 — nothing derived from the goldens, no other case's files (docs/harness.md, "What a decoder
 sees"). The harness fills the command from what :func:`stage` returns."""
+
 from __future__ import annotations
 
 import shutil
@@ -43,8 +44,11 @@ def auxiliary_files(case) -> list[Path]:
         return []
     named = {v for k, v in case.inputs.items() if k != "faces" and isinstance(v, str)}
     named |= set(case.inputs.get("faces", []))
-    return [case.suite_dir / rel for rel in case.sha256
-            if rel not in named and Path(rel).suffix.lower() not in _NEVER_AUXILIARY]
+    return [
+        case.suite_dir / rel
+        for rel in case.sha256
+        if rel not in named and Path(rel).suffix.lower() not in _NEVER_AUXILIARY
+    ]
 
 
 def stage(adapter, case, workdir: Path) -> tuple[dict[str, str], list[str]]:
@@ -64,8 +68,12 @@ def stage(adapter, case, workdir: Path) -> tuple[dict[str, str], list[str]]:
         if src.is_file() and not (ind / src.name).exists():
             shutil.copyfile(src, ind / src.name)
     ext = "fap" if adapter.faps_format == "fap" else "npz"
-    values.update(faps_out=str(outd / f"faps.{ext}"), vertices_out=str(outd / "vertices.npz"),
-                  images_dir=str(outd / "images"), faps_out_dir=str(outd / "faces"))
+    values.update(
+        faps_out=str(outd / f"faps.{ext}"),
+        vertices_out=str(outd / "vertices.npz"),
+        images_dir=str(outd / "images"),
+        faps_out_dir=str(outd / "faces"),
+    )
     (outd / "images").mkdir()
     (outd / "faces").mkdir()
     faces = []

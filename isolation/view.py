@@ -24,6 +24,7 @@ between cases.
 the part after a ``=`` (``--model=/opt/m.bin``), each part of a ``:`` list (``-cp a.jar:b.jar``)
 and a ``@file`` (a JVM argument file).
 """
+
 from __future__ import annotations
 
 import functools
@@ -79,8 +80,9 @@ def _known() -> dict[int, dict[str, str]]:
 
 def _is_git_dir(d: Path) -> bool:
     try:
-        return (d / "HEAD").is_file() and ((d / "objects").is_dir() and (d / "refs").is_dir() or
-                                          (d / "commondir").is_file())
+        return (d / "HEAD").is_file() and (
+            (d / "objects").is_dir() and (d / "refs").is_dir() or (d / "commondir").is_file()
+        )
     except OSError:
         return False
 
@@ -142,8 +144,10 @@ def _walk(top: Path, skip: set[Path]) -> str | None:
             for e in it:
                 seen += 1
                 if seen > MAX_ENTRIES:
-                    return (f"it holds more than {MAX_ENTRIES} files and folders, too many for the lab to check "
-                            f"that it holds nothing but the decoder's")
+                    return (
+                        f"it holds more than {MAX_ENTRIES} files and folders, too many for the lab to check "
+                        f"that it holds nothing but the decoder's"
+                    )
                 p = Path(e.path)
                 if e.name == ".git":
                     return f"it holds {p}, git data (its objects hold every committed file, goldens included)"
@@ -192,8 +196,9 @@ def _under(p: Path, roots) -> bool:
 _OWN = [Path(t) for t in ("/dev", "/proc", "/sys", "/run")]
 
 
-def command_folders(argv: list[str], workdir: Path, program_dirs: list[Path], *,
-                    through_python: bool) -> list[tuple[Path, str]]:
+def command_folders(
+    argv: list[str], workdir: Path, program_dirs: list[Path], *, through_python: bool
+) -> list[tuple[Path, str]]:
     """The folders a command's files would show (the program's — unless it is fbaconf's own
     ``{python}`` —, and each named file's or folder's, as given and with links resolved), each
     with the words that say why; not the case's own files, and not what the sandbox has of its

@@ -14,6 +14,7 @@ Resident memory. The processes of the tree are the case's cgroup's (where cgroup
 writable), else the launcher's descendants (``/proc/PID/task/TID/children``); their
 resident sets are summed every 10 ms.
 """
+
 from __future__ import annotations
 
 import os
@@ -66,12 +67,22 @@ class Watch:
     """Limits checked while one decoder (or one input of a server) runs; :meth:`check` says
     which one it passed ("output" or "memory"), :meth:`next_in` when to look again."""
 
-    def __init__(self, limits, dirs: list[Path], *, pid: int | None = None,
-                 procs: Callable[[], list[int]] | None = None, t0: float | None = None) -> None:
+    def __init__(
+        self,
+        limits,
+        dirs: list[Path],
+        *,
+        pid: int | None = None,
+        procs: Callable[[], list[int]] | None = None,
+        t0: float | None = None,
+    ) -> None:
         self.limit = limits.output_mb * 2**20
         self.dirs = [Path(d) for d in dirs]
-        self.rss_limit = limits.memory_mb if (limits.memory_kind == "rss" and limits.memory_mb and
-                                              (pid is not None or procs is not None)) else 0
+        self.rss_limit = (
+            limits.memory_mb
+            if (limits.memory_kind == "rss" and limits.memory_mb and (pid is not None or procs is not None))
+            else 0
+        )
         self.pid, self.procs = pid, procs
         t0 = time.perf_counter() if t0 is None else t0
         self.next_output = t0 + FIRST_S

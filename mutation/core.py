@@ -8,6 +8,7 @@ callers import functions by name at the top) or a custom ``patch`` function. ``p
 path of the arithmetic decoder off, so that a change of the Python block decoder takes effect.
 Applying a mutant changes the whole process and is never undone.
 """
+
 from __future__ import annotations
 
 import importlib

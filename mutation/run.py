@@ -16,6 +16,7 @@ own:
 ``fbaconf suites mutants [-j N]`` runs every mutant (``-j`` processes at a time) and prints the
 table and, last, ``mutation score: K/N``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -45,8 +46,15 @@ def _case_cost(c) -> tuple:
     return (order.get(c.kind, 2), heavy, c.frames, c.full_id)
 
 
-def run_mutant(name: str | None, claim: str = "predictable@2", *, stop_at_first: bool = True,
-               out_dir: Path | None = None, cases=None, formats: tuple[str, ...] = ("npz", "fap")) -> dict:
+def run_mutant(
+    name: str | None,
+    claim: str = "predictable@2",
+    *,
+    stop_at_first: bool = True,
+    out_dir: Path | None = None,
+    cases=None,
+    formats: tuple[str, ...] = ("npz", "fap"),
+) -> dict:
     """Apply ``name`` (None: the plain reference) and run the cases of ``claim`` through the
     harness, cheapest first: the required ones and the .fap player cases (the reference reads
     both, and a decoder's .fap reader is code a mutant can break), once with each FAP output
@@ -75,17 +83,34 @@ def run_mutant(name: str | None, claim: str = "predictable@2", *, stop_at_first:
             r = run_case(ctx, c)
             ran += 1
             if r.outcome.failing:
-                failing.append({"case": c.full_id if fmt == formats[0] else f"{c.full_id} ({fmt})",
-                                "outcome": r.outcome.value, "message": r.message[:300]})
+                failing.append(
+                    {
+                        "case": c.full_id if fmt == formats[0] else f"{c.full_id} ({fmt})",
+                        "outcome": r.outcome.value,
+                        "message": r.message[:300],
+                    }
+                )
                 if stop_at_first:
                     break
-    return {"mutant": name or "reference", "killed": bool(failing),
-            "killed_by": failing[0]["case"] if failing else None,
-            "failing": failing, "ran": ran, "total": len(plan), "seconds": round(time.perf_counter() - t0, 2)}
+    return {
+        "mutant": name or "reference",
+        "killed": bool(failing),
+        "killed_by": failing[0]["case"] if failing else None,
+        "failing": failing,
+        "ran": ran,
+        "total": len(plan),
+        "seconds": round(time.perf_counter() - t0, 2),
+    }
 
 
-def run_all(names: list[str] | None = None, *, claim: str = "predictable@2", jobs: int | None = None,
-            stop_at_first: bool = True, timeout: float = 900.0) -> list[dict]:
+def run_all(
+    names: list[str] | None = None,
+    *,
+    claim: str = "predictable@2",
+    jobs: int | None = None,
+    stop_at_first: bool = True,
+    timeout: float = 900.0,
+) -> list[dict]:
     """Every mutant (or ``names``) in its own process, ``jobs`` at a time."""
     names = names or list(MUTANTS)
     jobs = jobs or os.cpu_count() or 1
@@ -101,8 +126,12 @@ def run_all(names: list[str] | None = None, *, claim: str = "predictable@2", job
         for line in reversed(p.stdout.splitlines()):
             if line.startswith("{"):
                 return json.loads(line)
-        return {"mutant": n, "killed": False, "killed_by": None,
-                "error": f"exit {p.returncode}: {p.stderr.strip()[-400:]}"}
+        return {
+            "mutant": n,
+            "killed": False,
+            "killed_by": None,
+            "error": f"exit {p.returncode}: {p.stderr.strip()[-400:]}",
+        }
 
     with ThreadPoolExecutor(max_workers=jobs) as ex:
         return list(ex.map(one, names))
@@ -142,21 +171,26 @@ class MutantAdapter(PythonAdapter):
     """In-process adapter class for manifests: each case runs the mutant decoder program in a
     subprocess (``python -m fbaconf.mutation.run decode NAME ...``), so the mutant's
     patches never touch the harness process (thread-safe with ``-j``)."""
+
     supports_multi = True
     description = "fbaconf reference decoder with one injected bug (mutation/own.py)"
 
     def __init__(self, mutant: str = "") -> None:
         super().__init__()
         if mutant not in MUTANTS:
-            raise ManifestError(f"[options] mutant = {mutant!r}: unknown (known: {', '.join(MUTANTS)})",
-                                rule="manifest-options")
+            raise ManifestError(
+                f"[options] mutant = {mutant!r}: unknown (known: {', '.join(MUTANTS)})", rule="manifest-options"
+            )
         self.mutant = mutant
 
     def run(self, job) -> None:
         base = [sys.executable, "-m", "fbaconf.mutation.run", "decode", self.mutant]
         if job.faces:
-            argv = base + ["decode-multi", "--out-dir", str(job.path("faps_out_dir")),
-                           "--format", self.faps_format] + list(job.faces)
+            argv = (
+                base
+                + ["decode-multi", "--out-dir", str(job.path("faps_out_dir")), "--format", self.faps_format]
+                + list(job.faces)
+            )
         else:
             argv = base + ["decode", str(job.path("input"))]
             for opt, key in (("--scene", "scene"), ("--scenario", "scenario")):
@@ -177,8 +211,9 @@ class MutantAdapter(PythonAdapter):
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m fbaconf.mutation.run",
-                                 description="Run one mutant decoder (see the module doc).")
+    ap = argparse.ArgumentParser(
+        prog="python -m fbaconf.mutation.run", description="Run one mutant decoder (see the module doc)."
+    )
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run", help="run the suites against one mutant; prints one JSON line")
     r.add_argument("name", help="mutant name, or 'reference' for the unmodified reference")

@@ -4,6 +4,7 @@ equals what this produces, so the document cannot go stale.
 
     python -m fbaconf.profiles.catalogue [--write PATH]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,8 +20,10 @@ FAMILIES = (
     ("FAP-INPUT", "Input"),
     ("FAP-SYNTAX", "Syntax"),
     ("FAP-SEM", "Semantics"),
-    ("FAP-DECISION",
-     "Decision dependence (warnings: the stream relies on an fbaconf reading where another is plausible)"),
+    (
+        "FAP-DECISION",
+        "Decision dependence (warnings: the stream relies on an fbaconf reading where another is plausible)",
+    ),
     ("FAP-PROFILE", "Profile"),
     ("FAP-LEVEL", "Level"),
     ("FAP-CLAIM", "Claim"),
@@ -63,25 +66,32 @@ def generate() -> str:
     unknown = sorted(c for c in CODES if not any(c.rsplit("-", 1)[0] == p for p, _ in FAMILIES))
     if unknown:
         raise RuntimeError(f"codes outside the known families: {unknown}")
-    lines += ["## Rule ids of typed input errors", "",
-              "Every typed error a reader raises (`[rule …]` at the end of its one-line message) carries one of",
-              "these ids. Bitstream rules name the checker code a stream breaking them is reported under.", "",
-              "| rule | stage | severity | checker code | description |", "|---|---|---|---|---|"]
+    lines += [
+        "## Rule ids of typed input errors",
+        "",
+        "Every typed error a reader raises (`[rule …]` at the end of its one-line message) carries one of",
+        "these ids. Bitstream rules name the checker code a stream breaking them is reported under.",
+        "",
+        "| rule | stage | severity | checker code | description |",
+        "|---|---|---|---|---|",
+    ]
     for r in sorted(RULES.values(), key=lambda r: (r.stage, r.rule)):
         code = f"`{r.code}`" if r.code else ""
         lines.append(f"| `{r.rule}` | {r.stage} | {r.severity} | {code} | {_cell(r.description)} |")
     lines.append("")
     ps = load_profiles()
-    lines += ["## Level limits checked (from profiles/data/profiles.toml)",
-              "",
-              "| limit | unit | " + " | ".join(f"L{lv}" for lv in ps.levels)
-              + " | from profile | provenance | checked |",
-              "|---|---|" + "---|" * len(ps.levels) + "---|---|---|"]
+    lines += [
+        "## Level limits checked (from profiles/data/profiles.toml)",
+        "",
+        "| limit | unit | " + " | ".join(f"L{lv}" for lv in ps.levels) + " | from profile | provenance | checked |",
+        "|---|---|" + "---|" * len(ps.levels) + "---|---|---|",
+    ]
     for lim in ps.limits.values():
         vals = " | ".join(f"{lim.values[lv]:g}" for lv in ps.levels)
         checked = f"`{LIMIT_CODES[lim.id]}`" if lim.id in LIMIT_CODES else "decoder requirement (harness)"
-        lines.append(f"| {lim.id} | {lim.unit} | {vals} | {ps.profiles[lim.applies_from].name} | {lim.provenance} "
-                     f"| {checked} |")
+        lines.append(
+            f"| {lim.id} | {lim.unit} | {vals} | {ps.profiles[lim.applies_from].name} | {lim.provenance} | {checked} |"
+        )
     lines.append("")
     return "\n".join(lines)
 

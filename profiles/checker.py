@@ -13,6 +13,7 @@ and min/max lists outside intra planes (predicted planes carry no such fields); 
 for unmasked FAPs (a list carries values only for masked FAPs); symbols outside the
 signalled ranges (the alphabet is built from the ranges, so no symbol can leave them).
 """
+
 from __future__ import annotations
 
 import importlib
@@ -76,6 +77,7 @@ class SceneSummary:
 
     ``tools``: tool id -> node path of its first use. ``measures``: limit id -> (value,
     node path of the worst case). ``faces``: Face nodes in the scene."""
+
     faces: int = 0
     tools: dict[str, str] = field(default_factory=dict)
     measures: dict[str, tuple[float, str]] = field(default_factory=dict)
@@ -98,6 +100,7 @@ def image_size(path: Path) -> tuple[int, int] | None:
         return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
     try:
         import OpenImageIO as oiio  # noqa: PLC0415 (image I/O loads on first use)
+
         inp = oiio.ImageInput.open(str(path))
         if not inp:
             return None
@@ -135,7 +138,9 @@ def summarize_scene(scene: Any, base_dir: Path | None = None) -> SceneSummary:
                 if len(rows) != NUM_FEATURE_POINTS:
                     raise SceneStructureError(
                         f"featurePointsCoord must list the 84 feature points in label order (unsent ones as "
-                        f"3.4e38), got {len(rows)}", node_path=f"{path}.featurePointsCoord")
+                        f"3.4e38), got {len(rows)}",
+                        node_path=f"{path}.featurePointsCoord",
+                    )
                 s.measure("fdp_feature_points", int(sent.sum()), f"{path}.featurePointsCoord")
             if resolve(n.get("textureCoord")) is not None or n.get("useOrthoTexture"):
                 s.tools.setdefault("fdp_texture", f"{path}.textureCoord")
@@ -204,8 +209,13 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
             importlib.import_module("fbaconf.scenes.bt")  # optional: the scene readers (BT, and BIFS on it)
             bifs = importlib.import_module("fbaconf.scenes.bifs")
         except Exception as e:  # noqa: BLE001 - ImportError, or a reader that fails to import
-            out.append(diag(R.SCENE_UNAVAILABLE, f"scene {scene}: no scene reader in this build "
-                            f"({type(e).__name__}: {e}); the scene was not checked"))
+            out.append(
+                diag(
+                    R.SCENE_UNAVAILABLE,
+                    f"scene {scene}: no scene reader in this build "
+                    f"({type(e).__name__}: {e}); the scene was not checked",
+                )
+            )
             return None
         try:
             parsed = bifs.load_scene(scene)  # binary BIFS (issue 9) or BT text, by extension
@@ -218,8 +228,7 @@ def _load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
             where = f" (line {line}, column {getattr(e, 'column', '?')})" if line is not None else ""
             if getattr(e, "bit_offset", None) is not None:  # a binary BIFS scene
                 where = f" (BIFS bit offset {e.bit_offset}, rule {getattr(e, 'rule', '?')})"
-            out.append(diag(R.SCENE_INVALID, f"scene {scene}{where}: {getattr(e, 'message', e)}",
-                            node_path=path))
+            out.append(diag(R.SCENE_INVALID, f"scene {scene}{where}: {getattr(e, 'message', e)}", node_path=path))
             return None
         scene = parsed
     try:
@@ -249,8 +258,14 @@ def _interop(scene, out: list[Diagnostic]) -> None:
         ref = node.fields.get("faceSceneGraphNode")
         target = defs.get(ref.name) if hasattr(ref, "name") and not hasattr(ref, "type") else ref
         if getattr(target, "type", None) == "IndexedFaceSet":
-            out.append(diag(R.SCENE_INTEROP_FDM, "FaceDefMesh.faceSceneGraphNode references an IndexedFaceSet "
-                            "(as the seed defines it); MP4Box refuses this USE when decoding BIFS", node_path=path))
+            out.append(
+                diag(
+                    R.SCENE_INTEROP_FDM,
+                    "FaceDefMesh.faceSceneGraphNode references an IndexedFaceSet "
+                    "(as the seed defines it); MP4Box refuses this USE when decoding BIFS",
+                    node_path=path,
+                )
+            )
             return
 
 
@@ -265,8 +280,14 @@ class Report:
     fits: dict[str, bool] = field(default_factory=dict)
 
 
-def check_stream(data: bytes, *, scene=None, claim: Claim | str | None = None, file: str | None = None,
-                 profiles: ProfileSet | None = None) -> list[Diagnostic]:
+def check_stream(
+    data: bytes,
+    *,
+    scene=None,
+    claim: Claim | str | None = None,
+    file: str | None = None,
+    profiles: ProfileSet | None = None,
+) -> list[Diagnostic]:
     """All diagnostics for a face object stream, in stream order. Never raises on any stream or
     scene content; only a malformed ``claim`` string raises ValueError (a usage error).
 
@@ -275,8 +296,15 @@ def check_stream(data: bytes, *, scene=None, claim: Claim | str | None = None, f
     return analyse(data, scene=scene, claim=claim, file=file, profiles=profiles).diagnostics
 
 
-def analyse(data: bytes, *, scene=None, claim: Claim | str | None = None, file: str | None = None,
-            profiles: ProfileSet | None = None, smallest_claim: bool = False) -> Report:
+def analyse(
+    data: bytes,
+    *,
+    scene=None,
+    claim: Claim | str | None = None,
+    file: str | None = None,
+    profiles: ProfileSet | None = None,
+    smallest_claim: bool = False,
+) -> Report:
     """The full check: diagnostics, a summary, the smallest admissible claim. Never raises."""
     out: list[Diagnostic] = []
     summary: dict = {"bytes": len(data) if isinstance(data, (bytes, bytearray)) else 0}
@@ -329,13 +357,17 @@ def _analyse(data: bytes, scene, claim, file, profiles, want_smallest: bool, rep
     rep.claim = claim
     summary = rep.summary
     if len(data) < 4:
-        out.append(diag(R.SYNTAX_TOO_SHORT, f"input has {len(data)} byte(s): not a face object stream",
-                        bit_offset=0))
+        out.append(diag(R.SYNTAX_TOO_SHORT, f"input has {len(data)} byte(s): not a face object stream", bit_offset=0))
         return
     first = int.from_bytes(data[:4], "big")
     if first != FACE_OBJECT_START_CODE:
-        out.append(diag(R.SYNTAX_NOT_FACE, f"input starts with 0x{first:08X}, not face_object_start_code "
-                        "0x000001BA", bit_offset=0))
+        out.append(
+            diag(
+                R.SYNTAX_NOT_FACE,
+                f"input starts with 0x{first:08X}, not face_object_start_code 0x000001BA",
+                bit_offset=0,
+            )
+        )
         return
     st = _Stream(data, file)
     planes = st.planes
@@ -353,12 +385,16 @@ def _analyse(data: bytes, scene, claim, file, profiles, want_smallest: bool, rep
     faces = max(1, sc.faces if sc is not None else 1)
     measures["faces"] = (float(faces), {"node_path": "Face"} if sc is not None and sc.faces > 1 else {})
     summary.update(
-        planes=len(planes), frames=len(_rows(st)), intra_planes=sum(1 for p in planes if p.is_intra),
-        complete=st.error is None, parsed_to_bit=(st.error.bit_offset if st.error is not None
-                                                  else st.result.end_offset),
-        frame_rate=_first_rate(planes), faces=faces, tools=sorted(tools),
-        end_code=(f"0x{st.result.end_code:08X}" if st.result is not None and st.result.end_code is not None
-                  else None))
+        planes=len(planes),
+        frames=len(_rows(st)),
+        intra_planes=sum(1 for p in planes if p.is_intra),
+        complete=st.error is None,
+        parsed_to_bit=(st.error.bit_offset if st.error is not None else st.result.end_offset),
+        frame_rate=_first_rate(planes),
+        faces=faces,
+        tools=sorted(tools),
+        end_code=(f"0x{st.result.end_code:08X}" if st.result is not None and st.result.end_code is not None else None),
+    )
     # claims
     fits = {}
     for c in ps.claims():
@@ -373,8 +409,13 @@ def _analyse(data: bytes, scene, claim, file, profiles, want_smallest: bool, rep
     if want_smallest and smallest is None:
         top = ps.claims()[-1]
         why = sorted({d.code for d in _claim_violations(ps, top, tools, measures)})
-        out.append(diag(R.CLAIM_NONE, f"no profile@level defined in profiles.toml admits this stream (even {top} "
-                        f"is violated: {', '.join(why)})"))
+        out.append(
+            diag(
+                R.CLAIM_NONE,
+                f"no profile@level defined in profiles.toml admits this stream (even {top} "
+                f"is violated: {', '.join(why)})",
+            )
+        )
 
 
 def _first_rate(planes) -> float | None:
@@ -390,8 +431,10 @@ def _syntax(st: _Stream, out: list[Diagnostic]) -> None:
     if e is not None:
         code = R.code_for_rule(e.rule, R.SYNTAX_OTHER)
         if code == R.CHECK_DCT:
-            msg = (f"plane {e.plane} uses coding_type 1 (DCT segment mode), which this checker cannot parse; "
-                   "the rest of the stream was not checked")
+            msg = (
+                f"plane {e.plane} uses coding_type 1 (DCT segment mode), which this checker cannot parse; "
+                "the rest of the stream was not checked"
+            )
         elif code == R.SYNTAX_OTHER:
             msg = f"parsing stopped: {e.message} [rule {e.rule}]"
         else:
@@ -402,17 +445,28 @@ def _syntax(st: _Stream, out: list[Diagnostic]) -> None:
     nbits = len(st.data) * 8
     for byte in find_emulations(st.data, res):
         plane = next((p.index for p in reversed(res.planes) if p.bit_offset <= byte * 8), None)
-        out.append(diag(R.SYNTAX_EMULATION, f"start-code emulation: a byte-aligned 0x000001 at byte {byte} that is "
-                        f"no start code (D9); a decoder that scans for start codes stops there",
-                        bit_offset=byte * 8, plane=plane))
+        out.append(
+            diag(
+                R.SYNTAX_EMULATION,
+                f"start-code emulation: a byte-aligned 0x000001 at byte {byte} that is "
+                f"no start code (D9); a decoder that scans for start codes stops there",
+                bit_offset=byte * 8,
+                plane=plane,
+            )
+        )
     if res.end_code is None:
-        out.append(diag(R.SYNTAX_NO_END_CODE, "the stream ends without the end code 0x000001B1",
-                        bit_offset=res.end_offset))
+        out.append(
+            diag(R.SYNTAX_NO_END_CODE, "the stream ends without the end code 0x000001B1", bit_offset=res.end_offset)
+        )
     elif res.end_code != VISUAL_OBJECT_SEQUENCE_END_CODE:
-        out.append(diag(R.SYNTAX_UNEXPECTED_START_CODE,
-                        f"start code 0x{res.end_code:08X} ends the face object (expected a plane start code or "
-                        "the end code 0x000001B1); the data after it was not checked",
-                        bit_offset=res.end_offset - 32))
+        out.append(
+            diag(
+                R.SYNTAX_UNEXPECTED_START_CODE,
+                f"start code 0x{res.end_code:08X} ends the face object (expected a plane start code or "
+                "the end code 0x000001B1); the data after it was not checked",
+                bit_offset=res.end_offset - 32,
+            )
+        )
     elif res.end_offset < nbits:
         extra = (nbits - res.end_offset) // 8
         out.append(diag(R.SYNTAX_TRAILING, f"{extra} byte(s) after the end code", bit_offset=res.end_offset))
@@ -429,18 +483,39 @@ def _semantics(st: _Stream, out: list[Diagnostic]) -> None:
     for p in planes:
         if p.time_code is not None:
             h, m, _, s = p.time_code
-            bad = [f"{name} {v} > {lim}" for name, v, lim in (("hours", h, 23), ("minutes", m, 59),
-                                                                ("seconds", s, 59)) if v > lim]
+            bad = [
+                f"{name} {v} > {lim}"
+                for name, v, lim in (("hours", h, 23), ("minutes", m, 59), ("seconds", s, 59))
+                if v > lim
+            ]
             if bad:
-                out.append(diag(R.SEM_TIME_CODE_RANGE, "time code out of range: " + ", ".join(bad),
-                                bit_offset=_time_code_offset(p), plane=p.index, frame=p.frame_number))
+                out.append(
+                    diag(
+                        R.SEM_TIME_CODE_RANGE,
+                        "time code out of range: " + ", ".join(bad),
+                        bit_offset=_time_code_offset(p),
+                        plane=p.index,
+                        frame=p.frame_number,
+                    )
+                )
         # a time code has whole-second resolution: it goes backwards only when it is earlier
         # than the whole second the previous plane lies in
-        if (prev_t is not None and p.time_code is not None
-                and p.time_ms < np.floor((prev_t + _EPS_MS) / 1000.0) * 1000.0 - _EPS_MS):
-            out.append(diag(R.SEM_TIME_BACKWARDS, f"time code {p.time_ms / 1000.0:g} s is earlier than the second "
-                            f"of the previous plane ({prev_t:.3f} ms)", bit_offset=p.bit_offset, plane=p.index,
-                            frame=p.frame_number, time_ms=p.time_ms))
+        if (
+            prev_t is not None
+            and p.time_code is not None
+            and p.time_ms < np.floor((prev_t + _EPS_MS) / 1000.0) * 1000.0 - _EPS_MS
+        ):
+            out.append(
+                diag(
+                    R.SEM_TIME_BACKWARDS,
+                    f"time code {p.time_ms / 1000.0:g} s is earlier than the second "
+                    f"of the previous plane ({prev_t:.3f} ms)",
+                    bit_offset=p.bit_offset,
+                    plane=p.index,
+                    frame=p.frame_number,
+                    time_ms=p.time_ms,
+                )
+            )
         prev_t = p.time_ms
     rows = _rows(st)
     if not rows:
@@ -452,29 +527,52 @@ def _semantics(st: _Stream, out: list[Diagnostic]) -> None:
     high = fr.high[ks]
     # the top under D5 and under the other reading (0..ceil(63/q)): a value between the two is out of
     # range only under D5 (FAP-SEM-009); beyond both, or negative, under every reading (FAP-SEM-006)
-    top, top_other = (np.array([max(INTENSITY_MAX, bound(int(p.fap_quant)) * intensity_step(int(p.fap_quant)))
-                                if p.coding_type != CODING_DCT else INTENSITY_MAX for p in rp])
-                      for bound in (intensity_bound, intensity_bound_ceil))
-    for col, fap, name in ((2, 0, "viseme_blend"), (5, 1, "expression_intensity1"),
-                           (7, 1, "expression_intensity2")):
+    top, top_other = (
+        np.array(
+            [
+                max(INTENSITY_MAX, bound(int(p.fap_quant)) * intensity_step(int(p.fap_quant)))
+                if p.coding_type != CODING_DCT
+                else INTENSITY_MAX
+                for p in rp
+            ]
+        )
+        for bound in (intensity_bound, intensity_bound_ceil)
+    )
+    for col, fap, name in ((2, 0, "viseme_blend"), (5, 1, "expression_intensity1"), (7, 1, "expression_intensity2")):
         v = high[:, col]
-        for code, bad, shown in ((R.SEM_INTENSITY, (v < 0) | (v > top_other), top),
-                                 (R.SEM_INTENSITY_D5, (v > top) & (v <= top_other), top)):
+        for code, bad, shown in (
+            (R.SEM_INTENSITY, (v < 0) | (v > top_other), top),
+            (R.SEM_INTENSITY_D5, (v > top) & (v <= top_other), top),
+        ):
             for j in np.nonzero(coded[:, fap] & bad)[0]:
                 p = rp[j]
                 other = f" (0..{int(top_other[j])} under the other reading)" if top_other[j] != top[j] else ""
-                out.append(diag(code, f"{name} = {int(v[j])} outside 0..{int(shown[j])}{other}",
-                                bit_offset=p.bit_offset, plane=p.index, frame=int(fr.frame_number[ks[j]]),
-                                fap=fap + 1))
+                out.append(
+                    diag(
+                        code,
+                        f"{name} = {int(v[j])} outside 0..{int(shown[j])}{other}",
+                        bit_offset=p.bit_offset,
+                        plane=p.index,
+                        frame=int(fr.frame_number[ks[j]]),
+                        fap=fap + 1,
+                    )
+                )
     # negative values of unidirectional FAPs (D4 warning)
     vals = fr.values[ks]
     for f in UNIDIRECTIONAL:
         bad = np.nonzero(coded[:, f - 1] & (vals[:, f - 1] < 0))[0]
         for j in bad:
             p = rp[j]
-            out.append(diag(R.DECISION_UNIDIRECTIONAL_NEGATIVE,
-                            f"unidirectional FAP {f} decodes to {int(vals[j, f - 1])} < 0",
-                            bit_offset=p.bit_offset, plane=p.index, frame=int(fr.frame_number[ks[j]]), fap=f))
+            out.append(
+                diag(
+                    R.DECISION_UNIDIRECTIONAL_NEGATIVE,
+                    f"unidirectional FAP {f} decodes to {int(vals[j, f - 1])} < 0",
+                    bit_offset=p.bit_offset,
+                    plane=p.index,
+                    frame=int(fr.frame_number[ks[j]]),
+                    fap=f,
+                )
+            )
 
 
 def _rows(st: _Stream) -> list[tuple[int, Any]]:
@@ -536,14 +634,21 @@ def _measures(st: _Stream, summary: dict) -> dict[str, tuple[float, dict]]:
 
     def loc(j: int) -> dict:
         k, p = rows[int(order[j])]
-        return {"bit_offset": p.bit_offset, "plane": p.index, "frame": int(st.frames.frame_number[k]),
-                "time_ms": float(ts[j])}
+        return {
+            "bit_offset": p.bit_offset,
+            "plane": p.index,
+            "frame": int(st.frames.frame_number[k]),
+            "time_ms": float(ts[j]),
+        }
 
     peak_bits = float(np.round(win_bits[kb], 6))
     m["bitrate"] = (peak_bits, loc(kb))
     m["coded_frame_rate"] = (float(win_frames[kf]), loc(kf))
-    summary.update(peak_bitrate_bps=int(round(peak_bits)), peak_frame_rate_hz=int(win_frames[kf]),
-                   duration_s=round(float(ts[-1] - ts[0]) / 1000.0, 6))
+    summary.update(
+        peak_bitrate_bps=int(round(peak_bits)),
+        peak_frame_rate_hz=int(win_frames[kf]),
+        duration_s=round(float(ts[-1] - ts[0]) / 1000.0, 6),
+    )
     return m
 
 
@@ -554,9 +659,18 @@ def _limit_table(ps: ProfileSet, claim: Claim, measures: dict) -> list[dict]:
         f = UNIT_FACTORS.get(lim.unit, 1.0)
         m = measures.get(lim.id)
         measured = None if m is None or lim.bounds == "decoder" else round(m[0] / f, 6)
-        rows.append({"limit": lim.id, "kind": lim.kind, "value": lim.value(claim.level), "unit": lim.unit,
-                     "provenance": lim.provenance, "bounds": lim.bounds, "measured": measured,
-                     "ok": None if measured is None else bool(measured <= lim.value(claim.level) + 1e-9)})
+        rows.append(
+            {
+                "limit": lim.id,
+                "kind": lim.kind,
+                "value": lim.value(claim.level),
+                "unit": lim.unit,
+                "provenance": lim.provenance,
+                "bounds": lim.bounds,
+                "measured": measured,
+                "ok": None if measured is None else bool(measured <= lim.value(claim.level) + 1e-9),
+            }
+        )
     return rows
 
 
@@ -577,10 +691,24 @@ def _claim_violations(ps: ProfileSet, claim: Claim, tools: dict, measures: dict)
         limit = lim.value(claim.level) * UNIT_FACTORS.get(lim.unit, 1.0)
         if value > limit + 1e-9:
             shown = value / UNIT_FACTORS.get(lim.unit, 1.0)
-            out.append(diag(code, f"{lim.description}: {shown:g} {lim.unit} > {lim.value(claim.level):g} {lim.unit} "
-                            f"allowed at {prof.name}@{claim.level} ({lim.provenance} limit)", **loc))
+            out.append(
+                diag(
+                    code,
+                    f"{lim.description}: {shown:g} {lim.unit} > {lim.value(claim.level):g} {lim.unit} "
+                    f"allowed at {prof.name}@{claim.level} ({lim.provenance} limit)",
+                    **loc,
+                )
+            )
     return out
 
 
-__all__ = ["ARITH_BLOCKS", "Report", "SceneSummary", "analyse", "check_stream", "lookahead_stuffing", "summarize_scene",
-           "LIMIT_CODES"]
+__all__ = [
+    "ARITH_BLOCKS",
+    "Report",
+    "SceneSummary",
+    "analyse",
+    "check_stream",
+    "lookahead_stuffing",
+    "summarize_scene",
+    "LIMIT_CODES",
+]

@@ -10,6 +10,7 @@ rules of the .fap reader (``FAP-TEXT-*`` codes, each at line:column; profiles/te
 Exit status: 0 no errors (warnings/info allowed), 1 errors, 2 unreadable input (file
 missing, or not a face object stream at all) or a bad command line.
 """
+
 from __future__ import annotations
 
 import json
@@ -30,27 +31,47 @@ REPORT_FORMAT = "fbaconf.check-report/1"
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
-        "check", help="check a face object stream (syntax, semantics, profile and level)",
+        "check",
+        help="check a face object stream (syntax, semantics, profile and level)",
         description="Check a face object bitstream: syntax, semantics, decision dependence, and (with --claim) "
-                    "the tools and limits of a profile@level. Exit 0 clean, 1 errors, 2 unreadable input.")
+        "the tools and limits of a profile@level. Exit 0 clean, 1 errors, 2 unreadable input.",
+    )
     p.add_argument("input", metavar="IN.fba", help="face object bitstream, or an ASCII .fap file (its text rules)")
-    p.add_argument("--scene", metavar="S.bt", help="scene file (FDP/FIT/FaceDefTables) for profile/level checks: BT "
-                   "text, or binary BIFS (.bifs)")
+    p.add_argument(
+        "--scene",
+        metavar="S.bt",
+        help="scene file (FDP/FIT/FaceDefTables) for profile/level checks: BT text, or binary BIFS (.bifs)",
+    )
     p.add_argument("--claim", metavar="PROFILE@LEVEL", help="check against a claim, e.g. simple@1")
     p.add_argument("--json", action="store_true", help="JSON report (schema: profiles/data/check-report.schema.json)")
-    p.add_argument("--max-issues", type=int, default=0, metavar="N",
-                   help="report at most N diagnostics (0 = no limit); the exit status still counts all")
+    p.add_argument(
+        "--max-issues",
+        type=int,
+        default=0,
+        metavar="N",
+        help="report at most N diagnostics (0 = no limit); the exit status still counts all",
+    )
     p.add_argument("--only", nargs="+", default=[], metavar="CODE", help="report only these codes (PREFIX* allowed)")
-    p.add_argument("--ignore", nargs="+", default=[], metavar="CODE",
-                   help="do not report these codes (PREFIX* allowed)")
+    p.add_argument(
+        "--ignore", nargs="+", default=[], metavar="CODE", help="do not report these codes (PREFIX* allowed)"
+    )
     p.add_argument("--smallest-claim", action="store_true", help="print the lowest profile@level the stream fits")
-    p.add_argument("--locations", type=int, default=5, metavar="N",
-                   help="locations listed per folded issue (default 5)")
+    p.add_argument(
+        "--locations", type=int, default=5, metavar="N", help="locations listed per folded issue (default 5)"
+    )
     p.set_defaults(func=run)
 
 
-def build_report(rep: Report, *, file: str | None, max_issues: int = 0, only=(), ignore=(), locations: int = 5,
-                 smallest_claim: bool = False) -> tuple[dict, int]:
+def build_report(
+    rep: Report,
+    *,
+    file: str | None,
+    max_issues: int = 0,
+    only=(),
+    ignore=(),
+    locations: int = 5,
+    smallest_claim: bool = False,
+) -> tuple[dict, int]:
     """The JSON-able report and the exit status."""
     kept = D.select(rep.diagnostics, list(only), list(ignore))
     total = D.counts(kept)
@@ -87,9 +108,11 @@ def format_text(doc: dict) -> str:
         lines.append(f"  .fap text: {s.get('frames', 0)} frames read, {rate}")
     if "planes" in s:
         rate = f"{s['frame_rate']:g} Hz" if s.get("frame_rate") else "no frame rate"
-        lines.append(f"  {s['planes']} planes ({s['intra_planes']} intra), {rate}, peak "
-                     f"{s.get('peak_bitrate_bps', 0) / 1000:.3f} kbit/s, peak {s.get('peak_frame_rate_hz', 0)} "
-                     f"planes/s, tools: {', '.join(s.get('tools', [])) or '-'}")
+        lines.append(
+            f"  {s['planes']} planes ({s['intra_planes']} intra), {rate}, peak "
+            f"{s.get('peak_bitrate_bps', 0) / 1000:.3f} kbit/s, peak {s.get('peak_frame_rate_hz', 0)} "
+            f"planes/s, tools: {', '.join(s.get('tools', [])) or '-'}"
+        )
     for it in doc["issues"]:
         more = f" (x{it['count']})" if it["count"] > 1 else ""
         lines.append(f"{it['severity']}: {it['code']}{more}: {it['message']}")
@@ -131,8 +154,13 @@ def not_regular(path) -> str | None:
         return e.strerror or str(e)
     if stat.S_ISREG(st.st_mode):
         return None
-    return ("is a FIFO" if stat.S_ISFIFO(st.st_mode) else "is a folder" if stat.S_ISDIR(st.st_mode) else
-            "is a device or a socket") + ", not a regular file"
+    return (
+        "is a FIFO"
+        if stat.S_ISFIFO(st.st_mode)
+        else "is a folder"
+        if stat.S_ISDIR(st.st_mode)
+        else "is a device or a socket"
+    ) + ", not a regular file"
 
 
 def run(args) -> int:
@@ -155,20 +183,35 @@ def run(args) -> int:
             raise OSError(why)
         data = path.read_bytes()
     except OSError as e:
-        rep = Report([D.diag(R.INPUT_UNREADABLE, f"cannot read {args.input}: {e.strerror or e}")],
-                     {"bytes": 0}, unreadable=True, claim=claim)
+        rep = Report(
+            [D.diag(R.INPUT_UNREADABLE, f"cannot read {args.input}: {e.strerror or e}")],
+            {"bytes": 0},
+            unreadable=True,
+            claim=claim,
+        )
     else:
         if is_text_input(str(path), data) and not data.startswith(b"\x00\x00\x01\xba"):
             if args.scene or claim is not None or args.smallest_claim:
-                print("fbaconf check: error: --scene, --claim and --smallest-claim are for the binary stream; "
-                      f"{args.input} is .fap text", file=sys.stderr)
+                print(
+                    "fbaconf check: error: --scene, --claim and --smallest-claim are for the binary stream; "
+                    f"{args.input} is .fap text",
+                    file=sys.stderr,
+                )
                 return 2
             rep = analyse_text(data, file=str(path))
         else:
-            rep = analyse(data, scene=args.scene, claim=claim, file=str(path), profiles=ps,
-                          smallest_claim=args.smallest_claim)
-    doc, status = build_report(rep, file=str(path), max_issues=args.max_issues, only=args.only,
-                               ignore=args.ignore, locations=args.locations, smallest_claim=args.smallest_claim)
+            rep = analyse(
+                data, scene=args.scene, claim=claim, file=str(path), profiles=ps, smallest_claim=args.smallest_claim
+            )
+    doc, status = build_report(
+        rep,
+        file=str(path),
+        max_issues=args.max_issues,
+        only=args.only,
+        ignore=args.ignore,
+        locations=args.locations,
+        smallest_claim=args.smallest_claim,
+    )
     if args.json:
         print(json.dumps(doc, indent=2, sort_keys=False))
     else:

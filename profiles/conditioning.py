@@ -7,6 +7,7 @@ platform's LAPACK. The checker compiles such a scene the way the reference does 
 refusal at the FDP field it comes from. Scenes that do not calibrate (no feature points, or a
 downloaded model) are not compiled.
 """
+
 from __future__ import annotations
 
 from fbaconf import rules as R
@@ -19,8 +20,11 @@ from .diagnostics import Diagnostic, diag
 def calibrates(scene) -> bool:
     """Whether a Face's FDP sends feature points without a faceSceneGraph (the default head is warped)."""
     for node, _ in scene.walk():
-        if getattr(node, "type", None) == "FDP" and scene.resolve(node.get("featurePointsCoord")) is not None \
-                and not node.get("faceSceneGraph"):
+        if (
+            getattr(node, "type", None) == "FDP"
+            and scene.resolve(node.get("featurePointsCoord")) is not None
+            and not node.get("faceSceneGraph")
+        ):
             return True
     return False
 

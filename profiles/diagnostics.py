@@ -3,6 +3,7 @@
 The codes themselves (severity, clause, description) live in the one rule registry,
 :mod:`fbaconf.rules`.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -60,8 +61,12 @@ class Location:
         return ", ".join(parts) or "stream"
 
     def sort_key(self) -> tuple:
-        return (self.bit_offset if self.bit_offset is not None else 1 << 62, self.line or 0, self.column or 0,
-                self.node_path or "")
+        return (
+            self.bit_offset if self.bit_offset is not None else 1 << 62,
+            self.line or 0,
+            self.column or 0,
+            self.node_path or "",
+        )
 
 
 @dataclass(frozen=True)
@@ -73,21 +78,38 @@ class Diagnostic:
     location: Location = field(default_factory=Location)
 
     def to_dict(self) -> dict:
-        return {"code": self.code, "severity": self.severity, "message": self.message, "clause": self.clause,
-                "location": self.location.to_dict()}
+        return {
+            "code": self.code,
+            "severity": self.severity,
+            "message": self.message,
+            "clause": self.clause,
+            "location": self.location.to_dict(),
+        }
 
     def __str__(self) -> str:
         return f"{self.severity}: {self.code} at {self.location}: {self.message} [{self.clause}]"
 
 
-def diag(code: str, message: str, *, bit_offset: int | None = None, plane: int | None = None,
-         frame: int | None = None, fap: int | None = None, node_path: str | None = None,
-         time_ms: float | None = None) -> Diagnostic:
+def diag(
+    code: str,
+    message: str,
+    *,
+    bit_offset: int | None = None,
+    plane: int | None = None,
+    frame: int | None = None,
+    fap: int | None = None,
+    node_path: str | None = None,
+    time_ms: float | None = None,
+) -> Diagnostic:
     """A diagnostic for a registered code (severity and clause come from the registry)."""
     info = CODES[code]
-    return Diagnostic(code, info.severity, message, info.clause,
-                      Location(None if bit_offset is None else int(bit_offset), plane, frame, fap, node_path,
-                               time_ms))
+    return Diagnostic(
+        code,
+        info.severity,
+        message,
+        info.clause,
+        Location(None if bit_offset is None else int(bit_offset), plane, frame, fap, node_path, time_ms),
+    )
 
 
 def text_diag(code: str, message: str, line: int, column: int) -> Diagnostic:
@@ -99,6 +121,7 @@ def text_diag(code: str, message: str, line: int, column: int) -> Diagnostic:
 @dataclass
 class Issue:
     """Repeated diagnostics of one code folded: the first message, a count and the first locations."""
+
     code: str
     severity: str
     clause: str
@@ -107,9 +130,15 @@ class Issue:
     locations: list[Location]
 
     def to_dict(self) -> dict:
-        return {"code": self.code, "severity": self.severity, "clause": self.clause, "message": self.message,
-                "count": self.count, "locations": [loc.to_dict() for loc in self.locations],
-                "omitted_locations": self.count - len(self.locations)}
+        return {
+            "code": self.code,
+            "severity": self.severity,
+            "clause": self.clause,
+            "message": self.message,
+            "count": self.count,
+            "locations": [loc.to_dict() for loc in self.locations],
+            "omitted_locations": self.count - len(self.locations),
+        }
 
 
 def fold(diags: list[Diagnostic], first: int = 5) -> list[Issue]:
@@ -129,8 +158,10 @@ def fold(diags: list[Diagnostic], first: int = 5) -> list[Issue]:
 def select(diags: list[Diagnostic], only: list[str] | None = None, ignore: list[str] | None = None) -> list[Diagnostic]:
     """Keep the codes in ``only`` (all when empty) and drop those in ``ignore``. A pattern ending
     in '*' matches a prefix (``FAP-DECISION-*``)."""
+
     def match(code: str, pats) -> bool:
         return any(code == p or (p.endswith("*") and code.startswith(p[:-1])) for p in pats)
+
     out = diags
     if only:
         out = [d for d in out if match(d.code, only)]
@@ -146,5 +177,4 @@ def counts(diags) -> dict[str, int]:
     return c
 
 
-__all__ = ["Diagnostic", "Issue", "Location", "counts", "diag", "fold",
-           "select", "text_diag"]
+__all__ = ["Diagnostic", "Issue", "Location", "counts", "diag", "fold", "select", "text_diag"]

@@ -10,6 +10,7 @@ A :class:`Claim` is ``profile@level`` (``simple@1``, ``Calibration@L2``). Claims
 axes (profiles are nested, level limits grow with the level), so the first admissible claim
 in that order is the unique smallest one (``--smallest-claim``).
 """
+
 from __future__ import annotations
 
 import difflib
@@ -168,8 +169,9 @@ def _parse_tools(raw: dict, source: str) -> dict[str, Tool]:
     return tools
 
 
-def _parse_profile_table(rawp: dict, tools: dict[str, Tool], levels: tuple[int, ...],
-                         source: str) -> dict[str, Profile]:
+def _parse_profile_table(
+    rawp: dict, tools: dict[str, Tool], levels: tuple[int, ...], source: str
+) -> dict[str, Profile]:
     """The ``[profiles]`` table: references checked, includes closed (no cycle), ranks ordered."""
     if not rawp:
         raise _err(source, "no profiles")
@@ -201,9 +203,17 @@ def _parse_profile_table(rawp: dict, tools: dict[str, Tool], levels: tuple[int, 
         rank = p.get("rank")
         if not isinstance(rank, int):
             raise _err(source, f"profiles.{pid}.rank must be an integer")
-        profiles[pid] = Profile(pid, str(p.get("name", pid)), rank, tuple(p.get("includes", [])),
-                                tuple(p.get("tools", [])), frozenset(all_tools), p["provenance"],
-                                _parse_indications(pid, p.get("indication", {}), levels, source), frozenset(anc))
+        profiles[pid] = Profile(
+            pid,
+            str(p.get("name", pid)),
+            rank,
+            tuple(p.get("includes", [])),
+            tuple(p.get("tools", [])),
+            frozenset(all_tools),
+            p["provenance"],
+            _parse_indications(pid, p.get("indication", {}), levels, source),
+            frozenset(anc),
+        )
     for pid, p in profiles.items():
         for a in p.ancestors:
             if profiles[a].rank >= p.rank:
@@ -220,8 +230,9 @@ def _parse_indications(pid: str, raw: dict, levels: tuple[int, ...], source: str
             raise _err(source, f"profiles.{pid}.indication: unknown level {lv}")
         if v.get("provenance") not in PROVENANCES:
             raise _err(source, f"profiles.{pid}.indication.{lv}.provenance must be one of {PROVENANCES}")
-        ind[int(lv)] = Indication(int(v["code"]), str(v.get("name", "")), v["provenance"],
-                                  bool(v.get("private", False)))
+        ind[int(lv)] = Indication(
+            int(v["code"]), str(v.get("name", "")), v["provenance"], bool(v.get("private", False))
+        )
     return ind
 
 
@@ -244,8 +255,9 @@ def _parse_limit(lid: str, lim: dict, profiles: dict[str, Profile], levels: tupl
     ordered = [vals[lv] for lv in levels]
     if lim["kind"] == "max" and ordered != sorted(ordered):
         raise _err(source, f"{where}: a max limit must not decrease with the level")
-    return Limit(lid, lim["description"], lim["unit"], lim["kind"], lim["applies_from"], lim["bounds"],
-                 lim["provenance"], vals)
+    return Limit(
+        lid, lim["description"], lim["unit"], lim["kind"], lim["applies_from"], lim["bounds"], lim["provenance"], vals
+    )
 
 
 @lru_cache(maxsize=1)
@@ -266,5 +278,14 @@ def _load_default() -> ProfileSet:
     return parse_profiles(_default_text(), "profiles/data/profiles.toml")
 
 
-__all__ = ["Claim", "Limit", "Profile", "ProfileDataError", "ProfileSet", "Tool", "load_profiles",
-           "parse_profiles", "PROVENANCES"]
+__all__ = [
+    "Claim",
+    "Limit",
+    "Profile",
+    "ProfileDataError",
+    "ProfileSet",
+    "Tool",
+    "load_profiles",
+    "parse_profiles",
+    "PROVENANCES",
+]

@@ -4,6 +4,7 @@
 quantiser step, kept away from 0 and always moving, so that no intra or predicted
 alphabet collapses to a single symbol (FAP-SEM-008) and unidirectional FAPs stay positive.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,8 +18,9 @@ from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.bitstreams.frames import SET, FapFrames
 
 
-def smooth_frames(n: int, rate: float = 30.0, faps=range(3, 69), *, seed: int = 0, amplitude: int = 6,
-                  max_step: int = 2) -> FapFrames:
+def smooth_frames(
+    n: int, rate: float = 30.0, faps=range(3, 69), *, seed: int = 0, amplitude: int = 6, max_step: int = 2
+) -> FapFrames:
     """n frames at ``rate`` Hz, the given low-level FAPs coded in every frame."""
     rng = np.random.default_rng(seed)
     f = FapFrames.empty(n, rate)
@@ -63,8 +65,16 @@ def stuffing_positions(data: bytes, start: int, length: int) -> list[int]:
     return out
 
 
-def make_stream(n: int = 30, rate: float = 30.0, faps=range(3, 69), *, seed: int = 0, amplitude: int = 6,
-                max_step: int = 2, **options) -> bytes:
+def make_stream(
+    n: int = 30,
+    rate: float = 30.0,
+    faps=range(3, 69),
+    *,
+    seed: int = 0,
+    amplitude: int = 6,
+    max_step: int = 2,
+    **options,
+) -> bytes:
     """Encoded bytes of :func:`smooth_frames` with EncoderOptions(**options)."""
     opts = EncoderOptions(**options)
     return encode(smooth_frames(n, rate, faps, seed=seed, amplitude=amplitude, max_step=max_step), opts).data

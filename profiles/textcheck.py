@@ -6,6 +6,7 @@ file breaks — it reads on past an error inside a frame — and this module tur
 diagnostics with their ``line:column``. A profile claim is about the binary stream, so a text
 file has no profile or level checks.
 """
+
 from __future__ import annotations
 
 from fbaconf import rules as R
@@ -35,8 +36,9 @@ def analyse_text(data: bytes, *, file: str | None = None) -> Report:
     try:
         findings, frames, header = faptext.check_fap_text(text, file=file)
         for w in findings:
-            out.append(text_diag(R.code_for_rule(w.rule, R.TEXT_HEADER), f"{w.message} [rule {w.rule}]",
-                                 w.line, w.column))
+            out.append(
+                text_diag(R.code_for_rule(w.rule, R.TEXT_HEADER), f"{w.message} [rule {w.rule}]", w.line, w.column)
+            )
         if frames is not None and header is not None:
             summary.update(frames=len(frames), frame_rate=header.frame_rate)
     except Exception as e:  # noqa: BLE001 - a checker bug must not crash the caller

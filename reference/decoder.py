@@ -15,6 +15,7 @@ The chain itself is :mod:`fbaconf.reference.pipeline`, which also makes the gold
 by construction only if the whole pipeline is deterministic — which the golden tooling
 checks by regenerating bit for bit.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,9 +49,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with readings.using(*a.reading):
             if a.cmd == "decode":
-                reference_outputs(a.input, scene=a.scene, scenario=a.scenario, faps_out=a.faps_out,
-                                  vertices_out=a.vertices_out, images_dir=a.images_dir,
-                                  player_state=is_fap_text(a.input))
+                reference_outputs(
+                    a.input,
+                    scene=a.scene,
+                    scenario=a.scenario,
+                    faps_out=a.faps_out,
+                    vertices_out=a.vertices_out,
+                    images_dir=a.images_dir,
+                    player_state=is_fap_text(a.input),
+                )
             else:
                 multi_outputs(a.inputs, a.out_dir, a.format)
     except FbaconfInputError as e:

@@ -8,6 +8,7 @@ Used by the reference decoder (``reference/decoder.py``, in-process and as a pro
 and by the golden builder (``conformance/golden.py``): the goldens are exactly what this
 chain writes.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -20,8 +21,10 @@ def load_stream(path: Path):
     path = Path(path)
     if path.suffix.lower() == ".fap":
         from fbaconf.bitstreams.faptext import read_fap_file
+
         return read_fap_file(path)[0]
     from fbaconf.bitstreams.decoder import decode
+
     try:
         data = path.read_bytes()
     except OSError as e:
@@ -29,15 +32,23 @@ def load_stream(path: Path):
     return decode(data, file=str(path)).frames
 
 
-def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path | None = None,
-                      faps_out: Path | None = None, vertices_out: Path | None = None,
-                      images_dir: Path | None = None, player_state: bool = False,
-                      supersample: int | None = None) -> None:
+def reference_outputs(
+    stream: Path,
+    *,
+    scene: Path | None = None,
+    scenario: Path | None = None,
+    faps_out: Path | None = None,
+    vertices_out: Path | None = None,
+    images_dir: Path | None = None,
+    player_state: bool = False,
+    supersample: int | None = None,
+) -> None:
     """Decode (and animate, render) one stream with the reference, writing the requested outputs.
     ``player_state``: the FAP output is a player's (docs/harness.md, "Players"): its state,
     every FAP that holds a value written as set in every frame. ``supersample``: render with
     this many samples per pixel side instead of the scenario's (the goldens' 8 x 8)."""
     from fbaconf.bitstreams.fapio import save_faps
+
     frames = load_stream(stream)
     if faps_out is not None:
         save_faps(state_of(frames) if player_state else frames, faps_out)
@@ -45,12 +56,14 @@ def reference_outputs(stream: Path, *, scene: Path | None = None, scenario: Path
         return
     from fbaconf.animation.engine import animate
     from fbaconf.animation.stateio import save_npz
+
     state = animate(frames, scene=scene)
     if vertices_out is not None:
         save_npz(state, vertices_out)
     if images_dir is not None:
         from fbaconf.rendering.render import render_frames
         from fbaconf.rendering.scenario import Scenario
+
         sc = Scenario.load(scenario) if scenario is not None else Scenario.default()
         if supersample is not None:
             sc = sc.with_(supersample=supersample)
@@ -68,6 +81,7 @@ def state_of(frames):
     import numpy as np
 
     from fbaconf.bitstreams.frames import DERIVED, RETAINED, SET
+
     out = frames.copy()
     out.status = np.where(np.isin(out.status, (RETAINED, DERIVED)), SET, out.status).astype(out.status.dtype)
     return out
@@ -75,6 +89,7 @@ def state_of(frames):
 
 def multi_outputs(streams: list[Path], out_dir: Path, fmt: str = "npz") -> None:
     from fbaconf.bitstreams.fapio import save_faps
+
     out_dir.mkdir(parents=True, exist_ok=True)
     for s in streams:
         save_faps(load_stream(s), out_dir / f"{Path(s).stem}.{fmt}")

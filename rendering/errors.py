@@ -4,6 +4,7 @@ All derive from :class:`fbaconf.errors.FbaconfInputError` (so the CLI reports
 them as one line and exits 2) and from :class:`ValueError` (so plain Python callers can
 catch them as bad values).
 """
+
 from __future__ import annotations
 
 from fbaconf.errors import FbaconfInputError, join_location
@@ -20,8 +21,9 @@ class ScenarioError(RenderInputError):
 
     rule = "scenario"
 
-    def __init__(self, message: str, *, key: str | None = None, file: str | None = None,
-                 rule: str | None = None) -> None:
+    def __init__(
+        self, message: str, *, key: str | None = None, file: str | None = None, rule: str | None = None
+    ) -> None:
         super().__init__(message, rule=rule, file=file)
         self.key = key
 
@@ -41,16 +43,25 @@ class GeometryError(RenderInputError):
 
     rule = "geometry"
 
-    def __init__(self, message: str, *, part: str | None = None, vertex: int | None = None,
-                 frame: int | None = None, rule: str | None = None, file: str | None = None) -> None:
+    def __init__(
+        self,
+        message: str,
+        *,
+        part: str | None = None,
+        vertex: int | None = None,
+        frame: int | None = None,
+        rule: str | None = None,
+        file: str | None = None,
+    ) -> None:
         super().__init__(message, rule=rule, file=file)
         self.part = part
         self.vertex = vertex
         self.frame = frame
 
     def location(self) -> str:
-        return join_location(("frame", self.frame), ("part", None if self.part is None else f"'{self.part}'"),
-                             ("vertex", self.vertex))
+        return join_location(
+            ("frame", self.frame), ("part", None if self.part is None else f"'{self.part}'"), ("vertex", self.vertex)
+        )
 
     def to_dict(self) -> dict:
         d = super().to_dict()

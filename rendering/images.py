@@ -10,6 +10,7 @@ identical bytes. Writes are atomic: the image is written to a temporary name in 
 and moved into place with ``os.replace``; on any error the temporary file is removed, so
 no partial image is ever left under the final name.
 """
+
 from __future__ import annotations
 
 import warnings
@@ -25,6 +26,7 @@ from .errors import ImageIOError, TextureError
 def openimageio():
     """The OpenImageIO module (imported on first use)."""
     import OpenImageIO  # noqa: PLC0415 (image I/O loads on first use)
+
     return OpenImageIO
 
 
@@ -45,8 +47,9 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
 
 def srgb_to_linear(encoded: np.ndarray) -> np.ndarray:
     """sRGB-encoded [0, 1] -> linear (colour-science's sRGB EOTF)."""
-    return np.asarray(colour_science().cctf_decoding(np.asarray(encoded, dtype=np.float64), function="sRGB"),
-                      dtype=np.float64)
+    return np.asarray(
+        colour_science().cctf_decoding(np.asarray(encoded, dtype=np.float64), function="sRGB"), dtype=np.float64
+    )
 
 
 def _write(path: Path, pixels: np.ndarray, fmt: str) -> None:

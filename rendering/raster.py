@@ -47,6 +47,7 @@ Conventions (all normative for fbaconf's golden images)
   (each sample row's N samples added left to right, then the N row sums top to bottom,
   then divided by ``N*N``).
 """
+
 from __future__ import annotations
 
 import os
@@ -170,8 +171,9 @@ class LightSet:
     specular: bool = True
 
 
-def light(normals: np.ndarray, points: np.ndarray, eye: np.ndarray, lights: LightSet,
-          ks: np.ndarray, exponent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def light(
+    normals: np.ndarray, points: np.ndarray, eye: np.ndarray, lights: LightSet, ks: np.ndarray, exponent: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Diffuse irradiance E and specular S (float64[k, 3] each) for unit normals at points."""
     k = normals.shape[0]
     E = np.empty((k, 3), dtype=np.float64)
@@ -258,16 +260,24 @@ def _scratch_buf(scratch: dict | None, name: str, size: int, dtype, fill) -> np.
     return buf
 
 
-def rasterize(proj: Projected, tris: np.ndarray, width: int, height: int, near: float, far: float,
-              cull_backfaces: bool = False, *, scratch: dict | None = None) -> Coverage:
+def rasterize(
+    proj: Projected,
+    tris: np.ndarray,
+    width: int,
+    height: int,
+    near: float,
+    far: float,
+    cull_backfaces: bool = False,
+    *,
+    scratch: dict | None = None,
+) -> Coverage:
     """Scan-convert all triangles into the samples of a ``width x height`` grid and resolve
     visibility with the depth test. ``tris`` is int64[m, 3] (global vertex indices).
     ``scratch``: an optional dict in which per-image work buffers are kept between calls (with
     the C scan converter the returned arrays may be views into them, valid until the next call)."""
     tris = np.asarray(tris, dtype=np.int64)
     cx, cy = width / 2.0, height / 2.0
-    vok = ((proj.depth >= near) & (np.abs(proj.sx - cx) <= MAX_SCREEN_PX)
-           & (np.abs(proj.sy - cy) <= MAX_SCREEN_PX))
+    vok = (proj.depth >= near) & (np.abs(proj.sx - cx) <= MAX_SCREEN_PX) & (np.abs(proj.sy - cy) <= MAX_SCREEN_PX)
     X = np.floor(np.where(vok, proj.sx, 0.0) * SUB + 0.5).astype(np.int64)
     Y = np.floor(np.where(vok, proj.sy, 0.0) * SUB + 0.5).astype(np.int64)
     inv_d = np.where(vok, 1.0 / np.where(vok, proj.depth, 1.0), 0.0)
@@ -373,20 +383,36 @@ def rasterize(proj: Projected, tris: np.ndarray, width: int, height: int, near: 
 
     fast = native()
     if fast is not None:  # the same winners from the C extension (rendering/_fastraster.c)
-        tri_i = np.stack([X0, Y0, px0, py0, si0, sj0, bw, bh]
-                         + [a for term in edge_terms for a in (term[0], term[1], term[2], term[3])], axis=1)
+        tri_i = np.stack(
+            [X0, Y0, px0, py0, si0, sj0, bw, bh]
+            + [a for term in edge_terms for a in (term[0], term[1], term[2], term[3])],
+            axis=1,
+        )
         tri_f = np.stack([iz0, A, B, ASUB], axis=1)
         zbuf = _scratch_buf(scratch, "zbuf", width * height, np.float64, 0.0)
         tbuf = _scratch_buf(scratch, "wbuf", width * height, np.int64, -1)
-        fast.winners(width, height, float(far), any_beyond, np.ascontiguousarray(tri_i, dtype=np.int64),
-                     np.ascontiguousarray(tri_f, dtype=np.float64), np.ascontiguousarray(beyond, dtype=np.uint8),
-                     zbuf, tbuf)
+        fast.winners(
+            width,
+            height,
+            float(far),
+            any_beyond,
+            np.ascontiguousarray(tri_i, dtype=np.int64),
+            np.ascontiguousarray(tri_f, dtype=np.float64),
+            np.ascontiguousarray(beyond, dtype=np.uint8),
+            zbuf,
+            tbuf,
+        )
         size = width * height
         out = [_scratch_buf(scratch, f"res{i}", size, np.int64 if i < 2 else np.float64, None) for i in range(5)]
         tri_i = np.stack([X0, Y0, X1, Y1, X2, Y2, area[sel]], axis=1)
         tri_f = np.stack([ar, iz0, iz1, iz2], axis=1)
-        n = fast.resolve(width, tbuf, np.ascontiguousarray(tri_i, dtype=np.int64),
-                         np.ascontiguousarray(tri_f, dtype=np.float64), *out)
+        n = fast.resolve(
+            width,
+            tbuf,
+            np.ascontiguousarray(tri_i, dtype=np.int64),
+            np.ascontiguousarray(tri_f, dtype=np.float64),
+            *out,
+        )
         if n == 0:
             return empty
         # with ``scratch`` the winners and barycentrics are views into it, valid until its next use

@@ -17,6 +17,7 @@ being rendered, or in frame 0 which places the fitted camera — every frame wit
 their part, vertex colours / texcoords of the wrong shape or non-finite, and a texture
 without texcoords. Near-plane and zero-area handling: see :mod:`.raster`.
 """
+
 from __future__ import annotations
 
 import math
@@ -52,16 +53,22 @@ class Renderer:
             t = np.asarray(p.triangles, dtype=np.int64).reshape(-1, 3)
             if t.size and (t.min() < 0 or t.max() >= p.vertex_count):
                 bad = int(np.flatnonzero(np.any((t < 0) | (t >= p.vertex_count), axis=1))[0])
-                raise GeometryError(f"triangle {bad} {t[bad].tolist()} indexes outside the part's "
-                                    f"{p.vertex_count} vertices", part=p.name, rule="geometry-index")
+                raise GeometryError(
+                    f"triangle {bad} {t[bad].tolist()} indexes outside the part's {p.vertex_count} vertices",
+                    part=p.name,
+                    rule="geometry-index",
+                )
             tris.append(t + p.first_vertex)
             tri_part.append(np.full(t.shape[0], pi, dtype=np.int64))
             rows = slice(p.first_vertex, p.first_vertex + p.vertex_count)
             if p.vertex_colors is not None:
                 vc = np.asarray(p.vertex_colors, dtype=np.float64)
                 if vc.shape != (p.vertex_count, 3) or not np.all(np.isfinite(vc)):
-                    raise GeometryError(f"vertex_colors must be finite float[{p.vertex_count}, 3], "
-                                        f"got shape {vc.shape}", part=p.name, rule="geometry-colors")
+                    raise GeometryError(
+                        f"vertex_colors must be finite float[{p.vertex_count}, 3], got shape {vc.shape}",
+                        part=p.name,
+                        rule="geometry-colors",
+                    )
                 albedo[rows] = vc
             else:
                 col = np.asarray(p.color, dtype=np.float64).reshape(3)
@@ -70,20 +77,25 @@ class Renderer:
                 albedo[rows] = col
             spec, shin = float(p.specular), float(p.shininess)
             if not (math.isfinite(spec) and spec >= 0.0 and math.isfinite(shin) and shin >= 0.0):
-                raise GeometryError(f"specular ({p.specular}) and shininess ({p.shininess}) must be finite "
-                                    f"and >= 0", part=p.name, rule="geometry-material")
+                raise GeometryError(
+                    f"specular ({p.specular}) and shininess ({p.shininess}) must be finite and >= 0",
+                    part=p.name,
+                    rule="geometry-material",
+                )
             ks[rows] = spec
             expo[rows] = 128.0 * shin
             ks_part.append(spec)
             expo_part.append(128.0 * shin)
             if p.texture:
                 if p.texcoords is None:
-                    raise GeometryError("part has a texture but no texcoords", part=p.name,
-                                        rule="geometry-texcoords")
+                    raise GeometryError("part has a texture but no texcoords", part=p.name, rule="geometry-texcoords")
                 tc = np.asarray(p.texcoords, dtype=np.float64)
                 if tc.shape != (p.vertex_count, 2) or not np.all(np.isfinite(tc)):
-                    raise GeometryError(f"texcoords must be finite float[{p.vertex_count}, 2], got shape "
-                                        f"{tc.shape}", part=p.name, rule="geometry-texcoords")
+                    raise GeometryError(
+                        f"texcoords must be finite float[{p.vertex_count}, 2], got shape {tc.shape}",
+                        part=p.name,
+                        rule="geometry-texcoords",
+                    )
                 uv[rows] = tc
                 self.textures[pi] = self._load_texture(p.texture, p.name)
         self.tris = np.concatenate(tris) if tris else np.zeros((0, 3), np.int64)
@@ -91,7 +103,7 @@ class Renderer:
         self.albedo, self.ks, self.exponent, self.uv = albedo, ks, expo, uv
         self.vertex_part = np.zeros(n_v, dtype=np.int64)
         for pi, p in enumerate(state.parts):
-            self.vertex_part[p.first_vertex:p.first_vertex + p.vertex_count] = pi
+            self.vertex_part[p.first_vertex : p.first_vertex + p.vertex_count] = pi
         self.textured_vertex = np.isin(self.vertex_part, np.array(sorted(self.textures), dtype=np.int64))
         self.ks_tri = np.asarray(ks_part, dtype=np.float64)[self.tri_part] if ks_part else np.zeros(0)
         self.exponent_tri = np.asarray(expo_part, dtype=np.float64)[self.tri_part] if expo_part else np.zeros(0)
@@ -143,8 +155,13 @@ class Renderer:
             i = int(np.flatnonzero(bad)[0])
             pi = int(self.vertex_part[i]) if self.state.parts else 0
             p = self.state.parts[pi]
-            raise GeometryError(f"vertex position is not finite: {v[i].tolist()}", part=p.name,
-                                vertex=i - p.first_vertex, frame=k, rule="geometry-nonfinite")
+            raise GeometryError(
+                f"vertex position is not finite: {v[i].tolist()}",
+                part=p.name,
+                vertex=i - p.first_vertex,
+                frame=k,
+                rule="geometry-nonfinite",
+            )
         return v
 
     def _texture_samples(self, cov: raster.Coverage) -> tuple[np.ndarray, np.ndarray]:
@@ -156,8 +173,7 @@ class Renderer:
             m = np.flatnonzero(part_f == pi)
             if m.size:
                 U = self.uv
-                uv = (cov.b0[m, None] * U[cov.v0[m]] + cov.b1[m, None] * U[cov.v1[m]]
-                      + cov.b2[m, None] * U[cov.v2[m]])
+                uv = cov.b0[m, None] * U[cov.v0[m]] + cov.b1[m, None] * U[cov.v1[m]] + cov.b2[m, None] * U[cov.v2[m]]
                 idx.append(m)
                 cols.append(raster.sample_bilinear_repeat(tex, uv))
         if not idx:
@@ -188,8 +204,7 @@ class Renderer:
             return img.reshape(3, H, W)
         cam = self.camera
         proj = raster.project(V, cam, W, H)
-        cov = raster.rasterize(proj, self.tris, W, H, cam.near, cam.far, sc.cull_backfaces,
-                               scratch=self._scratch)
+        cov = raster.rasterize(proj, self.tris, W, H, cam.near, cam.far, sc.cull_backfaces, scratch=self._scratch)
         self.skipped_near[k] = cov.n_skipped_near
         if cov.pix.size == 0:
             return img.reshape(3, H, W)

@@ -36,6 +36,7 @@ Errors: TOML syntax -> :class:`TextFormatError` (line:column); anything else
 (unknown key, wrong type, out of range) -> :class:`ScenarioError` naming the file and
 the dotted key.
 """
+
 from __future__ import annotations
 
 import math
@@ -119,8 +120,11 @@ class Scenario:
             idx = list(self.frames)
         for k in idx:
             if not 0 <= k < n_frames:
-                raise ScenarioError(f"frame {k} out of range: the sequence has {n_frames} frames",
-                                    key="frames", rule="scenario-frame-range")
+                raise ScenarioError(
+                    f"frame {k} out of range: the sequence has {n_frames} frames",
+                    key="frames",
+                    rule="scenario-frame-range",
+                )
         return idx
 
     def resolve_camera(self, vertices0: np.ndarray) -> Camera:
@@ -135,9 +139,14 @@ class Scenario:
         empty or single-point box is treated as a unit cube around its centre."""
         cam = self.camera
         if not cam.fit:
-            return Camera(position=cam.position, look_at=cam.look_at, up=cam.up, fov_deg=cam.fov_deg,
-                          near=0.1 if cam.near is None else cam.near,
-                          far=1e5 if cam.far is None else cam.far)
+            return Camera(
+                position=cam.position,
+                look_at=cam.look_at,
+                up=cam.up,
+                fov_deg=cam.fov_deg,
+                near=0.1 if cam.near is None else cam.near,
+                far=1e5 if cam.far is None else cam.far,
+            )
         v = np.asarray(vertices0, dtype=np.float64).reshape(-1, 3)
         v = v[np.all(np.isfinite(v), axis=1)]
         if v.shape[0] == 0:
@@ -166,8 +175,14 @@ class Scenario:
         dist = max(dist, -zmin + 1e-6 * (zmax - zmin + 1.0))
         pos = c - dist * fwd
         near = (dist + zmin) / 2.0
-        return Camera(position=tuple(float(x) for x in pos), look_at=c_t, up=cam.up, fov_deg=cam.fov_deg,
-                      near=near, far=2.0 * (dist + zmax))
+        return Camera(
+            position=tuple(float(x) for x in pos),
+            look_at=c_t,
+            up=cam.up,
+            fov_deg=cam.fov_deg,
+            near=near,
+            far=2.0 * (dist + zmax),
+        )
 
     # ------------------------------------------------------------------ I/O
     @classmethod
@@ -178,8 +193,13 @@ class Scenario:
             msg = str(e)
             m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
             line, col = (int(m.group(1)), int(m.group(2))) if m else (1, 1)
-            raise TextFormatError(re.sub(r"\s*\(at line \d+, column \d+\)", "", msg) or "invalid TOML",
-                                  line=line, column=col, rule="toml-syntax", file=file) from None
+            raise TextFormatError(
+                re.sub(r"\s*\(at line \d+, column \d+\)", "", msg) or "invalid TOML",
+                line=line,
+                column=col,
+                rule="toml-syntax",
+                file=file,
+            ) from None
         return cls.from_dict(data, file=file)
 
     @classmethod
@@ -188,13 +208,15 @@ class Scenario:
         try:
             raw = path.read_bytes()
         except OSError as e:
-            raise ScenarioError(f"cannot read scenario: {e.strerror or e}", file=str(path),
-                                rule="scenario-unreadable") from None
+            raise ScenarioError(
+                f"cannot read scenario: {e.strerror or e}", file=str(path), rule="scenario-unreadable"
+            ) from None
         try:
             text = raw.decode("utf-8")
         except UnicodeDecodeError as e:
-            raise ScenarioError(f"scenario is not UTF-8 (byte {e.start})", file=str(path),
-                                rule="scenario-encoding") from None
+            raise ScenarioError(
+                f"scenario is not UTF-8 (byte {e.start})", file=str(path), rule="scenario-encoding"
+            ) from None
         return cls.from_toml(text, file=str(path))
 
     @classmethod
@@ -237,8 +259,13 @@ class Scenario:
                 out.append(f"far = {_fmt(c.far)}")
         out += ["", "[ambient]", f"color = {_fmt(self.ambient_color)}", f"intensity = {_fmt(self.ambient_intensity)}"]
         for lt in self.lights:
-            out += ["", "[[lights]]", f"direction = {_fmt(lt.direction)}", f"color = {_fmt(lt.color)}",
-                    f"intensity = {_fmt(lt.intensity)}"]
+            out += [
+                "",
+                "[[lights]]",
+                f"direction = {_fmt(lt.direction)}",
+                f"color = {_fmt(lt.color)}",
+                f"intensity = {_fmt(lt.intensity)}",
+            ]
         return "\n".join(out) + "\n"
 
     def save(self, path) -> None:
@@ -325,8 +352,7 @@ class _Parser:
     def choice(self, d, name, key, default, options) -> str:
         v = d.get(name, default)
         if v not in options:
-            raise self.err(key, f"expected one of {', '.join(repr(o) for o in options)}, got {v!r}",
-                           "scenario-choice")
+            raise self.err(key, f"expected one of {', '.join(repr(o) for o in options)}, got {v!r}", "scenario-choice")
         return v
 
     def scenario(self, data: dict) -> Scenario:
@@ -337,8 +363,9 @@ class _Parser:
         height = self.int_(d, "height", "height", base.height, 1, MAX_SIZE)
         ss = self.int_(d, "supersample", "supersample", base.supersample, 1, MAX_SUPERSAMPLE)
         if width * ss > MAX_SIZE or height * ss > MAX_SIZE:
-            raise self.err("supersample", f"supersampled image {width * ss}x{height * ss} exceeds {MAX_SIZE}",
-                           "scenario-range")
+            raise self.err(
+                "supersample", f"supersampled image {width * ss}x{height * ss} exceeds {MAX_SIZE}", "scenario-range"
+            )
         bg = self.vec3(d, "background", "background", base.background, 0.0, 1.0)
         shading = self.choice(d, "shading", "shading", base.shading, SHADINGS)
         fmt = self.choice(d, "format", "format", base.format, FORMATS)
@@ -351,21 +378,37 @@ class _Parser:
         amb_i = self.num(amb, "intensity", "ambient.intensity", 0.0, 0.0)
         lights_raw = d.get("lights", [])
         if not isinstance(lights_raw, list):
-            raise self.err("lights", f"expected an array of tables ([[lights]]), got {_tname(lights_raw)}",
-                           "scenario-type")
+            raise self.err(
+                "lights", f"expected an array of tables ([[lights]]), got {_tname(lights_raw)}", "scenario-type"
+            )
         lights = []
         for i, lt in enumerate(lights_raw):
             k = f"lights[{i}]"
             lt = self.table(lt, k, {"direction", "color", "intensity"})
             if "direction" not in lt:
                 raise self.err(f"{k}.direction", "missing (the direction the light travels)", "scenario-missing")
-            lights.append(DirectionalLight(
-                direction=self.vec3(lt, "direction", f"{k}.direction", None, nonzero=True),
-                color=self.vec3(lt, "color", f"{k}.color", (1.0, 1.0, 1.0), 0.0),
-                intensity=self.num(lt, "intensity", f"{k}.intensity", 1.0, 0.0)))
-        return Scenario(width=width, height=height, supersample=ss, background=bg, shading=shading,
-                        cull_backfaces=cull, specular=spec, format=fmt, frames=frames, camera=camera,
-                        ambient_color=amb_c, ambient_intensity=amb_i, lights=tuple(lights))
+            lights.append(
+                DirectionalLight(
+                    direction=self.vec3(lt, "direction", f"{k}.direction", None, nonzero=True),
+                    color=self.vec3(lt, "color", f"{k}.color", (1.0, 1.0, 1.0), 0.0),
+                    intensity=self.num(lt, "intensity", f"{k}.intensity", 1.0, 0.0),
+                )
+            )
+        return Scenario(
+            width=width,
+            height=height,
+            supersample=ss,
+            background=bg,
+            shading=shading,
+            cull_backfaces=cull,
+            specular=spec,
+            format=fmt,
+            frames=frames,
+            camera=camera,
+            ambient_color=amb_c,
+            ambient_intensity=amb_i,
+            lights=tuple(lights),
+        )
 
     def frames(self, v):
         if v is None:
@@ -383,8 +426,9 @@ class _Parser:
             stop = None if "stop" not in t else self.int_(t, "stop", "frames.stop", 0, 0, 2**62)
             step = self.int_(t, "step", "frames.step", 1, 1, 2**62)
             return FrameRange(start, stop, step)
-        raise self.err("frames", f"expected an array of indices or {{start, stop, step}}, got {_tname(v)}",
-                       "scenario-type")
+        raise self.err(
+            "frames", f"expected an array of indices or {{start, stop, step}}, got {_tname(v)}", "scenario-type"
+        )
 
     def camera(self, v) -> CameraSpec:
         allowed = {f.name for f in fields(CameraSpec)}

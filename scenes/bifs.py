@@ -37,6 +37,7 @@ The coder lives in :mod:`.bifs_tables` (node and field tables, errors),
 :mod:`.bifs_encoder` and :mod:`.bifs_decoder`; this module is its public face (the names
 below), the CLI glue of ``fbaconf encode|decode`` for scenes, and scene comparison.
 """
+
 from __future__ import annotations
 
 import json
@@ -52,8 +53,23 @@ from .bifs_decoder import TraceEntry, decode, format_trace, is_bifs_path, load_s
 from .bifs_encoder import BifsWriter, encode
 from .bifs_tables import BIFS_SUFFIXES, MAX_DEPTH, MF_VEC, SF_VEC, BifsEncodeError, BifsError, tables
 
-__all__ = ["BIFS_SUFFIXES", "MAX_DEPTH", "MF_VEC", "SF_VEC", "BifsEncodeError", "BifsError", "BifsWriter",
-           "TraceEntry", "decode", "encode", "format_trace", "is_bifs_path", "load_scene", "read", "tables"]
+__all__ = [
+    "BIFS_SUFFIXES",
+    "MAX_DEPTH",
+    "MF_VEC",
+    "SF_VEC",
+    "BifsEncodeError",
+    "BifsError",
+    "BifsWriter",
+    "TraceEntry",
+    "decode",
+    "encode",
+    "format_trace",
+    "is_bifs_path",
+    "load_scene",
+    "read",
+    "tables",
+]
 
 
 def cmd_encode_scene(args) -> int:
@@ -71,8 +87,9 @@ def cmd_encode_scene(args) -> int:
         raise
     atomic_write_bytes(out, data)
     if getattr(args, "json", False):
-        print(json.dumps({"input": str(src), "output": str(out), "bt_bytes": src.stat().st_size,
-                          "bifs_bytes": len(data)}))
+        print(
+            json.dumps({"input": str(src), "output": str(out), "bt_bytes": src.stat().st_size, "bifs_bytes": len(data)})
+        )
     else:
         print(f"encoded scene {src} ({src.stat().st_size} bytes of BT) -> {out}: {len(data)} bytes of BIFS")
     return 0
@@ -104,7 +121,6 @@ def cmd_decode_scene(args) -> int:
     return 0
 
 
-
 def same_scene(a: bt.Scene, b: bt.Scene) -> bool:
     """True when two scene models are equal with every float compared as float32 (the BIFS
     round-trip criterion: exact for integers, booleans, strings, names and structure)."""
@@ -117,12 +133,20 @@ def _f32(x) -> np.ndarray:
 
 def _same(a, b, rel: float = 0.0) -> bool:
     if isinstance(a, bt.Node) or isinstance(b, bt.Node):
-        return (isinstance(a, bt.Node) and isinstance(b, bt.Node) and a.type == b.type
-                and a.def_name == b.def_name and list(a.fields) == list(b.fields)
-                and all(_same(a.fields[k], b.fields[k], rel) for k in a.fields))
+        return (
+            isinstance(a, bt.Node)
+            and isinstance(b, bt.Node)
+            and a.type == b.type
+            and a.def_name == b.def_name
+            and list(a.fields) == list(b.fields)
+            and all(_same(a.fields[k], b.fields[k], rel) for k in a.fields)
+        )
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        if not (isinstance(a, np.ndarray) and isinstance(b, np.ndarray)) or a.shape != b.shape \
-                or a.dtype.kind != b.dtype.kind:
+        if (
+            not (isinstance(a, np.ndarray) and isinstance(b, np.ndarray))
+            or a.shape != b.shape
+            or a.dtype.kind != b.dtype.kind
+        ):
             return False
         if a.dtype.kind == "f":
             return _floats(a, b, rel)
@@ -166,8 +190,10 @@ def _full(v, defs, depth: int = 0):
             return v
     if isinstance(v, bt.Node):
         specs = bt.node_specs()[v.type]
-        fields = {name: _full(v.fields[name] if name in v.fields else spec.default, defs, depth + 1)
-                  for name, spec in specs.items()}
+        fields = {
+            name: _full(v.fields[name] if name in v.fields else spec.default, defs, depth + 1)
+            for name, spec in specs.items()
+        }
         return bt.Node(v.type, fields, v.def_name)
     if isinstance(v, list):
         return [_full(x, defs, depth + 1) for x in v]
@@ -178,12 +204,15 @@ def interop_view(scene: bt.Scene) -> bt.Scene:
     """``scene`` without what GPAC's MP4Box refuses though the seed defines it (D10): the
     ``faceSceneGraphNode`` of every FaceDefMesh (a USE of an IndexedFaceSet, where GPAC types
     the field SF3DNode). What interop tests with MP4Box compare ("mesh references aside")."""
+
     def strip(v):
         if isinstance(v, bt.Node):
-            fields = {k: strip(x) for k, x in v.fields.items()
-                      if not (v.type == "FaceDefMesh" and k == "faceSceneGraphNode")}
+            fields = {
+                k: strip(x) for k, x in v.fields.items() if not (v.type == "FaceDefMesh" and k == "faceSceneGraphNode")
+            }
             return bt.Node(v.type, fields, v.def_name)
         if isinstance(v, list):
             return [strip(x) for x in v]
         return v
+
     return bt.Scene([strip(n) for n in scene.nodes], scene.file)

@@ -1,5 +1,6 @@
 """Binary BIFS decoder: a BIFSConfig plus ReplaceScene access unit to a BT scene, with a per-field bit
 trace; reading .bifs files."""
+
 from __future__ import annotations
 
 import math
@@ -54,8 +55,9 @@ class _Decoder:
         return BifsError(msg, bit_offset=self.pos if at is None else at, rule=rule, node_path=path, file=self.file)
 
     def _truncated(self, nbits: int, what: str, path):
-        return self.err(f"stream ends inside {what} ({nbits} bits needed, {self.nbits - self.pos} left)",
-                        "bifs-truncated", path)
+        return self.err(
+            f"stream ends inside {what} ({nbits} bits needed, {self.nbits - self.pos} left)", "bifs-truncated", path
+        )
 
     def rd(self, nbits: int, what: str, path=None) -> int:
         pos = self.pos
@@ -80,14 +82,17 @@ class _Decoder:
         if n == 0:
             return b""
         if n * 8 > self.nbits - self.pos:
-            raise self.err(f"stream ends inside {what} ({n} bytes declared, {(self.nbits - self.pos) // 8} "
-                           f"left)", "bifs-truncated", path)
+            raise self.err(
+                f"stream ends inside {what} ({n} bytes declared, {(self.nbits - self.pos) // 8} left)",
+                "bifs-truncated",
+                path,
+            )
         pos = self.pos
         self.pos = pos + 8 * n
         if pos & 7 == 0:
-            return self.data[pos >> 3:(pos >> 3) + n]
+            return self.data[pos >> 3 : (pos >> 3) + n]
         sh = pos & 7
-        v = int.from_bytes(self.data[pos >> 3:(pos >> 3) + n + 1], "big") >> (8 - sh)
+        v = int.from_bytes(self.data[pos >> 3 : (pos >> 3) + n + 1], "big") >> (8 - sh)
         return (v & ((1 << (8 * n)) - 1)).to_bytes(n, "big")
 
     def note(self, start: int, depth: int, text) -> int | None:
@@ -114,16 +119,23 @@ class _Decoder:
         route_bits = self.rd(5, "routeIDbits")
         cmd = self.bit("isCommandStream")
         if not cmd:
-            raise self.err("BIFSConfig: isCommandStream = 0 (animation-mask streams are not supported)",
-                           "bifs-config", at=self.pos - 1)
+            raise self.err(
+                "BIFSConfig: isCommandStream = 0 (animation-mask streams are not supported)",
+                "bifs-config",
+                at=self.pos - 1,
+            )
         pixel = self.bit("pixelMetric")
         size = self.bit("hasSize")
         wh = None
         if size:
             wh = (self.rd(16, "pixelWidth"), self.rd(16, "pixelHeight"))
         self.align("BIFSConfig")
-        self.note(p, 0, f"BIFSConfig nodeIDbits={self.id_bits} routeIDbits={route_bits} isCommandStream=1 "
-                        f"pixelMetric={pixel} hasSize={size}" + (f" size={wh[0]}x{wh[1]}" if wh else ""))
+        self.note(
+            p,
+            0,
+            f"BIFSConfig nodeIDbits={self.id_bits} routeIDbits={route_bits} isCommandStream=1 "
+            f"pixelMetric={pixel} hasSize={size}" + (f" size={wh[0]}x{wh[1]}" if wh else ""),
+        )
         p = self.pos
         code = self.rd(2, "command code")
         if code != self.t.raw["command"]["replace_scene"]:
@@ -140,8 +152,9 @@ class _Decoder:
             raise self.err("ROUTEs are not supported", "bifs-routes", at=p2)
         p3 = self.pos
         if self.bit("continue"):
-            raise self.err("more than one command in the access unit (only one ReplaceScene is supported)",
-                           "bifs-command", at=p3)
+            raise self.err(
+                "more than one command in the access unit (only one ReplaceScene is supported)", "bifs-command", at=p3
+            )
         self.close(idx, p)
         self.align("access unit")
         if self.pos != self.nbits:
@@ -150,16 +163,20 @@ class _Decoder:
             raise self.err("the top node is NULL or a USE", "bifs-top", at=p)
         if top.type == "OrderedGroup":
             if top.def_name is not None or set(top.fields) - {"children"}:
-                raise self.err("the top OrderedGroup must carry only children (fbaconf's top-level list)",
-                               "bifs-top", "OrderedGroup")
+                raise self.err(
+                    "the top OrderedGroup must carry only children (fbaconf's top-level list)",
+                    "bifs-top",
+                    "OrderedGroup",
+                )
             nodes = list(top.fields.get("children", []))
         else:  # Group
             nodes = [top]
         return bt.Scene(nodes, self.file)
 
     # nodes
-    def node(self, ndt_name: str, path: str, depth: int, allowed, *, sf: bool, top: bool = False,
-             allow_null: bool = True):
+    def node(
+        self, ndt_name: str, path: str, depth: int, allowed, *, sf: bool, top: bool = False, allow_null: bool = True
+    ):
         start = self.pos
         if depth > MAX_DEPTH + 1:
             raise self.err(f"nodes nested deeper than {MAX_DEPTH}", "bifs-depth", path)
@@ -173,34 +190,55 @@ class _Decoder:
                 return None
             d = self.defs.get(nid)
             if d is None or not d[2]:
-                raise self.err(f"USE of node ID {nid}, which no complete node DEFined before", "bifs-use-undefined",
-                               path, at=start + 1)
+                raise self.err(
+                    f"USE of node ID {nid}, which no complete node DEFined before",
+                    "bifs-use-undefined",
+                    path,
+                    at=start + 1,
+                )
             name, ntype, _ = d
             if allowed is not None and ntype not in allowed:
-                raise self.err(f"USE {name}: a {ntype} node is not allowed here "
-                               f"(allowed: {', '.join(allowed) or 'NULL'})",
-                               "bifs-node-type", path, at=start)
+                raise self.err(
+                    f"USE {name}: a {ntype} node is not allowed here (allowed: {', '.join(allowed) or 'NULL'})",
+                    "bifs-node-type",
+                    path,
+                    at=start,
+                )
             self.note(start, depth, lambda: f"{path}: USE {name} (nodeID {nid}, {ntype})")
             return bt.Use(name)
         at = self.pos
         code = self.rd(ndt.bits, f"localNodeType ({ndt_name})", path)
         if code == 0:
-            raise self.err(f"node code 0 in {ndt_name} (a node of a later BIFS version) is not supported",
-                           "bifs-node-code", path, at=at)
+            raise self.err(
+                f"node code 0 in {ndt_name} (a node of a later BIFS version) is not supported",
+                "bifs-node-code",
+                path,
+                at=at,
+            )
         if code > len(ndt.nodes):
-            raise self.err(f"unknown node code {code} in {ndt_name} ({len(ndt.nodes)} nodes)", "bifs-node-code",
-                           path, at=at)
+            raise self.err(
+                f"unknown node code {code} in {ndt_name} ({len(ndt.nodes)} nodes)", "bifs-node-code", path, at=at
+            )
         ntype = ndt.nodes[code - 1]
         bn = self.t.nodes.get(ntype)
         if bn is None or (ntype == "OrderedGroup" and not top):
-            raise self.err(f"node {ntype} (code {code} in {ndt_name}) is outside the subset fbaconf reads",
-                           "bifs-unsupported-node", path, at=at)
+            raise self.err(
+                f"node {ntype} (code {code} in {ndt_name}) is outside the subset fbaconf reads",
+                "bifs-unsupported-node",
+                path,
+                at=at,
+            )
         if top and ntype not in ("OrderedGroup", "Group"):
-            raise self.err(f"top node {ntype} is not supported (Group or OrderedGroup)", "bifs-unsupported-node",
-                           path, at=at)
+            raise self.err(
+                f"top node {ntype} is not supported (Group or OrderedGroup)", "bifs-unsupported-node", path, at=at
+            )
         if allowed is not None and ntype not in allowed:
-            raise self.err(f"a {ntype} node is not allowed here (allowed: {', '.join(allowed) or 'NULL'})",
-                           "bifs-node-type", path, at=at)
+            raise self.err(
+                f"a {ntype} node is not allowed here (allowed: {', '.join(allowed) or 'NULL'})",
+                "bifs-node-type",
+                path,
+                at=at,
+            )
         npath = node_path(path, ntype, sf)
         def_name = None
         nid = None
@@ -216,8 +254,11 @@ class _Decoder:
                 raise self.err(f"bad or duplicate DEF name {def_name!r}", "bifs-def-name", npath, at=at)
             self.names.add(def_name)
             self.defs[nid] = (def_name, ntype, False)
-        idx = self.note(start, depth, lambda: f"{npath}: {f'DEF {def_name} (nodeID {nid}) ' if def_name else ''}"
-                                              f"{ntype} (code {code}/{ndt_name})")
+        idx = self.note(
+            start,
+            depth,
+            lambda: f"{npath}: {f'DEF {def_name} (nodeID {nid}) ' if def_name else ''}{ntype} (code {code}/{ndt_name})",
+        )
         node = bt.Node(ntype, {}, def_name)
         specs = bt.node_specs().get(ntype, {})
         fp = (lambda f: "") if top else (lambda f: f"{npath}.{f}")
@@ -237,8 +278,12 @@ class _Decoder:
                 at = self.pos
                 fid = self.rd(bn.def_bits, "field index", npath)
                 if fid >= len(bn.defs):
-                    raise self.err(f"{ntype} has no field with defID {fid} ({len(bn.defs)} fields)",
-                                   "bifs-field-index", npath, at=at)
+                    raise self.err(
+                        f"{ntype} has no field with defID {fid} ({len(bn.defs)} fields)",
+                        "bifs-field-index",
+                        npath,
+                        at=at,
+                    )
                 bf = bn.defs[fid]
                 if bf.name in node.fields:
                     raise self.err(f"field {bf.name!r} given twice", "bifs-duplicate-field", npath, at=at)
@@ -302,7 +347,7 @@ class _Decoder:
         if t in SF_VEC:
             k = SF_VEC[t]
             raw = self.rd_bytes(4 * k, t, path)
-            return tuple(_f32_value(raw[4 * i:4 * i + 4], self, path, at) for i in range(k))
+            return tuple(_f32_value(raw[4 * i : 4 * i + 4], self, path, at) for i in range(k))
         if t == "SFString":
             nb = self.rd(5, "SFString length bits", path)
             n = self.rd(nb, "SFString length", path)
@@ -317,8 +362,9 @@ class _Decoder:
         t = bf.type
         at = self.pos
         if self.bit("MF reserved", path):
-            raise self.err("MF field reserved bit is 1 (predictive MF coding is not supported)", "bifs-mf-reserved",
-                           path, at=at)
+            raise self.err(
+                "MF field reserved bit is 1 (predictive MF coding is not supported)", "bifs-mf-reserved", path, at=at
+            )
         is_list = self.bit("isListDescription", path)
         idx = self.note(start, depth, lambda: f"{path or 'OrderedGroup.children'}: {t}")
         item_bits = ITEM_BITS.get(t, 1)  # a lower bound for MFNode / MFString items
@@ -333,8 +379,12 @@ class _Decoder:
             at = self.pos
             n = self.rd(nb, "MF count", path)
             if n * item_bits > self.nbits - self.pos:
-                raise self.err(f"{t} count {n} needs at least {n * item_bits} bits, {self.nbits - self.pos} left",
-                               "bifs-mf-count", path, at=at)
+                raise self.err(
+                    f"{t} count {n} needs at least {n * item_bits} bits, {self.nbits - self.pos} left",
+                    "bifs-mf-count",
+                    path,
+                    at=at,
+                )
             if t in ("MFNode", "MFString", "MFURL"):
                 for i in range(n):
                     items.append(self.mf_item(t, bf, f"{path}[{i}]", depth + 1, allowed))
@@ -381,8 +431,9 @@ class _Decoder:
         if t == "MFFloat":
             return self.sf("SFFloat", path)
         if t in MF_VEC:
-            return self.sf({"MFVec2f": "SFVec2f", "MFVec3f": "SFVec3f", "MFColor": "SFColor",
-                            "MFRotation": "SFRotation"}[t], path)
+            return self.sf(
+                {"MFVec2f": "SFVec2f", "MFVec3f": "SFVec3f", "MFColor": "SFColor", "MFRotation": "SFRotation"}[t], path
+            )
         raise self.err(f"field type {t} is not supported", "bifs-field-type", path)
 
 
@@ -423,7 +474,7 @@ def _short(v, limit: int = 60) -> str:
         s = "[" + " ".join('"' + x + '"' for x in v[:8]) + (" ..." if len(v) > 8 else "") + "]"
     else:
         s = str(v)
-    return s if len(s) <= limit else s[:limit - 3] + "..."
+    return s if len(s) <= limit else s[: limit - 3] + "..."
 
 
 def decode(data: bytes, *, file: str | None = None, trace: list | None = None) -> bt.Scene:

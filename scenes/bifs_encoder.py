@@ -1,4 +1,5 @@
 """Binary BIFS encoder: a BT scene to a BIFSConfig plus one ReplaceScene access unit."""
+
 from __future__ import annotations
 
 import math
@@ -84,8 +85,12 @@ class _Encoder:
         code = table.code(v.type)
         bn = self.t.nodes.get(v.type)
         if code is None or bn is None:
-            raise self.err(f"a {v.type} node cannot be coded inline where the node data type is {ndt} "
-                           f"(DEF it where it belongs and USE it here)", "bifs-ndt", path)
+            raise self.err(
+                f"a {v.type} node cannot be coded inline where the node data type is {ndt} "
+                f"(DEF it where it belongs and USE it here)",
+                "bifs-ndt",
+                path,
+            )
         if allowed is not None and v.type not in allowed:
             raise self.err(f"a {v.type} node is not allowed here", "bifs-node-type", path)
         npath = node_path(path, v.type, sf)
@@ -171,7 +176,7 @@ class _Encoder:
                 w.bit(1 if v else 0)
             elif t == "SFInt32":
                 iv = int(v)
-                if isinstance(v, (bool, float)) or not -2**31 <= iv < 2**31:
+                if isinstance(v, (bool, float)) or not -(2**31) <= iv < 2**31:
                     raise ValueError(f"{v!r} is not an SFInt32")
                 w.write(iv & 0xFFFFFFFF, 32)
             elif t == "SFFloat":
@@ -232,8 +237,9 @@ class _Encoder:
         t = bf.type
         if t == "MFNode":
             items = list(val)
-            self.mf_items(len(items), lambda i: self.node(items[i], bf.ndt, f"{path}[{i}]", allowed,
-                                                          sf=False, allow_null=False))
+            self.mf_items(
+                len(items), lambda i: self.node(items[i], bf.ndt, f"{path}[{i}]", allowed, sf=False, allow_null=False)
+            )
             return
         if t in ("MFString", "MFURL"):
             items = list(val)
@@ -241,7 +247,7 @@ class _Encoder:
             return
         arr = np.asarray(val)
         if t == "MFInt32":
-            if arr.size and (arr.dtype.kind not in "iu" or arr.min() < -2**31 or arr.max() >= 2**31):
+            if arr.size and (arr.dtype.kind not in "iu" or arr.min() < -(2**31) or arr.max() >= 2**31):
                 raise self.err("MFInt32 values must be integers in the int32 range", "bifs-value", path)
             raw = arr.reshape(-1).astype(">i4").tobytes()
             per = 4
@@ -256,7 +262,8 @@ class _Encoder:
             per = 4 * k
         else:
             raise self.err(f"field type {t} is not supported", "bifs-field-type", path)
-        self.mf_items(len(raw) // per, lambda i: self.w.write_bytes(raw[i * per:(i + 1) * per]))
+        self.mf_items(len(raw) // per, lambda i: self.w.write_bytes(raw[i * per : (i + 1) * per]))
+
 
 OD_URL = re.compile(r"od:(\d+)\Z")
 
@@ -269,31 +276,31 @@ def encode(scene: bt.Scene, *, use_names: bool = True) -> bytes:
     # BIFSConfig (v1)
     if enc.id_bits > 31:
         raise BifsEncodeError("too many DEF nodes", rule="bifs-node-id")
-    w.write(enc.id_bits, 5)       # nodeIDbits
-    w.write(0, 5)                 # routeIDbits (no routes)
-    w.bit(1)                      # isCommandStream
-    w.bit(0)                      # pixelMetric
-    w.bit(0)                      # hasSize
+    w.write(enc.id_bits, 5)  # nodeIDbits
+    w.write(0, 5)  # routeIDbits (no routes)
+    w.bit(1)  # isCommandStream
+    w.bit(0)  # pixelMetric
+    w.bit(0)  # hasSize
     w.align()
     # access unit: one ReplaceScene command
     w.write(t.raw["command"]["replace_scene"], 2)
-    w.write(0, 6)                 # reserved
+    w.write(0, 6)  # reserved
     w.bit(1 if use_names else 0)  # useNames
-    w.bit(0)                      # protoList: no PROTOs (D10: GPAC writes and always reads it)
+    w.bit(0)  # protoList: no PROTOs (D10: GPAC writes and always reads it)
     top = bt.Node("OrderedGroup", {"children": list(scene.nodes)})
     ndt = t.ndts["SFTopNode"]
-    w.bit(0)                      # isReused
+    w.bit(0)  # isReused
     w.write(ndt.code("OrderedGroup"), ndt.bits)
-    w.bit(0)                      # isUpdateable
+    w.bit(0)  # isUpdateable
     bn = t.nodes["OrderedGroup"]
-    w.bit(1)                      # masked description
+    w.bit(1)  # masked description
     for bf in bn.defs:
         if bf.name == "children":
             w.bit(1)
             enc.mf(bf, top.fields["children"], "", None)
             continue
         w.bit(0)
-    w.bit(0)                      # hasROUTEs
-    w.bit(0)                      # no further command
+    w.bit(0)  # hasROUTEs
+    w.bit(0)  # no further command
     w.align()
     return w.getvalue()

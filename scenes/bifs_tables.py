@@ -1,5 +1,6 @@
 """Binary BIFS: constants, typed errors and the node/field tables of scenes/data/bifs_nodes.toml
 (checked against the BT field tables)."""
+
 from __future__ import annotations
 
 import math
@@ -29,8 +30,9 @@ class BifsError(BitstreamError):
 
     rule = "bifs"
 
-    def __init__(self, message: str, *, bit_offset: int, rule: str, node_path: str | None = None,
-                 file: str | None = None) -> None:
+    def __init__(
+        self, message: str, *, bit_offset: int, rule: str, node_path: str | None = None, file: str | None = None
+    ) -> None:
         super().__init__(message, bit_offset=bit_offset, rule=rule, file=file)
         self.node_path = node_path
 
@@ -54,10 +56,10 @@ class BifsEncodeError(SceneError):
 @dataclass(frozen=True)
 class BifsField:
     name: str
-    event: str          # field | exposedField | eventIn | eventOut
-    type: str           # SFInt32, MFNode, ...
-    ndt: str | None     # node data type of SFNode/MFNode fields
-    quant: int          # quantisation category (documentation; never applied, see module doc)
+    event: str  # field | exposedField | eventIn | eventOut
+    type: str  # SFInt32, MFNode, ...
+    ndt: str | None  # node data type of SFNode/MFNode fields
+    quant: int  # quantisation category (documentation; never applied, see module doc)
     def_id: int | None  # index among field/exposedField entries (None for events)
 
 
@@ -65,8 +67,8 @@ class BifsField:
 class BifsNode:
     name: str
     provenance: str
-    fields: tuple[BifsField, ...]   # all fields in table order
-    defs: tuple[BifsField, ...]     # the defID fields, in defID order
+    fields: tuple[BifsField, ...]  # all fields in table order
+    defs: tuple[BifsField, ...]  # the defID fields, in defID order
     by_name: dict
 
     @property
@@ -111,8 +113,9 @@ def tables() -> Tables:
         flds, defs = [], []
         for f in e["fields"]:
             is_def = f["event"] in ("field", "exposedField")
-            bf = BifsField(f["name"], f["event"], f["type"], f.get("ndt"), int(f.get("quant", 0)),
-                           len(defs) if is_def else None)
+            bf = BifsField(
+                f["name"], f["event"], f["type"], f.get("ndt"), int(f.get("quant", 0)), len(defs) if is_def else None
+            )
             if bf.ndt is not None and bf.ndt not in ndts:
                 raise RuntimeError(f"bifs_nodes.toml: {name}.{bf.name} names unknown NDT {bf.ndt}")
             flds.append(bf)

@@ -26,6 +26,7 @@ Errors raise :class:`TextFormatError` with line:column and the node path, e.g.
 :data:`MAX_FILE_BYTES` (a regular file: never a FIFO that blocks), tokens of at most
 :data:`MAX_TOKEN` characters, and an error quotes at most the first 40 characters of a token.
 """
+
 from __future__ import annotations
 
 import bisect
@@ -132,9 +133,13 @@ class Node:
         return d.copy() if isinstance(d, (np.ndarray, list)) else d
 
     def __eq__(self, other) -> bool:
-        return (isinstance(other, Node) and self.type == other.type and self.def_name == other.def_name
-                and list(self.fields) == list(other.fields)
-                and all(_value_eq(self.fields[k], other.fields[k]) for k in self.fields))
+        return (
+            isinstance(other, Node)
+            and self.type == other.type
+            and self.def_name == other.def_name
+            and list(self.fields) == list(other.fields)
+            and all(_value_eq(self.fields[k], other.fields[k]) for k in self.fields)
+        )
 
     def __repr__(self) -> str:
         d = f"DEF {self.def_name} " if self.def_name else ""
@@ -143,12 +148,21 @@ class Node:
 
 def _value_eq(a, b) -> bool:
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.dtype.kind == b.dtype.kind
-                and a.shape == b.shape and bool(np.array_equal(a, b)))
+        return (
+            isinstance(a, np.ndarray)
+            and isinstance(b, np.ndarray)
+            and a.dtype.kind == b.dtype.kind
+            and a.shape == b.shape
+            and bool(np.array_equal(a, b))
+        )
     if isinstance(a, list) and isinstance(b, list):
         return len(a) == len(b) and all(_value_eq(x, y) for x, y in zip(a, b))
-    if type(a) is not type(b) and not (isinstance(a, (int, float)) and isinstance(b, (int, float))
-                                       and not isinstance(a, bool) and not isinstance(b, bool)):
+    if type(a) is not type(b) and not (
+        isinstance(a, (int, float))
+        and isinstance(b, (int, float))
+        and not isinstance(a, bool)
+        and not isinstance(b, bool)
+    ):
         return False
     return a == b
 
@@ -158,6 +172,7 @@ class Scene:
     """A scene as read (or built): not changed once a reader or builder returns it — its DEF
     table is computed at the first :meth:`defs` or :meth:`resolve` and kept (a USE resolved
     per lookup walked the whole tree: quadratic on the level-limit scenes)."""
+
     nodes: list = field(default_factory=list)  # top-level Node / Use
     file: str | None = None
     _defs: dict | None = field(default=None, init=False, repr=False)
@@ -188,6 +203,7 @@ class Scene:
 
     def walk(self) -> Iterator[tuple[Node, str]]:
         """Every Node written in the scene (USE references not followed), with its path."""
+
         def rec(node, path):
             yield node, path
             specs = node_specs()[node.type]
@@ -199,6 +215,7 @@ class Scene:
                     for i, c in enumerate(v):
                         if isinstance(c, Node):
                             yield from rec(c, f"{path}.{fname}[{i}]")
+
         for i, n in enumerate(self.nodes):
             if isinstance(n, Node):
                 yield from rec(n, n.type if len(self.nodes) == 1 else f"[{i}]{n.type}")
@@ -208,8 +225,11 @@ class Scene:
 
 
 # ---------------------------------------------------------------------------------- reader
-_TOKEN = re.compile(r'(?P<ws>[\s,]+)|(?P<comment>#[^\n]*)|(?P<str>"(?:[^"\\]|\\.)*")|(?P<punct>[{}\[\]])|'
-                    r'(?P<word>[^\s,{}\[\]"#]+)|(?P<bad>.)', re.S)
+_TOKEN = re.compile(
+    r'(?P<ws>[\s,]+)|(?P<comment>#[^\n]*)|(?P<str>"(?:[^"\\]|\\.)*")|(?P<punct>[{}\[\]])|'
+    r'(?P<word>[^\s,{}\[\]"#]+)|(?P<bad>.)',
+    re.S,
+)
 _INT = re.compile(r"[+-]?(?:0[xX][0-9a-fA-F]+|[0-9]+)\Z")
 _FLOAT = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\Z")
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_\-.]*\Z")
@@ -234,11 +254,18 @@ class _Reader:
             if kind in ("ws", "comment"):
                 continue
             if m.end() - m.start() > MAX_TOKEN:  # measured before the token is copied
-                raise self.error(f"a token of {m.end() - m.start()} characters ({text[m.start():m.start() + 40]!r}…), "
-                                 f"longer than the reader's limit of {MAX_TOKEN}", m.start(), "bt-token-size")
+                raise self.error(
+                    f"a token of {m.end() - m.start()} characters ({text[m.start() : m.start() + 40]!r}…), "
+                    f"longer than the reader's limit of {MAX_TOKEN}",
+                    m.start(),
+                    "bt-token-size",
+                )
             if kind == "bad":
-                raise self.error("unterminated string" if m.group() == '"' else f"unexpected character {m.group()!r}",
-                                 m.start(), "bt-token")
+                raise self.error(
+                    "unterminated string" if m.group() == '"' else f"unexpected character {m.group()!r}",
+                    m.start(),
+                    "bt-token",
+                )
             self.toks.append((kind, m.group(), m.start()))
         self.i = 0
         self.depth = 0
@@ -339,8 +366,9 @@ class _Reader:
         if v == "USE":
             kind, name, off2 = self.next(path, "a DEF name")
             if kind != "word" or name not in self.defs:
-                raise self.error(f"USE {_clip(name)}: no node was DEFined with this name before", off2,
-                                 "bt-use-undefined", path)
+                raise self.error(
+                    f"USE {_clip(name)}: no node was DEFined with this name before", off2, "bt-use-undefined", path
+                )
             self._check_type(self.defs[name].type, allowed, off2, path)
             return Use(name)
         def_name = None
@@ -385,8 +413,9 @@ class _Reader:
             if not _INT.match(v):
                 raise self.error(f"expected an integer, got {_clip(v)}", off, "bt-number", path)
             if len(v.lstrip("+-").lstrip("0")) > 12:  # beyond SFInt32 by its length alone (no huge int())
-                raise self.error(f"integer {v[:20]}... ({len(v)} characters) out of SFInt32 range", off,
-                                 "bt-number", path)
+                raise self.error(
+                    f"integer {v[:20]}... ({len(v)} characters) out of SFInt32 range", off, "bt-number", path
+                )
             n = int(v, 10) if not v.lstrip("+-").startswith(("0x", "0X")) else int(v, 16)
             if n > 0xFFFFFFFF or n < -2147483648:
                 raise self.error(f"integer {_clip(v)} out of SFInt32 range", off, "bt-number", path)
@@ -500,6 +529,7 @@ def rounded(scene: Scene, decimals: int = 6) -> Scene:
     """A copy of ``scene`` with every float rounded to ``decimals`` decimals (-0 written as 0):
     generated geometry written at a fixed precision does not change with a numpy/libm
     build's last digit."""
+
     def r(v):
         if isinstance(v, Node):
             return Node(v.type, {k: r(x) for k, x in v.fields.items()}, v.def_name)
@@ -512,6 +542,7 @@ def rounded(scene: Scene, decimals: int = 6) -> Scene:
         if isinstance(v, np.ndarray) and v.dtype.kind == "f":
             return np.round(v, decimals) + 0.0
         return v
+
     return Scene([r(n) for n in scene.nodes], scene.file)
 
 
@@ -593,5 +624,5 @@ def _fmt_value(t, v, pad) -> str:
         per = 4
     if len(items) <= per:
         return "[" + ", ".join(items) + "]"
-    lines = [", ".join(items[i:i + per]) for i in range(0, len(items), per)]
+    lines = [", ".join(items[i : i + per]) for i in range(0, len(items), per)]
     return "[\n" + ",\n".join(f"{pad}  {ln}" for ln in lines) + f"\n{pad}]"

@@ -11,6 +11,7 @@ Tiers, by folder (each test is marked with its folder's name, so ``-m unit`` wor
   image-stage renderer matrices;
 * ``tests/attacks/`` — hostile decoders, manifests and packages.
 """
+
 from __future__ import annotations
 
 import fcntl
@@ -28,11 +29,17 @@ from fbaconf.certification import certify
 from fbaconf.certification.package import load_key, seal
 
 # ci: deterministic (derandomised) so a CI run is reproducible; dev: random exploration.
-settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True,
-                          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+settings.register_profile(
+    "ci",
+    derandomize=True,
+    deadline=None,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
 settings.register_profile("dev", deadline=None, suppress_health_check=[HealthCheck.too_slow])
-settings.register_profile("stress", max_examples=2000, deadline=None,
-                          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+settings.register_profile(
+    "stress", max_examples=2000, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
+)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
 REPO = Path(__file__).resolve().parents[1]
@@ -57,6 +64,8 @@ def pytest_collection_modifyitems(config, items):
             tier = path.relative_to(TESTS).parts[0]
             if tier in TIERS:
                 item.add_marker(getattr(pytest.mark, tier))
+
+
 SHARED_FAP = REPO.parent / "shared" / "data" / "fap"
 
 
@@ -92,13 +101,30 @@ def made_once(tmp_path_factory):
                 make(root)
                 (root / ".made").write_text("")
         return root
+
     return once
 
 
 def _certify(out: Path, *extra: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", "reference-inprocess",
-                           "--claim", "simple@1", "--no-speed", "-o", str(out), *extra],
-                          capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "certify",
+            "--decoder",
+            "reference-inprocess",
+            "--claim",
+            "simple@1",
+            "--no-speed",
+            "-o",
+            str(out),
+            *extra,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def _make_packages(root: Path) -> None:
@@ -106,8 +132,9 @@ def _make_packages(root: Path) -> None:
     key, _pub = certify.keygen(root / "keys")
     shutil.copytree(root / "unsigned", root / "signed", symlinks=True)
     seal(root / "signed", load_key(key, private=True))
-    (root / "made.json").write_text(json.dumps({"returncode": unsigned.returncode,
-                                                "output": unsigned.stdout + unsigned.stderr}))
+    (root / "made.json").write_text(
+        json.dumps({"returncode": unsigned.returncode, "output": unsigned.stdout + unsigned.stderr})
+    )
 
 
 @pytest.fixture(scope="session")

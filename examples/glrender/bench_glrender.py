@@ -13,6 +13,7 @@ vertices and normals, draw, resolve, encode, read back 8-bit sRGB). Reference:
 fps = frames per second of wall-clock time; in brackets per second of the process's CPU
 time (all threads: llvmpipe renders on several, the reference on one).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -51,13 +52,16 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     from fbaconf.rendering.render import Renderer
     from fbaconf.rendering.scenario import Scenario
+
     ctx = glrender.gl_context()
     states = bundled_states(a.frames)
     pts, tris = head_mesh(72, 70)
     states["synthetic 5k verts"] = animated_state(pts, tris, a.frames)
     base = Scenario.default().with_(width=256, height=256)
-    print(f"256x256, best of {a.repeat} x {a.frames} frames; GL: {ctx.info['GL_RENDERER']}, "
-          f"{os.cpu_count()} CPUs; fps wall (CPU)")
+    print(
+        f"256x256, best of {a.repeat} x {a.frames} frames; GL: {ctx.info['GL_RENDERER']}, "
+        f"{os.cpu_count()} CPUs; fps wall (CPU)"
+    )
     for name, state in states.items():
         n = min(a.frames, state.n_frames)
         n_tri = sum(p.triangles.shape[0] for p in state.parts)

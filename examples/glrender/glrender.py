@@ -33,6 +33,7 @@ Exit codes: 0 done; 2 the stream/scene was rejected (fbaconf input error); 69 no
 (this machine's GL cannot do the variant, e.g. msaa8 where GL_MAX_SAMPLES is 4, or no GL
 context at all).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,8 +44,20 @@ from pathlib import Path
 import numpy as np
 
 FAITHFUL = ("ssaa2", "ssaa3", "ssaa4", "msaa4", "msaa4-centroid", "msaa8")
-WRONG = ("lights-mirrored", "light-missing", "specular-off", "fov-wrong", "camera-shift", "region-displaced",
-         "texture-flipped", "texture-clamp", "gamma22", "gamma-twice", "cull-backfaces", "wrong-shading")
+WRONG = (
+    "lights-mirrored",
+    "light-missing",
+    "specular-off",
+    "fov-wrong",
+    "camera-shift",
+    "region-displaced",
+    "texture-flipped",
+    "texture-clamp",
+    "gamma22",
+    "gamma-twice",
+    "cull-backfaces",
+    "wrong-shading",
+)
 VARIANTS = FAITHFUL + WRONG
 # The renderer the wrong variants start from (a faithful 4x MSAA player, centroid sampling).
 BASE_WRONG = "msaa4-centroid"
@@ -65,6 +78,7 @@ def gl_context():
     global _CTX
     if _CTX is None:
         import moderngl
+
         try:
             _CTX = moderngl.create_standalone_context(require=330, backend="egl")
         except Exception as e:  # noqa: BLE001 - any failure means no GL here
@@ -294,8 +308,13 @@ def fit_camera(points: np.ndarray, sc, fov_deg: float):
     corner, far twice the farthest. A given position/look_at is used as it is."""
     cam = sc.camera
     if not cam.fit:
-        return (np.asarray(cam.position, float), np.asarray(cam.look_at, float), np.asarray(cam.up, float),
-                0.1 if cam.near is None else cam.near, 1e5 if cam.far is None else cam.far)
+        return (
+            np.asarray(cam.position, float),
+            np.asarray(cam.look_at, float),
+            np.asarray(cam.up, float),
+            0.1 if cam.near is None else cam.near,
+            1e5 if cam.far is None else cam.far,
+        )
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     p = p[np.isfinite(p).all(axis=1)]
     lo, hi = (p.min(axis=0), p.max(axis=0)) if len(p) else (np.zeros(3), np.zeros(3))
@@ -348,6 +367,7 @@ def load_texture_linear(path: Path) -> np.ndarray:
     """A texture file as linear float32 RGB [h, w, 3], top row first (integer formats are
     sRGB-encoded, float formats linear)."""
     import OpenImageIO as oiio
+
     buf = oiio.ImageBuf(str(path))
     px = buf.get_pixels(oiio.FLOAT)
     if buf.has_error or px is None:
@@ -367,6 +387,7 @@ class GLRenderer:
 
     def __init__(self, state, scenario, variant: str = "msaa4", *, scene_dir=None, ctx=None) -> None:
         import moderngl
+
         if variant not in VARIANTS:
             raise ValueError(f"unknown variant {variant!r} (one of {', '.join(VARIANTS)})")
         self.mgl = moderngl
@@ -380,10 +401,12 @@ class GLRenderer:
         self.samples = int(aa[4:5]) if aa.startswith("msaa") else 0
         self.centroid = aa.endswith("centroid")
         if self.samples > self.ctx.max_samples:
-            raise NotSupported(f"{variant}: this GL supports at most {self.ctx.max_samples} samples "
-                               f"(GL_MAX_SAMPLES; {self.ctx.info.get('GL_RENDERER')})")
+            raise NotSupported(
+                f"{variant}: this GL supports at most {self.ctx.max_samples} samples "
+                f"(GL_MAX_SAMPLES; {self.ctx.info.get('GL_RENDERER')})"
+            )
         lights = list(sc.lights)
-        if variant == "lights-mirrored":      # a handedness slip: light x negated
+        if variant == "lights-mirrored":  # a handedness slip: light x negated
             lights = [(-lt.direction[0], lt.direction[1], lt.direction[2], lt) for lt in lights]
         else:
             lights = [(*lt.direction, lt) for lt in lights]
@@ -414,8 +437,9 @@ class GLRenderer:
         V = state.vertices
         pts = V.reshape(-1, 3) if (sc.camera.fit and sc.camera.fit_to == "all") else V[0]
         self.eye, self.target, self.up, self.near, self.far = fit_camera(pts, sc, self.fov)
-        self.mvp = view_projection(self.eye, self.target, self.up, self.near, self.far, self.fov,
-                                   self.W, self.H, self.shift)
+        self.mvp = view_projection(
+            self.eye, self.target, self.up, self.near, self.far, self.fov, self.W, self.H, self.shift
+        )
 
         # --- static mesh data
         n_v = V.shape[1]
@@ -444,12 +468,15 @@ class GLRenderer:
         self.vbo_uv = ctx.buffer(uv.tobytes() or b"\0" * 8)
         self.ibo = ctx.buffer(self.tris.astype(np.uint32).tobytes() or b"\0" * 12)
         if self.shading == "gouraud":
-            self.prog = ctx.program(vertex_shader=_src(_GOURAUD_VS, self.centroid),
-                                    fragment_shader=_src(_GOURAUD_FS, self.centroid))
+            self.prog = ctx.program(
+                vertex_shader=_src(_GOURAUD_VS, self.centroid), fragment_shader=_src(_GOURAUD_FS, self.centroid)
+            )
         else:
-            self.prog = ctx.program(vertex_shader=_src(_FLAT_VS, self.centroid),
-                                    geometry_shader=_src(_FLAT_GS, self.centroid),
-                                    fragment_shader=_src(_FLAT_FS, self.centroid))
+            self.prog = ctx.program(
+                vertex_shader=_src(_FLAT_VS, self.centroid),
+                geometry_shader=_src(_FLAT_GS, self.centroid),
+                fragment_shader=_src(_FLAT_FS, self.centroid),
+            )
         attrs = [(self.vbo_pos, "3f", "in_pos"), (self.vbo_alb, "3f", "in_alb"), (self.vbo_uv, "2f", "in_uv")]
         if self.shading == "gouraud":
             attrs.append((self.vbo_nrm, "3f", "in_nrm"))
@@ -582,9 +609,26 @@ class GLRenderer:
         return np.clip(codes, 0, 255).astype(np.uint8)
 
     def release(self) -> None:
-        for name in ("vao", "box_vao", "enc_vao", "prog", "box_prog", "enc_prog", "vbo_pos", "vbo_nrm", "vbo_alb",
-                     "vbo_uv", "ibo", "scene_fbo", "scene_color", "scene_depth", "linear_fbo", "linear_tex",
-                     "code_fbo", "code_tex"):
+        for name in (
+            "vao",
+            "box_vao",
+            "enc_vao",
+            "prog",
+            "box_prog",
+            "enc_prog",
+            "vbo_pos",
+            "vbo_nrm",
+            "vbo_alb",
+            "vbo_uv",
+            "ibo",
+            "scene_fbo",
+            "scene_color",
+            "scene_depth",
+            "linear_fbo",
+            "linear_tex",
+            "code_fbo",
+            "code_tex",
+        ):
             obj = getattr(self, name, None)
             if obj is not None:
                 obj.release()
@@ -609,6 +653,7 @@ def render_frames(face_states, scenario, variant: str = "msaa4", *, scene_dir=No
 
 def write_png(path: Path, px: np.ndarray) -> None:
     import OpenImageIO as oiio
+
     out = oiio.ImageOutput.create(str(path))
     if out is None or not out.open(str(path), oiio.ImageSpec(px.shape[1], px.shape[0], 3, oiio.UINT8)):
         raise OSError(f"cannot write {path}: {oiio.geterror()}")
@@ -620,6 +665,7 @@ def write_png(path: Path, px: np.ndarray) -> None:
 
 def write_exr(path: Path, px: np.ndarray) -> None:
     import OpenImageIO as oiio
+
     out = oiio.ImageOutput.create(str(path))
     if out is None or not out.open(str(path), oiio.ImageSpec(px.shape[1], px.shape[0], 3, oiio.FLOAT)):
         raise OSError(f"cannot write {path}: {oiio.geterror()}")
@@ -631,6 +677,7 @@ def write_exr(path: Path, px: np.ndarray) -> None:
 def decode(a) -> None:
     from fbaconf.bitstreams.fapio import save_faps
     from fbaconf.reference.pipeline import load_stream, state_of
+
     frames = load_stream(a.input)
     if a.faps_out is not None:
         save_faps(state_of(frames) if a.input.suffix.lower() == ".fap" else frames, a.faps_out)
@@ -638,12 +685,14 @@ def decode(a) -> None:
         return
     from fbaconf.animation.engine import animate
     from fbaconf.animation.stateio import save_npz
+
     state = animate(frames, scene=a.scene)
     if a.vertices_out is not None:
         save_npz(state, a.vertices_out)
     if a.images_dir is None:
         return
     from fbaconf.rendering.scenario import Scenario
+
     sc = Scenario.load(a.scenario) if a.scenario is not None else Scenario.default()
     scene_dir = Path(a.scene).resolve().parent if a.scene else None
     a.images_dir.mkdir(parents=True, exist_ok=True)
@@ -672,11 +721,13 @@ def main(argv: list[str] | None = None) -> int:
     m.add_argument("inputs", type=Path, nargs="+")
     a = ap.parse_args(argv)
     from fbaconf.errors import FbaconfInputError
+
     try:
         if a.cmd == "decode":
             decode(a)
         else:
             from fbaconf.reference.pipeline import multi_outputs
+
             multi_outputs(a.inputs, a.out_dir, a.format)
     except FbaconfInputError as e:
         print(f"glrender: error: {e}", file=sys.stderr)

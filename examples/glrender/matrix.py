@@ -9,6 +9,7 @@ tolerances of harness/data/tolerances.toml — exactly the image stage of ``fbac
 Prints one line per variant: Fail count, then per case outcome letter, the largest number
 of violating pixels in a frame and the largest interior CIEDE2000 mean.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,12 +27,14 @@ import glrender
 
 def image_cases():
     from fbaconf.conformance.suite import load_suites
+
     return [c for s in load_suites() for c in s.cases if "images" in c.stages]
 
 
 def case_state(case, cache: dict):
     from fbaconf.animation.engine import animate
     from fbaconf.reference.pipeline import load_stream
+
     scene = case.input_path("scene")
     key = (str(scene), str(case.input_path("fba")))
     if key not in cache:
@@ -43,6 +46,7 @@ def run_case(case, variant: str, out: Path, cache: dict):
     """The image stage's StageResult for ``variant`` rendering ``case``'s compared frames."""
     from fbaconf.harness.compare import ImageTolerances, compare_images
     from fbaconf.rendering.scenario import Scenario
+
     state = case_state(case, cache)
     sc = Scenario.load(case.input_path("scenario"))
     scene = case.input_path("scene")
@@ -83,16 +87,23 @@ def main(argv: list[str]) -> int:
                     row = None
                     break
                 m = r.metrics
-                row[c.full_id] = {"outcome": r.outcome.value, "message": r.message,
-                                  **{k: m[k] for k in sorted(m) if isinstance(m[k], (int, float))}}
-                cells.append(f"{c.id}:{r.outcome.value[0]}{int(m.get('violations_max', -1))}"
-                             f"/{m.get('interior_deltae_mean_max', float('nan')):.2f}")
+                row[c.full_id] = {
+                    "outcome": r.outcome.value,
+                    "message": r.message,
+                    **{k: m[k] for k in sorted(m) if isinstance(m[k], (int, float))},
+                }
+                cells.append(
+                    f"{c.id}:{r.outcome.value[0]}{int(m.get('violations_max', -1))}"
+                    f"/{m.get('interior_deltae_mean_max', float('nan')):.2f}"
+                )
             table[v] = row
             if row is None:
                 continue
             fails = sum(x["outcome"] == "Fail" for x in row.values())
-            print(f"{v:18s} fails {fails:2d}/{len(cases)} ({time.perf_counter() - t0:.1f}s)  "
-                  + " ".join(cells), flush=True)
+            print(
+                f"{v:18s} fails {fails:2d}/{len(cases)} ({time.perf_counter() - t0:.1f}s)  " + " ".join(cells),
+                flush=True,
+            )
     if a.json:
         a.json.write_text(json.dumps(table, indent=1, sort_keys=True))
     return 0

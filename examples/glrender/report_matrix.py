@@ -10,6 +10,7 @@ Cell: outcome letter (P Pass, Q QualityWarning, F Fail, N NotSupported), then
 violations_max (most pixels over the per-pixel limit in one frame; the limit is 32) /
 interior_deltae_mean_max (largest interior CIEDE2000 mean of a frame; fail above 0.75).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -20,8 +21,18 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from glrender import FAITHFUL, WRONG
 
-KEYS = ("violations_max", "violation_limit", "interior_deltae_mean_max", "interior_deltae_p99_max",
-        "deltae_mean_max", "psnr_min", "max_error", "frames_failing", "frames_warning", "frames_compared")
+KEYS = (
+    "violations_max",
+    "violation_limit",
+    "interior_deltae_mean_max",
+    "interior_deltae_p99_max",
+    "deltae_mean_max",
+    "psnr_min",
+    "max_error",
+    "frames_failing",
+    "frames_warning",
+    "frames_compared",
+)
 
 
 def collect(runs: Path) -> dict:
@@ -53,21 +64,30 @@ def cell(x: dict) -> str:
 def markdown(m: dict) -> str:
     lines = []
     cases = sorted({c for rows in m.values() for c in rows}, key=lambda c: (c.split("/")[0], c))
-    lines.append("| variant | Fail | QualityWarning | Pass | NotSupported | most violating px in a frame | "
-                 "largest interior ΔE mean | largest interior ΔE p99 | lowest PSNR dB |")
+    lines.append(
+        "| variant | Fail | QualityWarning | Pass | NotSupported | most violating px in a frame | "
+        "largest interior ΔE mean | largest interior ΔE p99 | lowest PSNR dB |"
+    )
     lines.append("|---|---|---|---|---|---|---|---|---|")
     for v, rows in m.items():
         outs = [x["outcome"] for x in rows.values()]
         vals = [x for x in rows.values() if x.get("violations_max") is not None]
-        f = (lambda k, fn: f"{fn(x[k] for x in vals):.4g}" if vals else "–")
-        lines.append(f"| {v} | {outs.count('Fail')} | {outs.count('QualityWarning')} | {outs.count('Pass')} | "
-                     f"{outs.count('NotSupported')} | {f('violations_max', max)} | "
-                     f"{f('interior_deltae_mean_max', max)} | {f('interior_deltae_p99_max', max)} | "
-                     f"{f('psnr_min', min)} |")
+        f = lambda k, fn: f"{fn(x[k] for x in vals):.4g}" if vals else "–"
+        lines.append(
+            f"| {v} | {outs.count('Fail')} | {outs.count('QualityWarning')} | {outs.count('Pass')} | "
+            f"{outs.count('NotSupported')} | {f('violations_max', max)} | "
+            f"{f('interior_deltae_mean_max', max)} | {f('interior_deltae_p99_max', max)} | "
+            f"{f('psnr_min', min)} |"
+        )
     for title, group in (("Faithful variants", FAITHFUL), ("Wrong variants", WRONG)):
         vs = [v for v in group if v in m and any(x.get("violations_max") is not None for x in m[v].values())]
-        lines += ["", f"**{title}** (cell: verdict, violations_max / interior ΔE mean max)", "",
-                  "| case | " + " | ".join(vs) + " |", "|---|" + "---|" * len(vs)]
+        lines += [
+            "",
+            f"**{title}** (cell: verdict, violations_max / interior ΔE mean max)",
+            "",
+            "| case | " + " | ".join(vs) + " |",
+            "|---|" + "---|" * len(vs),
+        ]
         for c in cases:
             lines.append(f"| {c} | " + " | ".join(cell(m[v][c]) if c in m[v] else "" for v in vs) + " |")
     return "\n".join(lines) + "\n"

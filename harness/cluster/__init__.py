@@ -40,6 +40,7 @@ from it; the client accepts task results serialized as msgpack only, never pickl
 pickled control messages between the cluster's authenticated members: the defence against a
 stranger is that no stranger is a member.)
 """
+
 from __future__ import annotations
 
 import json
@@ -82,26 +83,32 @@ def parse(spec: str) -> tuple[str, str | int]:
 
 # ------------------------------------------------------------------ certificates
 
+
 def lab_security():
     """The lab's certificates for a remote scheduler (module doc), or ClusterError."""
     from distributed.security import Security  # noqa: PLC0415 (the cluster extra)
+
     env = {k: os.environ.get(f"FBACONF_CLUSTER_{k.upper()}") for k in ("ca", "cert", "key")}
     if all(env.values()):
         for k, v in env.items():
             if not Path(v).is_file():
                 raise ClusterError(f"FBACONF_CLUSTER_{k.upper()}={v}: no such file")
-        return Security(tls_ca_file=env["ca"], tls_client_cert=env["cert"], tls_client_key=env["key"],
-                        require_encryption=True)
+        return Security(
+            tls_ca_file=env["ca"], tls_client_cert=env["cert"], tls_client_key=env["key"], require_encryption=True
+        )
     sec = Security(require_encryption=True)  # dask's configuration (distributed.comm.tls.*)
     if sec.tls_ca_file and sec.tls_client_cert:
         return sec
-    raise ClusterError("a remote Dask scheduler is reached only over TLS with the lab's certificates: set "
-                       "FBACONF_CLUSTER_CA, FBACONF_CLUSTER_CERT and FBACONF_CLUSTER_KEY (PEM files: the lab's "
-                       "certificate authority, a client certificate it signed and its key), or dask's "
-                       "distributed.comm.tls configuration (docs/fuzzing.md, \"Who may talk to the cluster\")")
+    raise ClusterError(
+        "a remote Dask scheduler is reached only over TLS with the lab's certificates: set "
+        "FBACONF_CLUSTER_CA, FBACONF_CLUSTER_CERT and FBACONF_CLUSTER_KEY (PEM files: the lab's "
+        "certificate authority, a client certificate it signed and its key), or dask's "
+        'distributed.comm.tls configuration (docs/fuzzing.md, "Who may talk to the cluster")'
+    )
 
 
 # ------------------------------------------------------------------ clients
+
 
 @contextmanager
 def client(spec: str) -> Iterator:
@@ -114,9 +121,12 @@ def client(spec: str) -> Iterator:
         raise ClusterError("--cluster needs Dask: pip install 'dask[distributed]'") from None
     if kind == "local":
         if not hasattr(os, "memfd_create"):
-            raise ClusterError("--cluster local needs Linux: the run's key is kept in memory (memfd, prctl); "
-                               "use --cluster tls://HOST:PORT or -j N")
+            raise ClusterError(
+                "--cluster local needs Linux: the run's key is kept in memory (memfd, prctl); "
+                "use --cluster tls://HOST:PORT or -j N"
+            )
         from .local import local_cluster  # noqa: PLC0415 (Dask: optional, the cluster extra)
+
         with local_cluster(int(arg), make_certificates) as (cluster, sec):
             c = Client(cluster, security=sec, deserializers=RESULT_DESERIALIZERS)
             try:
@@ -141,6 +151,7 @@ def task_key(kind: str) -> str:
 
 
 # ------------------------------------------------------------------ results as data
+
 
 def plain(obj, what: str = "result", *, _depth: int = 0, _count: list | None = None):
     """``obj`` if it is plain data — dicts with string keys, lists (tuples read as lists),
@@ -198,8 +209,8 @@ def run_on_cluster(c, run_case: Callable, ctx, cases, on_result: Callable, stopp
     ``on_result`` as it arrives. Tasks of a lost worker are rerun by Dask; a task that raises
     is retried twice."""
     from distributed import as_completed  # noqa: PLC0415 (Dask: optional (the cluster extra))
-    futures = [c.submit(_case_task, run_case, ctx, case, key=task_key("case"), pure=False, retries=2)
-               for case in cases]
+
+    futures = [c.submit(_case_task, run_case, ctx, case, key=task_key("case"), pure=False, retries=2) for case in cases]
     ac = as_completed(futures, with_results=True)
     for _fut, got in ac:
         if stopping():

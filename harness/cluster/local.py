@@ -13,6 +13,7 @@ talk to the cluster").
 * No HTTP: no route is served (Dask's dashboard and ``/info`` pages show logs, call stacks and
   task keys to whoever reaches the port) and the HTTP servers stop listening as they start.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
@@ -27,8 +28,11 @@ from .tls import RunCertificates, memory_file, nondumpable
 _IN_MEMORY = "<in memory: fbaconf run>"  # what Dask's repr of the Security shows for the certificate
 
 # Dask's configuration while the cluster lives: forked workers, no HTTP route anywhere.
-CONFIG = {"distributed.worker.multiprocessing-method": "fork", "distributed.scheduler.http.routes": [],
-          "distributed.worker.http.routes": []}
+CONFIG = {
+    "distributed.worker.multiprocessing-method": "fork",
+    "distributed.scheduler.http.routes": [],
+    "distributed.worker.http.routes": [],
+}
 
 
 class RunSecurity(Security):
@@ -36,9 +40,16 @@ class RunSecurity(Security):
     in memory. Never pickled: the workers are forked, and have it."""
 
     def __init__(self, certs: RunCertificates) -> None:
-        super().__init__(require_encryption=True, tls_ca_file=certs.ca.decode("ascii"),
-                         tls_client_cert=_IN_MEMORY, tls_client_key=None, tls_scheduler_cert=_IN_MEMORY,
-                         tls_scheduler_key=None, tls_worker_cert=_IN_MEMORY, tls_worker_key=None)
+        super().__init__(
+            require_encryption=True,
+            tls_ca_file=certs.ca.decode("ascii"),
+            tls_client_cert=_IN_MEMORY,
+            tls_client_key=None,
+            tls_scheduler_cert=_IN_MEMORY,
+            tls_scheduler_key=None,
+            tls_worker_cert=_IN_MEMORY,
+            tls_worker_key=None,
+        )
         self._chain = certs.cert + certs.key
 
     def _get_tls_context(self, tls, purpose):
@@ -70,18 +81,27 @@ class RunWorker(Worker):
 
 
 @contextmanager
-def local_cluster(n: int, make_certificates: Callable[[], RunCertificates]) -> Iterator[tuple[SpecCluster,
-                                                                                             RunSecurity]]:
+def local_cluster(
+    n: int, make_certificates: Callable[[], RunCertificates]
+) -> Iterator[tuple[SpecCluster, RunSecurity]]:
     """The run's cluster of ``n`` forked single-threaded workers, and its security; the
     certificates are made once this process is closed to the user's other processes."""
     with nondumpable(), dask.config.set(CONFIG):
         sec = RunSecurity(make_certificates())
-        common = dict(host="127.0.0.1", protocol="tls://", security=sec, dashboard=False,
-                      dashboard_address="127.0.0.1:0")
-        worker = {"cls": Nanny, "options": dict(common, nthreads=1, worker_class=RunWorker, silence_logs=40,
-                                                memory_limit=1 / n)}  # a share of the memory, as LocalCluster
-        cluster = SpecCluster(scheduler={"cls": RunScheduler, "options": dict(common, port=0)},
-                              workers={i: worker for i in range(n)}, worker=worker, security=sec, silence_logs=40)
+        common = dict(
+            host="127.0.0.1", protocol="tls://", security=sec, dashboard=False, dashboard_address="127.0.0.1:0"
+        )
+        worker = {
+            "cls": Nanny,
+            "options": dict(common, nthreads=1, worker_class=RunWorker, silence_logs=40, memory_limit=1 / n),
+        }  # a share of the memory, as LocalCluster
+        cluster = SpecCluster(
+            scheduler={"cls": RunScheduler, "options": dict(common, port=0)},
+            workers={i: worker for i in range(n)},
+            worker=worker,
+            security=sec,
+            silence_logs=40,
+        )
         try:
             yield cluster, sec
         finally:

@@ -8,6 +8,7 @@ own key is dropped once it has signed (nothing else is ever signed with it), so 
 secret is the one certificate's key; the process holding it closes itself to the user's other
 processes (:func:`nondumpable`), and hands the key to OpenSSL through an anonymous memory file
 (:func:`memory_file`), never a path another process could open."""
+
 from __future__ import annotations
 
 import ctypes
@@ -31,6 +32,7 @@ PR_GET_DUMPABLE, PR_SET_DUMPABLE = 3, 4
 class RunCertificates:
     """PEM bytes: the authority's certificate (public), the certificate it signed and that
     certificate's private key (the secret)."""
+
     ca: bytes
     cert: bytes
     key: bytes
@@ -51,14 +53,23 @@ def make_certificates(*, common_name: str = "fbaconf-run") -> RunCertificates:
         return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])
 
     def cert(subject, issuer, public, signer, *, ca: bool):
-        b = (x509.CertificateBuilder().subject_name(subject).issuer_name(issuer).public_key(public)
-             .serial_number(x509.random_serial_number()).not_valid_before(now - datetime.timedelta(minutes=5))
-             .not_valid_after(now + datetime.timedelta(days=1))
-             .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True))
+        b = (
+            x509.CertificateBuilder()
+            .subject_name(subject)
+            .issuer_name(issuer)
+            .public_key(public)
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(now - datetime.timedelta(minutes=5))
+            .not_valid_after(now + datetime.timedelta(days=1))
+            .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True)
+        )
         if not ca:
-            b = b.add_extension(x509.SubjectAlternativeName([x509.DNSName("localhost"),
-                                                             x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]),
-                                critical=False)
+            b = b.add_extension(
+                x509.SubjectAlternativeName(
+                    [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
+                ),
+                critical=False,
+            )
         return b.sign(signer, hashes.SHA256())
 
     ca_key = rsa.generate_private_key(public_exponent=65537, key_size=2048)
@@ -68,8 +79,11 @@ def make_certificates(*, common_name: str = "fbaconf-run") -> RunCertificates:
     leaf = cert(name(common_name), ca_name, key.public_key(), ca_key, ca=False)
     del ca_key
     pem = serialization.Encoding.PEM
-    return RunCertificates(ca.public_bytes(pem), leaf.public_bytes(pem),
-                           key.private_bytes(pem, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()))
+    return RunCertificates(
+        ca.public_bytes(pem),
+        leaf.public_bytes(pem),
+        key.private_bytes(pem, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()),
+    )
 
 
 def _prctl(option: int, value: int = 0) -> int:
@@ -107,7 +121,7 @@ def memory_file(data: bytes) -> Iterator[str]:
     try:
         view = memoryview(data)
         while view:
-            view = view[os.write(fd, view):]
+            view = view[os.write(fd, view) :]
         yield f"/proc/self/fd/{fd}"
     finally:
         os.close(fd)

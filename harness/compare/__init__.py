@@ -28,6 +28,7 @@ header is checked (dtype, shape, size against the byte cap) before any data is r
 zip bomb or a header claiming a huge array cannot exhaust memory. Unreadable images are a
 ``Fail`` of the images stage, not an exception.
 """
+
 from .base import DEFAULT_MAX_BYTES, DEFAULT_MAX_PIXELS, PSNR_CAP, OutputError, ToleranceError, worst
 from .faps import compare_faps
 from .images import compare_images
@@ -35,7 +36,22 @@ from .loaders import check_output_file, load_output_faps, load_output_vertices, 
 from .tolerances import ImageTolerances, VertexTolerances, load_tolerances
 from .vertices import compare_vertices, part_namer
 
-__all__ = ["OutputError", "ToleranceError", "DEFAULT_MAX_BYTES", "DEFAULT_MAX_PIXELS", "PSNR_CAP",
-           "ImageTolerances", "VertexTolerances", "load_tolerances", "load_output_faps", "load_output_vertices",
-           "check_output_file", "open_npz", "compare_faps", "compare_vertices", "compare_images", "part_namer",
-           "worst"]
+__all__ = [
+    "OutputError",
+    "ToleranceError",
+    "DEFAULT_MAX_BYTES",
+    "DEFAULT_MAX_PIXELS",
+    "PSNR_CAP",
+    "ImageTolerances",
+    "VertexTolerances",
+    "load_tolerances",
+    "load_output_faps",
+    "load_output_vertices",
+    "check_output_file",
+    "open_npz",
+    "compare_faps",
+    "compare_vertices",
+    "compare_images",
+    "part_namer",
+    "worst",
+]

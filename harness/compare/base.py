@@ -1,4 +1,5 @@
 """What every comparison stage shares: limits on untrusted outputs, the error types, the worst-of outcome."""
+
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -12,7 +13,7 @@ DEFAULT_MAX_PIXELS = 64 * 1024 * 1024  # cap of width x height x channels of one
 PSNR_CAP = 100.0  # PSNR of identical images is infinite; recorded as this (JSON has no infinity)
 
 FAPFRAMES_FORMAT = "fbaconf.FapFrames/1"
-_INT32 = (-(2 ** 31), 2 ** 31 - 1)
+_INT32 = (-(2**31), 2**31 - 1)
 
 
 class OutputError(FbaconfInputError):

@@ -1,5 +1,6 @@
 """The FAP stage: exact, normative comparison of decoded FAP frames (values, statuses, frame numbers,
 times, the .fap header rate)."""
+
 from __future__ import annotations
 
 from typing import Any
@@ -53,8 +54,9 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
     vdiff = (e.values != g.values) & norm
     vdiff[:, :2] = False  # FAP 1/2 live in the high-level fields
     hdiff = e.high != g.high
-    hnorm = np.concatenate([np.repeat(norm[:, [0]], nv, axis=1),
-                            np.repeat(norm[:, [1]], len(HIGH_LEVEL_FIELDS) - nv, axis=1)], axis=1)
+    hnorm = np.concatenate(
+        [np.repeat(norm[:, [0]], nv, axis=1), np.repeat(norm[:, [1]], len(HIGH_LEVEL_FIELDS) - nv, axis=1)], axis=1
+    )
     hdiff &= hnorm
     vdiff[:, 0] |= hdiff[:, :nv].any(axis=1)
     vdiff[:, 1] |= hdiff[:, nv:].any(axis=1)
@@ -94,15 +96,24 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
     absd = np.where(norm, np.abs(e.values.astype(np.int64) - g.values.astype(np.int64)), 0)
     habs = np.where(hnorm, np.abs(e.high.astype(np.int64) - g.high.astype(np.int64)), 0)
     max_abs = np.maximum(absd.max(axis=1, initial=0), habs.max(axis=1, initial=0))
-    series = {"faps_differing": [float(x) for x in per_fap.sum(axis=1)],
-              "max_abs_diff": [float(x) for x in max_abs]}
-    metrics = {"frames_compared": float(n), "frames_differing": float(bad_frame.sum()),
-               "faps_differing": float(per_fap.sum()), "max_abs_diff": float(max_abs.max(initial=0)),
-               "expected_frames": float(ne), "got_frames": float(ng), "frame_number_offset": float(offset)}
+    series = {"faps_differing": [float(x) for x in per_fap.sum(axis=1)], "max_abs_diff": [float(x) for x in max_abs]}
+    metrics = {
+        "frames_compared": float(n),
+        "frames_differing": float(bad_frame.sum()),
+        "faps_differing": float(per_fap.sum()),
+        "max_abs_diff": float(max_abs.max(initial=0)),
+        "expected_frames": float(ne),
+        "got_frames": float(ng),
+        "frame_number_offset": float(offset),
+    }
     # what kind of difference (conformance/provisional.py: which provisional decision could explain it)
-    metrics.update(values_differing=float((vdiff | missing).sum()), status_differing=float(sdiff.sum()),
-                   frame_numbers_differing=float(fndiff.sum()), times_differing=float(tdiff.sum()),
-                   rate_differs=float(rate_bad))
+    metrics.update(
+        values_differing=float((vdiff | missing).sum()),
+        status_differing=float(sdiff.sum()),
+        frame_numbers_differing=float(fndiff.sum()),
+        times_differing=float(tdiff.sum()),
+        rate_differs=float(rate_bad),
+    )
     if text_output:
         metrics["times_unverified"] = float(times_unverified)
 
@@ -113,8 +124,13 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
         fn = int(e.frame_number[k])
         where = f"frame {k} (frame_number {fn})"
         if fndiff[k]:
-            first = {"frame": k, "frame_number": fn, "what": "frame number", "expected": fn,
-                     "got": int(g.frame_number[k])}
+            first = {
+                "frame": k,
+                "frame_number": fn,
+                "what": "frame number",
+                "expected": fn,
+                "got": int(g.frame_number[k]),
+            }
             detail = f"{where}: frame number: expected {fn}, got {int(g.frame_number[k])}"
         elif not per_fap[k].any():
             et, gt = float(e.time_ms[k]), float(g.time_ms[k])
@@ -136,19 +152,24 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
                 c = next(c for c in cols if hdiff[k, c])
                 field_name = HIGH_LEVEL_FIELDS[c]
                 first.update(what=field_name, expected=int(e.high[k, c]), got=int(g.high[k, c]))
-                detail = (f"{where}: FAP {num} {name} {field_name}: expected {int(e.high[k, c])}, "
-                          f"got {int(g.high[k, c])}")
+                detail = (
+                    f"{where}: FAP {num} {name} {field_name}: expected {int(e.high[k, c])}, got {int(g.high[k, c])}"
+                )
             else:
                 es, gs = int(e.status[k, j]), int(g.status[k, j])
-                first.update(what="status", expected=STATUS_NAMES.get(es, str(es)),
-                             got=STATUS_NAMES.get(gs, str(gs)))
-                detail = (f"{where}: FAP {num} {name} status: expected {first['expected']}, "
-                          f"got {first['got']}")
+                first.update(what="status", expected=STATUS_NAMES.get(es, str(es)), got=STATUS_NAMES.get(gs, str(gs)))
+                detail = f"{where}: FAP {num} {name} status: expected {first['expected']}, got {first['got']}"
     if rate_bad:
         er, gr = float(expected.frame_rate), float(got.frame_rate)
         first = {"what": "frame rate", "expected": er, "got": gr}
-        return StageResult("faps", Outcome.FAIL, f"header frame rate: expected {er:.6g} Hz (the coded rate), got "
-                           f"{gr:.6g} Hz", first, metrics, series)
+        return StageResult(
+            "faps",
+            Outcome.FAIL,
+            f"header frame rate: expected {er:.6g} Hz (the coded rate), got {gr:.6g} Hz",
+            first,
+            metrics,
+            series,
+        )
     count_msg = ""
     if ne != ng:
         count_msg = f"frame count: expected {ne}, got {ng}"
@@ -167,11 +188,19 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
         rows = []
         for j in cols:
             ks = np.nonzero(per_fap[:, j])[0]
-            rows.append({"fap": int(j + 1), "name": _fap_name(int(j + 1)), "frames": int(len(ks)),
-                         "first": int(ks[0]), "last": int(ks[-1])})
+            rows.append(
+                {
+                    "fap": int(j + 1),
+                    "name": _fap_name(int(j + 1)),
+                    "frames": int(len(ks)),
+                    "first": int(ks[0]),
+                    "last": int(ks[-1]),
+                }
+            )
         first = dict(first, faps=rows)
-        shown = ", ".join(f"{r['fap']} {r['name']} ({r['frames']} frame(s), {r['first']}..{r['last']})"
-                          for r in rows[:8])
+        shown = ", ".join(
+            f"{r['fap']} {r['name']} ({r['frames']} frame(s), {r['first']}..{r['last']})" for r in rows[:8]
+        )
         parts.append(f"differing FAPs: {shown}" + (f", and {len(rows) - 8} more" if len(rows) > 8 else ""))
     return StageResult("faps", Outcome.FAIL, "; ".join(parts), first, metrics, series)
 

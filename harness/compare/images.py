@@ -1,5 +1,6 @@
 """The image stage: a contrast-aware per-pixel rule and CIEDE2000 against converged golden images,
 heat-map artefacts."""
+
 from __future__ import annotations
 
 import math
@@ -21,8 +22,6 @@ from .tolerances import ImageTolerances
 
 class _ImageUnreadable(Exception):
     pass
-
-
 
 
 def _read_encoded(path: Path, max_bytes: int, max_pixels: int) -> np.ndarray:
@@ -86,8 +85,9 @@ def _buf(px: np.ndarray):
 
 
 # Heat-map stops (display sRGB), from 0 (black) to 1 (white): black, indigo, red, orange, yellow, white.
-_HEAT = np.array([[0.0, 0.0, 0.0], [0.25, 0.0, 0.55], [0.85, 0.1, 0.15], [1.0, 0.55, 0.0], [1.0, 0.95, 0.2],
-                  [1.0, 1.0, 1.0]])
+_HEAT = np.array(
+    [[0.0, 0.0, 0.0], [0.25, 0.0, 0.55], [0.85, 0.1, 0.15], [1.0, 0.55, 0.0], [1.0, 0.95, 0.2], [1.0, 1.0, 1.0]]
+)
 
 
 def heat_map(values: np.ndarray, scale: float) -> np.ndarray:
@@ -109,7 +109,7 @@ def _neighbourhood(px: np.ndarray):
     """The nine 3x3-shifted views of ``px`` (edge-replicated): each pixel's neighbours in turn."""
     h, w = px.shape[:2]
     pad = np.pad(px, ((1, 1), (1, 1), (0, 0)), mode="edge")
-    return [pad[dy:dy + h, dx:dx + w] for dy in (0, 1, 2) for dx in (0, 1, 2)]
+    return [pad[dy : dy + h, dx : dx + w] for dy in (0, 1, 2) for dx in (0, 1, 2)]
 
 
 def local_range(px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -124,12 +124,13 @@ def local_range(px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 @dataclass
 class FrameJudgement:
     """What the image rules measured on one frame (sRGB-encoded values in [0, 1])."""
-    diff: np.ndarray         # float[H, W]: largest channel difference per pixel
-    allowed: np.ndarray      # float[H, W]: abs_tol + contrast_k x local contrast of the golden
-    edge: np.ndarray         # bool[H, W]: the golden's local contrast above edge_contrast
-    violating: np.ndarray    # bool[H, W]: diff > allowed
-    deltae: np.ndarray       # float[H, W]: CIEDE2000 per pixel of the 3x3-blurred images
-    violation_limit: int     # a frame fails with more violating pixels than this
+
+    diff: np.ndarray  # float[H, W]: largest channel difference per pixel
+    allowed: np.ndarray  # float[H, W]: abs_tol + contrast_k x local contrast of the golden
+    edge: np.ndarray  # bool[H, W]: the golden's local contrast above edge_contrast
+    violating: np.ndarray  # bool[H, W]: diff > allowed
+    deltae: np.ndarray  # float[H, W]: CIEDE2000 per pixel of the 3x3-blurred images
+    violation_limit: int  # a frame fails with more violating pixels than this
 
     @property
     def violations(self) -> int:
@@ -157,8 +158,9 @@ def judge_frame(expected: np.ndarray, got: np.ndarray, tol: ImageTolerances) -> 
     allowed = tol.abs_tol + tol.contrast_k * contrast
     h, w = diff.shape
     limit = max(int(tol.fail_pixels), int(math.floor(tol.fail_percent / 100.0 * w * h)))
-    return FrameJudgement(diff, allowed, contrast > tol.edge_contrast, diff > allowed, _delta_e(_box3(e), _box3(g)),
-                          limit)
+    return FrameJudgement(
+        diff, allowed, contrast > tol.edge_contrast, diff > allowed, _delta_e(_box3(e), _box3(g)), limit
+    )
 
 
 def _box3(px: np.ndarray) -> np.ndarray:
@@ -171,10 +173,18 @@ def _box3(px: np.ndarray) -> np.ndarray:
     return acc / 9.0
 
 
-def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTolerances, artefact_dir: Path, *,  # noqa: PLR0913
-                   frames: Sequence[int] | None = None, relative_to: Path | None = None,
-                   max_artefact_frames: int = 10, max_bytes: int = DEFAULT_MAX_BYTES,
-                   max_pixels: int = DEFAULT_MAX_PIXELS) -> StageResult:
+def compare_images(  # noqa: PLR0913 - keyword options of the image stage
+    expected: Sequence[Path],
+    got: Sequence[Path],
+    tol: ImageTolerances,
+    artefact_dir: Path,
+    *,
+    frames: Sequence[int] | None = None,
+    relative_to: Path | None = None,
+    max_artefact_frames: int = 10,
+    max_bytes: int = DEFAULT_MAX_BYTES,
+    max_pixels: int = DEFAULT_MAX_PIXELS,
+) -> StageResult:
     """Compare a decoder's frame images with the golden ones, pairwise.
 
     Each pair is compared on sRGB-encoded values in [0, 1] (8-bit images as stored; float
@@ -216,8 +226,14 @@ def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTole
     notes: list[str] = []
     firsts: list[dict | None] = []
     artefacts: dict[str, str] = {}
-    agg = {"max_error": 0.0, "violations_max": 0.0, "violation_limit": 0.0, "deltae_mean_max": 0.0,
-           "interior_deltae_mean_max": 0.0, "interior_deltae_p99_max": 0.0}
+    agg = {
+        "max_error": 0.0,
+        "violations_max": 0.0,
+        "violation_limit": 0.0,
+        "deltae_mean_max": 0.0,
+        "interior_deltae_mean_max": 0.0,
+        "interior_deltae_p99_max": 0.0,
+    }
     psnrs: list[float] = []
     written = 0
 
@@ -256,8 +272,14 @@ def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTole
             bad = [f"{n} expected {ea.shape[a]}, got {ga.shape[a]}" for n, a in dims if ea.shape[a] != ga.shape[a]]
             outcomes.append(Outcome.FAIL)
             notes.append(f"frame {fr}: image size/channels differ: {'; '.join(bad)}")
-            firsts.append({"frame": fr, "what": "size", "expected": [ea.shape[1], ea.shape[0], ea.shape[2]],
-                           "got": [ga.shape[1], ga.shape[0], ga.shape[2]]})
+            firsts.append(
+                {
+                    "frame": fr,
+                    "what": "size",
+                    "expected": [ea.shape[1], ea.shape[0], ea.shape[2]],
+                    "got": [ga.shape[1], ga.shape[0], ga.shape[2]],
+                }
+            )
             continue
         oiio = openimageio()
         cr = oiio.ImageBufAlgo.compare(_buf(ea), _buf(ga), 1.0, 1.0)
@@ -279,8 +301,10 @@ def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTole
 
         reasons_fail, reasons_warn = [], []
         if j.violations > j.violation_limit:
-            reasons_fail.append(f"{j.violations} pixel(s) differ by more than {tol.abs_tol:g} + {tol.contrast_k:g} x "
-                                f"the golden's local contrast (limit {j.violation_limit} pixels)")
+            reasons_fail.append(
+                f"{j.violations} pixel(s) differ by more than {tol.abs_tol:g} + {tol.contrast_k:g} x "
+                f"the golden's local contrast (limit {j.violation_limit} pixels)"
+            )
         if in_mean > tol.interior_deltae_fail_mean:
             reasons_fail.append(f"interior ΔE2000 mean {in_mean:.3g} > {tol.interior_deltae_fail_mean:g}")
         if in_p99 > tol.interior_deltae_fail_p99:
@@ -288,8 +312,10 @@ def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTole
         if de_mean > tol.deltae_fail_mean:
             reasons_fail.append(f"ΔE2000 mean {de_mean:.3g} > {tol.deltae_fail_mean:g}")
         if in_mean > tol.interior_deltae_warn_mean:
-            reasons_warn.append(f"interior ΔE2000 mean {in_mean:.3g} > {tol.interior_deltae_warn_mean:g} "
-                                f"(a uniform difference below one just-noticeable difference)")
+            reasons_warn.append(
+                f"interior ΔE2000 mean {in_mean:.3g} > {tol.interior_deltae_warn_mean:g} "
+                f"(a uniform difference below one just-noticeable difference)"
+            )
         outcome = Outcome.FAIL if reasons_fail else Outcome.QUALITY_WARNING if reasons_warn else Outcome.PASS
         outcomes.append(outcome)
         if outcome is Outcome.PASS:
@@ -299,11 +325,19 @@ def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTole
             y, x = (int(v) for v in np.unravel_index(int(np.argmax(j.diff - j.allowed)), j.diff.shape))
         else:
             y, x = (int(v) for v in np.unravel_index(int(np.argmax(de)), de.shape))
-        first = {"frame": fr, "pixel": [x, y], "expected": _px8(_rgb(ea)[y, x]), "got": _px8(_rgb(ga)[y, x]),
-                 "deltae": float(de[y, x]), "reason": "; ".join(reasons_fail or reasons_warn)}
+        first = {
+            "frame": fr,
+            "pixel": [x, y],
+            "expected": _px8(_rgb(ea)[y, x]),
+            "got": _px8(_rgb(ga)[y, x]),
+            "deltae": float(de[y, x]),
+            "reason": "; ".join(reasons_fail or reasons_warn),
+        }
         firsts.append(first)
-        notes.append(f"frame {fr}: {first['reason']}; worst pixel ({x}, {y}): expected RGB {first['expected']}, "
-                     f"got {first['got']}")
+        notes.append(
+            f"frame {fr}: {first['reason']}; worst pixel ({x}, {y}): expected RGB {first['expected']}, "
+            f"got {first['got']}"
+        )
         if written < max_artefact_frames:
             written += 1
             scale = max(float(de.max()), 2.0)
@@ -320,15 +354,21 @@ def compare_images(expected: Sequence[Path], got: Sequence[Path], tol: ImageTole
         notes.insert(0, f"the decoder wrote {len(got)} images, expected {len(expected)}")
 
     overall = worst(outcomes) if outcomes else Outcome.PASS
-    metrics = {"frames_compared": float(len(psnrs)), "frames": float(len(expected)),
-               "frames_failing": float(sum(o is Outcome.FAIL for o in outcomes)),
-               "frames_warning": float(sum(o is Outcome.QUALITY_WARNING for o in outcomes)),
-               "psnr_min": float(min(psnrs)) if psnrs else 0.0, **agg}
+    metrics = {
+        "frames_compared": float(len(psnrs)),
+        "frames": float(len(expected)),
+        "frames_failing": float(sum(o is Outcome.FAIL for o in outcomes)),
+        "frames_warning": float(sum(o is Outcome.QUALITY_WARNING for o in outcomes)),
+        "psnr_min": float(min(psnrs)) if psnrs else 0.0,
+        **agg,
+    }
     series = {"psnr": psnr_s, "deltae_mean": de_s, "violations": viol_s}
     if overall is Outcome.PASS:
-        msg = (f"{len(expected)} image(s) within tolerance (at most {int(agg['violations_max'])} violating "
-               f"pixel(s) of {int(agg['violation_limit'])} allowed, interior ΔE2000 mean <= "
-               f"{agg['interior_deltae_mean_max']:.3g}, PSNR >= {metrics['psnr_min']:.4g} dB)")
+        msg = (
+            f"{len(expected)} image(s) within tolerance (at most {int(agg['violations_max'])} violating "
+            f"pixel(s) of {int(agg['violation_limit'])} allowed, interior ΔE2000 mean <= "
+            f"{agg['interior_deltae_mean_max']:.3g}, PSNR >= {metrics['psnr_min']:.4g} dB)"
+        )
         return StageResult("images", overall, msg, None, metrics, series, artefacts)
     first = next((f for o, f in zip(outcomes, firsts) if o is overall and f is not None), None)
     n_bad = sum(o is overall for o in outcomes)

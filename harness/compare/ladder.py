@@ -6,6 +6,7 @@ each stage the case compares against its goldens, in order: FAPs exactly (:mod:`
 vertices and effective FAPs within tolerance (:mod:`.vertices`), images with OpenImageIO and
 CIEDE2000 (:mod:`.images`). The worst stage decides.
 """
+
 from __future__ import annotations
 
 import os
@@ -56,15 +57,25 @@ def outcome_for(ending: Ending, *, invalid_stream: bool = False, conceal_allowed
             return Outcome.PASS, f"invalid stream rejected cleanly ({msg})"
         if conceal_allowed:
             return None
-        return Outcome.FAIL, (f"{msg}: decoded an invalid stream without complaint; a conformant decoder "
-                              f"rejects it with a documented exit code")
+        return Outcome.FAIL, (
+            f"{msg}: decoded an invalid stream without complaint; a conformant decoder "
+            f"rejects it with a documented exit code"
+        )
     if k == EndingKind.REJECT:
         return Outcome.FAIL, f"{msg}: a valid stream was rejected"
     return None
 
 
-def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], out_dir: Path,
-                    gdir: Path | None = None, stages_of_case: list[str] | None = None) -> list[StageResult]:
+def compare_outputs(
+    case: Case,
+    job: Job,
+    *,
+    golden: Path,
+    outputs: list[str],
+    out_dir: Path,
+    gdir: Path | None = None,
+    stages_of_case: list[str] | None = None,
+) -> list[StageResult]:
     """Each stage the case compares and the decoder outputs, judged against the goldens under
     ``golden`` (or in ``gdir``: what another reading gives, conformance/golden.py); failing images
     leave artefacts under ``out_dir``. ``stages_of_case``: the stages to compare instead of the
@@ -78,9 +89,14 @@ def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], o
             cand = [outd / f"{src.stem}.{ext}" for ext in ("npz", "fap")]
             got_path = next((p for p in cand if os.path.lexists(p)), None)
             if got_path is None:
-                stages.append(StageResult(f"faps[face {i}]", Outcome.FAIL,
-                                          f"no output for face {i} ({src.name}): expected {cand[0].name} or "
-                                          f"{cand[1].name} in the output folder"))
+                stages.append(
+                    StageResult(
+                        f"faps[face {i}]",
+                        Outcome.FAIL,
+                        f"no output for face {i} ({src.name}): expected {cand[0].name} or "
+                        f"{cand[1].name} in the output folder",
+                    )
+                )
                 continue
             stages.append(_faps_stage(expected, got_path, f"faps[face {i}]"))
         return stages
@@ -90,8 +106,9 @@ def compare_outputs(case: Case, job: Job, *, golden: Path, outputs: list[str], o
         if stage == "faps":
             gp = gdir / case.goldens.get("faps", "faps.npz")
             if not gp.is_file():
-                stages.append(StageResult("faps", Outcome.ERROR,
-                                          f"golden missing: {gp} (run fbaconf golden regenerate)"))
+                stages.append(
+                    StageResult("faps", Outcome.ERROR, f"golden missing: {gp} (run fbaconf golden regenerate)")
+                )
                 continue
             text_in = job.values.get("input", "").lower().endswith(".fap")
             stages.append(_faps_stage(FapFrames.load_npz(gp), job.path("faps_out"), "faps", text_in))
@@ -107,13 +124,13 @@ def _faps_stage(expected, got_path: Path, name: str, text_input: bool = False) -
     compare, only the values of every FAP the standard fixes; a player (``.fap`` input) is
     compared on its state (:mod:`.faps`)."""
     if got_path is None or not os.path.lexists(got_path):
-        return StageResult(name, Outcome.FAIL, "decoder exited 0 but wrote no FAP output"
-                           + (f" ({got_path.name})" if got_path else ""))
+        return StageResult(
+            name, Outcome.FAIL, "decoder exited 0 but wrote no FAP output" + (f" ({got_path.name})" if got_path else "")
+        )
     try:
         # A generous cap from the expected length keeps a hostile output from costing the
         # harness memory far beyond what the case can need.
-        got = load_output_faps(got_path, max_bytes=min(DEFAULT_MAX_BYTES,
-                                                            (1 << 20) + 8192 * len(expected.values)))
+        got = load_output_faps(got_path, max_bytes=min(DEFAULT_MAX_BYTES, (1 << 20) + 8192 * len(expected.values)))
     except OutputError as e:
         return StageResult(name, Outcome.FAIL, f"unreadable FAP output: {e}")
     r = compare_faps(expected, got, text_output=got_path.suffix.lower() == ".fap", player=text_input)
@@ -166,22 +183,36 @@ def _effective_faps_stage(golden: Path, got_path: Path, tol: dict) -> StageResul
     except Exception as e:  # noqa: BLE001 - untrusted file
         return StageResult(name, Outcome.FAIL, f"unreadable effective FAP output: {type(e).__name__}: {e}")
     if got.shape != exp.shape:
-        return StageResult(name, Outcome.FAIL, f"shape {list(got.shape)}, expected {list(exp.shape)}",
-                           first_difference={"what": "shape", "expected": list(exp.shape), "got": list(got.shape)})
+        return StageResult(
+            name,
+            Outcome.FAIL,
+            f"shape {list(got.shape)}, expected {list(exp.shape)}",
+            first_difference={"what": "shape", "expected": list(exp.shape), "got": list(got.shape)},
+        )
     atol = float(tol.get("max_tol", 1e-6))
     diff = np.abs(np.nan_to_num(got - exp, nan=np.inf))
     per_frame = diff.max(axis=1) if diff.size else np.zeros(0)
     series = {"max |effective FAP error|": [float(x) for x in np.minimum(per_frame, 1e30)]}
     bad = np.argwhere(diff > atol)
     if len(bad) == 0:
-        return StageResult(name, Outcome.PASS, "effective FAPs match",
-                           metrics={"max_abs_diff": float(diff.max(initial=0))}, series=series)
+        return StageResult(
+            name,
+            Outcome.PASS,
+            "effective FAPs match",
+            metrics={"max_abs_diff": float(diff.max(initial=0))},
+            series=series,
+        )
     f, j = (int(x) for x in bad[0])
     fd = {"frame": f, "fap": j + 1, "name": fap_table()[j].name, "expected": float(exp[f, j]), "got": float(got[f, j])}
-    return StageResult(name, Outcome.FAIL,
-                       f"frame {f}, FAP {j + 1} ({fd['name']}): expected {exp[f, j]:g}, got {got[f, j]:g} "
-                       f"(tolerance {atol:g}); {len(bad)} value(s) off", first_difference=fd,
-                       metrics={"max_abs_diff": float(diff.max()), "values_differing": float(len(bad))}, series=series)
+    return StageResult(
+        name,
+        Outcome.FAIL,
+        f"frame {f}, FAP {j + 1} ({fd['name']}): expected {exp[f, j]:g}, got {got[f, j]:g} "
+        f"(tolerance {atol:g}); {len(bad)} value(s) off",
+        first_difference=fd,
+        metrics={"max_abs_diff": float(diff.max()), "values_differing": float(len(bad))},
+        series=series,
+    )
 
 
 def _part_lookup(golden_vertices: Path) -> Callable[[int], str] | None:

@@ -1,5 +1,6 @@
 """Reading a decoder's output files defensively: regular files only, capped sizes, .npz without pickles
 or zip bombs, .fap text."""
+
 from __future__ import annotations
 
 import math
@@ -28,18 +29,40 @@ def check_output_file(path: Path, max_bytes: int) -> None:
     except OSError as e:
         raise OutputError(f"cannot read output: {e.strerror or e}", rule="output-missing", file=str(path)) from None
     if not stat.S_ISREG(st.st_mode):
-        kind = ("a symbolic link" if stat.S_ISLNK(st.st_mode) else "a FIFO" if stat.S_ISFIFO(st.st_mode) else
-                "a directory" if stat.S_ISDIR(st.st_mode) else "a device or socket")
+        kind = (
+            "a symbolic link"
+            if stat.S_ISLNK(st.st_mode)
+            else "a FIFO"
+            if stat.S_ISFIFO(st.st_mode)
+            else "a directory"
+            if stat.S_ISDIR(st.st_mode)
+            else "a device or socket"
+        )
         raise OutputError(f"output is {kind}; outputs must be regular files", rule="output-unsafe", file=str(path))
     if st.st_size > max_bytes:
-        raise OutputError(f"output is {st.st_size} bytes, more than the limit of {max_bytes}",
-                          rule="output-too-large", file=str(path))
+        raise OutputError(
+            f"output is {st.st_size} bytes, more than the limit of {max_bytes}", rule="output-too-large", file=str(path)
+        )
 
 
 # Exceptions a broken zip / npy can raise while we read it (all become OutputError).
-_READ_ERRORS = (zipfile.BadZipFile, zipfile.LargeZipFile, zlib.error, OSError, EOFError, ValueError, KeyError,
-                TypeError, OverflowError, NotImplementedError, RuntimeError, IndexError, MemoryError,
-                UnicodeError, SyntaxError)
+_READ_ERRORS = (
+    zipfile.BadZipFile,
+    zipfile.LargeZipFile,
+    zlib.error,
+    OSError,
+    EOFError,
+    ValueError,
+    KeyError,
+    TypeError,
+    OverflowError,
+    NotImplementedError,
+    RuntimeError,
+    IndexError,
+    MemoryError,
+    UnicodeError,
+    SyntaxError,
+)
 
 
 class _SafeNpz:
@@ -57,11 +80,16 @@ class _SafeNpz:
             raise self.err(f"{len(infos)} zip members, more than {MAX_NPZ_MEMBERS}", rule="output-too-large")
         for i in infos:
             if i.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED):
-                raise self.err(f"member {i.filename[:80]!r} uses zip compression type {i.compress_type}; .npz "
-                               f"members must be stored or deflated", rule="output-npz")
+                raise self.err(
+                    f"member {i.filename[:80]!r} uses zip compression type {i.compress_type}; .npz "
+                    f"members must be stored or deflated",
+                    rule="output-npz",
+                )
         if sum(i.file_size for i in infos) > max_bytes:
-            raise self.err(f"the members expand to {sum(i.file_size for i in infos)} bytes, more than the limit of "
-                           f"{max_bytes}", rule="output-too-large")
+            raise self.err(
+                f"the members expand to {sum(i.file_size for i in infos)} bytes, more than the limit of {max_bytes}",
+                rule="output-too-large",
+            )
         self.members = {i.filename[:-4]: i for i in infos if i.filename.endswith(".npy")}
 
     def __enter__(self) -> _SafeNpz:
@@ -105,8 +133,11 @@ class _SafeNpz:
             raise self.err(f"array '{key}' has unsupported dtype {dtype}", rule="output-dtype")
         nbytes = math.prod(shape) * dtype.itemsize
         if nbytes > info.file_size or self.read_bytes + info.file_size > self.max_bytes:
-            raise self.err(f"array '{key}' (shape {list(shape)}, {dtype}) is larger than its data or than "
-                           f"the limit of {self.max_bytes} bytes", rule="output-too-large")
+            raise self.err(
+                f"array '{key}' (shape {list(shape)}, {dtype}) is larger than its data or than "
+                f"the limit of {self.max_bytes} bytes",
+                rule="output-too-large",
+            )
         self.read_bytes += info.file_size
         with self.zf.open(info) as f:
             a = np.lib.format.read_array(f, allow_pickle=False)
@@ -160,27 +191,42 @@ def _load_fapframes_npz(path: Path, max_bytes: int) -> FapFrames:
         values = _want(z, "values", kinds="iu", shape=(None, NUM_FAPS), what="integers")
         n = values.shape[0]
         _int_in(z, "values", values, *_INT32)
-        status = _int_in(z, "status", _want(z, "status", kinds="iu", shape=(n, NUM_FAPS), what="integers"),
-                         0, max(STATUS_NAMES))
-        high = _int_in(z, "high", _want(z, "high", kinds="iu", shape=(n, len(HIGH_LEVEL_FIELDS)),
-                                        what="integers"), *_INT32)
-        frame_number = _int_in(z, "frame_number", _want(z, "frame_number", kinds="iu", shape=(n,),
-                                                        what="integers"), -(2 ** 63), 2 ** 63 - 1)
+        status = _int_in(
+            z, "status", _want(z, "status", kinds="iu", shape=(n, NUM_FAPS), what="integers"), 0, max(STATUS_NAMES)
+        )
+        high = _int_in(
+            z, "high", _want(z, "high", kinds="iu", shape=(n, len(HIGH_LEVEL_FIELDS)), what="integers"), *_INT32
+        )
+        frame_number = _int_in(
+            z, "frame_number", _want(z, "frame_number", kinds="iu", shape=(n,), what="integers"), -(2**63), 2**63 - 1
+        )
         time_ms = _want(z, "time_ms", kinds="iuf", shape=(n,), what="numbers").astype(np.float64)
         if not np.isfinite(time_ms).all():
             k = int(np.nonzero(~np.isfinite(time_ms))[0][0])
             raise z.err(f"time_ms of frame {k} is {time_ms[k]}", rule="output-nonfinite")
         kw: dict[str, Any] = {}
-        for key, lo, hi in (("is_intra", 0, 1), ("fap_quant", -(2 ** 15), 2 ** 15 - 1),
-                            ("coding_type", -128, 127), ("bit_offset", -(2 ** 63), 2 ** 63 - 1)):
+        for key, lo, hi in (
+            ("is_intra", 0, 1),
+            ("fap_quant", -(2**15), 2**15 - 1),
+            ("coding_type", -128, 127),
+            ("bit_offset", -(2**63), 2**63 - 1),
+        ):
             if key in z:
                 kw[key] = _int_in(z, key, _want(z, key, kinds="biu", shape=(n,), what="integers"), lo, hi)
         frame_rate = float(_scalar(z, "frame_rate", "iuf")) if "frame_rate" in z else 25.0
         if not frame_rate > 0:
             raise z.err(f"frame_rate is {frame_rate}, must be > 0", rule="output-range")
         gender = int(_scalar(z, "gender", "biu")) if "gender" in z else 0
-        return FapFrames(values=values, status=status, high=high, frame_number=frame_number, time_ms=time_ms,
-                         frame_rate=frame_rate, gender=gender, **kw)
+        return FapFrames(
+            values=values,
+            status=status,
+            high=high,
+            frame_number=frame_number,
+            time_ms=time_ms,
+            frame_rate=frame_rate,
+            gender=gender,
+            **kw,
+        )
 
 
 def _is_zip(path: Path) -> bool:
@@ -208,17 +254,24 @@ def load_output_faps(path, *, max_bytes: int = DEFAULT_MAX_BYTES) -> FapFrames:
             return _load_fapframes_npz(path, max_bytes)
         frames, header, _warnings = read_fap_file(path)
         if header.declared_frames != len(frames):
-            raise OutputError(f"unusable FAP output: the header says {header.declared_frames} frame(s), the file holds "
-                              f"{len(frames)}", rule="output-fap-count", file=str(path))
+            raise OutputError(
+                f"unusable FAP output: the header says {header.declared_frames} frame(s), the file holds {len(frames)}",
+                rule="output-fap-count",
+                file=str(path),
+            )
         return frames
     except OutputError:
         raise
     except FbaconfInputError as e:
-        raise OutputError(f"unreadable FAP output: {e.location() + ': ' if e.location() else ''}{e.message} "
-                          f"[rule {e.rule}]", rule="output-fap-text", file=str(path)) from None
+        raise OutputError(
+            f"unreadable FAP output: {e.location() + ': ' if e.location() else ''}{e.message} [rule {e.rule}]",
+            rule="output-fap-text",
+            file=str(path),
+        ) from None
     except Exception as e:  # noqa: BLE001 - untrusted input: nothing else may escape
-        raise OutputError(f"unreadable FAP output ({type(e).__name__}: {e})", rule="output-unreadable",
-                          file=str(path)) from None
+        raise OutputError(
+            f"unreadable FAP output ({type(e).__name__}: {e})", rule="output-unreadable", file=str(path)
+        ) from None
 
 
 def load_output_vertices(path, *, key: str = "vertices", max_bytes: int = DEFAULT_MAX_BYTES) -> np.ndarray:
@@ -234,18 +287,21 @@ def load_output_vertices(path, *, key: str = "vertices", max_bytes: int = DEFAUL
         check_output_file(path, max_bytes)
         with open_npz(path, max_bytes) as z:
             if key not in z:
-                raise z.err(f"no array '{key}' (arrays: {', '.join(sorted(z.members)) or 'none'})",
-                            rule="output-array-missing")
+                raise z.err(
+                    f"no array '{key}' (arrays: {', '.join(sorted(z.members)) or 'none'})", rule="output-array-missing"
+                )
             a = _want(z, key, kinds="f", shape=(None, None, 3), what="floats")
             a = a.astype(np.float64)
             bad = ~np.isfinite(a).all(axis=2)
             if bad.any():
                 f, v = (int(x[0]) for x in np.nonzero(bad))
-                raise z.err(f"array '{key}' is not finite at frame {f}, vertex {v}: {a[f, v].tolist()}",
-                            rule="output-nonfinite")
+                raise z.err(
+                    f"array '{key}' is not finite at frame {f}, vertex {v}: {a[f, v].tolist()}", rule="output-nonfinite"
+                )
             return a
     except OutputError:
         raise
     except Exception as e:  # noqa: BLE001 - untrusted input: nothing else may escape
-        raise OutputError(f"unreadable vertices output ({type(e).__name__}: {e})", rule="output-unreadable",
-                          file=str(path)) from None
+        raise OutputError(
+            f"unreadable vertices output ({type(e).__name__}: {e})", rule="output-unreadable", file=str(path)
+        ) from None

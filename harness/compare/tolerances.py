@@ -1,5 +1,6 @@
 """Tolerances of the comparison ladder: harness/data/tolerances.toml (every number with its reason) and
 a case's overrides."""
+
 from __future__ import annotations
 
 import math
@@ -54,23 +55,27 @@ class _Tolerances:
         elif isinstance(defaults, Mapping):
             base = dict(defaults)
         else:
-            raise ToleranceError(f"{cls.__name__} defaults must be a {cls.__name__}, a table or None",
-                                 rule="tolerance-type")
+            raise ToleranceError(
+                f"{cls.__name__} defaults must be a {cls.__name__}, a table or None", rule="tolerance-type"
+            )
         if overrides is not None and not isinstance(overrides, Mapping):
             raise ToleranceError(f"{cls.__name__} overrides must be a table", rule="tolerance-type")
         merged = {**base, **dict(overrides or {})}
         unknown = sorted(set(merged) - set(names))
         if unknown:
-            raise ToleranceError(f"unknown {cls.__name__} key(s) {', '.join(map(str, unknown))} "
-                                 f"(known: {', '.join(names)})", rule="tolerance-key")
+            raise ToleranceError(
+                f"unknown {cls.__name__} key(s) {', '.join(map(str, unknown))} (known: {', '.join(names)})",
+                rule="tolerance-key",
+            )
         missing = [n for n in names if n not in merged]
         if missing:
             raise ToleranceError(f"{cls.__name__} misses {', '.join(missing)}", rule="tolerance-key")
         vals = {n: _check_number(cls.__name__, n, merged[n]) for n in names}
         for w, f in cls._order:
             if vals[w] > vals[f]:
-                raise ToleranceError(f"{cls.__name__}: {w} ({vals[w]}) is above {f} ({vals[f]})",
-                                     rule="tolerance-order")
+                raise ToleranceError(
+                    f"{cls.__name__}: {w} ({vals[w]}) is above {f} ({vals[f]})", rule="tolerance-order"
+                )
         return cls(**vals)
 
     def to_dict(self) -> dict[str, float]:
@@ -81,6 +86,7 @@ class _Tolerances:
 class VertexTolerances(_Tolerances):
     """Vertex comparison limits in scene units: per-frame maximum euclidean error of any
     vertex and per-frame RMS over all vertices."""
+
     max_tol: float
     rms_tol: float
     _section = "vertices"
@@ -93,6 +99,7 @@ class ImageTolerances(_Tolerances):
     of violating pixels a frame may have (``fail_pixels`` or ``fail_percent`` % of its pixels,
     whichever is more), pixels with local contrast above ``edge_contrast`` are edges, and
     CIEDE2000 limits on the interior and the whole image."""
+
     abs_tol: float
     contrast_k: float
     edge_contrast: float

@@ -15,11 +15,25 @@ case ids and artefact names) is untrusted: it is escaped for HTML and XML, strip
 terminal control sequences for the terminal, and characters XML cannot hold are shown
 as ``\\xNN`` escapes. Every file is written atomically.
 """
+
 from .common import clean_text, format_difference, profile_of, verdict
 from .html import html_report, svg_plot, write_html
 from .jsonreport import read_json, report_json, write_json
 from .junit import junit_xml, write_junit
 from .terminal import terminal_summary
 
-__all__ = ["terminal_summary", "write_json", "read_json", "report_json", "write_junit", "junit_xml",
-           "write_html", "html_report", "format_difference", "verdict", "profile_of", "svg_plot", "clean_text"]
+__all__ = [
+    "terminal_summary",
+    "write_json",
+    "read_json",
+    "report_json",
+    "write_junit",
+    "junit_xml",
+    "write_html",
+    "html_report",
+    "format_difference",
+    "verdict",
+    "profile_of",
+    "svg_plot",
+    "clean_text",
+]

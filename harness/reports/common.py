@@ -1,4 +1,5 @@
 """What every report format shares: text cleaning of untrusted strings, verdicts, difference formatting, the cases that need attention."""  # noqa: E501
+
 from __future__ import annotations
 
 import math
@@ -18,7 +19,6 @@ VERDICTS = {0: "PASS", 1: "FAIL", 2: "SETUP ERROR", 3: "SPEED FAIL", 4: "SPEED I
 _NONFINITE = {"Infinity": math.inf, "-Infinity": -math.inf, "NaN": math.nan}
 
 
-
 _ANSI = re.compile(r"\x1b(?:\[[0-?]*[ -/]*[@-~]|\][^\x07\x1b]*(?:\x07|\x1b\\)?|[@-Z\\-_])")
 # Characters XML 1.0 cannot hold, plus the other C0/C1 controls (kept out of every report).
 _BAD_CHARS = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f\ud800-\udfff\ufffe\uffff]")
@@ -34,6 +34,7 @@ def clean_text(value: Any) -> str:
     def esc(m: re.Match) -> str:
         c = ord(m.group(0))
         return f"\\x{c:02x}" if c < 0x100 else f"\\u{c:04x}"
+
     return _BAD_CHARS.sub(esc, s)
 
 
@@ -82,8 +83,13 @@ def format_difference(d: dict | None) -> str:
         where.append(f"frame {_fmt_value(d['frame'])}")
     if "time_ms" in d:
         where.append(f"t={_fmt_value(d['time_ms'])} ms")
-    for key, label in (("fap", "FAP"), ("vertex", "vertex"), ("pixel", "pixel"), ("channel", "channel"),
-                       ("field", "field")):
+    for key, label in (
+        ("fap", "FAP"),
+        ("vertex", "vertex"),
+        ("pixel", "pixel"),
+        ("channel", "channel"),
+        ("field", "field"),
+    ):
         if key in d:
             item = f"{label} {_fmt_value(d[key])}"
             extra = [str(d[k]) for k in ("name", "part") if k in d and key in ("fap", "vertex")]
@@ -116,8 +122,17 @@ def _suite_names(record: RunRecord) -> list[str]:
 # The count tables' columns: a required case the decoder could not take is counted apart from an
 # informative one (it fails the claim unless its tool is set aside as unverified; harness/verdict.py).
 NS_REQUIRED = "RequiredNotSupported"
-DISPLAY_COLUMNS = ("Pass", "Fail", "QualityWarning", NS_REQUIRED, "NotSupported", "Timeout", "Crash", "Error",
-                   "Skipped")
+DISPLAY_COLUMNS = (
+    "Pass",
+    "Fail",
+    "QualityWarning",
+    NS_REQUIRED,
+    "NotSupported",
+    "Timeout",
+    "Crash",
+    "Error",
+    "Skipped",
+)
 
 
 def display_counts(results) -> dict[str, int]:
@@ -153,12 +168,16 @@ def verdict_reason(record: RunRecord) -> str:
     out = []
     for tool in sorted(unverified):
         t = (v.get("tools") or {}).get(tool, {})
-        out.append(f"{tool} {t.get('state', 'unverified')} ({t.get('note', '')}): its {t.get('cases', '?')} required "
-                   f"case(s) set aside; --strict fails them")
+        out.append(
+            f"{tool} {t.get('state', 'unverified')} ({t.get('note', '')}): its {t.get('cases', '?')} required "
+            f"case(s) set aside; --strict fails them"
+        )
     if record.provisional_differences:
         how = sorted({str(d.get("reading")) for d in record.provisional_differences})
         out.append(f"{len(record.provisional_differences)} case(s) judged by the declared reading {', '.join(how)}")
     return clean_text("; ".join(out))
+
+
 def speed_word(s: SpeedResult) -> str:
     """PASS, FAIL or INCONCLUSIVE (below the minimum on a machine busy with other work)."""
     return s.verdict.upper()
@@ -169,8 +188,11 @@ def _speed_summary(speed: list[SpeedResult]) -> str:
         return ""
     words = [speed_word(s) for s in speed]
     bad, unsure = words.count("FAIL"), words.count("INCONCLUSIVE")
-    return (f"; speed: {words.count('PASS')} of {len(speed)} pass" + (f", {bad} below the level minimum" if bad else "")
-            + (f", {unsure} inconclusive (below it on a busy machine)" if unsure else ""))
+    return (
+        f"; speed: {words.count('PASS')} of {len(speed)} pass"
+        + (f", {bad} below the level minimum" if bad else "")
+        + (f", {unsure} inconclusive (below it on a busy machine)" if unsure else "")
+    )
 
 
 # Baseline classes in the order a CI log shows them: what fails the run first.
@@ -181,10 +203,14 @@ def _problem_cases(record: RunRecord) -> list[CaseResult]:
     """Cases worth a closer look: new failures first (a required case the decoder cannot take
     included), then fixed ones, then the rest worst first: failing, quality warnings, flakes."""
     rank = {o: i for i, o in enumerate(OUTCOME_ORDER)}
-    picked = [r for r in record.results if r.outcome.failing or r.outcome is Outcome.QUALITY_WARNING
-              or r.baseline in ("fixed", "flake", "new")]
-    return sorted(picked, key=lambda r: (_BASELINE_ORDER.get(r.baseline or "", 2), rank[r.outcome], not r.required,
-                                         r.case_id))
+    picked = [
+        r
+        for r in record.results
+        if r.outcome.failing or r.outcome is Outcome.QUALITY_WARNING or r.baseline in ("fixed", "flake", "new")
+    ]
+    return sorted(
+        picked, key=lambda r: (_BASELINE_ORDER.get(r.baseline or "", 2), rank[r.outcome], not r.required, r.case_id)
+    )
 
 
 def baseline_changes(record: RunRecord) -> tuple[list[CaseResult], list[CaseResult]]:
@@ -205,8 +231,9 @@ def baseline_lines(record: RunRecord, limit: int = 30) -> list[str]:
         what = r.message.splitlines()[0] if r.message else ""
         out.append(f"  NEW    {r.case_id}  {r.outcome.value}" + (f": {what[:200]}" if what else ""))
     for r in fixed[:limit]:
-        out.append(f"  FIXED  {r.case_id}  passes now, listed as failing: remove its line from the baseline "
-                   f"(or --allow-fixed)")
+        out.append(
+            f"  FIXED  {r.case_id}  passes now, listed as failing: remove its line from the baseline (or --allow-fixed)"
+        )
     more = max(0, len(new) - limit) + max(0, len(fixed) - limit)
     if more:
         out.append(f"  ... and {more} more (see the cases to look at below)")
@@ -228,8 +255,9 @@ def reproduce_line(r: CaseResult, keep_option: str = "--keep-workdirs", env: dic
 
 
 def _speed_rows(speed: list[SpeedResult]) -> list[list[str]]:
-    return [[s.operation, s.claim, f"{s.rate_fps:.2f}", f"{s.required_fps:.2f}", speed_word(s), s.provenance]
-            for s in speed]
+    return [
+        [s.operation, s.claim, f"{s.rate_fps:.2f}", f"{s.required_fps:.2f}", speed_word(s), s.provenance] for s in speed
+    ]
 
 
 def _normalised(message: str, case_id: str = "") -> str:
@@ -252,12 +280,19 @@ def failure_groups(record: RunRecord) -> list[tuple[str, list[CaseResult]]]:
         key = (r.outcome.value, signature(r), r.crash_kind or "", _normalised(r.message, r.case_id), r.baseline or "")
         groups.setdefault(key, []).append(r)
     rank = {o.value: i for i, o in enumerate(OUTCOME_ORDER)}
-    out = sorted(groups.items(), key=lambda kv: (_BASELINE_ORDER.get(kv[0][4], 2), rank[kv[0][0]], -len(kv[1]),
-                                                 kv[1][0].case_id))
+    out = sorted(
+        groups.items(), key=lambda kv: (_BASELINE_ORDER.get(kv[0][4], 2), rank[kv[0][0]], -len(kv[1]), kv[1][0].case_id)
+    )
     return [(k[0], rs) for k, rs in out]
 
 
 def provisional_line(record: RunRecord) -> str:
     n = len(record.provisional)
-    return (f"{n} provisional rule(s) and level limit(s) this verdict rests on (listed in report.json and "
-            f"in a certificate's statement)") if n else ""
+    return (
+        (
+            f"{n} provisional rule(s) and level limit(s) this verdict rests on (listed in report.json and "
+            f"in a certificate's statement)"
+        )
+        if n
+        else ""
+    )

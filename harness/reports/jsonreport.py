@@ -1,4 +1,5 @@
 """The run record as strict JSON (schema harness/data/run-report.schema.json), written and read back."""
+
 from __future__ import annotations
 
 import json
@@ -49,8 +50,20 @@ def _restore(doc: dict) -> dict:
             st["metrics"] = {k: _restore_float(v) for k, v in st.get("metrics", {}).items()}
             st["series"] = {k: [_restore_float(x) for x in v] for k, v in st.get("series", {}).items()}
     for s in doc.get("speed", []):
-        for k in ("per_frame_s", "startup_s", "rate_fps", "required_fps", "fit_r2", "cpu_s", "wall_s", "stall_s",
-                  "others_share", "others_share_between", "load", "uncontended_fps"):
+        for k in (
+            "per_frame_s",
+            "startup_s",
+            "rate_fps",
+            "required_fps",
+            "fit_r2",
+            "cpu_s",
+            "wall_s",
+            "stall_s",
+            "others_share",
+            "others_share_between",
+            "load",
+            "uncontended_fps",
+        ):
             if k in s:
                 s[k] = _restore_float(s[k])
     return doc

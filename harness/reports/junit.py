@@ -1,4 +1,5 @@
 """JUnit XML for CI systems (ElementTree, no extra dependency), agreeing with the run's exit code."""
+
 from __future__ import annotations
 
 import json
@@ -50,7 +51,7 @@ def _case_details(r: CaseResult) -> str:
 
 def _one_line(text: str, limit: int = 500) -> str:
     s = " ".join(clean_text(text).split())
-    return s if len(s) <= limit else s[:limit - 1] + "\u2026"
+    return s if len(s) <= limit else s[: limit - 1] + "\u2026"
 
 
 def _properties(parent: ET.Element, props: list[tuple[str, Any]]) -> None:
@@ -74,8 +75,13 @@ def _close_suite(ts, c: Counter, record: RunRecord) -> None:
 def junit_xml(record: RunRecord) -> bytes:
     """The JUnit XML document written by :func:`write_junit`."""
     dec = record.decoder or {}
-    common = [("decoder", dec.get("name")), ("decoder.manifest_sha256", dec.get("manifest_sha256")),
-              ("claim", record.claim), ("exit_code", record.exit_code), ("verdict", verdict(record))]
+    common = [
+        ("decoder", dec.get("name")),
+        ("decoder.manifest_sha256", dec.get("manifest_sha256")),
+        ("claim", record.claim),
+        ("exit_code", record.exit_code),
+        ("verdict", verdict(record)),
+    ]
     if record.baseline_summary:  # "N new, N known, N fixed, N flaky"
         common.append(("baseline", record.baseline_summary))
     common += [(f"provisional.{i}", p) for i, p in enumerate(record.provisional)]
@@ -90,8 +96,13 @@ def junit_xml(record: RunRecord) -> bytes:
         meta = suite_meta.get(name, {})
         _properties(ts, common + [(f"suite.{k}", v) for k, v in meta.items() if k != "name"])
         for r in cases:
-            tc = ET.SubElement(ts, "testcase", classname=clean_text(f"fbaconf.{r.suite}"), name=clean_text(r.case_id),
-                               time=_sec(r.duration_s))
+            tc = ET.SubElement(
+                ts,
+                "testcase",
+                classname=clean_text(f"fbaconf.{r.suite}"),
+                name=clean_text(r.case_id),
+                time=_sec(r.duration_s),
+            )
             o = r.outcome
             msg = _one_line(("new: " if r.baseline == "new" else "") + (r.message or o.value))
             excused = r.baseline in ("known-failure", "flake") and not o.ok
@@ -101,14 +112,25 @@ def junit_xml(record: RunRecord) -> bytes:
                 el.text = _case_details(r)
                 c["skipped"] += 1
             elif r.baseline == "fixed":
-                el = ET.SubElement(tc, "failure", message=_one_line("fixed: the baseline lists this case as "
-                                                                    "failing but it passes now: remove the line"),
-                                   type="BaselineFixed")
+                el = ET.SubElement(
+                    tc,
+                    "failure",
+                    message=_one_line(
+                        "fixed: the baseline lists this case as failing but it passes now: remove the line"
+                    ),
+                    type="BaselineFixed",
+                )
                 c["failures"] += 1
             elif o is Outcome.NOT_SUPPORTED and r.required:
-                el = ET.SubElement(tc, "failure", message=_one_line(("new: " if r.baseline == "new" else "")
-                                                                    + f"required by the claim but not supported: "
-                                                                    f"{r.message}"), type=o.value)
+                el = ET.SubElement(
+                    tc,
+                    "failure",
+                    message=_one_line(
+                        ("new: " if r.baseline == "new" else "") + f"required by the claim but not supported: "
+                        f"{r.message}"
+                    ),
+                    type=o.value,
+                )
                 c["failures"] += 1
             elif o in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH):
                 el = ET.SubElement(tc, "failure", message=msg, type=o.value)
@@ -119,7 +141,9 @@ def junit_xml(record: RunRecord) -> bytes:
                 el.text = _case_details(r)
                 c["errors"] += 1
             elif o in (Outcome.NOT_SUPPORTED, Outcome.SKIPPED):
-                el = ET.SubElement(tc, "skipped", message=_one_line(f"{o.value}: {r.message}" if r.message else o.value))  # noqa: E501
+                el = ET.SubElement(
+                    tc, "skipped", message=_one_line(f"{o.value}: {r.message}" if r.message else o.value)
+                )
                 c["skipped"] += 1
             elif o is Outcome.QUALITY_WARNING:
                 ET.SubElement(tc, "system-out").text = "QualityWarning (passes): " + _case_details(r)
@@ -135,15 +159,24 @@ def junit_xml(record: RunRecord) -> bytes:
         _properties(ts, common)
         for s in record.speed:
             t = sum(float(x.get("seconds", 0.0)) for x in s.samples if isinstance(x, dict))
-            tc = ET.SubElement(ts, "testcase", classname="fbaconf.speed",
-                               name=clean_text(f"{s.operation} {s.claim}"), time=_sec(t))
-            text = (f"{s.operation}: {s.rate_fps:.2f} fps measured, {s.required_fps:.2f} fps required "
-                    f"(provenance: {s.provenance}); per frame {s.per_frame_s:.6g} s, startup {s.startup_s:.6g} s, "
-                    f"fit r2 {s.fit_r2:.4f}" + (f"\n{s.message}" if s.message else ""))
+            tc = ET.SubElement(
+                ts, "testcase", classname="fbaconf.speed", name=clean_text(f"{s.operation} {s.claim}"), time=_sec(t)
+            )
+            text = (
+                f"{s.operation}: {s.rate_fps:.2f} fps measured, {s.required_fps:.2f} fps required "
+                f"(provenance: {s.provenance}); per frame {s.per_frame_s:.6g} s, startup {s.startup_s:.6g} s, "
+                f"fit r2 {s.fit_r2:.4f}" + (f"\n{s.message}" if s.message else "")
+            )
             if not s.passed:
-                el = ET.SubElement(tc, "failure", type="SpeedBelowMinimum",
-                                   message=_one_line(f"{s.operation} {s.rate_fps:.2f} fps below the required "
-                                                     f"{s.required_fps:.2f} fps ({s.provenance})"))
+                el = ET.SubElement(
+                    tc,
+                    "failure",
+                    type="SpeedBelowMinimum",
+                    message=_one_line(
+                        f"{s.operation} {s.rate_fps:.2f} fps below the required "
+                        f"{s.required_fps:.2f} fps ({s.provenance})"
+                    ),
+                )
                 el.text = clean_text(text)
                 c["failures"] += 1
             else:

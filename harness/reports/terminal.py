@@ -1,4 +1,5 @@
 """The terminal summary: aligned tables per suite, profile and outcome, the failing cases, speed, the verdict line."""
+
 from __future__ import annotations
 
 from collections.abc import Iterable
@@ -28,8 +29,14 @@ from .common import (
 )
 
 _ANSI_COLOURS = {
-    Outcome.PASS: "32", Outcome.QUALITY_WARNING: "33", Outcome.NOT_SUPPORTED: "36", Outcome.SKIPPED: "2",
-    Outcome.FAIL: "31", Outcome.TIMEOUT: "35", Outcome.CRASH: "1;31", Outcome.ERROR: "1;35",
+    Outcome.PASS: "32",
+    Outcome.QUALITY_WARNING: "33",
+    Outcome.NOT_SUPPORTED: "36",
+    Outcome.SKIPPED: "2",
+    Outcome.FAIL: "31",
+    Outcome.TIMEOUT: "35",
+    Outcome.CRASH: "1;31",
+    Outcome.ERROR: "1;35",
 }
 _ANSI_COLOURS.update({o.value: c for o, c in list(_ANSI_COLOURS.items())})
 _ANSI_COLOURS[NS_REQUIRED] = "1;33"
@@ -63,27 +70,32 @@ def _stderr_excerpt(r, n: int = 6) -> tuple[str, list[str]]:
     if at >= 0:
         start = text.rfind("\n", 0, at) + 1
         return "the crash report", [clean_text(x) for x in text[start:].rstrip().splitlines()[:n]]
-    return "last lines", clean_text(text).rstrip().splitlines()[-(n - 1):]
+    return "last lines", clean_text(text).rstrip().splitlines()[-(n - 1) :]
 
 
 def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: int = 20) -> str:  # noqa: C901
     """A plain-text summary of ``record`` (ANSI colours when ``color``), ending with the verdict line
     ``result: PASS|FAIL|SPEED FAIL|SPEED INCONCLUSIVE|SETUP ERROR (N cases: a Pass, b Fail, ...)``."""
+
     def paint(code: str, text: str) -> str:
         return f"\x1b[{code}m{text}\x1b[0m" if color else text
 
     lines: list[str] = []
     dec = record.decoder or {}
-    lines.append(f"fbaconf run: decoder {clean_text(dec.get('name', '?'))}"
-                 + (f", claim {clean_text(record.claim)}" if record.claim else "")
-                 + (f", {record.duration_s:.1f} s" if record.duration_s else ""))
+    lines.append(
+        f"fbaconf run: decoder {clean_text(dec.get('name', '?'))}"
+        + (f", claim {clean_text(record.claim)}" if record.claim else "")
+        + (f", {record.duration_s:.1f} s" if record.duration_s else "")
+    )
     lines += ["  " + x for x in baseline_lines(record)]  # what fails the run against its baseline, first
     suites = []
     for s in record.suites:
         n = s.get("cases")
         n = len(n) if isinstance(n, (list, tuple)) else n
-        suites.append(f"{clean_text(s.get('name', '?'))} {clean_text(s.get('version', ''))}".rstrip()
-                      + (f" ({n} cases)" if n is not None else ""))
+        suites.append(
+            f"{clean_text(s.get('name', '?'))} {clean_text(s.get('version', ''))}".rstrip()
+            + (f" ({n} cases)" if n is not None else "")
+        )
     if suites:
         lines.append("  suites: " + ", ".join(suites))
     if record.provisional:
@@ -114,10 +126,12 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
     groups = failure_groups(record)
     if groups:
         n_cases = sum(len(rs) for _o, rs in groups)
-        shown = groups[:max(0, max_failures)]
+        shown = groups[: max(0, max_failures)]
         lines.append("")
-        lines.append(f"cases to look at: {n_cases} in {len(groups)} group(s) of identical failures"
-                     + (f" ({len(shown)} groups shown)" if len(shown) < len(groups) else ""))
+        lines.append(
+            f"cases to look at: {n_cases} in {len(groups)} group(s) of identical failures"
+            + (f" ({len(shown)} groups shown)" if len(shown) < len(groups) else "")
+        )
         for outcome, rs in shown:
             r = rs[0]
             tags = []
@@ -163,9 +177,16 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
             if ci != 4:
                 return text
             return paint({"PASS": "32", "INCONCLUSIVE": "33"}.get(text.strip(), "31"), text)
+
         rows = [[clean_text(c) for c in row] for row in _speed_rows(record.speed)]
-        lines.extend(_table(["operation", "claim", "measured fps", "required fps", "verdict", "provenance"],
-                            rows, {2, 3}, colour_speed))
+        lines.extend(
+            _table(
+                ["operation", "claim", "measured fps", "required fps", "verdict", "provenance"],
+                rows,
+                {2, 3},
+                colour_speed,
+            )
+        )
         for s in record.speed:
             if s.message:
                 lines.append(f"  {clean_text(s.operation)}: {clean_text(s.message)}")
@@ -177,16 +198,25 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
     if record.provisional_differences:
         how = "they fail the claim (--strict)" if record.strict else "the claim passes with them; --strict fails them"
         lines += ["", f"provisional differences ({how}): cases judged by an other reading the decoder declares"]
-        lines += [f"  {clean_text(d['case_id'])}  rests on {', '.join(d['rests_on'])}; judged by {d.get('reading')}"
-                  for d in record.provisional_differences]
+        lines += [
+            f"  {clean_text(d['case_id'])}  rests on {', '.join(d['rests_on'])}; judged by {d.get('reading')}"
+            for d in record.provisional_differences
+        ]
 
     v = verdict(record)
     lines.append("")
-    code = ("33" if record.exit_code in (3, 4) or (record.exit_code == 0 and v != "PASS") else
-            "32" if record.exit_code == 0 else "31")
+    code = (
+        "33"
+        if record.exit_code in (3, 4) or (record.exit_code == 0 and v != "PASS")
+        else "32"
+        if record.exit_code == 0
+        else "31"
+    )
     reason = verdict_reason(record)
     if reason:
         lines.append(f"why: {reason}")
-    lines.append(f"result: {paint('1;' + code, v)} "
-                 f"({_summary_counts(display_counts(record.results))}{_speed_summary(record.speed)})")
+    lines.append(
+        f"result: {paint('1;' + code, v)} "
+        f"({_summary_counts(display_counts(record.results))}{_speed_summary(record.speed)})"
+    )
     return "\n".join(lines) + "\n"

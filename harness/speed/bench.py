@@ -1,5 +1,6 @@
 """``fbaconf bench``: a decoder's decode and render speed against the claimed level's minimums
 (the measurement itself is :mod:`.speed`)."""
+
 from __future__ import annotations
 
 import json
@@ -62,9 +63,16 @@ def run(args) -> int:
         if not args.json:
             print(f"measuring {op} speed of {adapter.name} for {claim}...", file=sys.stderr, flush=True)
         try:
-            r = measure(adapter, claim, op, lengths=lengths, repeats=args.repeats,
-                        work_dir=(args.work_dir / op) if args.work_dir else None,
-                        target_s=args.target_seconds, render_size=size)
+            r = measure(
+                adapter,
+                claim,
+                op,
+                lengths=lengths,
+                repeats=args.repeats,
+                work_dir=(args.work_dir / op) if args.work_dir else None,
+                target_s=args.target_seconds,
+                render_size=size,
+            )
         except SpeedRunError as e:
             r = failed_result(e, claim)
             failed = True
@@ -74,9 +82,14 @@ def run(args) -> int:
     sv = speed_verdict([r.to_json() for r in results])
     code = 1 if failed else (sv[1] if sv else 0)
     if args.json:
-        doc = {"format": "fbaconf.bench/1", "decoder": adapter.describe(), "claim": claim, "exit_code": code,
-               "speed": [r.to_json() for r in results],
-               "skipped": [{"operation": op, "reason": why} for op, why in skipped]}
+        doc = {
+            "format": "fbaconf.bench/1",
+            "decoder": adapter.describe(),
+            "claim": claim,
+            "exit_code": code,
+            "speed": [r.to_json() for r in results],
+            "skipped": [{"operation": op, "reason": why} for op, why in skipped],
+        }
         print(json.dumps(jsonable(doc), indent=2))
         return code
     print(render_table(results))
@@ -85,11 +98,13 @@ def run(args) -> int:
     for r in results:
         if r.message:
             print(f"{r.operation}: {r.message}")
-    verdict = {0: "PASS: every measured rate meets the level minimum",
-               1: "ERROR: a decoder run failed during the measurement",
-               3: "FAIL: below the level's minimum rate (speed requirement only)",
-               4: "INCONCLUSIVE: below the level's minimum rate on a machine busy with other work (measure again "
-                  "on an idle machine)"}[code]
+    verdict = {
+        0: "PASS: every measured rate meets the level minimum",
+        1: "ERROR: a decoder run failed during the measurement",
+        3: "FAIL: below the level's minimum rate (speed requirement only)",
+        4: "INCONCLUSIVE: below the level's minimum rate on a machine busy with other work (measure again "
+        "on an idle machine)",
+    }[code]
     print(f"result: {verdict}")
     return code
 
@@ -98,21 +113,46 @@ def render_table(results) -> str:
     """Plain-text table: operation, per-frame ms, start-up, measured/required fps, ratio, verdict,
     the decoder's CPU time and wait and the share of the CPUs others used over the timed runs,
     provenance (provisional limits marked with ``*``)."""
-    header = ["operation", "claim", "per-frame ms", "startup s", "measured fps", "required fps", "ratio",
-              "verdict", "cpu s", "wait s", "others %", "provenance"]
+    header = [
+        "operation",
+        "claim",
+        "per-frame ms",
+        "startup s",
+        "measured fps",
+        "required fps",
+        "ratio",
+        "verdict",
+        "cpu s",
+        "wait s",
+        "others %",
+        "provenance",
+    ]
     rows = []
     for r in results:
         ratio = (r.rate_fps / r.required_fps) if r.required_fps and r.required_fps > 0 else math.inf
         prov = r.provenance + (" *" if r.provenance == "provisional" else "")
-        rows.append([r.operation, r.claim, _num(r.per_frame_s * 1000, 3), _num(r.startup_s, 3),
-                     _num(r.rate_fps, 1), _num(r.required_fps, 1), _num(ratio, 2),
-                     (r.verdict or ("pass" if r.passed else "fail")).upper(), _num(r.cpu_s, 2), _num(r.stall_s, 2),
-                     _num(None if r.others_share is None else 100 * r.others_share, 0), prov])
+        rows.append(
+            [
+                r.operation,
+                r.claim,
+                _num(r.per_frame_s * 1000, 3),
+                _num(r.startup_s, 3),
+                _num(r.rate_fps, 1),
+                _num(r.required_fps, 1),
+                _num(ratio, 2),
+                (r.verdict or ("pass" if r.passed else "fail")).upper(),
+                _num(r.cpu_s, 2),
+                _num(r.stall_s, 2),
+                _num(None if r.others_share is None else 100 * r.others_share, 0),
+                prov,
+            ]
+        )
     widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(header)]
     right = {2, 3, 4, 5, 6, 8, 9, 10}
 
     def line(cells):
         return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
+
     out = [line(header), line(["-" * w for w in widths])] + [line(r) for r in rows]
     if any(r.provenance == "provisional" for r in results):
         out.append("* provisional level limit (profiles/data/profiles.toml): not from the ISO text")

@@ -5,6 +5,7 @@ as images against the reference rendering — never a count of lines or of files
 The sample is drawn after the run, from the operating system's random source: the first and
 last frames and a few at random, so a decoder cannot know which frames are looked at.
 """
+
 from __future__ import annotations
 
 import secrets
@@ -44,8 +45,11 @@ def faps_problem(path: Path, run: Run, *, max_bytes: int, player: bool = False) 
         ks = sample(n)
         got, count, text = _sampled(path, n, ks, max_bytes)
     except OutputError as e:
-        return (f"finished but wrote no output ({path})" if e.rule == "output-missing" else
-                f"finished but its output is unusable: {e}")
+        return (
+            f"finished but wrote no output ({path})"
+            if e.rule == "output-missing"
+            else f"finished but its output is unusable: {e}"
+        )
     if count != n:
         return f"was given {n} frames but its output holds {count}"
     r = compare_faps(run.expected(ks), got, text_output=text, player=player)
@@ -54,14 +58,17 @@ def faps_problem(path: Path, run: Run, *, max_bytes: int, player: bool = False) 
     d = r.first_difference or {}
     k = int(ks[d["frame"]]) if isinstance(d.get("frame"), (int, np.integer)) and d["frame"] < len(ks) else None
     where = f"frame {k}" if k is not None else "a sampled frame"
-    return (f"finished but its output is not the decoding of the content it was given ({where} of {n}, "
-            f"{d.get('what', 'value')}"
-            f"{' of FAP ' + str(d['fap']) if d.get('fap') is not None else ''}: expected {d.get('expected')}, "
-            f"got {d.get('got')})")
+    return (
+        f"finished but its output is not the decoding of the content it was given ({where} of {n}, "
+        f"{d.get('what', 'value')}"
+        f"{' of FAP ' + str(d['fap']) if d.get('fap') is not None else ''}: expected {d.get('expected')}, "
+        f"got {d.get('got')})"
+    )
 
 
-def images_problem(images_dir: Path, run: Run, ks, *, width: int, height: int, scene: Path | None = None,
-                   max_bytes: int) -> str | None:
+def images_problem(
+    images_dir: Path, run: Run, ks, *, width: int, height: int, scene: Path | None = None, max_bytes: int
+) -> str | None:
     """Why the images of frames ``ks`` in ``images_dir`` (``frame_<k:05d>.png``) are not the
     reference rendering of ``run`` at ``width`` x ``height`` — judged as the image stage judges
     a case (:func:`~.compare.images.compare_images`, the default tolerances: what a faithful
@@ -71,12 +78,21 @@ def images_problem(images_dir: Path, run: Run, ks, *, width: int, height: int, s
     with tempfile.TemporaryDirectory(prefix="fbaconf-speed-images-") as tmp:
         expected = run.reference_images(ks, Path(tmp) / "expected", width=width, height=height, scene=scene)
         got = [Path(images_dir) / f"frame_{k:05d}.png" for k in ks]
-        r = compare_images(expected, got, ImageTolerances.from_dict(None, {}), Path(tmp) / "artefacts", frames=ks,
-                           max_bytes=max_bytes, max_artefact_frames=0)
+        r = compare_images(
+            expected,
+            got,
+            ImageTolerances.from_dict(None, {}),
+            Path(tmp) / "artefacts",
+            frames=ks,
+            max_bytes=max_bytes,
+            max_artefact_frames=0,
+        )
     if r.outcome.ok:
         return None
-    return (f"finished but its images are not the rendering of the content it was given (frames "
-            f"{', '.join(map(str, ks))} of {run.n} judged as images): {r.message}")
+    return (
+        f"finished but its images are not the rendering of the content it was given (frames "
+        f"{', '.join(map(str, ks))} of {run.n} judged as images): {r.message}"
+    )
 
 
 def _sampled(path: Path, n: int, ks: np.ndarray, max_bytes: int) -> tuple[FapFrames, int, bool]:
@@ -100,8 +116,11 @@ def _sampled(path: Path, n: int, ks: np.ndarray, max_bytes: int) -> tuple[FapFra
         raise OutputError("no .fap header with a frame count", rule="output-fap-count", file=str(path)) from None
     ones = b" ".join([b"1"] * 68)
     if declared == n and len(lines) == 1 + 2 * n and all(lines[1 + 2 * k].strip() == ones for k in ks):
-        mini = b" ".join(head[:-1] + [str(len(ks)).encode()]) + b"\n" + b"".join(
-            lines[1 + 2 * k] + b"\n" + lines[2 + 2 * k] + b"\n" for k in ks)
+        mini = (
+            b" ".join(head[:-1] + [str(len(ks)).encode()])
+            + b"\n"
+            + b"".join(lines[1 + 2 * k] + b"\n" + lines[2 + 2 * k] + b"\n" for k in ks)
+        )
         try:
             frames, _header, _w = read_fap_text(mini.decode("utf-8"), file=str(path))
         except (FbaconfInputError, UnicodeDecodeError) as e:

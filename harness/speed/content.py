@@ -20,6 +20,7 @@ the blocks that hold them only, and the expected images the reference rendering 
 frames (8 x 8 samples per pixel, as the goldens): a 100,000-frame run costs its encoding, and
 a few blocks' decoding.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -119,8 +120,10 @@ class Run:
         """Block ``j``: the procedural motion at a secret phase plus secret per-frame noise."""
         raw = self.content._random(f"run {self.number} block {j}", 4 + size * tables.NUM_FAPS)
         frames = synthetic_sequence(size, CONTENT_RATE, seed=int.from_bytes(raw[:4], "little") & 0x7FFFFFFF)
-        levels = (np.frombuffer(raw[4:], dtype=np.uint8).reshape(size, tables.NUM_FAPS).astype(np.int64)
-                  % (2 * NOISE_LEVELS + 1)) - NOISE_LEVELS
+        levels = (
+            np.frombuffer(raw[4:], dtype=np.uint8).reshape(size, tables.NUM_FAPS).astype(np.int64)
+            % (2 * NOISE_LEVELS + 1)
+        ) - NOISE_LEVELS
         info = tables.fap_table()
         step = np.array([f.quant_step for f in info], dtype=np.int64) * CONTENT_QUANT
         bound = np.array([f.intra_range * f.quant_step for f in info], dtype=np.int64) * 9 // 10
@@ -170,11 +173,15 @@ class Run:
             raise ValueError(f"frames {ks.tolist()} outside the run's {self.n}")
         rows = [self._block(int(k) // BLOCK_FRAMES).select(np.array([int(k) % BLOCK_FRAMES])) for k in ks]
         first = self._block(0)
-        return FapFrames(values=np.concatenate([x.values for x in rows]).reshape(len(ks), -1),
-                         status=np.concatenate([x.status for x in rows]).reshape(len(ks), -1),
-                         high=np.concatenate([x.high for x in rows]).reshape(len(ks), -1), frame_number=ks,
-                         time_ms=ks * (1000.0 / first.frame_rate), frame_rate=first.frame_rate,
-                         is_intra=np.concatenate([x.is_intra for x in rows]) if rows else None)
+        return FapFrames(
+            values=np.concatenate([x.values for x in rows]).reshape(len(ks), -1),
+            status=np.concatenate([x.status for x in rows]).reshape(len(ks), -1),
+            high=np.concatenate([x.high for x in rows]).reshape(len(ks), -1),
+            frame_number=ks,
+            time_ms=ks * (1000.0 / first.frame_rate),
+            frame_rate=first.frame_rate,
+            is_intra=np.concatenate([x.is_intra for x in rows]) if rows else None,
+        )
 
     def reference_images(self, ks, out_dir: Path, *, width: int, height: int, scene: Path | None = None) -> list[Path]:
         """The reference rendering of frames ``ks`` at ``width`` x ``height`` (the default
@@ -192,7 +199,7 @@ def _split(data: bytes) -> tuple[bytes, bytes, bytes]:
     i = data.find(_PLANE_START)
     if i < 0 or not data.endswith(_END):  # pragma: no cover - encoder options fixed above
         raise ContentError("generated stream lacks plane start codes / end code")
-    return data[:i], data[i:-len(_END)], data[-len(_END):]
+    return data[:i], data[i : -len(_END)], data[-len(_END) :]
 
 
 def content_stream(n: int) -> bytes:

@@ -24,6 +24,7 @@ least :data:`BUSY_SHARE` of the CPUs both during the runs and between them — a
 uncontended rate meets the minimum; otherwise it fails. A decoder that is slow by itself (it
 sleeps, or waits on its own threads) on an idle machine fails: nothing excuses it.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -36,6 +37,7 @@ BUSY_SHARE = 0.10  # others used at least this share of the machine's CPUs: it w
 @dataclass
 class Window:
     """One timed run: its frames and time, the samples around it, the decoder's CPU and wait."""
+
     frames: int
     seconds: float  # the run's time, as the fit uses it
     before: MachineSample
@@ -76,6 +78,7 @@ def _others(a: MachineSample, b: MachineSample, outside_own_s: float = 0.0) -> f
 @dataclass
 class Load:
     """The machine during a measurement (every figure over the timed runs unless said)."""
+
     cpus: int
     wall_s: float  # the runs' time
     cpu_s: float | None  # the decoder's CPU time (None: not known for every run)
@@ -88,18 +91,26 @@ class Load:
     @property
     def busy(self) -> bool:
         """Whether other work held the machine, during and between the runs (module doc)."""
-        return (self.cpu_s is not None and self.others_share is not None and self.others_share >= BUSY_SHARE
-                and self.others_share_between is not None and self.others_share_between >= BUSY_SHARE)
+        return (
+            self.cpu_s is not None
+            and self.others_share is not None
+            and self.others_share >= BUSY_SHARE
+            and self.others_share_between is not None
+            and self.others_share_between >= BUSY_SHARE
+        )
 
     def describe(self) -> str:
         def pct(x):
             return "unknown" if x is None else f"{100 * x:.0f} %"
+
         cpu = "unknown" if self.cpu_s is None else f"{self.cpu_s:.2f} s"
         stall = "unknown" if self.stall_s is None else f"{self.stall_s:.2f} s ({self.stall_source})"
         load = "unknown" if self.load is None else f"{self.load:.1f}"
-        return (f"runs {self.wall_s:.2f} s, decoder CPU {cpu}, waiting for a CPU {stall}; other processes used "
-                f"{pct(self.others_share)} of the {self.cpus} CPUs during the runs and "
-                f"{pct(self.others_share_between)} between them; load average {load}")
+        return (
+            f"runs {self.wall_s:.2f} s, decoder CPU {cpu}, waiting for a CPU {stall}; other processes used "
+            f"{pct(self.others_share)} of the {self.cpus} CPUs during the runs and "
+            f"{pct(self.others_share_between)} between them; load average {load}"
+        )
 
 
 def account(windows: list[Window], cpus: int) -> Load:
@@ -123,8 +134,16 @@ def account(windows: list[Window], cpus: int) -> Load:
         gap_span += max(b.before.t - a.after.t, 0.0)
     between = gap_others / (cpus * gap_span) if gap_span > 0 else None
     loads = [x.load for w in windows for x in (w.before, w.after) if x.load is not None]
-    return Load(cpus=cpus, wall_s=wall, cpu_s=cpu, stall_s=stall, stall_source=", ".join(sources) or "none",
-                others_share=during, others_share_between=between, load=max(loads) if loads else None)
+    return Load(
+        cpus=cpus,
+        wall_s=wall,
+        cpu_s=cpu,
+        stall_s=stall,
+        stall_source=", ".join(sources) or "none",
+        others_share=during,
+        others_share_between=between,
+        load=max(loads) if loads else None,
+    )
 
 
 def verdict(rate: float, required: float, uncontended_rate: float | None, load: Load) -> tuple[str, str]:
@@ -136,10 +155,14 @@ def verdict(rate: float, required: float, uncontended_rate: float | None, load: 
         return "inconclusive", (
             f"the machine was busy: {rate:.1f} fps measured is below the minimum {required:g} fps, but without "
             f"the wait other processes explain the rate is {uncontended_rate:.1f} fps — not the decoder's own "
-            f"reading ({load.describe()}); measure again on a machine that is not busy")
+            f"reading ({load.describe()}); measure again on a machine that is not busy"
+        )
     if load.busy:
-        why = (f"even without the wait other processes explain it is {uncontended_rate:.1f} fps"
-               if uncontended_rate is not None else "what it waited for cannot be told")
+        why = (
+            f"even without the wait other processes explain it is {uncontended_rate:.1f} fps"
+            if uncontended_rate is not None
+            else "what it waited for cannot be told"
+        )
     else:
         why = "the machine was not busy with other work: the time is the decoder's own"
     return "fail", f"{rate:.1f} fps is below the minimum {required:g} fps; {why} ({load.describe()})"

@@ -39,6 +39,7 @@ A run that fails (non-zero exit, crash, timeout, missing, short or wrong output)
 :class:`SpeedRunError`; :func:`measure_claim` turns it into a failed :class:`SpeedResult`.
 :func:`fbaconf.harness.verdict.speed_verdict` turns a run's speed results into the claim's speed verdict.
 """
+
 from __future__ import annotations
 
 import math
@@ -81,14 +82,22 @@ DECODE_IMAGE_SIZE = 8  # the decode operation's images, when its command always 
 
 class SpeedError(FbaconfInputError):
     """The speed measurement cannot be set up (unknown operation or claim, impossible command)."""
+
     rule = "speed-setup"
 
 
 class SpeedRunError(Exception):
     """A decoder run failed during the speed measurement (exit code, crash, timeout, no output)."""
 
-    def __init__(self, operation: str, frames: int, outcome: Outcome, message: str,
-                 argv: list[str] | None = None, stderr_tail: str = "") -> None:
+    def __init__(
+        self,
+        operation: str,
+        frames: int,
+        outcome: Outcome,
+        message: str,
+        argv: list[str] | None = None,
+        stderr_tail: str = "",
+    ) -> None:
         super().__init__(f"{operation} of {frames} frames: {message}")
         self.operation = operation
         self.frames = frames
@@ -99,6 +108,7 @@ class SpeedRunError(Exception):
 
 
 # --------------------------------------------------------------------------- one run
+
 
 def skip_reason(adapter: Adapter, operation: str) -> str | None:
     """Why ``operation`` cannot be measured for this adapter (None when it can)."""
@@ -124,12 +134,24 @@ def _spawned_stall(watch: sysinfo.TreeWatch, cpu_s: float, before, after) -> tup
 
 
 class _Runner:
-    def __init__(self, adapter: Adapter, operation: str, content: Content, runs_dir: Path,
-                 render_size: tuple[int, int], persistent: bool = True) -> None:
+    def __init__(
+        self,
+        adapter: Adapter,
+        operation: str,
+        content: Content,
+        runs_dir: Path,
+        render_size: tuple[int, int],
+        persistent: bool = True,
+    ) -> None:
         self.adapter = adapter
-        self.serve_declared = (operation == "decode" and isinstance(adapter, CommandAdapter)
-                               and "serve" in adapter.commands and getattr(adapter, "serve_equivalent", False)
-                               and "fba" in adapter.inputs and "faps" in adapter.outputs)
+        self.serve_declared = (
+            operation == "decode"
+            and isinstance(adapter, CommandAdapter)
+            and "serve" in adapter.commands
+            and getattr(adapter, "serve_equivalent", False)
+            and "fba" in adapter.inputs
+            and "faps" in adapter.outputs
+        )
         self.persistent = persistent and self.serve_declared
         self._server: PersistentDecoder | None = None  # the persistent decoder, started at the first run
         self._watch: sysinfo.TreeWatch | None = None
@@ -174,14 +196,22 @@ class _Runner:
         if self.operation == "render":
             w, h = self.render_size
             self._image_frames = []  # every frame; the sample is drawn after the run
-            v["scenario"] = str(c.scenario(f"render-{w}x{h}", width=w, height=h, supersample=RENDER_SUPERSAMPLE,
-                                           frames=None))
+            v["scenario"] = str(
+                c.scenario(f"render-{w}x{h}", width=w, height=h, supersample=RENDER_SUPERSAMPLE, frames=None)
+            )
         else:  # two small frames: the first (it places the camera) and one drawn for this run
             k = secrets.SystemRandom().randrange(1, n) if n > 1 else 0
             self._image_frames = sorted({0, k})
             s = DECODE_IMAGE_SIZE
-            v["scenario"] = str(c.scenario(f"decode-frames-{'-'.join(map(str, self._image_frames))}", width=s,
-                                           height=s, supersample=RENDER_SUPERSAMPLE, frames=tuple(self._image_frames)))
+            v["scenario"] = str(
+                c.scenario(
+                    f"decode-frames-{'-'.join(map(str, self._image_frames))}",
+                    width=s,
+                    height=s,
+                    supersample=RENDER_SUPERSAMPLE,
+                    frames=tuple(self._image_frames),
+                )
+            )
         if "scene" in wanted:
             # the form the decoder reads: BT unless it declares only the binary BIFS input
             kind = "bifs" if "bifs" in a.inputs and "scene" not in a.inputs else "bt"
@@ -205,12 +235,16 @@ class _Runner:
             except KeyError as e:
                 name = e.args[0]
                 if name in self.extra or name not in supplied:
-                    raise SpeedError(f"{a.name}: the decode command needs {{{name}}}, which a speed "
-                                     f"measurement cannot supply") from None
+                    raise SpeedError(
+                        f"{a.name}: the decode command needs {{{name}}}, which a speed measurement cannot supply"
+                    ) from None
                 self.extra.add(name)
                 if name in ("vertices_out", "images_dir") or (name == "faps_out" and self.operation == "render"):
-                    what = {"vertices_out": "vertices", "images_dir": "images (two 8x8 frames requested)",
-                            "faps_out": "FAPs"}[name]
+                    what = {
+                        "vertices_out": "vertices",
+                        "images_dir": "images (two 8x8 frames requested)",
+                        "faps_out": "FAPs",
+                    }[name]
                     self.notes.append(f"the decode command always writes {what}; included in the time")
                 elif name == "scene":
                     self.notes.append("the command requires a scene: the bundled default head is given")
@@ -270,8 +304,20 @@ class _Runner:
             # the harness waits for): the tree's own readings are the decoder's CPU time
             cpu = max(res.cpu_s, watch.cpu_s)
             stall, source = _spawned_stall(watch, cpu, before, after)
-            return speed_load.Window(n, res.elapsed_s, before, after, cpu_s=cpu, stall_s=stall, stall_source=source,
-                                     outside_own_s=cpu - res.cpu_s), job, argv
+            return (
+                speed_load.Window(
+                    n,
+                    res.elapsed_s,
+                    before,
+                    after,
+                    cpu_s=cpu,
+                    stall_s=stall,
+                    stall_source=source,
+                    outside_own_s=cpu - res.cpu_s,
+                ),
+                job,
+                argv,
+            )
         if not isinstance(a, PythonAdapter):  # pragma: no cover - no other adapter kinds
             raise SpeedError(f"unsupported adapter kind {type(a).__name__}")
         job = job_for()
@@ -283,9 +329,19 @@ class _Runner:
         if judged is not None:
             raise SpeedRunError(self.operation, n, judged[0], judged[1])
         known = th0 is not None and th1 is not None
-        return speed_load.Window(n, elapsed, before, after, cpu_s=th1[0] - th0[0] if known else None,
-                                 stall_s=th1[1] - th0[1] if known else None,
-                                 stall_source="thread" if known else "none"), job, None
+        return (
+            speed_load.Window(
+                n,
+                elapsed,
+                before,
+                after,
+                cpu_s=th1[0] - th0[0] if known else None,
+                stall_s=th1[1] - th0[1] if known else None,
+                stall_source="thread" if known else "none",
+            ),
+            job,
+            None,
+        )
 
     def _serve(self, run: Run) -> tuple[speed_load.Window, Path]:
         """One input to the persistent decoder: the time from sending it to its answer; the
@@ -301,8 +357,10 @@ class _Runner:
             self._server = PersistentDecoder(argv, root, workdir, view, a.limits, env=a.env or None)
             # the serve tree (this process's only children while it runs): its CPU time and wait
             self._watch = sysinfo.TreeWatch(os.getpid()).__enter__()
-            self.notes.append("measured through the persistent protocol ([commands] serve, declared equivalent to "
-                              "decode): one process for every run, no process start-up per sample")
+            self.notes.append(
+                "measured through the persistent protocol ([commands] serve, declared equivalent to "
+                "decode): one process for every run, no process start-up per sample"
+            )
         out = workdir / "out"
         if out.exists():
             remove_tree(out)
@@ -316,9 +374,18 @@ class _Runner:
         tree1, after = (watch.cpu_s, watch.wait_s), sysinfo.machine_sample()
         self._judge(res, n, self._server.argv)
         cpu = tree1[0] - tree0[0]
-        window = speed_load.Window(n, res.elapsed_s, before, after, cpu_s=cpu, stall_s=tree1[1] - tree0[1],
-                                   stall_source="process tree", outside_own_s=cpu, tree_before=tree0[0],
-                                   tree_after=tree1[0])
+        window = speed_load.Window(
+            n,
+            res.elapsed_s,
+            before,
+            after,
+            cpu_s=cpu,
+            stall_s=tree1[1] - tree0[1],
+            stall_source="process tree",
+            outside_own_s=cpu,
+            tree_before=tree0[0],
+            tree_after=tree1[0],
+        )
         self._check_output(Job(workdir=workdir, values={"faps_out": str(path)}, frames=n), run, self._server.argv)
         return window, path
 
@@ -344,13 +411,18 @@ class _Runner:
                     remove_tree(workdir)
         lo, hi = lengths[0], lengths[-1]
         slope = (best[hi] - best[lo]) / (hi - lo)
-        what = (f"decode's per-frame cost {slope * 1000:.3f} ms ({lo} and {hi} frames, fastest of two each) "
-                f"against serve's {serve_per_frame * 1000:.3f} ms")
+        what = (
+            f"decode's per-frame cost {slope * 1000:.3f} ms ({lo} and {hi} frames, fastest of two each) "
+            f"against serve's {serve_per_frame * 1000:.3f} ms"
+        )
         if slope <= EQUIVALENCE_FACTOR * serve_per_frame:
-            return True, (f"serve checked against decode on fresh content of {lo} and {hi} frames: the same frames; "
-                          f"{what}")
-        return False, (f"the manifest declares serve equivalent to decode, but {what} (more than "
-                       f"{EQUIVALENCE_FACTOR:g} x): serve is not what is certified, decode was timed")
+            return True, (
+                f"serve checked against decode on fresh content of {lo} and {hi} frames: the same frames; {what}"
+            )
+        return False, (
+            f"the manifest declares serve equivalent to decode, but {what} (more than "
+            f"{EQUIVALENCE_FACTOR:g} x): serve is not what is certified, decode was timed"
+        )
 
     def _same_frames(self, by_decode: Path | None, by_serve: Path, n: int) -> None:
         limit = self.adapter.limits.output_mb * 2**20
@@ -361,9 +433,14 @@ class _Runner:
             raise SpeedRunError(self.operation, n, Outcome.FAIL, f"serve_equivalent: {e}") from None
         r = compare_faps(d, s, text_output=by_serve.suffix == ".fap")
         if not r.outcome.ok:
-            raise SpeedRunError(self.operation, n, Outcome.FAIL,
-                                f"the manifest declares [commands] serve equivalent to decode, but on {n} frames "
-                                f"serve's output differs from decode's: {r.message}", self._server.argv)
+            raise SpeedRunError(
+                self.operation,
+                n,
+                Outcome.FAIL,
+                f"the manifest declares [commands] serve equivalent to decode, but on {n} frames "
+                f"serve's output differs from decode's: {r.message}",
+                self._server.argv,
+            )
 
     def _judge(self, res, n: int, argv) -> None:
         """A run that did not decode (exit code, crash, timeout...) fails the measurement."""
@@ -374,8 +451,11 @@ class _Runner:
 
     def _check_output(self, job: Job, run: Run, argv) -> None:
         n = run.n
-        key = "images_dir" if self.operation == "render" else next(
-            k for k in ("faps_out", "vertices_out", "images_dir") if k in job.values)
+        key = (
+            "images_dir"
+            if self.operation == "render"
+            else next(k for k in ("faps_out", "vertices_out", "images_dir") if k in job.values)
+        )
         p = job.path(key)
         limit = self.adapter.limits.output_mb * 2**20
         why = None
@@ -396,6 +476,7 @@ class _Runner:
 
 
 # --------------------------------------------------------------------------- fitting
+
 
 def fit_line(frames, seconds) -> tuple[float, float, float]:
     """Least-squares ``seconds = startup + frames * per_frame``: (per_frame, startup, r2)."""
@@ -448,6 +529,7 @@ def _series(n: int) -> list[int]:
 
 # --------------------------------------------------------------------------- public API
 
+
 def required_rate(claim: str, operation: str) -> tuple[float, str, str]:
     """(minimum rate in frames/s, provenance, limit description) for ``claim`` and ``operation``;
     the rate is 0 when the limit does not apply to the claimed profile."""
@@ -462,10 +544,20 @@ def required_rate(claim: str, operation: str) -> tuple[float, str, str]:
     return float(lim.value(c.level)), lim.provenance, lim.description
 
 
-def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] | None = None,  # noqa: PLR0913
-            repeats: int = 3, work_dir: Path | None = None, target_s: float = 0.5,
-            max_frames: int = 100_000, max_run_s: float | None = None,
-            render_size: tuple[int, int] = DEFAULT_RENDER_SIZE, persistent: bool = True) -> SpeedResult | None:
+def measure(  # noqa: PLR0913 - keyword options of a measurement
+    adapter: Adapter,
+    claim: str,
+    operation: str,
+    *,
+    lengths: list[int] | None = None,
+    repeats: int = 3,
+    work_dir: Path | None = None,
+    target_s: float = 0.5,
+    max_frames: int = 100_000,
+    max_run_s: float | None = None,
+    render_size: tuple[int, int] = DEFAULT_RENDER_SIZE,
+    persistent: bool = True,
+) -> SpeedResult | None:
     """Measure ``operation`` (``decode`` | ``render``) of ``adapter`` against ``claim``'s minimum.
 
     Returns None when the adapter cannot do the operation (:func:`skip_reason` says why).
@@ -494,20 +586,25 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
     content = Content(root / "content")
     opts = dict(lengths=lengths, repeats=repeats, target_s=target_s, max_frames=max_frames, max_run_s=max_run_s)
     try:
-        runner = _Runner(adapter, operation, content, root / f"runs-{operation}", tuple(render_size),
-                         persistent=persistent)
+        runner = _Runner(
+            adapter, operation, content, root / f"runs-{operation}", tuple(render_size), persistent=persistent
+        )
         fit = _measure_series(runner, **opts)
         if runner.persistent:
             try:
-                same, note = (runner.equivalence(fit["lengths"], fit["per_frame"]) if fit["per_frame"] > 0 else
-                              (False, "serve's time did not grow with the frames it decoded: decode was timed"))
+                same, note = (
+                    runner.equivalence(fit["lengths"], fit["per_frame"])
+                    if fit["per_frame"] > 0
+                    else (False, "serve's time did not grow with the frames it decoded: decode was timed")
+                )
             finally:
                 runner.close()
             if same:
                 runner.notes.append(note)
             else:
-                runner = _Runner(adapter, operation, content, root / f"runs-{operation}-decode", tuple(render_size),
-                                 persistent=False)
+                runner = _Runner(
+                    adapter, operation, content, root / f"runs-{operation}-decode", tuple(render_size), persistent=False
+                )
                 runner.notes.append(note)
                 fit = _measure_series(runner, **opts)
         runner.close()
@@ -518,15 +615,17 @@ def measure(adapter: Adapter, claim: str, operation: str, *, lengths: list[int] 
     return _result(operation, claim, fit, runner.notes)
 
 
-def _measure_series(runner: _Runner, *, lengths, repeats: int, target_s: float, max_frames: int,
-                    max_run_s: float) -> dict:
+def _measure_series(
+    runner: _Runner, *, lengths, repeats: int, target_s: float, max_frames: int, max_run_s: float
+) -> dict:
     """Run the measurement proper: the lengths (searched unless given) ``repeats`` times,
     each run's time and accounting; the fits."""
     try:
         t_start = time.perf_counter()
         if lengths is None:
-            lengths = _choose_lengths(lambda n: runner.run(n).seconds, target_s=target_s, max_frames=max_frames,
-                                      max_run_s=max_run_s)
+            lengths = _choose_lengths(
+                lambda n: runner.run(n).seconds, target_s=target_s, max_frames=max_frames, max_run_s=max_run_s
+            )
         else:
             runner.run(lengths[0])  # warm-up, discarded
         samples: list[dict] = []
@@ -536,9 +635,18 @@ def _measure_series(runner: _Runner, *, lengths, repeats: int, target_s: float, 
             for n in order:
                 w = runner.run(n)
                 windows.append(w)
-                samples.append({"frames": n, "seconds": w.seconds, "repeat": r,
-                                **{k: v for k, v in (("cpu_s", w.cpu_s), ("stall_s", w.stall_s),
-                                                     ("others_s", w.others_s)) if v is not None}})
+                samples.append(
+                    {
+                        "frames": n,
+                        "seconds": w.seconds,
+                        "repeat": r,
+                        **{
+                            k: v
+                            for k, v in (("cpu_s", w.cpu_s), ("stall_s", w.stall_s), ("others_s", w.others_s))
+                            if v is not None
+                        },
+                    }
+                )
         wall = time.perf_counter() - t_start
     except BaseException:
         runner.close()
@@ -550,39 +658,80 @@ def _measure_series(runner: _Runner, *, lengths, repeats: int, target_s: float, 
     per_frame, startup = _median_fit(samples, "seconds", repeats)
     r2 = _r2([s["frames"] for s in samples], [s["seconds"] for s in samples], per_frame, startup)
     unc = _median_fit(samples, "uncontended_s", repeats)[0]
-    return {"lengths": lengths, "samples": samples, "per_frame": per_frame, "startup": startup, "r2": r2,
-            "wall": wall, "load": load, "uncontended_per_frame": unc}
+    return {
+        "lengths": lengths,
+        "samples": samples,
+        "per_frame": per_frame,
+        "startup": startup,
+        "r2": r2,
+        "wall": wall,
+        "load": load,
+        "uncontended_per_frame": unc,
+    }
 
 
 def _median_fit(samples: list[dict], key: str, repeats: int) -> tuple[float, float]:
-    fits = [fit_line([s["frames"] for s in samples if s["repeat"] == r], [s[key] for s in samples if s["repeat"] == r])
-            for r in range(repeats)]
+    fits = [
+        fit_line([s["frames"] for s in samples if s["repeat"] == r], [s[key] for s in samples if s["repeat"] == r])
+        for r in range(repeats)
+    ]
     return statistics.median(f[0] for f in fits), statistics.median(f[1] for f in fits)
 
 
 def _result(operation: str, claim: str, fit: dict, notes: list[str]) -> SpeedResult:
-    required, provenance, target_s, max_frames, repeats = (fit["required"], fit["provenance"], fit["target_s"],
-                                                           fit["max_frames"], fit["repeats"])
-    per_frame, startup, r2, lengths, samples = (fit["per_frame"], fit["startup"], fit["r2"], fit["lengths"],
-                                                fit["samples"])
+    required, provenance, target_s, max_frames, repeats = (
+        fit["required"],
+        fit["provenance"],
+        fit["target_s"],
+        fit["max_frames"],
+        fit["repeats"],
+    )
+    per_frame, startup, r2, lengths, samples = (
+        fit["per_frame"],
+        fit["startup"],
+        fit["r2"],
+        fit["lengths"],
+        fit["samples"],
+    )
     load: speed_load.Load = fit["load"]
     notes = list(notes)
-    numbers = dict(cpu_s=load.cpu_s, wall_s=load.wall_s, stall_s=load.stall_s, stall_source=load.stall_source,
-                   others_share=load.others_share, others_share_between=load.others_share_between,
-                   load=load.load, cpus=load.cpus)
+    numbers = dict(
+        cpu_s=load.cpu_s,
+        wall_s=load.wall_s,
+        stall_s=load.stall_s,
+        stall_source=load.stall_source,
+        others_share=load.others_share,
+        others_share_between=load.others_share_between,
+        load=load.load,
+        cpus=load.cpus,
+    )
     if not per_frame > 0:  # never an infinite rate: the time did not grow with the frames decoded
-        reason = (f"no {operation} rate: the fitted per-frame cost is {per_frame * 1000:.4f} ms, not positive — the "
-                  f"run time did not grow with the {lengths} frames decoded (a decoder's time must; the measurement "
-                  f"cannot resolve it, or the decoder does not decode what it is given)")
+        reason = (
+            f"no {operation} rate: the fitted per-frame cost is {per_frame * 1000:.4f} ms, not positive — the "
+            f"run time did not grow with the {lengths} frames decoded (a decoder's time must; the measurement "
+            f"cannot resolve it, or the decoder does not decode what it is given)"
+        )
         # on a busy machine the other processes' time can swamp the slope (an honest renderer measured -2.4 ms a
         # frame at load 6 on 2 cores): that is the lab's noise, not the decoder's speed
         busy = load.busy
         if busy:
             reason += f"; the machine was busy ({load.describe()}): measure again on a machine that is not busy"
-        return SpeedResult(operation=operation, claim=claim, per_frame_s=per_frame, startup_s=startup, rate_fps=0.0,
-                           required_fps=required, passed=False, provenance=provenance, samples=samples, fit_r2=r2,
-                           message=f"{reason}; lengths {lengths} x {repeats}" + "".join(f"; {n}" for n in notes),
-                           verdict="inconclusive" if busy else "fail", reason=reason, **numbers)
+        return SpeedResult(
+            operation=operation,
+            claim=claim,
+            per_frame_s=per_frame,
+            startup_s=startup,
+            rate_fps=0.0,
+            required_fps=required,
+            passed=False,
+            provenance=provenance,
+            samples=samples,
+            fit_r2=r2,
+            message=f"{reason}; lengths {lengths} x {repeats}" + "".join(f"; {n}" for n in notes),
+            verdict="inconclusive" if busy else "fail",
+            reason=reason,
+            **numbers,
+        )
     rate = 1.0 / per_frame
     unc = fit["uncontended_per_frame"]
     unc_rate = (1.0 / unc) if unc > 0 else None
@@ -601,15 +750,30 @@ def _result(operation: str, claim: str, fit: dict, notes: list[str]) -> SpeedRes
         notes.append(note)
     word = {"pass": "meets", "fail": "is below", "inconclusive": "is below (inconclusive: the machine was busy)"}
     what = {"decode": "decode rate (all faces together)", "render": "render rate per face"}[operation]
-    msg = (f"{what} {_fmt_rate(rate)} fps {word[verdict]} the {claim} minimum {required:g} fps ({provenance}); "
-           f"{per_frame * 1000:.3f} ms/frame, fitted start-up {startup:+.3f} s, lengths {lengths} x {repeats}, "
-           f"{fit['wall']:.1f} s; {reason}")
+    msg = (
+        f"{what} {_fmt_rate(rate)} fps {word[verdict]} the {claim} minimum {required:g} fps ({provenance}); "
+        f"{per_frame * 1000:.3f} ms/frame, fitted start-up {startup:+.3f} s, lengths {lengths} x {repeats}, "
+        f"{fit['wall']:.1f} s; {reason}"
+    )
     if notes:
         msg += "; " + "; ".join(notes)
-    return SpeedResult(operation=operation, claim=claim, per_frame_s=per_frame, startup_s=startup,
-                       rate_fps=rate, required_fps=required, passed=verdict == "pass", provenance=provenance,
-                       samples=samples, fit_r2=r2, message=msg, verdict=verdict, reason=reason,
-                       uncontended_fps=unc_rate, **numbers)
+    return SpeedResult(
+        operation=operation,
+        claim=claim,
+        per_frame_s=per_frame,
+        startup_s=startup,
+        rate_fps=rate,
+        required_fps=required,
+        passed=verdict == "pass",
+        provenance=provenance,
+        samples=samples,
+        fit_r2=r2,
+        message=msg,
+        verdict=verdict,
+        reason=reason,
+        uncontended_fps=unc_rate,
+        **numbers,
+    )
 
 
 def _fmt_rate(rate: float) -> str:
@@ -623,9 +787,19 @@ def failed_result(err: SpeedRunError, claim: str) -> SpeedResult:
     except SpeedError:
         required, provenance = math.nan, "none"
     reason = f"decoder run failed ({err.outcome.value}) on {err.frames} frames: {err.message}"
-    return SpeedResult(operation=err.operation, claim=claim, per_frame_s=math.nan, startup_s=math.nan,
-                       rate_fps=0.0, required_fps=required, passed=False, provenance=provenance,
-                       message=reason, verdict="fail", reason=reason)
+    return SpeedResult(
+        operation=err.operation,
+        claim=claim,
+        per_frame_s=math.nan,
+        startup_s=math.nan,
+        rate_fps=0.0,
+        required_fps=required,
+        passed=False,
+        provenance=provenance,
+        message=reason,
+        verdict="fail",
+        reason=reason,
+    )
 
 
 def measure_claim(adapter: Adapter, claim: str | None = None, **kwargs) -> list[SpeedResult]:

@@ -6,6 +6,7 @@ One module per area; each defines ``MUTANTS_LIST`` (``mutation.core.Mutant`` wit
 lists them with how each was shown to differ from the reference, and the equivalent ones
 with their reasons.
 """
+
 from __future__ import annotations
 
 import importlib

@@ -5,6 +5,7 @@ The sandbox rows need bubblewrap (``.ci/run`` installs it). Without it they fail
 (``CI`` set) and skip elsewhere, naming the reason: a developer machine without bwrap
 runs decoders unisolated, which is exactly what these rows would catch.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -59,23 +60,29 @@ def decoder(tmp_path: Path, name: str, body: str, *, limits: str = "timeout_s = 
     """A decoder written in Python, run as {python} SCRIPT {input} {faps_out}; ``body`` sees
     IN, OUT (paths) and may call honest() to decode with the reference."""
     script = tmp_path / f"{name}.py"
-    script.write_text(textwrap.dedent('''\
+    script.write_text(
+        textwrap.dedent("""\
         import os, sys, signal, subprocess, time
         IN, OUT = sys.argv[1], sys.argv[2]
         def honest():
             from fbaconf.reference.pipeline import reference_outputs
             reference_outputs(IN, faps_out=OUT)
-        ''') + textwrap.dedent(body))
+        """)
+        + textwrap.dedent(body)
+    )
     m = tmp_path / f"{name}.toml"
-    m.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 f'faps_format = "{faps_format}"\n[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", '
-                 f'"{{faps_out}}"]\n[limits]\n{limits}')
+    m.write_text(
+        f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        f'faps_format = "{faps_format}"\n[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", '
+        f'"{{faps_out}}"]\n[limits]\n{limits}'
+    )
     return m
 
 
 def run(tmp_path: Path, m: Path, ids=VALID, **kw):
-    return run_cases(adapters.resolve(m), cases(ids), claim="simple@1", out_dir=tmp_path / "run", jobs=1,
-                     progress=False, **kw)
+    return run_cases(
+        adapters.resolve(m), cases(ids), claim="simple@1", out_dir=tmp_path / "run", jobs=1, progress=False, **kw
+    )
 
 
 def digest(p: Path) -> str:
@@ -91,14 +98,14 @@ def test_honest_decoder_passes_in_the_sandbox(tmp_path):
 def test_copy_the_golden_fails_every_valid_case(tmp_path):
     needs_sandbox()
     gold = golden_root()
-    body = f'''
+    body = f"""
         import shutil
         from pathlib import Path
         case = Path(IN).stem
         for g in Path({str(gold)!r}).glob("*/" + case + "/*.npz"):
             shutil.copyfile(g, OUT)
             break
-        '''
+        """
     assert any(gold.glob("*/*/*.npz")), "the goldens exist outside the sandbox"
     rs = run(tmp_path, decoder(tmp_path, "copier", body))
     assert all(r.outcome == Outcome.FAIL for r in rs), [(r.outcome, r.message) for r in rs]
@@ -109,7 +116,7 @@ def test_cannot_change_the_harness_the_venv_or_its_manifest(tmp_path):
     targets = [ROOT / "harness" / "runner.py", ROOT / "conformance" / "data" / "suites.toml"]
     site = Path(next(p for p in sys.path if p.endswith("site-packages")))
     m_path = tmp_path / "patcher.toml"
-    body = f'''
+    body = f"""
         for t in {[str(t) for t in targets]!r}:
             try:
                 open(t, "a").write("# patched")
@@ -121,7 +128,7 @@ def test_cannot_change_the_harness_the_venv_or_its_manifest(tmp_path):
             except OSError:
                 pass
         honest()
-        '''
+        """
     before = {t: digest(t) for t in targets}
     m = decoder(tmp_path, "patcher", body)
     mtext = m.read_text()
@@ -134,7 +141,7 @@ def test_cannot_change_the_harness_the_venv_or_its_manifest(tmp_path):
 
 def test_cannot_forge_the_results_of_the_run(tmp_path):
     needs_sandbox()
-    body = '''
+    body = """
         from pathlib import Path
         run = Path(OUT).parents[4]
         for p in [run / "results.jsonl", Path(OUT).parents[3] / "results.jsonl"]:
@@ -143,7 +150,7 @@ def test_cannot_forge_the_results_of_the_run(tmp_path):
             except OSError:
                 pass
         sys.exit(3)
-        '''
+        """
     rs = run(tmp_path, decoder(tmp_path, "forger", body), ids=VALID[:1])
     assert rs[0].outcome == Outcome.FAIL
     logged = ResultLog(tmp_path / "run" / "results.jsonl").read()
@@ -164,7 +171,7 @@ def _procs_with(marker: str) -> list[int]:
 
 def test_an_escaped_grandchild_is_gone_when_the_case_ends(tmp_path):
     needs_sandbox()
-    body = '''
+    body = """
         subprocess.Popen(["setsid", "sleep", "313.5"], start_new_session=True)
         if os.fork() == 0:
             os.setsid()
@@ -172,7 +179,7 @@ def test_an_escaped_grandchild_is_gone_when_the_case_ends(tmp_path):
                 os.execvp("sleep", ["sleep", "313.5"])
             os._exit(0)
         honest()
-        '''
+        """
     rs = run(tmp_path, decoder(tmp_path, "escaper", body), ids=VALID[:1])
     time.sleep(0.2)
     assert _procs_with("313.5") == []
@@ -182,7 +189,7 @@ def test_an_escaped_grandchild_is_gone_when_the_case_ends(tmp_path):
 def test_a_fork_bomb_is_capped_and_cleaned_up(tmp_path):
     needs_sandbox()
     needs_cgroups()
-    body = '''
+    body = """
         n = 0
         for i in range(300):
             try:
@@ -194,7 +201,7 @@ def test_a_fork_bomb_is_capped_and_cleaned_up(tmp_path):
                 break
         print("forked", n, file=sys.stderr)
         sys.exit(0 if n < 300 else 9)
-        '''
+        """
     t0 = time.perf_counter()
     rs = run(tmp_path, decoder(tmp_path, "bomb", body, limits="timeout_s = 20\nprocesses = 32\n"), ids=VALID[:1])
     assert time.perf_counter() - t0 < 15
@@ -206,7 +213,7 @@ def test_a_fork_bomb_is_capped_and_cleaned_up(tmp_path):
 def test_memory_limit_holds_for_the_whole_tree(tmp_path):
     needs_sandbox()
     needs_cgroups()
-    body = '''
+    body = """
         kids = []
         for i in range(3):
             pid = os.fork()
@@ -218,7 +225,7 @@ def test_memory_limit_holds_for_the_whole_tree(tmp_path):
         ok = all(os.waitpid(p, 0)[1] == 0 for p in kids)
         honest()
         sys.exit(0 if ok else 1)
-        '''
+        """
     rs = run(tmp_path, decoder(tmp_path, "hog", body, limits="timeout_s = 30\nmemory_mb = 300\n"), ids=VALID[:1])
     assert rs[0].outcome == Outcome.CRASH and "memory limit" in rs[0].message, rs[0].message
 
@@ -230,14 +237,14 @@ def test_no_network(tmp_path):
     srv.listen(1)
     srv.settimeout(0.5)
     port = srv.getsockname()[1]
-    body = f'''
+    body = f"""
         import socket
         try:
             socket.create_connection(("127.0.0.1", {port}), timeout=2).sendall(b"leak")
         except OSError as e:
             print("no network:", e, file=sys.stderr)
         honest()
-        '''
+        """
     rs = run(tmp_path, decoder(tmp_path, "caller", body), ids=VALID[:1])
     with pytest.raises(OSError):
         srv.accept()
@@ -248,14 +255,14 @@ def test_no_network(tmp_path):
 def test_writes_outside_its_folder_do_not_land(tmp_path):
     needs_sandbox()
     victim = tmp_path / "victim.txt"
-    body = f'''
+    body = f"""
         for t in [{str(victim)!r}, "/tmp/fbaconf-escape-marker", "/etc/fbaconf-escape-marker"]:
             try:
                 open(t, "w").write("escaped")
             except OSError:
                 pass
         honest()
-        '''
+        """
     rs = run(tmp_path, decoder(tmp_path, "writer", body), ids=VALID[:1])
     assert not victim.exists()
     assert not Path("/tmp/fbaconf-escape-marker").exists() and not Path("/etc/fbaconf-escape-marker").exists()
@@ -263,7 +270,7 @@ def test_writes_outside_its_folder_do_not_land(tmp_path):
 
 
 def test_a_deep_tree_in_the_work_folder_does_not_stop_the_run(tmp_path):
-    body = '''
+    body = """
         fd = os.open(".", os.O_RDONLY)
         for i in range(3000):
             os.mkdir("d", dir_fd=fd)
@@ -271,7 +278,7 @@ def test_a_deep_tree_in_the_work_folder_does_not_stop_the_run(tmp_path):
             os.close(fd)
             fd = nfd
         sys.exit(3)
-        '''
+        """
     rs = run(tmp_path, decoder(tmp_path, "deep", body), ids=VALID)
     assert [r.outcome for r in rs] == [Outcome.FAIL, Outcome.FAIL]
     assert not (tmp_path / "run" / "work").exists()
@@ -279,16 +286,28 @@ def test_a_deep_tree_in_the_work_folder_does_not_stop_the_run(tmp_path):
 
 @pytest.mark.parametrize("kind", ["fifo", "zero", "passwd"])
 def test_outputs_that_are_not_regular_files_are_not_read(tmp_path, kind):
-    make = {"fifo": "os.mkfifo(OUT)", "zero": "os.symlink('/dev/zero', OUT)",
-            "passwd": "os.symlink('/etc/passwd', OUT)"}[kind]
+    make = {
+        "fifo": "os.mkfifo(OUT)",
+        "zero": "os.symlink('/dev/zero', OUT)",
+        "passwd": "os.symlink('/etc/passwd', OUT)",
+    }[kind]
     t0 = time.perf_counter()
     rs = run(tmp_path, decoder(tmp_path, kind, make + "\n", faps_format="fap"), ids=VALID[:1])
     assert time.perf_counter() - t0 < 20
     assert rs[0].outcome == Outcome.FAIL and "regular file" in rs[0].message, rs[0].message
 
 
-@pytest.mark.parametrize("limits", ["timeout_s = 1e300", "timeout_s = inf", "timeout_s = -1", "memory_mb = 1.5",
-                                    "processes = 0", "output_mb = 99999999999"])
+@pytest.mark.parametrize(
+    "limits",
+    [
+        "timeout_s = 1e300",
+        "timeout_s = inf",
+        "timeout_s = -1",
+        "memory_mb = 1.5",
+        "processes = 0",
+        "output_mb = 99999999999",
+    ],
+)
 def test_limits_that_would_disable_checks_are_refused(tmp_path, limits):
     m = decoder(tmp_path, "lim", "honest()\n", limits=limits + "\n")
     with pytest.raises(adapters.ManifestError):
@@ -304,16 +323,16 @@ def test_manifest_names_cannot_leave_the_run_folder(tmp_path, name):
 
 
 def fbaconf_cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "fbaconf", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "fbaconf", *args], capture_output=True, text=True, cwd=cwd, timeout=600
+    )
 
 
 def test_certify_leaves_a_users_folder_intact(tmp_path):
     mine = tmp_path / "mine"
     (mine / ".git").mkdir(parents=True)
     (mine / "notes.txt").write_text("keep me")
-    r = fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(mine),
-                    "--no-speed")
+    r = fbaconf_cli("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "-o", str(mine), "--no-speed")
     assert r.returncode == 2 and "not empty" in r.stderr
     assert (mine / "notes.txt").read_text() == "keep me" and (mine / ".git").is_dir()
 
@@ -361,17 +380,36 @@ def test_interruption_kills_running_decoders_and_resume_is_exact(tmp_path):
     """SIGINT at -j 2 while decoders sleep: the run stops within seconds with a partial
     report; --resume then runs exactly the cases that had not finished."""
     flag = tmp_path / "fast-now"
-    body = f'''
+    body = f"""
         from pathlib import Path
         if "dct" in Path(IN).name and not Path({str(flag)!r}).exists():
             time.sleep(60)
         honest()
-        '''
+        """
     m = decoder(tmp_path, "sleepy", body, limits="timeout_s = 120\n")
     out = tmp_path / "run"
-    args = [sys.executable, "-m", "fbaconf", "run", "--decoder", str(m), "--claim", "simple@1", "-j", "2",
-            "--suite", "simple-l1-core", "--case", "arith-q8-visemes-expressions", "--case", "dct-q4",
-            "--case", "dct-short-high-level", "-o", str(out)]
+    args = [
+        sys.executable,
+        "-m",
+        "fbaconf",
+        "run",
+        "--decoder",
+        str(m),
+        "--claim",
+        "simple@1",
+        "-j",
+        "2",
+        "--suite",
+        "simple-l1-core",
+        "--case",
+        "arith-q8-visemes-expressions",
+        "--case",
+        "dct-q4",
+        "--case",
+        "dct-short-high-level",
+        "-o",
+        str(out),
+    ]
     p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     log = out / "results.jsonl"
     deadline = time.time() + 60
@@ -391,17 +429,24 @@ def test_interruption_kills_running_decoders_and_resume_is_exact(tmp_path):
     r = subprocess.run(args + ["--resume"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     lines = [json.loads(x)["case_id"] for x in log.read_text().splitlines()]
-    assert sorted(lines) == sorted(["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/dct-q4",
-                                    "simple-l1-core/dct-short-high-level"])
+    assert sorted(lines) == sorted(
+        ["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/dct-q4", "simple-l1-core/dct-short-high-level"]
+    )
 
 
-@pytest.mark.parametrize("manifest", [
-    '[]', '{"format": "fbaconf.suite/1"}', '{"format": "fbaconf.suite/1", "name": "../../x", "claim": "simple@1", '
-    '"cases": []}', '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [{"id": "/etc"}]}',
-    '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [{"id": "c", "claim": "simple@1", '
-    '"inputs": {"fba": "../../../etc/passwd"}}]}',
-    '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [3]}',
-    '{"format": "fbaconf.suite/1", "name": "s", "claim": 1, "cases": {}}'])
+@pytest.mark.parametrize(
+    "manifest",
+    [
+        "[]",
+        '{"format": "fbaconf.suite/1"}',
+        '{"format": "fbaconf.suite/1", "name": "../../x", "claim": "simple@1", "cases": []}',
+        '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [{"id": "/etc"}]}',
+        '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [{"id": "c", "claim": "simple@1", '
+        '"inputs": {"fba": "../../../etc/passwd"}}]}',
+        '{"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1", "cases": [3]}',
+        '{"format": "fbaconf.suite/1", "name": "s", "claim": 1, "cases": {}}',
+    ],
+)
 def test_malformed_or_escaping_suite_manifests_are_one_clear_error(tmp_path, manifest):
     d = tmp_path / "s"
     d.mkdir()
@@ -416,8 +461,9 @@ def test_promote_confines_what_a_finding_names(tmp_path):
         d = fz / f"f-{abs(hash(fid))}"
         d.mkdir(parents=True)
         (d / "min.fba").write_bytes(b"\x00\x00\x01\xba")
-        (d / "finding.json").write_text(json.dumps({"id": fid, "class": "crash", "signature": "x",
-                                                    "minimal": {"file": minimal}}))
+        (d / "finding.json").write_text(
+            json.dumps({"id": fid, "class": "crash", "signature": "x", "minimal": {"file": minimal}})
+        )
     data = tmp_path / "data"
     refused = []
     assert promote(tmp_path / "fz", data, log=refused.append) == []
@@ -426,29 +472,34 @@ def test_promote_confines_what_a_finding_names(tmp_path):
     assert not any(tmp_path.rglob("hostname"))
 
 
-BASE_MANIFEST = ('name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n')
+BASE_MANIFEST = 'name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n'
 GOOD_COMMANDS = '[commands]\ndecode = ["/bin/true", "{input}", "{faps_out}"]\n'
 
 
-@pytest.mark.parametrize("text", [
-    BASE_MANIFEST.replace('"x"', "1") + GOOD_COMMANDS,
-    BASE_MANIFEST.replace('["simple@1"]', '"simple@1"') + GOOD_COMMANDS,
-    BASE_MANIFEST.replace('["simple@1"]', '["simpel@1"]') + GOOD_COMMANDS,
-    BASE_MANIFEST.replace('["fba"]', '["xyz"]') + GOOD_COMMANDS,
-    BASE_MANIFEST + "tools = [1]\n" + GOOD_COMMANDS,
-    BASE_MANIFEST + "reject_exit_codes = [69]\n" + GOOD_COMMANDS,
-    BASE_MANIFEST + "env = [1]\n" + GOOD_COMMANDS,
-    BASE_MANIFEST + "python = 1\n" + GOOD_COMMANDS,
-    BASE_MANIFEST + 'python = "fbaconf.harness.refadapter:ReferenceAdapter"\n[options]\nnope = 1\n',
-    BASE_MANIFEST + "sandbox = 1\n" + GOOD_COMMANDS,
-    BASE_MANIFEST + "[commands]\ndecode = [1]\n",
-    BASE_MANIFEST + '[commands]\ndecode = ["/bin/true", "{nope}"]\n',
-    BASE_MANIFEST + "commands = 1\n",
-    BASE_MANIFEST + "limits = 3\n" + GOOD_COMMANDS,
-    BASE_MANIFEST + '[limits]\ntimeout = 1\n' + GOOD_COMMANDS,
-    BASE_MANIFEST + "tmeout_s = 1\n" + GOOD_COMMANDS,
-    "\x00\x01", "name = ", "",
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        BASE_MANIFEST.replace('"x"', "1") + GOOD_COMMANDS,
+        BASE_MANIFEST.replace('["simple@1"]', '"simple@1"') + GOOD_COMMANDS,
+        BASE_MANIFEST.replace('["simple@1"]', '["simpel@1"]') + GOOD_COMMANDS,
+        BASE_MANIFEST.replace('["fba"]', '["xyz"]') + GOOD_COMMANDS,
+        BASE_MANIFEST + "tools = [1]\n" + GOOD_COMMANDS,
+        BASE_MANIFEST + "reject_exit_codes = [69]\n" + GOOD_COMMANDS,
+        BASE_MANIFEST + "env = [1]\n" + GOOD_COMMANDS,
+        BASE_MANIFEST + "python = 1\n" + GOOD_COMMANDS,
+        BASE_MANIFEST + 'python = "fbaconf.harness.refadapter:ReferenceAdapter"\n[options]\nnope = 1\n',
+        BASE_MANIFEST + "sandbox = 1\n" + GOOD_COMMANDS,
+        BASE_MANIFEST + "[commands]\ndecode = [1]\n",
+        BASE_MANIFEST + '[commands]\ndecode = ["/bin/true", "{nope}"]\n',
+        BASE_MANIFEST + "commands = 1\n",
+        BASE_MANIFEST + "limits = 3\n" + GOOD_COMMANDS,
+        BASE_MANIFEST + "[limits]\ntimeout = 1\n" + GOOD_COMMANDS,
+        BASE_MANIFEST + "tmeout_s = 1\n" + GOOD_COMMANDS,
+        "\x00\x01",
+        "name = ",
+        "",
+    ],
+)
 def test_malformed_manifests_are_one_clear_error(tmp_path, text):
     m = tmp_path / "m.toml"
     m.write_text(text, errors="surrogateescape")

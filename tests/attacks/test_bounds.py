@@ -2,6 +2,7 @@
 ceilings and never "none", 0 or unbounded; ``[env]`` carries data, never a runtime's start-up
 hook; a decoder cannot take a bundled adapter's name; ``run`` names which limits hold and how.
 Every hostile manifest here is written from the issue's description."""
+
 from __future__ import annotations
 
 import os
@@ -38,24 +39,38 @@ def write(tmp_path: Path, text: str, name="acme.toml") -> Path:
 
 
 def fbaconf(*args, timeout=600) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fbaconf", *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "fbaconf", *map(str, args)], capture_output=True, text=True, timeout=timeout
+    )
 
 
 # ------------------------------------------------------------------ limits
 
 
 # the issue's manifests: each was accepted by run and certify, and held or wrote what it asked for
-@pytest.mark.parametrize("limits,words", [
-    ('memory_kind = "none"', 'memory_kind = "none" is no limit'),
-    ("memory_mb = 0", "memory_mb = 0 is no limit"),
-    ("output_mb = 1048576", "output_mb = 1048576 is over the lab's ceiling of 1024 (the lab raises it with "
-                            "--max-output-mb)"),
-    ("processes = 4096", "processes = 4096 is over the lab's ceiling of 256 (the lab raises it with --max-processes)"),
-    ("timeout_s = 86400", "timeout_s = 86400 is over the lab's ceiling of 600 (the lab raises it with "
-                          "--max-timeout-s)"),
-    ("memory_mb = 8192", "memory_mb = 8192 is over the lab's ceiling of 4096 (the lab raises it with --max-memory-mb)"),
-])
+@pytest.mark.parametrize(
+    "limits,words",
+    [
+        ('memory_kind = "none"', 'memory_kind = "none" is no limit'),
+        ("memory_mb = 0", "memory_mb = 0 is no limit"),
+        (
+            "output_mb = 1048576",
+            "output_mb = 1048576 is over the lab's ceiling of 1024 (the lab raises it with --max-output-mb)",
+        ),
+        (
+            "processes = 4096",
+            "processes = 4096 is over the lab's ceiling of 256 (the lab raises it with --max-processes)",
+        ),
+        (
+            "timeout_s = 86400",
+            "timeout_s = 86400 is over the lab's ceiling of 600 (the lab raises it with --max-timeout-s)",
+        ),
+        (
+            "memory_mb = 8192",
+            "memory_mb = 8192 is over the lab's ceiling of 4096 (the lab raises it with --max-memory-mb)",
+        ),
+    ],
+)
 def test_a_limit_past_the_labs_ceiling_or_no_limit_is_refused(tmp_path, limits, words):
     m = write(tmp_path, BASE + COMMANDS + f"[limits]\n{limits}\n")
     with pytest.raises(adapters.ManifestError) as e:
@@ -88,8 +103,9 @@ def test_run_and_certify_refuse_a_limit_past_the_ceiling_before_anything_runs(tm
 def test_the_raised_ceiling_is_the_labs_flag_on_every_verb():
     for verb in ("run", "certify", "bench", "fuzz"):
         r = fbaconf(verb, "--help", timeout=60)
-        assert all(f in r.stdout for f in ("--max-timeout-s", "--max-memory-mb", "--max-output-mb",
-                                           "--max-processes")), verb
+        assert all(
+            f in r.stdout for f in ("--max-timeout-s", "--max-memory-mb", "--max-output-mb", "--max-processes")
+        ), verb
 
 
 # ------------------------------------------------------------------ what run says holds
@@ -101,8 +117,9 @@ def test_run_names_the_limits_in_force_with_writable_cgroups(monkeypatch):
     monkeypatch.setattr(sandbox, "isolation", lambda: "bwrap")
     a = adapters.resolve("reference")
     lines = limits_in_force(a)
-    assert lines[1] == "memory: 4096 MB over the whole process tree (cgroup memory limit; OOM events read from " \
-                       "the kernel)"
+    assert (
+        lines[1] == "memory: 4096 MB over the whole process tree (cgroup memory limit; OOM events read from the kernel)"
+    )
     assert lines[3] == "processes: 64 in the tree (cgroup pids limit)"
     line = report(a).notice()
     assert "NOT" not in line and "over the whole process tree" in line
@@ -115,23 +132,41 @@ def test_without_writable_cgroups_run_never_reads_as_limited_for_the_tree(monkey
     a = adapters.resolve("reference")
     line = report(a).notice()
     assert "decoders run isolated" not in line and "NOT fully isolated" in line
-    assert "memory: 4096 MB of address space per process (RLIMIT_AS) — no cgroup here, so NOT over the whole " \
-           "tree" in line
+    assert (
+        "memory: 4096 MB of address space per process (RLIMIT_AS) — no cgroup here, so NOT over the whole tree" in line
+    )
     assert "processes: NOT limited (no writable pids cgroup here)" in line
     assert "over the whole process tree (cgroup" not in line
     inproc = limits_in_force(adapters.resolve("reference-inprocess"))
-    assert inproc == ["in-process: reference-inprocess runs inside fbaconf's own process: the timeout (120 s) is "
-                      "checked after each call; no memory, output or process limit"]
+    assert inproc == [
+        "in-process: reference-inprocess runs inside fbaconf's own process: the timeout (120 s) is "
+        "checked after each call; no memory, output or process limit"
+    ]
 
 
 # ------------------------------------------------------------------ [env]
 
 
-HOOKS = {"PYTHONPATH": "{dir}", "PYTHONSTARTUP": "{dir}/sitecustomize.py", "PYTHONHOME": "{dir}",
-         "LD_PRELOAD": "{dir}/hook.so", "LD_LIBRARY_PATH": "{dir}", "JAVA_TOOL_OPTIONS": "-javaagent:{dir}/a.jar",
-         "_JAVA_OPTIONS": "-Xmx1g", "JDK_JAVA_OPTIONS": "-Dx=1", "NODE_OPTIONS": "--require {dir}/hook.js",
-         "PERL5OPT": "Mhook", "RUBYOPT": "rhook", "BASH_ENV": "{dir}/hook.sh", "ENV": "{dir}/hook.sh",
-         "CLASSPATH": "{dir}", "GODEBUG": "x", "ASAN_OPTIONS": "log_path", "PATH": "{dir}", "HOME": "x"}
+HOOKS = {
+    "PYTHONPATH": "{dir}",
+    "PYTHONSTARTUP": "{dir}/sitecustomize.py",
+    "PYTHONHOME": "{dir}",
+    "LD_PRELOAD": "{dir}/hook.so",
+    "LD_LIBRARY_PATH": "{dir}",
+    "JAVA_TOOL_OPTIONS": "-javaagent:{dir}/a.jar",
+    "_JAVA_OPTIONS": "-Xmx1g",
+    "JDK_JAVA_OPTIONS": "-Dx=1",
+    "NODE_OPTIONS": "--require {dir}/hook.js",
+    "PERL5OPT": "Mhook",
+    "RUBYOPT": "rhook",
+    "BASH_ENV": "{dir}/hook.sh",
+    "ENV": "{dir}/hook.sh",
+    "CLASSPATH": "{dir}",
+    "GODEBUG": "x",
+    "ASAN_OPTIONS": "log_path",
+    "PATH": "{dir}",
+    "HOME": "x",
+}
 
 
 @pytest.mark.parametrize("name", sorted(HOOKS))
@@ -143,28 +178,39 @@ def test_a_start_up_hook_in_env_is_refused(tmp_path, name):
     assert e.value.rule == "manifest-env" and name in str(e.value)
 
 
-@pytest.mark.parametrize("name,value", [
-    ("FOO_FLAGS", "--load hook"),  # a runtime the list does not know: an option
-    ("FOO_OPTS", "fast -Xhook"),
-    ("FOO_ARGS", "@/opt/args.txt"),  # an argument file
-    ("FOO_CONF", "preload=hook"),  # a setting
-])
+@pytest.mark.parametrize(
+    "name,value",
+    [
+        ("FOO_FLAGS", "--load hook"),  # a runtime the list does not know: an option
+        ("FOO_OPTS", "fast -Xhook"),
+        ("FOO_ARGS", "@/opt/args.txt"),  # an argument file
+        ("FOO_CONF", "preload=hook"),  # a setting
+    ],
+)
 def test_a_value_that_is_an_option_or_a_setting_is_refused_whatever_the_name(name, value):
     assert env_problem(name, value) is not None
 
 
-@pytest.mark.parametrize("name,value", [("ACME_MODE", "strict"), ("BUG", "sign"), ("ACME_LICENSE", "ci"),
-                                        ("GOBLIN_MODE", "fast"), ("THREADS", "2"),
-                                        ("ACME_MODELS", "/opt/acme/models")])  # shows nothing more: see environ.py
+@pytest.mark.parametrize(
+    "name,value",
+    [
+        ("ACME_MODE", "strict"),
+        ("BUG", "sign"),
+        ("ACME_LICENSE", "ci"),
+        ("GOBLIN_MODE", "fast"),
+        ("THREADS", "2"),
+        ("ACME_MODELS", "/opt/acme/models"),
+    ],
+)  # shows nothing more: see environ.py
 def test_plain_data_passes(name, value):
     assert env_problem(name, value) is None
 
 
-SITECUSTOMIZE = '''
+SITECUSTOMIZE = """
 # runs before any decoder code when PYTHONPATH names this folder
 import sys
 sys.stderr.write("HOOKED\\n")
-'''
+"""
 
 
 def test_the_sitecustomize_attack_certifies_nothing_and_the_hook_was_real(tmp_path):
@@ -176,16 +222,20 @@ def test_the_sitecustomize_attack_certifies_nothing_and_the_hook_was_real(tmp_pa
     vendor = tmp_path / "vendor"
     vendor.mkdir()
     (vendor / "sitecustomize.py").write_text(SITECUSTOMIZE)
-    m = write(tmp_path, BASE + '[commands]\ndecode = ["{python}", "-c", "pass", "{input}", "{faps_out}"]\n'
-              f'[env]\nPYTHONPATH = "{vendor}"\n')
+    m = write(
+        tmp_path,
+        BASE + '[commands]\ndecode = ["{python}", "-c", "pass", "{input}", "{faps_out}"]\n'
+        f'[env]\nPYTHONPATH = "{vendor}"\n',
+    )
     r = fbaconf("certify", "--decoder", m, "--claim", "predictable@2", "--no-speed", "-o", tmp_path / "pkg")
     assert r.returncode == 2 and "PYTHONPATH is in the PYTHON… namespace" in r.stderr, r.stderr
     assert not (tmp_path / "pkg").exists()
     case = tmp_path / "case"
     (case / "in").mkdir(parents=True)
     view = sandbox.View(read_only=[vendor, *sandbox.python_view()], writable=[case])
-    res = sandbox.run([sys.executable, "-c", "pass"], case, sandbox.Limits(timeout_s=30),
-                      env={"PYTHONPATH": str(vendor)}, view=view)
+    res = sandbox.run(
+        [sys.executable, "-c", "pass"], case, sandbox.Limits(timeout_s=30), env={"PYTHONPATH": str(vendor)}, view=view
+    )
     assert "HOOKED" in res.stderr_tail  # what the manifest would have done
 
 

@@ -3,6 +3,7 @@ listens on loopback only, uses task keys no one can guess, and reads what worker
 plain data. Before: any client of the tcp:// scheduler ran code on the workers, could patch
 run_case so a decoder exiting 3 everywhere reported PASS, or pre-submit fbaconf's predictable
 keys; a local process joined --cluster local:1 mid-run."""
+
 from __future__ import annotations
 
 import ipaddress
@@ -28,7 +29,7 @@ def _address(entry: str) -> tuple[str, int]:
     """``host:port`` of /proc/net/tcp{,6} (the host in 32-bit words, each little-endian)."""
     host, port = entry.split(":")
     raw = bytes.fromhex(host)
-    return str(ipaddress.ip_address(b"".join(raw[i:i + 4][::-1] for i in range(0, len(raw), 4)))), int(port, 16)
+    return str(ipaddress.ip_address(b"".join(raw[i : i + 4][::-1] for i in range(0, len(raw), 4)))), int(port, 16)
 
 
 def own_listening() -> list[tuple[str, int]]:
@@ -120,10 +121,25 @@ def test_a_lab_scheduler_with_the_labs_certificates_is_reached_and_no_one_else(t
     certificates; fbaconf is given them by FBACONF_CLUSTER_*."""
     paths = _lab_files(tmp_path / "lab")
     ca, cert, key = (str(paths[k]) for k in ("ca", "cert", "key"))
-    sec = Security(tls_ca_file=ca, tls_client_cert=cert, tls_client_key=key, tls_scheduler_cert=cert,
-                   tls_scheduler_key=key, tls_worker_cert=cert, tls_worker_key=key, require_encryption=True)
-    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tls://",
-                                  host="127.0.0.1", security=sec, dashboard_address=None) as lab:
+    sec = Security(
+        tls_ca_file=ca,
+        tls_client_cert=cert,
+        tls_client_key=key,
+        tls_scheduler_cert=cert,
+        tls_scheduler_key=key,
+        tls_worker_cert=cert,
+        tls_worker_key=key,
+        require_encryption=True,
+    )
+    with distributed.LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        processes=False,
+        protocol="tls://",
+        host="127.0.0.1",
+        security=sec,
+        dashboard_address=None,
+    ) as lab:
         for k in ("ca", "cert", "key"):
             monkeypatch.setenv(f"FBACONF_CLUSTER_{k.upper()}", str(paths[k]))
         with cluster.client(lab.scheduler_address.replace("tls://", "tcp://")) as c:
@@ -136,12 +152,15 @@ def test_a_lab_scheduler_with_the_labs_certificates_is_reached_and_no_one_else(t
                 pass
 
 
-@pytest.mark.parametrize("bad", [
-    b"\x80\x04pickle".decode("latin-1"),  # not JSON
-    "[" * 100_000 + "]" * 100_000,  # nested past any bound
-    json.dumps([1, 2, 3]),  # not a table
-    '{"result": ' + "[" * 40 + "]" * 40 + "}",  # deeper than MAX_DEPTH
-])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        b"\x80\x04pickle".decode("latin-1"),  # not JSON
+        "[" * 100_000 + "]" * 100_000,  # nested past any bound
+        json.dumps([1, 2, 3]),  # not a table
+        '{"result": ' + "[" * 40 + "]" * 40 + "}",  # deeper than MAX_DEPTH
+    ],
+)
 def test_what_a_worker_sends_back_is_plain_data_or_refused(bad):
     with pytest.raises(ClusterError):
         cluster.from_data(bad, "case result")
@@ -150,18 +169,45 @@ def test_what_a_worker_sends_back_is_plain_data_or_refused(bad):
 
 
 def test_shard_and_minimisation_reports_are_checked_field_by_field():
-    good = {"seed": 1, "execs": 3, "fuzz_seconds": 1.5, "features": ["a"], "universe": ["a", "b"],
-            "corpus": ["AAE="], "findings": [{"key": "crash:x", "cls": "crash", "signature": "x", "message": "m",
-                                              "detail": {}, "data": "AAE=", "kind": "stream", "origin": "o",
-                                              "index": 2, "corpus_size": 4, "hits": 1, "seed": 1,
-                                              "found_at_s": 0.5}]}
+    good = {
+        "seed": 1,
+        "execs": 3,
+        "fuzz_seconds": 1.5,
+        "features": ["a"],
+        "universe": ["a", "b"],
+        "corpus": ["AAE="],
+        "findings": [
+            {
+                "key": "crash:x",
+                "cls": "crash",
+                "signature": "x",
+                "message": "m",
+                "detail": {},
+                "data": "AAE=",
+                "kind": "stream",
+                "origin": "o",
+                "index": 2,
+                "corpus_size": 4,
+                "hits": 1,
+                "seed": 1,
+                "found_at_s": 0.5,
+            }
+        ],
+    }
     r = shard_report(json.dumps(good))
     assert r["corpus"] == [b"\x00\x01"] and r["findings"][0]["data"] == b"\x00\x01"
     for change in ({"execs": "3"}, {"corpus": ["not base64!"]}, {"features": [1]}, {"findings": [{"key": 1}]}):
         with pytest.raises(ClusterError):
             shard_report(json.dumps({**good, **change}))
-    m = {"minimal": "AA==", "tests": 1, "seconds": 0.1, "reproduced": True, "flaky": False, "message": None,
-         "detail": None}
+    m = {
+        "minimal": "AA==",
+        "tests": 1,
+        "seconds": 0.1,
+        "reproduced": True,
+        "flaky": False,
+        "message": None,
+        "detail": None,
+    }
     assert minimise_report(json.dumps(m))["minimal"] == b"\x00"
     for change in ({"minimal": 5}, {"flaky": 1}, {"tests": True}, {"reproduced": "yes"}):
         with pytest.raises(ClusterError):
@@ -359,10 +405,12 @@ print(json.dumps({"rep": rep, "args": args, "outcomes": [r.outcome.value for r i
 # (uid 0 kept), as two processes of one ordinary user would — what keeps the attacker out is
 # then the harness's and the workers' being non-dumpable (bubblewrap still starts: it needs no
 # capability, only user namespaces).
-NO_CAPABILITIES = ("import ctypes, os, sys\n"
-                   "for cap in range(64):\n"
-                   "    ctypes.CDLL(None).prctl(24, cap, 0, 0, 0)  # PR_CAPBSET_DROP (root only)\n"
-                   "os.execv(sys.executable, [sys.executable] + sys.argv[1:])\n")
+NO_CAPABILITIES = (
+    "import ctypes, os, sys\n"
+    "for cap in range(64):\n"
+    "    ctypes.CDLL(None).prctl(24, cap, 0, 0, 0)  # PR_CAPBSET_DROP (root only)\n"
+    "os.execv(sys.executable, [sys.executable] + sys.argv[1:])\n"
+)
 
 
 def _attacked_run(tmp_path: Path, *, hand_over_the_key: bool):
@@ -372,15 +420,30 @@ def _attacked_run(tmp_path: Path, *, hand_over_the_key: bool):
     (tmp_path / "fail.py").write_text("import sys\nsys.exit(3)\n")
     (tmp_path / "fail.toml").write_text(
         'name = "exit-3"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
-        f'[commands]\ndecode = ["{{python}}", "{tmp_path / "fail.py"}", "{{input}}", "{{faps_out}}"]\n')
+        f'[commands]\ndecode = ["{{python}}", "{tmp_path / "fail.py"}", "{{input}}", "{{faps_out}}"]\n'
+    )
     (tmp_path / "attacker.py").write_text(ATTACKER)
     (tmp_path / "scenario.py").write_text(SCENARIO)
     for d in ("tmp", "mine"):
         (tmp_path / d).mkdir()
-    env = {**os.environ, "TMPDIR": str(tmp_path / "tmp"),
-           "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")])}
-    p = subprocess.run([sys.executable, "-c", NO_CAPABILITIES, str(tmp_path / "scenario.py"), str(tmp_path),
-                        "hand-over" if hand_over_the_key else "attack"], capture_output=True, env=env, timeout=600)
+    env = {
+        **os.environ,
+        "TMPDIR": str(tmp_path / "tmp"),
+        "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")]),
+    }
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            NO_CAPABILITIES,
+            str(tmp_path / "scenario.py"),
+            str(tmp_path),
+            "hand-over" if hand_over_the_key else "attack",
+        ],
+        capture_output=True,
+        env=env,
+        timeout=600,
+    )
     assert p.returncode == 0, p.stderr.decode()[-4000:]
     doc = json.loads(p.stdout.decode().strip().splitlines()[-1])
     return doc["rep"], doc["args"], doc["outcomes"]

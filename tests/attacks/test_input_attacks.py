@@ -1,6 +1,7 @@
 """Inputs a user hands the harness (issue 29): a suite manifest, a file to check, a scene to
 animate. Each bad one is one clear error naming the file and the rule — never a traceback, a
 hang or a MemoryError."""
+
 from __future__ import annotations
 
 import json
@@ -14,8 +15,12 @@ import pytest
 
 from fbaconf.conformance.suite import Suite, SuiteError
 
-BASE = {"format": "fbaconf.suite/1", "name": "s", "claim": "simple@1",
-        "cases": [{"id": "c1", "claim": "simple@1", "kind": "decode", "inputs": {"fba": "x.fba"}, "sha256": {}}]}
+BASE = {
+    "format": "fbaconf.suite/1",
+    "name": "s",
+    "claim": "simple@1",
+    "cases": [{"id": "c1", "claim": "simple@1", "kind": "decode", "inputs": {"fba": "x.fba"}, "sha256": {}}],
+}
 
 
 def _variant(change) -> str:
@@ -52,8 +57,13 @@ def test_a_malformed_suite_is_one_clear_error(tmp_path, name):
 def test_a_malformed_suite_stops_a_run_with_its_error_not_a_traceback(tmp_path):
     (tmp_path / "s").mkdir()
     (tmp_path / "s" / "suite.json").write_text(BAD_SUITES["inputs as a list"])
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "run", "--decoder", "reference", "-o", str(tmp_path / "o")],
-                       capture_output=True, text=True, timeout=120, env={**os.environ, "FBACONF_SUITES": str(tmp_path)})
+    r = subprocess.run(
+        [sys.executable, "-m", "fbaconf", "run", "--decoder", "reference", "-o", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "FBACONF_SUITES": str(tmp_path)},
+    )
     assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
     assert "inputs must be a table" in r.stderr, r.stderr
 
@@ -86,9 +96,26 @@ def test_animate_on_a_scene_with_a_huge_token_is_an_error_not_a_memory_error(tmp
         f.truncate(1 << 30)
     token = tmp_path / "token.bt"
     token.write_bytes(b"Face { fdp " + b"x" * (3 << 20) + b" }\n")  # a 3 MB token in a small file
-    for scene, words in ((huge, "over the 67108864 byte limit [rule bt-file]"),
-                         (token, "a token of 3145728 characters ('xxxxxxxx")):
-        r = subprocess.run([sys.executable, "-m", "fbaconf", "animate", "--scene", str(scene), "--faps", str(faps),
-                            "-o", str(tmp_path / "out.npz")], capture_output=True, text=True, timeout=120)
+    for scene, words in (
+        (huge, "over the 67108864 byte limit [rule bt-file]"),
+        (token, "a token of 3145728 characters ('xxxxxxxx"),
+    ):
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "fbaconf",
+                "animate",
+                "--scene",
+                str(scene),
+                "--faps",
+                str(faps),
+                "-o",
+                str(tmp_path / "out.npz"),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert r.returncode == 2 and words in r.stderr, r.stderr
         assert "Traceback" not in r.stderr and "MemoryError" not in r.stderr and len(r.stderr) < 1000

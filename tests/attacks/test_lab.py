@@ -1,6 +1,7 @@
 """The lab, not the vendor, sets isolation (issue 29): no manifest key widens a decoder's view,
 ``python =`` runs only bundled code under certify, a signing key never reaches a decoder or a
 package, certify says (or refuses) when it cannot isolate — and no manifest gives a traceback."""
+
 from __future__ import annotations
 
 import json
@@ -42,8 +43,15 @@ def write(tmp_path: Path, text: str | bytes, name="m.toml") -> Path:
 # ------------------------------------------------------------------ the manifest cannot widen the view
 
 
-@pytest.mark.parametrize("table", ['[sandbox]\nread_only = ["/"]\n', '[sandbox]\nread_only = ["/work"]\n',
-                                   "[sandbox]\n", 'sandbox = {read_only = ["/proc"]}\n'])
+@pytest.mark.parametrize(
+    "table",
+    [
+        '[sandbox]\nread_only = ["/"]\n',
+        '[sandbox]\nread_only = ["/work"]\n',
+        "[sandbox]\n",
+        'sandbox = {read_only = ["/proc"]}\n',
+    ],
+)
 def test_a_sandbox_table_is_refused(tmp_path, table):
     text = BASE + table + COMMANDS if table.startswith("sandbox =") else BASE + COMMANDS + table
     with pytest.raises(adapters.ManifestError) as e:
@@ -53,8 +61,24 @@ def test_a_sandbox_table_is_refused(tmp_path, table):
 
 def test_certify_with_a_widening_manifest_certifies_nothing(tmp_path):
     m = write(tmp_path, BASE + COMMANDS + '[sandbox]\nread_only = ["/"]\n')
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", str(m), "--claim", "simple@1",
-                        "-o", str(tmp_path / "pkg"), "--no-speed"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "certify",
+            "--decoder",
+            str(m),
+            "--claim",
+            "simple@1",
+            "-o",
+            str(tmp_path / "pkg"),
+            "--no-speed",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 2 and "[sandbox] is not a manifest key" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "pkg").exists()
 
@@ -126,6 +150,7 @@ def test_allow_unisolated_says_what_was_missing_in_the_statement(tmp_path, monke
 
 def _two_cases():
     from fbaconf.conformance.suite import load_suites  # noqa: PLC0415 (test helper)
+
     (s,) = load_suites(names=["simple-l1-core"])
     return [c for c in s.cases if c.id in ("arith-q1-all-faps", "dct-q4")]
 
@@ -141,7 +166,7 @@ def test_the_isolation_gaps_are_named_for_command_decoders_only(monkeypatch):
 # ------------------------------------------------------------------ the key
 
 
-HUNTER = r'''
+HUNTER = r"""
 import os, sys
 IN, OUT = sys.argv[1], sys.argv[2]
 # what to recognise (the key's first bytes, its path), given reversed: its own argv does not match
@@ -191,7 +216,7 @@ hunt()
 print("FOUND " + " ".join(found) if found else "NOTHING", file=sys.stderr)
 from fbaconf.reference.pipeline import reference_outputs
 reference_outputs(IN, faps_out=OUT)
-'''
+"""
 
 
 def _hunter(tmp_path: Path, key: Path) -> Path:
@@ -200,16 +225,37 @@ def _hunter(tmp_path: Path, key: Path) -> Path:
     (vendor / "hunter.py").write_text(HUNTER)
     marks = [b"".join(key.read_bytes().splitlines()[1:-1])[:24], str(key).encode()]
     m = vendor / "hunter.toml"
-    m.write_text('name = "hunter"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 'faps_format = "npz"\n[commands]\ndecode = ["{python}", "{manifest_dir}/hunter.py", "{input}", '
-                 f'"{{faps_out}}", "{marks[0][::-1].hex()}", "{marks[1][::-1].hex()}"]\n[limits]\ntimeout_s = 60\n')
+    m.write_text(
+        'name = "hunter"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        'faps_format = "npz"\n[commands]\ndecode = ["{python}", "{manifest_dir}/hunter.py", "{input}", '
+        f'"{{faps_out}}", "{marks[0][::-1].hex()}", "{marks[1][::-1].hex()}"]\n[limits]\ntimeout_s = 60\n'
+    )
     return m
 
 
 def _certify(m: Path, pkg: Path, key: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", str(m), "--claim", "simple@1",
-                           "-o", str(pkg), "--no-speed", "-j", "2", "--key", str(key)], capture_output=True,
-                          text=True, timeout=900)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "certify",
+            "--decoder",
+            str(m),
+            "--claim",
+            "simple@1",
+            "-o",
+            str(pkg),
+            "--no-speed",
+            "-j",
+            "2",
+            "--key",
+            str(key),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
 
 
 def test_a_decoder_hunting_the_key_finds_nothing_and_no_key_byte_reaches_the_package(tmp_path):
@@ -226,8 +272,9 @@ def test_a_decoder_hunting_the_key_finds_nothing_and_no_key_byte_reaches_the_pac
     required = select_cases(load_suites(), "simple@1", [], [], only_required=True, adapter=adapters.resolve(m))
     assert len(results) == len(required)
     hunted = [x for x in results if x["case_id"].endswith(("/arith-q1-all-faps", "/dct-q4"))]
-    assert len(hunted) == 2 and all("NOTHING" in x["stderr_tail"] and x["outcome"] == "Pass" for x in hunted), \
-        [x["stderr_tail"] for x in hunted]
+    assert len(hunted) == 2 and all("NOTHING" in x["stderr_tail"] and x["outcome"] == "Pass" for x in hunted), [
+        x["stderr_tail"] for x in hunted
+    ]
     body = b"".join(key.read_bytes().splitlines()[1:-1])
     for p in pkg.rglob("*"):
         if p.is_file():
@@ -246,9 +293,26 @@ def test_a_key_inside_a_folder_the_decoder_sees_stops_certify(tmp_path):
 def test_a_bad_key_stops_certify_before_any_decoder_runs(tmp_path):
     bad = tmp_path / "bad.key"
     bad.write_text("not a key")
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", "reference", "--claim", "simple@1",
-                        "-o", str(tmp_path / "pkg"), "--no-speed", "--key", str(bad)], capture_output=True, text=True,
-                       timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "certify",
+            "--decoder",
+            "reference",
+            "--claim",
+            "simple@1",
+            "-o",
+            str(tmp_path / "pkg"),
+            "--no-speed",
+            "--key",
+            str(bad),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 2 and "not a PEM private key" in r.stderr and not (tmp_path / "pkg").exists()
 
 
@@ -258,7 +322,7 @@ def test_a_bad_key_stops_certify_before_any_decoder_runs(tmp_path):
 MALFORMED = [
     b"a = " + b"[" * 5000 + b"]" * 5000,  # deep nesting (tomllib recursion)
     b"[a]\n" + b"".join(b"[a" + b".b" * i + b"]\n" for i in range(1, 40)),
-    BASE.encode() + b"description = \"\xff\xfe\"\n" + COMMANDS.encode(),  # not UTF-8
+    BASE.encode() + b'description = "\xff\xfe"\n' + COMMANDS.encode(),  # not UTF-8
     b"\xef\xbb\xbf" + BASE.encode() + COMMANDS.encode() + b"\x80",
     (BASE + "tools = 3\n" + COMMANDS).encode(),  # a tools integer
     (BASE + 'tools = "dct"\n' + COMMANDS).encode(),
@@ -267,10 +331,10 @@ MALFORMED = [
     (BASE + "faps_format = [1]\n" + COMMANDS).encode(),
     (BASE + "reject_exit_codes = 2\n" + COMMANDS).encode(),
     (BASE + "options = 2\n" + COMMANDS).encode(),
-    (BASE + "[commands]\ndecode = [[[\"x\"]]]\n").encode(),
-    (BASE + "[commands]\ndecode = [\"x\", [1]]\n").encode(),
+    (BASE + '[commands]\ndecode = [[["x"]]]\n').encode(),
+    (BASE + '[commands]\ndecode = ["x", [1]]\n').encode(),
     (BASE + "[commands]\ndecode = []\n").encode(),
-    (BASE + "[commands]\n\"{x}\" = [\"a\"]\n").encode(),
+    (BASE + '[commands]\n"{x}" = ["a"]\n').encode(),
     (BASE + COMMANDS + "[env]\nA = [1]\n").encode(),
     (BASE + COMMANDS + "[limits]\ntimeout_s = 1e999\n").encode(),
     (BASE + COMMANDS + "[limits]\nmemory_kind = 3\n").encode(),
@@ -292,8 +356,9 @@ def test_malformed_manifests_are_one_short_error(tmp_path, text):
 
 def test_malformed_manifest_through_the_cli_has_no_traceback(tmp_path):
     m = write(tmp_path, MALFORMED[0])
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "run", "--decoder", str(m)], capture_output=True, text=True,
-                       timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-m", "fbaconf", "run", "--decoder", str(m)], capture_output=True, text=True, timeout=120
+    )
     assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr) < 600
 
 
@@ -305,15 +370,18 @@ def test_a_manifest_that_is_not_a_regular_file_is_refused_unopened(tmp_path):
         adapters.resolve(fifo / "m.toml")
 
 
-_values = st.recursive(st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=20),
-                       lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner,
-                                                                                    max_size=4), max_leaves=12)
+_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=20),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+    max_leaves=12,
+)
 
 
 @given(key=st.sampled_from(list(adapters.MANIFEST_KEYS) + ["sandbox", "x"]), value=_values)
 def test_any_value_of_any_key_is_a_manifest_error_or_an_adapter(tmp_path_factory, key, value):
     """Property: whatever a key holds, loading gives an adapter or one ManifestError."""
     import tomllib  # noqa: PLC0415 (only to skip values TOML cannot hold)
+
     data = tomllib.loads(BASE + COMMANDS)
     data[key] = value
     text = _toml(data)
@@ -328,6 +396,7 @@ def test_any_value_of_any_key_is_a_manifest_error_or_an_adapter(tmp_path_factory
 
 def _toml(data) -> str | None:
     """A minimal TOML writer (inline tables), or None for what TOML cannot hold (null)."""
+
     def val(v):
         if v is None:
             raise ValueError
@@ -342,6 +411,7 @@ def _toml(data) -> str | None:
         if isinstance(v, list):
             return "[" + ", ".join(val(x) for x in v) + "]"
         return "{" + ", ".join(f"{json.dumps(k)} = {val(x)}" for k, x in v.items()) + "}"
+
     try:
         return "\n".join(f"{json.dumps(k)} = {val(v)}" for k, v in data.items()) + "\n"
     except ValueError:

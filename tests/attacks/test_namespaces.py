@@ -4,6 +4,7 @@ all, a root process outside could not ``unshare -U`` and a concurrent case's san
 start. The seccomp filter (isolation/seccomp.py) refuses ``unshare``/``clone`` with a namespace
 flag and ``setns`` (EPERM) and ``clone3`` (ENOSYS, so the C library falls back to ``clone``);
 threads and ``fork`` still work. The hostile decoders are written here."""
+
 from __future__ import annotations
 
 import os
@@ -30,7 +31,7 @@ def needs_sandbox():
         pytest.skip("bubblewrap (bwrap) is not installed, or the filter does not know this architecture")
 
 
-PROBE = '''
+PROBE = """
 import ctypes, errno, os, subprocess, threading
 libc = ctypes.CDLL(None, use_errno=True)
 def call(f, *a):
@@ -57,7 +58,7 @@ t.start(); t.join()
 print("child", subprocess.run(["/bin/echo", "ok"], capture_output=True, text=True).stdout.strip())
 r = subprocess.run(["unshare", "-U", "-m", "true"], capture_output=True, text=True)
 print("unshare-command", r.returncode)
-'''
+"""
 
 
 def _run_script(tmp_path: Path, name: str, body: str, limits=None):
@@ -80,7 +81,7 @@ def test_every_way_to_a_new_namespace_is_refused_and_threads_and_children_still_
     assert got["unshare-command"] != "0"
 
 
-FLOOD = '''
+FLOOD = """
 import ctypes, os, sys, time
 libc = ctypes.CDLL(None, use_errno=True)
 N = int(sys.argv[1]) if len(sys.argv) > 1 else 200
@@ -101,12 +102,16 @@ time.sleep(3)
 print("namespaces", made)
 for k in kids:
     os.waitpid(k, 0)
-'''
+"""
 
 
 def _flood(tmp_path: Path, name: str, n: int, out: dict) -> None:
-    out["res"] = _run_script(tmp_path, name, FLOOD.replace("int(sys.argv[1]) if len(sys.argv) > 1 else 200", str(n)),
-                             Limits(timeout_s=60, processes=256))
+    out["res"] = _run_script(
+        tmp_path,
+        name,
+        FLOOD.replace("int(sys.argv[1]) if len(sys.argv) > 1 else 200", str(n)),
+        Limits(timeout_s=60, processes=256),
+    )
 
 
 def test_a_namespace_flood_takes_nothing_and_a_concurrent_case_runs(tmp_path):
@@ -122,8 +127,14 @@ def test_a_namespace_flood_takes_nothing_and_a_concurrent_case_runs(tmp_path):
             break
         time.sleep(0.05)
     (s,) = load_suites(names=["simple-l1-core"])
-    (r,) = run_cases(adapters.resolve("reference"), [c for c in s.cases if c.id == "dct-q4"], claim="simple@1",
-                     out_dir=tmp_path / "run", jobs=1, progress=False)
+    (r,) = run_cases(
+        adapters.resolve("reference"),
+        [c for c in s.cases if c.id == "dct-q4"],
+        claim="simple@1",
+        out_dir=tmp_path / "run",
+        jobs=1,
+        progress=False,
+    )
     assert holding.exists(), "the flooder never got to hold"  # the case ran during the hold
     t.join()
     assert r.outcome == Outcome.PASS, r.message

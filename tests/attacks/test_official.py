@@ -2,6 +2,7 @@
 that are not the ones this fbaconf ships (a hostile suite cut to one case certified "PASS (1
 case)" and verified OK on a machine with the official suites), and a decoder that ran without
 isolation (verify printed a plain OK for an --allow-unisolated certificate)."""
+
 from __future__ import annotations
 
 import json
@@ -18,8 +19,14 @@ from fbaconf.isolation import sandbox
 
 
 def fbaconf(*args, env=None, cwd=None):
-    return subprocess.run([sys.executable, "-m", "fbaconf", *map(str, args)], capture_output=True, text=True,
-                          timeout=600, env={**os.environ, **(env or {})}, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "fbaconf", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, **(env or {})},
+        cwd=cwd,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -32,8 +39,17 @@ def one_case_package(tmp_path_factory):
     doc = json.loads((dst / "suite.json").read_text())
     doc["cases"] = doc["cases"][:1]
     (dst / "suite.json").write_text(json.dumps(doc, indent=1))
-    r = fbaconf("certify", "--decoder", "reference-inprocess", "--claim", "simple@1", "--no-speed",
-                "-o", tmp / "pkg", env={"FBACONF_SUITES": str(tmp / "suites")})
+    r = fbaconf(
+        "certify",
+        "--decoder",
+        "reference-inprocess",
+        "--claim",
+        "simple@1",
+        "--no-speed",
+        "-o",
+        tmp / "pkg",
+        env={"FBACONF_SUITES": str(tmp / "suites")},
+    )
     return tmp / "pkg", r
 
 
@@ -61,21 +77,30 @@ def test_the_official_suites_are_this_fbaconfs_whatever_the_environment_says(one
     pkg, _r = one_case_package
     suites = json.loads((pkg / "certificate.json").read_text())["suites"]
     assert official.differences(suites, None)  # the cut suite is not ours
-    ours = [{"name": "simple-l1-core",
-             "sha256": package.hashlib.sha256((official.suites_folder() / "simple-l1-core" / "suite.json")
-                                              .read_bytes()).hexdigest()}]
+    ours = [
+        {
+            "name": "simple-l1-core",
+            "sha256": package.hashlib.sha256(
+                (official.suites_folder() / "simple-l1-core" / "suite.json").read_bytes()
+            ).hexdigest(),
+        }
+    ]
     golden = (official.golden_folder() / "MANIFEST.json").read_bytes()
     assert official.differences(ours, golden) == []
     assert official.differences(ours, golden + b" ") == ["goldens: the golden manifest is not this fbaconf's"]
     assert official.differences([{"name": "../etc", "sha256": "x"}], None) == [
-        "suite ../etc: not a suite this fbaconf ships"]
+        "suite ../etc: not a suite this fbaconf ships"
+    ]
 
 
 def test_certify_records_that_the_decoder_ran_unisolated(tmp_path, monkeypatch):
     monkeypatch.setattr(sandbox, "isolation", lambda: "none")
     monkeypatch.setattr(certify, "preflight", lambda *a, **k: None)  # the canary would run unisolated too
-    monkeypatch.setattr(certify, "select_cases", lambda suites, claim, *a, **k: [
-        c for s in suites if s.name == "simple-l1-core" for c in s.cases[:2]])
+    monkeypatch.setattr(
+        certify,
+        "select_cases",
+        lambda suites, claim, *a, **k: [c for s in suites if s.name == "simple-l1-core" for c in s.cases[:2]],
+    )
     certify.certify("reference", "simple@1", tmp_path / "pkg", speed=False, allow_unisolated=True, jobs=1)
     cert = json.loads((tmp_path / "pkg" / "certificate.json").read_text())
     assert cert["isolated"] is False and (tmp_path / "pkg" / "summary.txt").read_text().startswith("NOT ISOLATED")

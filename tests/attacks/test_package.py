@@ -3,6 +3,7 @@ re-derived, the signature covers the digest list, each file is read once.
 
 Uses the session's packages (tests/conftest.py: ``certify --decoder reference-inprocess
 --claim simple@1 --no-speed``, unsigned and signed)."""
+
 from __future__ import annotations
 
 import json
@@ -18,8 +19,12 @@ from fbaconf.certification.certify import PUB_FILE, keygen, verify
 
 
 def cli(*args):
-    return subprocess.run([sys.executable, "-m", "fbaconf", "certify", "verify", *map(str, args)],
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "fbaconf", "certify", "verify", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
 def reseal(pkg: Path) -> None:
@@ -61,8 +66,18 @@ def test_every_file_is_covered(certified_package):
     listed = {ln.split("  ", 1)[1] for ln in sums}
     present = {p.relative_to(certified_package).as_posix() for p in certified_package.rglob("*") if p.is_file()}
     assert present - listed == {package.SUMS}
-    for name in ("certificate.json", "statement.md", "summary.txt", "index.html", "results.jsonl", "report.json",
-                 "junit.xml", "decoder.toml", "golden-MANIFEST.json", "suites/simple-l1-core.json"):
+    for name in (
+        "certificate.json",
+        "statement.md",
+        "summary.txt",
+        "index.html",
+        "results.jsonl",
+        "report.json",
+        "junit.xml",
+        "decoder.toml",
+        "golden-MANIFEST.json",
+        "suites/simple-l1-core.json",
+    ):
         assert name in listed, name
 
 
@@ -85,17 +100,26 @@ def test_editing_any_field_of_the_certificate_is_caught_and_names_the_file(certi
     assert r.returncode == 1 and "certificate.json" in r.stderr
 
 
-@pytest.mark.parametrize("key,value", [("verdict", "FAIL"), ("exit_code", 1), ("cases", 3),
-                                       ("counts", {"Pass": 1}), ("claim", "simple@2"),
-                                       ("provisional_differences", [{"case_id": "simple-l1-core/dct-q4",
-                                                                     "rests_on": ["D8"]}])])
+@pytest.mark.parametrize(
+    "key,value",
+    [
+        ("verdict", "FAIL"),
+        ("exit_code", 1),
+        ("cases", 3),
+        ("counts", {"Pass": 1}),
+        ("claim", "simple@2"),
+        ("provisional_differences", [{"case_id": "simple-l1-core/dct-q4", "rests_on": ["D8"]}]),
+    ],
+)
 def test_a_resealed_certificate_that_disagrees_with_the_results_fails(certified_package, key, value):
     """The forger recomputes SHA256SUMS: verify re-derives the verdict and names the field."""
     edit_json(certified_package / package.CERTIFICATE, lambda c: c.__setitem__(key, value))
     reseal(certified_package)
     v = verify(certified_package)
-    assert v.problems and all(p.startswith(("certificate.json:", "report.json:", "results.jsonl:", "statement.md:",
-                                            "summary.txt:")) for p in v.problems), v.problems
+    assert v.problems and all(
+        p.startswith(("certificate.json:", "report.json:", "results.jsonl:", "statement.md:", "summary.txt:"))
+        for p in v.problems
+    ), v.problems
     assert any(p.startswith("certificate.json:") for p in v.problems) or key == "claim"
     r = cli(certified_package)
     assert r.returncode == 1
@@ -134,16 +158,31 @@ def test_a_forged_provisional_basis_is_caught(certified_package):
     target = next(r for r in lines if r["case_id"] == "simple-l1-core/arith-q1-all-faps")
     target.update(outcome="Fail", rests_on=["D8"], stages=[])
     res.write_text("\n".join(json.dumps(r) for r in lines) + "\n")
-    edit_json(certified_package / package.CERTIFICATE, lambda c: c.update(
-        verdict="PASS (provisional differences: 1)",
-        provisional_differences=[{"case_id": target["case_id"], "rests_on": ["D8"]}],
-        counts={"Pass": c["counts"]["Pass"] - 1, "Fail": 1}))
+    edit_json(
+        certified_package / package.CERTIFICATE,
+        lambda c: c.update(
+            verdict="PASS (provisional differences: 1)",
+            provisional_differences=[{"case_id": target["case_id"], "rests_on": ["D8"]}],
+            counts={"Pass": c["counts"]["Pass"] - 1, "Fail": 1},
+        ),
+    )
     reseal(certified_package)
     assert any("arith-q1-all-faps" in p and "rests on []" in p for p in verify(certified_package).problems)
 
 
-@pytest.mark.parametrize("name", ["statement.md", "summary.txt", "index.html", "results.jsonl", "report.json",
-                                  "suites/simple-l1-core.json", "golden-MANIFEST.json", "decoder.toml"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "statement.md",
+        "summary.txt",
+        "index.html",
+        "results.jsonl",
+        "report.json",
+        "suites/simple-l1-core.json",
+        "golden-MANIFEST.json",
+        "decoder.toml",
+    ],
+)
 def test_one_changed_byte_in_any_file_is_named(certified_package, name):
     p = certified_package / name
     data = bytearray(p.read_bytes())
@@ -191,6 +230,7 @@ def test_verify_reads_each_file_once(certified_package, monkeypatch):
     def counting(path, limit):
         seen[Path(path).name] = seen.get(Path(path).name, 0) + 1
         return real(path, limit)
+
     monkeypatch.setattr(package, "read_regular", counting)
     assert verify(certified_package).problems == []
     assert seen and max(seen.values()) == 1, seen
@@ -210,13 +250,15 @@ def test_a_certificate_swapped_after_its_digest_was_checked_changes_nothing(cert
         if Path(path).name == package.CERTIFICATE:
             os.replace(forged, Path(path))  # too late: the bytes are in memory
         return data
+
     monkeypatch.setattr(package, "read_regular", swapping)
     v = verify(certified_package)
     assert v.problems == [] and v.certificate["verdict"] == "PASS"
 
 
-@pytest.mark.parametrize("content", [b"[" * 100_000 + b"]" * 100_000, b'{"a":' * 100_000 + b"1" + b"}" * 100_000,
-                                     b"\xff\xfe", b"[]", b'"x"'])
+@pytest.mark.parametrize(
+    "content", [b"[" * 100_000 + b"]" * 100_000, b'{"a":' * 100_000 + b"1" + b"}" * 100_000, b"\xff\xfe", b"[]", b'"x"']
+)
 def test_malformed_certificates_are_one_problem_never_a_traceback(certified_package, content):
     (certified_package / package.CERTIFICATE).write_bytes(content)
     reseal(certified_package)
@@ -238,5 +280,3 @@ def test_non_regular_files_are_refused_unopened(certified_package):
     (certified_package / "link").symlink_to("/etc/passwd")
     v = verify(certified_package)  # returns: a FIFO is never opened
     assert {p.split(":")[0] for p in v.problems} == {"'fifo'", "'link'"}
-
-

@@ -3,6 +3,7 @@ fork server's reply channel. Each attack must become a finding of the input that
 no hang, no harness traceback, no ending moved onto another input — and the inputs around it
 must be judged as usual.
 """
+
 from __future__ import annotations
 
 import json
@@ -35,13 +36,21 @@ def answer(rid, code):
 """
 
 
-def _manifest(tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 3",
-              equivalent: bool = False) -> Path:
+def _manifest(
+    tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 3", equivalent: bool = False
+) -> Path:
     prog = tmp_path / "dec.py"
     prog.write_text("import os, signal, sys, time\n" + body)
-    lines = ['name = "t"', 'claims = ["simple@1"]', 'inputs = ["fba"]', 'outputs = ["faps"]', 'faps_format = "fap"',
-             f"serve_equivalent = {str(equivalent).lower()}", "[commands]",
-             f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]']
+    lines = [
+        'name = "t"',
+        'claims = ["simple@1"]',
+        'inputs = ["fba"]',
+        'outputs = ["faps"]',
+        'faps_format = "fap"',
+        f"serve_equivalent = {str(equivalent).lower()}",
+        "[commands]",
+        f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]',
+    ]
     if serve is not None:
         srv = tmp_path / "serve.py"
         srv.write_text(SERVE + serve)
@@ -103,8 +112,16 @@ def test_early_and_extra_answers_are_a_protocol_error_of_that_input(tmp_path):
     t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)", serve=serve))
     try:
         got = _queue(t, [b"", b"", b"TWICE", b"", b"EARLY", b"", b"", b""])
-        assert [_key(v) for v in got] == [None, None, "unexpected-exit:protocol-error", None,
-                                          "unexpected-exit:protocol-error", None, None, None]
+        assert [_key(v) for v in got] == [
+            None,
+            None,
+            "unexpected-exit:protocol-error",
+            None,
+            "unexpected-exit:protocol-error",
+            None,
+            None,
+            None,
+        ]
         assert all("broke the persistent protocol" in got[i].message for i in (2, 4))
     finally:
         t.close()
@@ -165,6 +182,7 @@ def test_the_speed_phase_through_a_flooding_serve_fails_fast(tmp_path):
 
 
 # ------------------------------------------------------------------ the fork server's channel
+
 
 @pytest.fixture(params=["c", "python"])
 def server(request, monkeypatch):
@@ -270,8 +288,20 @@ def test_a_serve_that_answers_before_decoding_gets_its_crash_filed_under_its_inp
     fuzzer late, and is filed under its input all the same."""
     t = _target(tmp_path, _manifest(tmp_path, "sys.exit(2)", serve=ANSWER_FIRST, limits="timeout_s = 5"))
     assert t.persistent
-    fz = Fuzzer(t, _boom_seeds(), FuzzConfig(seed=3, max_execs=12, seconds=120, jobs=jobs, progress=False,
-                                             minimise_seconds=60, minimise_tests=400, out_dir=tmp_path / "out"))
+    fz = Fuzzer(
+        t,
+        _boom_seeds(),
+        FuzzConfig(
+            seed=3,
+            max_execs=12,
+            seconds=120,
+            jobs=jobs,
+            progress=False,
+            minimise_seconds=60,
+            minimise_tests=400,
+            out_dir=tmp_path / "out",
+        ),
+    )
     fz.run()
     assert fz.stats.execs == 12
     (f,) = fz.findings.values()
@@ -318,8 +348,19 @@ while True:
     answer(rid, 2)
 """
     t = _target(tmp_path, _manifest(tmp_path, "sys.exit(2)", serve=serve, limits="timeout_s = 5"))
-    fz = Fuzzer(t, _boom_seeds(), FuzzConfig(seed=3, max_execs=7, seconds=120, progress=False, minimise_seconds=60,
-                                             minimise_tests=400, out_dir=tmp_path / "out"))
+    fz = Fuzzer(
+        t,
+        _boom_seeds(),
+        FuzzConfig(
+            seed=3,
+            max_execs=7,
+            seconds=120,
+            progress=False,
+            minimise_seconds=60,
+            minimise_tests=400,
+            out_dir=tmp_path / "out",
+        ),
+    )
     fz.run()
     (f,) = fz.findings.values()
     assert (f.verdict.cls, f.verdict.signature) == ("crash", "flaky:SIGSEGV"), f.verdict.message

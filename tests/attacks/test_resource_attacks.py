@@ -3,6 +3,7 @@ kernel's OOM events (never from page cache reaching the limit), the output limit
 while the decoder writes, trees of any depth counted and removed, no inotify instances taken
 from the host's user, ``memory_kind = "rss"`` sampling the decoder's tree (not the launcher).
 """
+
 from __future__ import annotations
 
 import os
@@ -45,8 +46,14 @@ def needs_cgroups():
 def run_one(tmp_path: Path, m: Path):
     suite, cid = VALID.split("/")
     (s,) = load_suites(names=[suite])
-    (r,) = run_cases(adapters.resolve(m), [c for c in s.cases if c.id == cid], claim="simple@1",
-                     out_dir=tmp_path / "run", jobs=1, progress=False)
+    (r,) = run_cases(
+        adapters.resolve(m),
+        [c for c in s.cases if c.id == cid],
+        claim="simple@1",
+        out_dir=tmp_path / "run",
+        jobs=1,
+        progress=False,
+    )
     return r
 
 
@@ -55,7 +62,7 @@ def test_an_honest_decoder_with_400_mb_of_scratch_files_passes(tmp_path):
     this decoder (38 MB resident, exit 0) read "Crash: exceeded 256 MB"."""
     needs_sandbox()
     needs_cgroups()
-    body = '''
+    body = """
         chunk = bytes(range(256)) * 4096  # 1 MB
         for k in range(4):  # 4 x 100 MB written, read back and removed: 400 MB through the page cache
             p = os.path.join(os.environ["TMPDIR"], "scratch%d" % k)
@@ -67,7 +74,7 @@ def test_an_honest_decoder_with_400_mb_of_scratch_files_passes(tmp_path):
                     pass
             os.unlink(p)
         honest()
-        '''
+        """
     lim = "timeout_s = 60\nmemory_mb = 256\noutput_mb = 256\n"
     r = run_one(tmp_path, decoder(tmp_path, "scratch", body, limits=lim))
     assert r.outcome == Outcome.PASS, r.message
@@ -79,7 +86,8 @@ def test_a_disk_flood_is_stopped_at_the_output_limit_while_it_writes(tmp_path):
     work = tmp_path / "case"
     flood = work / "in" / "flood.py"  # in the case folder: what a sandboxed decoder sees
     flood.parent.mkdir(parents=True)
-    flood.write_text(textwrap.dedent('''\
+    flood.write_text(
+        textwrap.dedent("""\
         import os
         chunk = b"\\1" * (1 << 20)
         for k in range(12):  # 12 x 100 MB
@@ -87,7 +95,8 @@ def test_a_disk_flood_is_stopped_at_the_output_limit_while_it_writes(tmp_path):
                 for _ in range(100):
                     f.write(chunk)
         print("wrote it all")
-        '''))
+        """)
+    )
     lim = Limits(timeout_s=60, memory_mb=512, output_mb=256)
     t0 = time.perf_counter()
     res = sandbox.run([os.path.realpath(sys.executable), str(flood)], work, lim)
@@ -103,7 +112,7 @@ def test_a_6000_level_tree_with_338_mb_below_a_3000_level_chain_is_counted_and_r
     against 20,000) stayed in the run folder, and 338 MB below a chain longer than PATH_MAX were
     neither counted nor removed. Here the harness's descriptor limit is lowered to 1,024 so 6,000
     levels are as deep (and 3,000 levels of "d/" are 6,000 bytes, over PATH_MAX's 4,096)."""
-    body = '''
+    body = """
         fd = os.open(".", os.O_RDONLY)
         for i in range(6000):
             os.mkdir("d", dir_fd=fd)
@@ -116,7 +125,7 @@ def test_a_6000_level_tree_with_338_mb_below_a_3000_level_chain_is_counted_and_r
                     os.ftruncate(f, 169 << 20)
                     os.close(f)
         honest()
-        '''
+        """
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (min(1024, soft), hard))
     try:
@@ -132,12 +141,14 @@ def test_a_decoder_takes_no_inotify_instance_from_the_hosts_user(tmp_path):
     needs_sandbox()
     probe = tmp_path / "case" / "in" / "inotify.py"
     probe.parent.mkdir(parents=True)
-    probe.write_text(textwrap.dedent('''\
+    probe.write_text(
+        textwrap.dedent("""\
         import ctypes, os
         libc = ctypes.CDLL(None, use_errno=True)
         got = [libc.inotify_init1(0) for _ in range(200)] + [libc.fanotify_init(0, 0)]
         print("instances", sum(1 for fd in got if fd >= 0), os.strerror(ctypes.get_errno()))
-        '''))
+        """)
+    )
     lim = Limits(timeout_s=20)
     res = sandbox.run([os.path.realpath(sys.executable), str(probe)], tmp_path / "case", lim)
     assert res.returncode == 0, res.stderr_tail
@@ -151,12 +162,14 @@ def test_rss_is_sampled_over_the_decoders_tree_not_the_launcher(tmp_path, monkey
     monkeypatch.setattr(cgroups, "_CG_BASES", [])  # no cgroup limit: the sampling alone
     hog = tmp_path / "case" / "in" / "hog.py"
     hog.parent.mkdir(parents=True)
-    hog.write_text(textwrap.dedent('''\
+    hog.write_text(
+        textwrap.dedent("""\
         import subprocess, sys, time
         child = "x = bytearray(300 << 20)\\nfor i in range(0, len(x), 4096): x[i] = 1\\nimport time; time.sleep(10)"
         subprocess.run([sys.executable, "-c", child])
         print("the child ran free")
-        '''))
+        """)
+    )
     lim = Limits(timeout_s=30, memory_mb=150, memory_kind="rss")
     res = sandbox.run([os.path.realpath(sys.executable), str(hog)], tmp_path / "case", lim)
     ending = endings.classify(res, lim)
@@ -174,6 +187,8 @@ def test_isolation_report_names_what_is_missing(monkeypatch):
     monkeypatch.setattr(sandbox, "_ISOLATION", "none")
     rep = report()
     assert not rep.complete and rep.line().startswith("not isolated: ")
-    assert [m.split(":")[0] for m in rep.missing] == ["bubblewrap (bwrap)",
-                                                      "writable cgroups with the memory controller",
-                                                      "writable cgroups with the pids controller"]
+    assert [m.split(":")[0] for m in rep.missing] == [
+        "bubblewrap (bwrap)",
+        "writable cgroups with the memory controller",
+        "writable cgroups with the pids controller",
+    ]

@@ -5,6 +5,7 @@ claim's simplest valid stream before the cases; after them, identical endings wi
 too. Either way: exit 2, the program's stdout and stderr, the limits in force, the likely fix —
 no case counted, no certificate. The decoders here are written for it; none prints a runtime's
 known words."""
+
 from __future__ import annotations
 
 import json
@@ -36,22 +37,25 @@ def decoder(tmp_path: Path, name: str, body: str, claim="simple@1") -> Path:
     d.mkdir()
     (d / f"{name}.py").write_text("import os, sys\nIN, OUT = sys.argv[1], sys.argv[2]\n" + body)
     m = d / f"{name}.toml"
-    m.write_text(f'name = "{name}"\nclaims = ["{claim}"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
-                 f'[commands]\ndecode = ["{{python}}", "{{manifest_dir}}/{name}.py", "{{input}}", "{{faps_out}}"]\n'
-                 "[limits]\ntimeout_s = 30\n")
+    m.write_text(
+        f'name = "{name}"\nclaims = ["{claim}"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
+        f'[commands]\ndecode = ["{{python}}", "{{manifest_dir}}/{name}.py", "{{input}}", "{{faps_out}}"]\n'
+        "[limits]\ntimeout_s = 30\n"
+    )
     return m
 
 
 def fbaconf(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fbaconf", *map(str, args)], capture_output=True, text=True,
-                          timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "fbaconf", *map(str, args)], capture_output=True, text=True, timeout=600
+    )
 
 
-BROKEN = '''
+BROKEN = """
 print("acme: licence server unreachable (this line is on stdout)")
 print("acme: giving up", file=sys.stderr)
 sys.exit(1)
-'''
+"""
 
 
 def test_a_decoder_that_cannot_start_is_one_set_up_error_not_a_fail_per_case(tmp_path):
@@ -92,7 +96,7 @@ def test_the_canary_passes_a_decoder_that_decodes_and_one_that_declines(tmp_path
     assert preflight.canary(adapters.resolve(declines), "simple@1") is not None  # NotSupported: the cases decide
 
 
-DECODES_ONLY_THE_CANARY = '''
+DECODES_ONLY_THE_CANARY = """
 import shutil
 name = os.path.basename(IN)
 if name == os.environ["CANARY"]:
@@ -101,7 +105,7 @@ if name == os.environ["CANARY"]:
     sys.exit(0)
 print(f"acme: cannot map the model for {IN}", file=sys.stderr)
 sys.exit(1)
-'''
+"""
 
 
 def test_every_case_ending_the_same_way_without_a_decoding_is_one_set_up_error(tmp_path):
@@ -112,8 +116,21 @@ def test_every_case_ending_the_same_way_without_a_decoding_is_one_set_up_error(t
     stem = preflight.canary_case(a0, "simple@1").id
     m = decoder(tmp_path, "acme", DECODES_ONLY_THE_CANARY)
     m.write_text(m.read_text() + f'[env]\nCANARY = "{stem}.fba"\n')
-    r = fbaconf("run", "--decoder", m, "--claim", "simple@1", "--case", "simple-l1-core/arith-q*",
-                "--case", "simple-l1-error/*marker*", "-o", tmp_path / "run", "-j", "2")
+    r = fbaconf(
+        "run",
+        "--decoder",
+        m,
+        "--claim",
+        "simple@1",
+        "--case",
+        "simple-l1-core/arith-q*",
+        "--case",
+        "simple-l1-error/*marker*",
+        "-o",
+        tmp_path / "run",
+        "-j",
+        "2",
+    )
     assert r.returncode == 2, r.stdout + r.stderr
     assert "every one of the" in r.stderr and "ended the same way, none decoded" in r.stderr
     assert "| acme: cannot map the model for" in r.stderr and "likely fix:" in r.stderr
@@ -121,8 +138,15 @@ def test_every_case_ending_the_same_way_without_a_decoding_is_one_set_up_error(t
 
 
 def _result(case_id, outcome, exit_code=1, stderr="", **kw):
-    return CaseResult(case_id=case_id, suite=case_id.split("/")[0], claim="simple@1", outcome=outcome,
-                      exit_code=exit_code, stderr_tail=stderr, **kw)
+    return CaseResult(
+        case_id=case_id,
+        suite=case_id.split("/")[0],
+        claim="simple@1",
+        outcome=outcome,
+        exit_code=exit_code,
+        stderr_tail=stderr,
+        **kw,
+    )
 
 
 def test_identical_endings_are_judged_on_endings_not_on_outcomes():
@@ -132,14 +156,19 @@ def test_identical_endings_are_judged_on_endings_not_on_outcomes():
     (err,) = load_suites(names=["simple-l1-error"])
     valid, invalid = core.cases[:2], err.cases[:2]
     a = adapters.resolve("reference")
-    same = [_result(c.full_id, Outcome.FAIL, stderr=f"cannot open /x/run/work/case-{i}ab/in/{c.id}.fba")
-            for i, c in enumerate(valid)]
-    same += [_result(c.full_id, Outcome.PASS, stderr=f"cannot open /x/run/work/case-9{i}/in/{c.id}.fba")
-             for i, c in enumerate(invalid)]
+    same = [
+        _result(c.full_id, Outcome.FAIL, stderr=f"cannot open /x/run/work/case-{i}ab/in/{c.id}.fba")
+        for i, c in enumerate(valid)
+    ]
+    same += [
+        _result(c.full_id, Outcome.PASS, stderr=f"cannot open /x/run/work/case-9{i}/in/{c.id}.fba")
+        for i, c in enumerate(invalid)
+    ]
     ids = {c.full_id for c in valid}
 
     def judged(results, valid_ids=ids):
         return setup.identical(a.name, a.limits, results, valid_ids)
+
     assert "every one of the 4 cases it ran ended the same way, none decoded" in judged(same)
     differs = same[:-1] + [_result(invalid[-1].full_id, Outcome.PASS, stderr="bad marker at byte 4")]
     assert judged(differs) is None
@@ -151,17 +180,19 @@ def test_identical_endings_are_judged_on_endings_not_on_outcomes():
 
 def test_the_ending_names_the_decoder_not_the_program():
     res = sandbox.ProcResult(["/usr/bin/java", "-jar", "x.jar"], 1, stderr_tail="no")
-    assert endings.classify(res, sandbox.Limits(), name="acme-java").message == "acme-java exited with code 1, a " \
-                                                                               "reject; stderr: no"
+    assert (
+        endings.classify(res, sandbox.Limits(), name="acme-java").message == "acme-java exited with code 1, a "
+        "reject; stderr: no"
+    )
     assert endings.classify(res, sandbox.Limits()).message.startswith("java exited")  # no name: the program
 
 
-LOUD = '''
+LOUD = """
 sys.stdout.write("o" * 9000 + "END-OUT\\n")
 sys.stderr.write("e" * 9000 + "END-ERR\\n")
 os.symlink(os.environ["TARGET"], "stderr.txt")  # the harness must not write through it
 sys.exit(3)
-'''
+"""
 
 
 def test_keep_workdirs_keeps_each_cases_whole_stdout_and_stderr(tmp_path):
@@ -171,8 +202,15 @@ def test_keep_workdirs_keeps_each_cases_whole_stdout_and_stderr(tmp_path):
     m = decoder(tmp_path, "loud", LOUD)
     m.write_text(m.read_text() + f'[env]\nTARGET = "{target}"\n')
     (s,) = load_suites(names=["simple-l1-core"])
-    (r,) = run_cases(adapters.resolve(m), [c for c in s.cases if c.id == "dct-q4"], claim="simple@1",
-                     out_dir=tmp_path / "run", jobs=1, progress=False, keep_workdirs=True)
+    (r,) = run_cases(
+        adapters.resolve(m),
+        [c for c in s.cases if c.id == "dct-q4"],
+        claim="simple@1",
+        out_dir=tmp_path / "run",
+        jobs=1,
+        progress=False,
+        keep_workdirs=True,
+    )
     assert r.outcome == Outcome.FAIL and "loud exited with code 3" in r.message
     (kept,) = list((tmp_path / "run" / "work").glob("case-*"))
     out, err = (kept / "stdout.txt"), (kept / "stderr.txt")

@@ -6,6 +6,7 @@ Each hostile decoder here is a small program written from a description of the a
 the attack needs content it could know in advance, a control shows it working on such
 content (the secret fixed, or runs repeated): the defence, not the attack's own weakness, is
 what fails it. The rates measured are printed (``-s``)."""
+
 from __future__ import annotations
 
 import json
@@ -37,7 +38,9 @@ def honest(src, out):
 """
 
 # Recognises the speed content and writes n frames of zeros at once; decodes honestly otherwise.
-FAKE = HONEST + r"""
+FAKE = (
+    HONEST
+    + r"""
 import os, re, sys
 src, out = sys.argv[1], sys.argv[2]
 m = re.fullmatch(r"content-(\w+)\.fba", os.path.basename(src))
@@ -50,10 +53,13 @@ if m:
 else:
     honest(src, out)
 """
+)
 
 # Ships a table: the sha256 of every stream it has seen -> its decoding; answers from it at once,
 # decodes honestly (25 fps) what it does not know.
-TABLE = HONEST + r"""
+TABLE = (
+    HONEST
+    + r"""
 import hashlib, sys
 src, out = sys.argv[1], sys.argv[2]
 known = TABLE.get(hashlib.sha256(open(src, 'rb').read()).hexdigest())
@@ -62,6 +68,7 @@ if known is not None:
 else:
     honest(src, out)
 """
+)
 
 SERVE = r"""
 import sys
@@ -102,16 +109,32 @@ while True:
 """
 
 
-def _manifest(tmp_path: Path, decode_body: str, *, serve: str | None = None, extra: str = "",
-              serve_args: str = "", images: bool = False) -> Path:
+def _manifest(
+    tmp_path: Path,
+    decode_body: str,
+    *,
+    serve: str | None = None,
+    extra: str = "",
+    serve_args: str = "",
+    images: bool = False,
+) -> Path:
     dec = tmp_path / "dec.py"
     main = "\nimport sys\nhonest(sys.argv[1], sys.argv[2])\n"  # a body that only defines honest() runs it
     dec.write_text(textwrap.dedent(decode_body) + ("" if "sys.argv" in decode_body else main))
     outputs = '["faps", "images"]' if images else '["faps"]'
     argv = f'"{{python}}", "{dec}", "{{input}}", "{{faps_out}}", "{{frames}}"' + (
-        ', "{images_dir}", "{scenario}"' if images else "")
-    lines = ['name = "speedy"', f'claims = ["{CLAIM}"]', 'inputs = ["fba"]', f'outputs = {outputs}',
-             'faps_format = "fap"', extra, "[commands]", f"decode = [{argv}]"]
+        ', "{images_dir}", "{scenario}"' if images else ""
+    )
+    lines = [
+        'name = "speedy"',
+        f'claims = ["{CLAIM}"]',
+        'inputs = ["fba"]',
+        f"outputs = {outputs}",
+        'faps_format = "fap"',
+        extra,
+        "[commands]",
+        f"decode = [{argv}]",
+    ]
     if serve is not None:
         (tmp_path / "serve.py").write_text(textwrap.dedent(serve))
         lines.append(f'serve = ["{{python}}", "{tmp_path / "serve.py"}"{serve_args}]')
@@ -122,8 +145,11 @@ def _manifest(tmp_path: Path, decode_body: str, *, serve: str | None = None, ext
 
 
 def _decode_result(m: Path, lengths=(4, 24), repeats: int = 1, **kw):
-    (r,) = [x for x in speed.measure_claim(load_manifest(m), CLAIM, lengths=list(lengths), repeats=repeats, **kw)
-            if x.operation == "decode"]
+    (r,) = [
+        x
+        for x in speed.measure_claim(load_manifest(m), CLAIM, lengths=list(lengths), repeats=repeats, **kw)
+        if x.operation == "decode"
+    ]
     print(f"\n{m.parent.name}: {r.verdict} at {r.rate_fps:.1f} fps — {r.message}")
     return r
 
@@ -143,12 +169,14 @@ def _fixed_secret(monkeypatch):
     def init(self, root):
         real(self, root)
         self._secret = b"k" * 32
+
     monkeypatch.setattr(speed_content.Content, "__init__", init)
 
 
 def _table(tmp_path: Path, lengths=(4, 24), runs: int = 6) -> dict[str, str]:
     """What an attacker ships: the decoding of the runs the public generator makes, by digest."""
     import hashlib  # noqa: PLC0415
+
     table = {}
     for n in lengths:
         c = speed_content.Content(tmp_path / f"table-{n}")
@@ -200,8 +228,10 @@ def test_a_fast_serve_declared_equivalent_is_not_what_is_timed(tmp_path):
 
 
 def test_a_serve_that_answers_differently_fails(tmp_path):
-    wrong = SERVE.replace("write_fap_file(out, decode(data).frames)",
-                          "f = decode(data).frames; f.values[:, 5] += 1; write_fap_file(out, f)")
+    wrong = SERVE.replace(
+        "write_fap_file(out, decode(data).frames)",
+        "f = decode(data).frames; f.values[:, 5] += 1; write_fap_file(out, f)",
+    )
     r = _decode_result(_manifest(tmp_path, HONEST, serve=wrong, extra="serve_equivalent = true"))
     assert r.verdict == "fail" and "not the decoding of the content" in r.message, r.message
 
@@ -221,15 +251,26 @@ def test_a_serve_answering_repeats_from_a_cache_never_hits(tmp_path, monkeypatch
                 made[n] = real(self, n)
             made[n].remove = lambda: None  # kept for the next run of that length
             return made[n]
+
         mp.setattr(speed_content.Content, "make", repeated)
         (tmp_path / "control").mkdir()
-        m = _manifest(tmp_path / "control", HONEST.replace("25.0", "100.0"), serve=CACHE, serve_args=', "100"',
-                      extra="serve_equivalent = true")
+        m = _manifest(
+            tmp_path / "control",
+            HONEST.replace("25.0", "100.0"),
+            serve=CACHE,
+            serve_args=', "100"',
+            extra="serve_equivalent = true",
+        )
         r = _decode_result(m, lengths, repeats=3)
     assert "serve is not what is certified" in r.message, r.message  # the cache hit
     (tmp_path / "real").mkdir()
-    m = _manifest(tmp_path / "real", HONEST.replace("25.0", "100.0"), serve=CACHE, serve_args=', "100"',
-                  extra="serve_equivalent = true")
+    m = _manifest(
+        tmp_path / "real",
+        HONEST.replace("25.0", "100.0"),
+        serve=CACHE,
+        serve_args=', "100"',
+        extra="serve_equivalent = true",
+    )
     r = _decode_result(m, lengths, repeats=3)
     assert "persistent protocol" in r.message and "the same frames" in r.message, r.message  # timed through serve
     assert r.verdict == "fail" and 50 < r.rate_fps < 150, r.message
@@ -293,6 +334,7 @@ def test_a_per_frame_cost_that_is_not_positive_is_an_error_not_an_infinite_rate(
     def faster_when_longer(self, n):
         real(self, n)
         return speed_load.Window(n, 1.0 - n / 1000, idle, idle, cpu_s=None, stall_s=None, stall_source="none")
+
     monkeypatch.setattr(speed._Runner, "run", faster_when_longer)
     m = _manifest(tmp_path, HONEST)
     r = speed.measure(load_manifest(m), CLAIM, "decode", lengths=[2, 8], repeats=1)
@@ -315,6 +357,7 @@ def test_a_per_frame_cost_that_is_not_positive_on_a_busy_machine_is_inconclusive
         before = sample()
         after = sample()
         return speed_load.Window(n, 1.0 - n / 1000, before, after, cpu_s=0.1, stall_s=None, stall_source="none")
+
     monkeypatch.setattr(speed._Runner, "run", faster_when_longer_on_a_busy_machine)
     m = _manifest(tmp_path, HONEST)
     r = speed.measure(load_manifest(m), CLAIM, "decode", lengths=[2, 8], repeats=1)
@@ -324,7 +367,9 @@ def test_a_per_frame_cost_that_is_not_positive_on_a_busy_machine_is_inconclusive
 
 # Sleeps 1/25 s a frame and meanwhile keeps four threads busy: it makes itself wait for a CPU,
 # hoping its reading is taken for a busy machine's.
-CONTENDER = HONEST.replace("    time.sleep(len(frames) / 25.0)\n", """\
+CONTENDER = HONEST.replace(
+    "    time.sleep(len(frames) / 25.0)\n",
+    """\
     import threading
     stop = []
     def spin():
@@ -335,7 +380,8 @@ CONTENDER = HONEST.replace("    time.sleep(len(frames) / 25.0)\n", """\
         t.start()
     time.sleep(len(frames) / 25.0)
     stop.append(1)
-""")
+""",
+)
 
 
 def test_a_decoder_cannot_make_itself_inconclusive(tmp_path, monkeypatch):

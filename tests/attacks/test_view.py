@@ -6,6 +6,7 @@ or package folder, and no key. Every line of that docs section names its test he
 
 The sandboxed rows need bubblewrap (as in test_attacks.py: fail in CI, skip elsewhere).
 """
+
 from __future__ import annotations
 
 import json
@@ -28,8 +29,7 @@ from fbaconf.isolation.staging import auxiliary_files, staged_inputs
 
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
 # binary cases with a .fap sibling in their suite folder, one with skips, one with a texture
-WITH_SIBLING = ["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/skips-14-15",
-                "simple-l1-core/dct-q4"]
+WITH_SIBLING = ["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/skips-14-15", "simple-l1-core/dct-q4"]
 TEXTURED = "predictable-l1-stress/grid-limits-l1"
 
 
@@ -49,14 +49,17 @@ def cases(ids):
     return out
 
 
-def manifest(tmp_path: Path, name: str, decode: list, *, inputs=("fba",), outputs=("faps",), fmt="fap",
-             claim="predictable@2") -> Path:
+def manifest(
+    tmp_path: Path, name: str, decode: list, *, inputs=("fba",), outputs=("faps",), fmt="fap", claim="predictable@2"
+) -> Path:
     d = tmp_path / name
     d.mkdir(exist_ok=True)
     m = d / f"{name}.toml"
-    m.write_text(f'name = "{name}"\nclaims = ["{claim}"]\ninputs = {json.dumps(list(inputs))}\n'
-                 f'outputs = {json.dumps(list(outputs))}\nfaps_format = "{fmt}"\n'
-                 f'[commands]\ndecode = {json.dumps(decode)}\n[limits]\ntimeout_s = 30\n')
+    m.write_text(
+        f'name = "{name}"\nclaims = ["{claim}"]\ninputs = {json.dumps(list(inputs))}\n'
+        f'outputs = {json.dumps(list(outputs))}\nfaps_format = "{fmt}"\n'
+        f"[commands]\ndecode = {json.dumps(decode)}\n[limits]\ntimeout_s = 30\n"
+    )
     return m
 
 
@@ -69,8 +72,9 @@ def python_decoder(tmp_path: Path, name: str, body: str, **kw) -> Path:
 
 
 def run(tmp_path: Path, m: Path, ids, **kw):
-    return run_cases(adapters.resolve(m), cases(ids), claim=None, out_dir=tmp_path / "run", jobs=1,
-                     progress=False, **kw)
+    return run_cases(
+        adapters.resolve(m), cases(ids), claim=None, out_dir=tmp_path / "run", jobs=1, progress=False, **kw
+    )
 
 
 # ------------------------------------------------------------------ the case folder
@@ -120,13 +124,16 @@ def test_the_sibling_copier_passes_no_case(tmp_path):
 
 def test_listing_the_case_folder_shows_the_inputs_and_nothing_else(tmp_path):
     needs_sandbox()
-    body = '''
+    body = """
         here = os.path.dirname(IN)
         print(json.dumps(sorted(os.listdir(here))), file=sys.stderr)
         sys.exit(3)
-        '''
-    rs = run(tmp_path, python_decoder(tmp_path, "lister", body, inputs=("fba", "scene"), outputs=("faps",)),
-             WITH_SIBLING[:1] + [TEXTURED])
+        """
+    rs = run(
+        tmp_path,
+        python_decoder(tmp_path, "lister", body, inputs=("fba", "scene"), outputs=("faps",)),
+        WITH_SIBLING[:1] + [TEXTURED],
+    )
     seen = [json.loads(r.stderr_tail.strip().splitlines()[-1]) for r in rs]
     assert seen[0] == ["arith-q8-visemes-expressions.fba"]
     assert seen[1] == ["grid-limits-l1-scenario.toml", "grid-limits-l1.bt", "grid-limits-l1.fba", "texture512.png"]
@@ -134,7 +141,7 @@ def test_listing_the_case_folder_shows_the_inputs_and_nothing_else(tmp_path):
 
 # ------------------------------------------------------------------ everything else it can reach
 
-INVENTORY = '''
+INVENTORY = """
     import stat
     seen, notes = [], []
     def note(x):
@@ -183,7 +190,7 @@ INVENTORY = '''
     with open(out, "w") as f:
         json.dump({"seen": seen, "notes": notes, "env": dict(os.environ)}, f)
     sys.exit(3)
-'''
+"""
 
 
 def inventory(tmp_path: Path, extra_hidden: Path | None = None) -> dict:
@@ -208,8 +215,9 @@ def test_no_golden_and_no_reference_output_is_in_view(seen):
     gold = str(golden_root().resolve())
     files = inv["seen"]
     assert not [p for p in files if p.startswith(gold) or "/golden/" in p]
-    assert not [p for p in files if p.endswith((".fap", "faps.npz", "vertices.npz"))
-                and "/conformance/data/" not in p], "a reference output or golden is visible"
+    assert not [
+        p for p in files if p.endswith((".fap", "faps.npz", "vertices.npz")) and "/conformance/data/" not in p
+    ], "a reference output or golden is visible"
     assert not [p for p in files if p.startswith(str(suites_root().resolve()))]
     assert not [p for p in files if "/build/" in p and "fbaconf" in p], "a build copy (its goldens) is visible"
 
@@ -254,14 +262,27 @@ def test_proc_shows_no_host_process_and_its_parent_cwd_leads_nowhere(seen):
 def test_its_environment_holds_nothing_of_the_harness(seen):
     _tmp, inv = seen
     env = inv["env"]
-    assert set(env) <= {"PATH", "LANG", "LC_ALL", "HOME", "TMPDIR", "TMP", "TEMP", "LD_LIBRARY_PATH",
-                        "JAVA_HOME", "PYTHONPATH", "VIRTUAL_ENV", "LC_CTYPE", "PWD"}, sorted(env)
+    assert set(env) <= {
+        "PATH",
+        "LANG",
+        "LC_ALL",
+        "HOME",
+        "TMPDIR",
+        "TMP",
+        "TEMP",
+        "LD_LIBRARY_PATH",
+        "JAVA_HOME",
+        "PYTHONPATH",
+        "VIRTUAL_ENV",
+        "LC_CTYPE",
+        "PWD",
+    }, sorted(env)
 
 
 def test_a_copy_anything_decoder_passes_no_case(tmp_path):
     """It crawls everything it can reach for a file that looks like its case's expected output."""
     needs_sandbox()
-    body = '''
+    body = """
         stem = os.path.splitext(os.path.basename(IN))[0]
         best = None
         skip = ("/proc", "/sys", "/dev", "/usr", "/etc", "/bin", "/sbin", "/lib", "/lib64")
@@ -278,7 +299,7 @@ def test_a_copy_anything_decoder_passes_no_case(tmp_path):
         if best is None:
             sys.exit(3)
         shutil.copyfile(best, OUT)
-        '''
+        """
     rs = run(tmp_path, python_decoder(tmp_path, "copyall", body, fmt="npz"), WITH_SIBLING)
     assert not [r for r in rs if r.outcome.ok], [(r.case_id, r.message) for r in rs]
 
@@ -347,8 +368,9 @@ def test_a_secret_file_in_view_cannot_be_read(tmp_path):
     saved = set(sandbox._SECRETS)
     try:
         sandbox.keep_secret(key)
-        res = sandbox.run(["/bin/sh", "-c", f"cat {shown}/other.txt; cat {key}"], work, sandbox.Limits(timeout_s=10),
-                          view=view)
+        res = sandbox.run(
+            ["/bin/sh", "-c", f"cat {shown}/other.txt; cat {key}"], work, sandbox.Limits(timeout_s=10), view=view
+        )
     finally:
         sandbox._SECRETS.clear()
         sandbox._SECRETS.update(saved)
@@ -364,7 +386,8 @@ def test_the_speed_phase_shows_a_stream_decoder_no_expected_output(tmp_path):
     (the expected output), and a command that asks for {fap} cannot be given one."""
     needs_sandbox()
     from fbaconf.harness.speed import measure as speed  # noqa: PLC0415 (only this test)
-    body = '''
+
+    body = """
         here = os.path.dirname(IN)
         bad = [f for f in os.listdir(here) if f.endswith((".fap", ".npz"))]
         if bad:
@@ -372,13 +395,28 @@ def test_the_speed_phase_shows_a_stream_decoder_no_expected_output(tmp_path):
             sys.exit(3)
         from fbaconf.reference.pipeline import reference_outputs
         reference_outputs(IN, faps_out=OUT)
-        '''
+        """
     m = python_decoder(tmp_path, "speedlook", body, fmt="npz", claim="simple@1")
-    r = speed.measure(adapters.resolve(m), "simple@1", "decode", lengths=[8, 16], repeats=1,
-                      work_dir=tmp_path / "speed", persistent=False)
+    r = speed.measure(
+        adapters.resolve(m),
+        "simple@1",
+        "decode",
+        lengths=[8, 16],
+        repeats=1,
+        work_dir=tmp_path / "speed",
+        persistent=False,
+    )
     assert r is not None  # every run decoded (one that saw a .fap would have failed: SpeedRunError)
-    asks = manifest(tmp_path, "asksfap", ["{python}", "-c", "pass", "{input}", "{fap}", "{faps_out}"], fmt="npz",
-                    claim="simple@1")
+    asks = manifest(
+        tmp_path, "asksfap", ["{python}", "-c", "pass", "{input}", "{fap}", "{faps_out}"], fmt="npz", claim="simple@1"
+    )
     with pytest.raises(speed.SpeedError, match="fap"):
-        speed.measure(adapters.resolve(asks), "simple@1", "decode", lengths=[8, 16], repeats=1,
-                      work_dir=tmp_path / "speed2", persistent=False)
+        speed.measure(
+            adapters.resolve(asks),
+            "simple@1",
+            "decode",
+            lengths=[8, 16],
+            repeats=1,
+            work_dir=tmp_path / "speed2",
+            persistent=False,
+        )

@@ -12,6 +12,7 @@ expected output in what it is shown and copies it). Each test asserts the refusa
 control, that the same thief *does* pass a case when the folder is shown — so the refusal is
 what stops it. The sandboxed rows need bubblewrap (fail in CI, skip elsewhere).
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -34,7 +35,7 @@ from fbaconf.isolation import sandbox, view
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
 CASE = ("simple-l1-core", "dct-q4")
 
-THIEF = r'''
+THIEF = r"""
 import hashlib, json, os, shutil, subprocess, sys
 SHOWN, IN, OUT = sys.argv[1], sys.argv[2], sys.argv[3]
 stem = os.path.splitext(os.path.basename(IN))[0]
@@ -57,7 +58,7 @@ for root, dirs, files in os.walk(here):  # a checkout, a build, an installed pac
         shutil.copyfile(os.path.join(root, stem + ".fap"), OUT)
         sys.exit(0)
 sys.exit(3)
-'''
+"""
 
 
 def needs_sandbox():
@@ -77,10 +78,12 @@ def thief_manifest(tmp_path: Path, shown: Path) -> Path:
     vendor.mkdir(exist_ok=True)
     (vendor / "thief.py").write_text(THIEF)
     m = vendor / "thief.toml"
-    m.write_text('name = "thief"\nclaims = ["predictable@2"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 'faps_format = "fap"\n[commands]\n'
-                 f'decode = ["{{python}}", "{{manifest_dir}}/thief.py", "{shown}", "{{input}}", "{{faps_out}}"]\n'
-                 "[limits]\ntimeout_s = 60\n")
+    m.write_text(
+        'name = "thief"\nclaims = ["predictable@2"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        'faps_format = "fap"\n[commands]\n'
+        f'decode = ["{{python}}", "{{manifest_dir}}/thief.py", "{shown}", "{{input}}", "{{faps_out}}"]\n'
+        "[limits]\ntimeout_s = 60\n"
+    )
     return m
 
 
@@ -91,8 +94,24 @@ def refused(tmp_path: Path, shown: Path, words: str) -> None:
     with pytest.raises(ViewError) as e:
         preflight(adapters.resolve(m), None)
     assert e.value.rule == "sandbox-view" and words in str(e.value) and str(shown.parent) in str(e.value), str(e.value)
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", str(m), "--claim", "predictable@2",
-                        "--no-speed", "-o", str(tmp_path / "pkg")], capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "certify",
+            "--decoder",
+            str(m),
+            "--claim",
+            "predictable@2",
+            "--no-speed",
+            "-o",
+            str(tmp_path / "pkg"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr[-2000:]
     assert not (tmp_path / "pkg" / "results.jsonl").exists()  # 0 cases ran: 0 valid-stream Pass
 
@@ -109,9 +128,18 @@ def control(tmp_path: Path, shown: Path) -> None:
     (tmp_path / "vendor").mkdir(exist_ok=True)
     (tmp_path / "vendor" / "thief.py").write_text(THIEF)
     shown_dirs = [shown.parent, tmp_path / "vendor", *sandbox.python_view()]
-    res = sandbox.run([sys.executable, str(tmp_path / "vendor" / "thief.py"), str(shown),
-                       str(work / "in" / f"{CASE[1]}.fba"), str(work / "out" / "faps.fap")], work,
-                      sandbox.Limits(timeout_s=60), view=sandbox.View(read_only=shown_dirs, writable=[work]))
+    res = sandbox.run(
+        [
+            sys.executable,
+            str(tmp_path / "vendor" / "thief.py"),
+            str(shown),
+            str(work / "in" / f"{CASE[1]}.fba"),
+            str(work / "out" / "faps.fap"),
+        ],
+        work,
+        sandbox.Limits(timeout_s=60),
+        view=sandbox.View(read_only=shown_dirs, writable=[work]),
+    )
     assert res.returncode == 0, res.stderr_tail
     assert (work / "out" / "faps.fap").read_bytes() == case.input_path("fap").read_bytes()
 
@@ -126,8 +154,13 @@ def copy_of_fbaconf(where: Path) -> Path:
 
 def git_dir() -> Path:
     try:
-        out = subprocess.run(["git", "rev-parse", "--path-format=absolute", "--git-common-dir"], cwd=ROOT,
-                             capture_output=True, text=True, timeout=30)
+        out = subprocess.run(
+            ["git", "rev-parse", "--path-format=absolute", "--git-common-dir"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
     except OSError:
         out = None
     if out is None or out.returncode != 0:
@@ -209,13 +242,21 @@ def test_a_jar_or_model_the_command_names_elsewhere_is_shown(tmp_path):
     vendor = tmp_path / "vendor"
     vendor.mkdir()
     m = vendor / "m.toml"
-    m.write_text('name = "reader"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\n'
-                 'decode = ["/bin/sh", "-c", "cat \\"$1\\" \\"$2\\" >/dev/null && echo read", "sh", '
-                 f'"--model={models}/weights.bin", "{tmp_path}/lib/extra.jar:/usr/share", "{{input}}", '
-                 '"{faps_out}"]\n')
+    m.write_text(
+        'name = "reader"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\n'
+        'decode = ["/bin/sh", "-c", "cat \\"$1\\" \\"$2\\" >/dev/null && echo read", "sh", '
+        f'"--model={models}/weights.bin", "{tmp_path}/lib/extra.jar:/usr/share", "{{input}}", '
+        '"{faps_out}"]\n'
+    )
     a = adapters.resolve(m)
-    argv = ["/bin/sh", "-c", 'cat "${1#--model=}" "${2%%:*}" >/dev/null && echo read', "sh",
-            f"--model={models}/weights.bin", f"{tmp_path}/lib/extra.jar:/usr/share"]
+    argv = [
+        "/bin/sh",
+        "-c",
+        'cat "${1#--model=}" "${2%%:*}" >/dev/null && echo read',
+        "sh",
+        f"--model={models}/weights.bin",
+        f"{tmp_path}/lib/extra.jar:/usr/share",
+    ]
     work = tmp_path / "case"
     (work / "in").mkdir(parents=True)
     v = a.sandbox_view(argv, work)
@@ -227,8 +268,17 @@ def test_a_jar_or_model_the_command_names_elsewhere_is_shown(tmp_path):
 def test_named_paths_reads_the_forms_a_command_names_files_in(tmp_path):
     for name in ("a.jar", "b.jar", "args.txt", "m.bin"):
         (tmp_path / name).write_text("x")
-    got = view.named_paths(["-cp", f"{tmp_path}/a.jar:{tmp_path}/b.jar", f"@{tmp_path}/args.txt",
-                            f"--model={tmp_path}/m.bin", "relative/x", f"{tmp_path}/missing", str(tmp_path)])
+    got = view.named_paths(
+        [
+            "-cp",
+            f"{tmp_path}/a.jar:{tmp_path}/b.jar",
+            f"@{tmp_path}/args.txt",
+            f"--model={tmp_path}/m.bin",
+            "relative/x",
+            f"{tmp_path}/missing",
+            str(tmp_path),
+        ]
+    )
     assert got == [tmp_path / "a.jar", tmp_path / "b.jar", tmp_path / "args.txt", tmp_path / "m.bin", tmp_path]
 
 

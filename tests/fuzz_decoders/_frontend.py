@@ -2,6 +2,7 @@
 
 Parses the first plane and every plane after a plane start code up to its skip chain and calls
 ``on_header(fields)``; exit 2 for what it cannot parse, 69 (payload not supported) otherwise."""
+
 import sys
 
 

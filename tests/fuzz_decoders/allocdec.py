@@ -2,6 +2,7 @@
 
 THE BUG: a timeline buffer of 1 MiB per second of the first time code is allocated without
 checking hours (0..31) and minutes (0..63): a time code of hours >= 1 asks for gigabytes."""
+
 import os
 import sys
 

@@ -2,6 +2,7 @@
 
 THE BUG: the frames per second are counted by stepping a clock in sixteenths of the frame
 rate field; with frame_rate = seconds = 0 the step is 0 and the loop never ends."""
+
 import os
 import sys
 

@@ -10,6 +10,7 @@ hand-written lines.
 The decoder is the reference behind a script with planted bugs switched by ``[env] BUG``:
 A changes a FAP of ``arith-q1-all-faps``, B one of ``arith-q31-timecodes`` (both cases rest on
 public facts only, so their failures are never provisional differences)."""
+
 from __future__ import annotations
 
 import os
@@ -48,8 +49,9 @@ def make_repo(tmp_path: Path) -> Path:
     repo = tmp_path / "acme"
     # an fbaconf checkout beside the tests: its own pytest configuration and a conftest needing a missing module
     (repo / "fbaconf" / "tests").mkdir(parents=True)
-    (repo / "fbaconf" / "pyproject.toml").write_text('[tool.pytest.ini_options]\ntestpaths = ["tests"]\n'
-                                                     'addopts = "-p no:nothing-like-this"\n')
+    (repo / "fbaconf" / "pyproject.toml").write_text(
+        '[tool.pytest.ini_options]\ntestpaths = ["tests"]\naddopts = "-p no:nothing-like-this"\n'
+    )
     (repo / "fbaconf" / "tests" / "conftest.py").write_text("import hypothesis_is_not_installed_here\n")
     (repo / "fbaconf" / "tests" / "test_own.py").write_text("def test_fbaconfs_own():\n    assert False\n")
     (repo / "tests").mkdir()
@@ -61,7 +63,8 @@ def make_repo(tmp_path: Path) -> Path:
 
 
 def set_bugs(repo: Path, bugs: str, extra_env: str = "") -> None:
-    (repo / "ci" / "acme.toml").write_text(textwrap.dedent(f"""\
+    (repo / "ci" / "acme.toml").write_text(
+        textwrap.dedent(f"""\
         name = "acme"
         claims = ["simple@1"]
         inputs = ["fba"]
@@ -74,17 +77,29 @@ def set_bugs(repo: Path, bugs: str, extra_env: str = "") -> None:
         {extra_env}
         [limits]
         timeout_s = 30
-        """))
+        """)
+    )
 
 
 def pytest_in(repo: Path, *args, env=None):
     # -P: the checkout at ./fbaconf must not shadow the installed package (as `.venv/bin/pytest` runs it)
     # no hypothesis plugin: a decoder project's CI has none (and it costs seconds to load)
-    cmd = [sys.executable, "-P", "-m", "pytest", "-p", "no:cacheprovider", "-p", "no:hypothesispytest",
-           "--fbaconf-decoder", "ci/acme.toml",
-           "--fbaconf-suite", "simple-l1-core", *args]
-    return subprocess.run(cmd, cwd=repo, capture_output=True, text=True, timeout=600,
-                          env={**os.environ, **(env or {})})
+    cmd = [
+        sys.executable,
+        "-P",
+        "-m",
+        "pytest",
+        "-p",
+        "no:cacheprovider",
+        "-p",
+        "no:hypothesispytest",
+        "--fbaconf-decoder",
+        "ci/acme.toml",
+        "--fbaconf-suite",
+        "simple-l1-core",
+        *args,
+    ]
+    return subprocess.run(cmd, cwd=repo, capture_output=True, text=True, timeout=600, env={**os.environ, **(env or {})})
 
 
 def k_cases():
@@ -124,8 +139,21 @@ def test_node_ids_of_a_decoder_elsewhere_paste_back_from_the_repository_root(rep
     elsewhere.mkdir()
     for name in ("acme.toml", "acme.py"):
         (elsewhere / name).write_text((repo / "ci" / name).read_text())
-    cmd = [sys.executable, "-P", "-m", "pytest", "-p", "no:cacheprovider", "-p", "no:hypothesispytest",
-           "--fbaconf-decoder", str(elsewhere / "acme.toml"), "--fbaconf-suite", "simple-l1-core", "-rf"]
+    cmd = [
+        sys.executable,
+        "-P",
+        "-m",
+        "pytest",
+        "-p",
+        "no:cacheprovider",
+        "-p",
+        "no:hypothesispytest",
+        "--fbaconf-decoder",
+        str(elsewhere / "acme.toml"),
+        "--fbaconf-suite",
+        "simple-l1-core",
+        "-rf",
+    ]
     r = subprocess.run(cmd + ["-k", "arith-q1-all-faps"], cwd=repo, capture_output=True, text=True, timeout=600)
     failed = [line.split()[1] for line in r.stdout.splitlines() if line.startswith("FAILED ")]
     assert failed == ["fbaconf::simple-l1-core/arith-q1-all-faps"], r.stdout[-2000:]
@@ -137,21 +165,34 @@ def test_a_fixed_case_and_a_new_bug_fail_and_are_named_first(repo, tmp_path):
     set_bugs(repo, "B")  # bug A fixed, bug B new
     try:
         both = ["fbaconf::simple-l1-core/arith-q1-all-faps", "fbaconf::simple-l1-core/arith-q31-timecodes"]
-        r = pytest_in(repo, "--fbaconf-baseline", "ci/baseline.txt", "--fbaconf-keep-workdirs", "--fbaconf-out",
-                      str(tmp_path / "out"), "--junitxml", str(tmp_path / "junit.xml"), *both)
+        r = pytest_in(
+            repo,
+            "--fbaconf-baseline",
+            "ci/baseline.txt",
+            "--fbaconf-keep-workdirs",
+            "--fbaconf-out",
+            str(tmp_path / "out"),
+            "--junitxml",
+            str(tmp_path / "junit.xml"),
+            *both,
+        )
         out = r.stdout
         assert r.returncode == 1 and "fbaconf: 1 new, 0 known, 1 fixed, 0 flaky" in out, out
         junit = (tmp_path / "junit.xml").read_text()
         assert '<property name="baseline" value="1 new, 0 known, 1 fixed, 0 flaky"' in junit
-        assert out.index("NEW    fbaconf::simple-l1-core/arith-q31-timecodes") < \
-            out.index("FIXED  fbaconf::simple-l1-core/arith-q1-all-faps") < out.index("= FAILURES =")
+        assert (
+            out.index("NEW    fbaconf::simple-l1-core/arith-q31-timecodes")
+            < out.index("FIXED  fbaconf::simple-l1-core/arith-q1-all-faps")
+            < out.index("= FAILURES =")
+        )
         assert "lists it as Fail,faps:3: remove its line (or --fbaconf-allow-fixed)" in out
         assert "first difference: frame 0, FAP" in out and "{'" not in out  # words, no Python repr
         # the kept case folder is named as it is: the line reruns the decoder as printed
         line = next(ln for ln in out.splitlines() if ln.startswith("reproduce: "))
         assert "<case folder>" not in line and Path(line.split()[3]).is_file(), line
-        assert pytest_in(repo, "--fbaconf-baseline", "ci/baseline.txt", "--fbaconf-allow-fixed",
-                         both[0]).returncode == 0
+        assert (
+            pytest_in(repo, "--fbaconf-baseline", "ci/baseline.txt", "--fbaconf-allow-fixed", both[0]).returncode == 0
+        )
     finally:
         set_bugs(repo, "A")
 
@@ -169,18 +210,29 @@ def test_a_flaky_case_listed_as_a_flake_is_retried(repo, tmp_path):
     flakes.write_text("simple-l1-core/arith-q1-all-faps,Flake\n")
     set_bugs(repo, "", extra_env=f'COUNT = "{tmp_path / "count"}"')
     try:
-        r = pytest_in(repo, "--fbaconf-baseline", str(flakes), "fbaconf::simple-l1-core/arith-q1-all-faps",
-                      env={"FBACONF_SANDBOX": "none"})
-        assert r.returncode == 0 and "1 passed" in r.stdout and "0 new, 0 known, 0 fixed, 1 flaky" in r.stdout, \
+        r = pytest_in(
+            repo,
+            "--fbaconf-baseline",
+            str(flakes),
+            "fbaconf::simple-l1-core/arith-q1-all-faps",
+            env={"FBACONF_SANDBOX": "none"},
+        )
+        assert r.returncode == 0 and "1 passed" in r.stdout and "0 new, 0 known, 0 fixed, 1 flaky" in r.stdout, (
             r.stdout + r.stderr
+        )
         assert (tmp_path / "count").read_text() == "2"  # failed, then passed on the re-run
     finally:
         set_bugs(repo, "A")
 
 
 def fbaconf_run(repo: Path, *args):
-    return subprocess.run([sys.executable, "-P", "-m", "fbaconf", "run", "--decoder", "ci/acme.toml", "--no-progress",
-                           "-j", "2", *args], cwd=repo, capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-P", "-m", "fbaconf", "run", "--decoder", "ci/acme.toml", "--no-progress", "-j", "2", *args],
+        cwd=repo,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def test_write_baseline_then_an_unchanged_run_has_nothing_new(tmp_path):
@@ -192,8 +244,16 @@ def test_write_baseline_then_an_unchanged_run_has_nothing_new(tmp_path):
     m.write_text(m.read_text().replace('claims = ["simple@1"]', 'claims = ["simple@2"]'))
     b = repo / "ci" / "baseline.txt"
     b.write_text("# acme's baseline\nsimple-l1-core/arith-ntsc-rate,Flake   # slow runners\n")
-    sel = ["--suite", "simple-l2-stress", "--suite", "simple-l1-core", "--case", "simple-l1-core/arith-q1-all-faps",
-           "--case", "simple-l2-stress/*"]
+    sel = [
+        "--suite",
+        "simple-l2-stress",
+        "--suite",
+        "simple-l1-core",
+        "--case",
+        "simple-l1-core/arith-q1-all-faps",
+        "--case",
+        "simple-l2-stress/*",
+    ]
     r = fbaconf_run(repo, *sel, "-o", "run1", "--write-baseline", "ci/baseline.txt")
     assert r.returncode == 1, r.stdout + r.stderr
     lines = b.read_text().splitlines()
@@ -229,6 +289,8 @@ def test_a_decoder_not_built_yet_is_named_with_its_folder_expanded(tmp_path):
     m.write_text(m.read_text().replace('"{python}", "{manifest_dir}/acme.py"', '"{manifest_dir}/../build/acme"'))
     with pytest.raises(UsageError) as e:
         preflight(resolve(str(m)))
-    assert e.value.args[0] == (f"decoder acme: program {repo}/build/acme not found (not a file, and not on "
-                               f"PATH); [commands] decode names it \"{{manifest_dir}}/../build/acme\": build the "
-                               f"decoder first")
+    assert e.value.args[0] == (
+        f"decoder acme: program {repo}/build/acme not found (not a file, and not on "
+        f'PATH); [commands] decode names it "{{manifest_dir}}/../build/acme": build the '
+        f"decoder first"
+    )

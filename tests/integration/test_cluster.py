@@ -1,5 +1,6 @@
 """Cases as Dask tasks (issue 19): the same verdicts as the local pool, and a worker lost
 mid-run loses no case."""
+
 from __future__ import annotations
 
 import json
@@ -31,19 +32,29 @@ def some_cases(n: int):
 
 def slow_manifest(tmp_path: Path) -> Path:
     script = tmp_path / "slow.py"
-    script.write_text("import sys, time\ntime.sleep(0.4)\n"
-                      "from fbaconf.reference.pipeline import reference_outputs\n"
-                      "try:\n    reference_outputs(sys.argv[1], faps_out=sys.argv[2])\n"
-                      "except Exception as e:\n    print(e, file=sys.stderr); sys.exit(1)\n")
+    script.write_text(
+        "import sys, time\ntime.sleep(0.4)\n"
+        "from fbaconf.reference.pipeline import reference_outputs\n"
+        "try:\n    reference_outputs(sys.argv[1], faps_out=sys.argv[2])\n"
+        "except Exception as e:\n    print(e, file=sys.stderr); sys.exit(1)\n"
+    )
     m = tmp_path / "slow.toml"
-    m.write_text('name = "slow"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
-                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{faps_out}}"]\n')
+    m.write_text(
+        'name = "slow"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
+        f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{faps_out}}"]\n'
+    )
     return m
 
 
-@pytest.mark.parametrize("spec,expected", [("local", ("local", os.cpu_count() or 1)), ("local:3", ("local", 3)),
-                                           ("tcp://10.1.2.3:8786", ("tls", "tls://10.1.2.3:8786")),
-                                           ("tls://10.1.2.3:8786", ("tls", "tls://10.1.2.3:8786"))])
+@pytest.mark.parametrize(
+    "spec,expected",
+    [
+        ("local", ("local", os.cpu_count() or 1)),
+        ("local:3", ("local", 3)),
+        ("tcp://10.1.2.3:8786", ("tls", "tls://10.1.2.3:8786")),
+        ("tls://10.1.2.3:8786", ("tls", "tls://10.1.2.3:8786")),
+    ],
+)
 def test_cluster_specs(spec, expected):
     assert cluster.parse(spec) == expected
 
@@ -95,8 +106,15 @@ def test_cluster_verdicts_equal_the_pool_and_a_lost_worker_loses_nothing(tmp_pat
                 os.kill(workers[0], signal.SIGKILL)
                 killed.append(workers[0])
 
-    dist = run_cases(a, cases, claim="simple@1", out_dir=tmp_path / "dask", progress=False, cluster="local:2",
-                     on_result=kill_one_worker)
+    dist = run_cases(
+        a,
+        cases,
+        claim="simple@1",
+        out_dir=tmp_path / "dask",
+        progress=False,
+        cluster="local:2",
+        on_result=kill_one_worker,
+    )
     assert killed, "a worker process was killed mid-run"
     assert [(r.case_id, r.outcome) for r in dist] == [(r.case_id, r.outcome) for r in pool]
     logged = ResultLog(tmp_path / "dask" / "results.jsonl").read()
@@ -113,9 +131,11 @@ def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(t
     here = Path(__file__).resolve().parents[1] / "fuzz_decoders"
     subprocess.run(["gcc", "-O1", "-o", str(tmp_path / "skipchain"), str(here / "skipchain.c")], check=True)
     m = tmp_path / "skipchain.toml"
-    m.write_text('name = "planted-skipchain"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 'faps_format = "fap"\n[commands]\ndecode = ["{manifest_dir}/skipchain", "{input}", "{faps_out}"]\n'
-                 '[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n')
+    m.write_text(
+        'name = "planted-skipchain"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        'faps_format = "fap"\n[commands]\ndecode = ["{manifest_dir}/skipchain", "{input}", "{faps_out}"]\n'
+        "[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n"
+    )
     killed = []
     # the workers' shard folders (tempfile) under tmp_path: their servers' command lines name it
     (tmp_path / "tmp").mkdir()
@@ -132,12 +152,21 @@ def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(t
         if workers:
             os.kill(workers[0], signal.SIGKILL)
             killed.append(workers[0])
+
     with cluster.client("local:2") as c:
         timer = threading.Timer(4.0, kill_one_worker)
         timer.start()
         threading.Thread(target=count_servers, daemon=True).start()
-        camp, findings = run_campaign(c, ShardSpec(str(m), timeout_s=1.0), workers=2, seconds=8, seed=5,
-                                      out=tmp_path / "out", minimise_seconds=5, progress=lambda _m: None)
+        camp, findings = run_campaign(
+            c,
+            ShardSpec(str(m), timeout_s=1.0),
+            workers=2,
+            seconds=8,
+            seed=5,
+            out=tmp_path / "out",
+            minimise_seconds=5,
+            progress=lambda _m: None,
+        )
         timer.cancel()
         done.set()
     assert killed, "a worker was killed mid-round"

@@ -1,6 +1,7 @@
 """The GitHub Actions workflow the harness guide documents is complete and consistent:
 a trigger, a job that builds the decoder, installs fbaconf, runs it with the paths the
 guide names, and uploads the report and the JUnit file — and the guide shows this file."""
+
 from __future__ import annotations
 
 import shlex
@@ -28,8 +29,9 @@ def test_workflow_is_complete():
     assert uploads and uploads[0]["with"]["path"] == out and uploads[0].get("if") == "always()"
     junit_steps = [s for s in steps if "junit" in str(s.get("uses", "")).lower()]
     assert junit_steps and junit_steps[0]["with"]["report_paths"] == junit
-    assert any("pip install" in r for r in runs) and runs.index(next(r for r in runs if "pip install" in r)) < \
-        runs.index(fb)
+    assert any("pip install" in r for r in runs) and runs.index(
+        next(r for r in runs if "pip install" in r)
+    ) < runs.index(fb)
 
 
 def test_guide_shows_the_checked_workflow():

@@ -8,6 +8,7 @@ generated and mutated streams (the fuzzer's oracle is the reference: wrong outpu
 stream, acceptance of an invalid one and every crash are findings); and give no sanitizer
 report (ASan + UBSan) on any suite stream or mutation of one.
 """
+
 from __future__ import annotations
 
 import random
@@ -43,8 +44,22 @@ def fbadec(tmp_path_factory):
     flags = ["-std=c11", "-Wall", "-Wextra", "-Werror", "-I", str(SRC)]
     r = subprocess.run([cc, "-O2", *flags, "-o", str(d / "fbadec"), *srcs, "-lm"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    asan = subprocess.run([cc, "-O1", "-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=all", *flags,
-                           "-o", str(d / "fbadec-asan"), *srcs, "-lm"], capture_output=True, text=True)
+    asan = subprocess.run(
+        [
+            cc,
+            "-O1",
+            "-g",
+            "-fsanitize=address,undefined",
+            "-fno-sanitize-recover=all",
+            *flags,
+            "-o",
+            str(d / "fbadec-asan"),
+            *srcs,
+            "-lm",
+        ],
+        capture_output=True,
+        text=True,
+    )
     shutil.copy(SRC / "fbadec.toml", d / "fbadec.toml")
     return d, asan.returncode == 0
 
@@ -67,7 +82,7 @@ def _mutations(data: bytes, rng: random.Random, n: int):
                 i = rng.randrange(len(b) * 8)
                 b[i // 8] ^= 0x80 >> (i % 8)
         elif k == 1:
-            b = b[:rng.randrange(len(b) + 1)]
+            b = b[: rng.randrange(len(b) + 1)]
         elif k == 2 and b:
             i = rng.randrange(len(b))
             b[i:i] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 6)))
@@ -117,19 +132,29 @@ def test_no_sanitizer_report_on_any_suite_stream_or_mutation(fbadec, tmp_path):
         pytest.skip("the compiler cannot build with -fsanitize=address,undefined here")
     rng = random.Random(20)
     # each distinct stream once (a case's image-only views share its input file)
-    streams = list(dict.fromkeys(p.read_bytes() for s in load_suites() for c in s.cases for p in
-                                 ([c.input_path("fba")] if c.input_path("fba") else [])))
+    streams = list(
+        dict.fromkeys(
+            p.read_bytes()
+            for s in load_suites()
+            for c in s.cases
+            for p in ([c.input_path("fba")] if c.input_path("fba") else [])
+        )
+    )
     fin, out = tmp_path / "in.fba", tmp_path / "out.npz"
     for data in streams:
         fin.write_bytes(data)
         r = subprocess.run([str(d / "fbadec-asan"), str(fin), str(out)], capture_output=True, text=True, timeout=30)
-        assert r.returncode in (0, 1) and "Sanitizer" not in r.stderr and "runtime error" not in r.stderr, \
-            (r.returncode, r.stderr[-800:])
+        assert r.returncode in (0, 1) and "Sanitizer" not in r.stderr and "runtime error" not in r.stderr, (
+            r.returncode,
+            r.stderr[-800:],
+        )
     inputs = streams + [m for s in streams for m in _mutations(s, rng, 6)]
     codes, rc = _serve_each(d / "fbadec-asan", inputs, out, tmp_path / "serve.log")
     report = (tmp_path / "serve.log").read_text(errors="replace")
-    assert "Sanitizer" not in report and "runtime error" not in report, \
-        (f"input {len(codes)} of {len(inputs)}", report[-1500:])
+    assert "Sanitizer" not in report and "runtime error" not in report, (
+        f"input {len(codes)} of {len(inputs)}",
+        report[-1500:],
+    )
     assert rc == 0 and len(codes) == len(inputs) and set(codes) <= {0, 1}, (rc, len(codes), report[-800:])
     assert codes.count(0) >= len(streams) // 2 and codes.count(1) > 0  # both valid and invalid inputs were decoded
 
@@ -138,9 +163,11 @@ def test_a_sanitizer_report_in_serve_mode_is_seen_and_placed(tmp_path):
     """The serve sweep's own check: a --serve process that aborts with a report on its third input
     is seen (the report, and the input it stopped at)."""
     fake = tmp_path / "fake-serve"
-    fake.write_text("#!/bin/sh\nn=0\nwhile read -r id size out; do\n  head -c \"$size\" >/dev/null\n"
-                    "  if [ \"$n\" = 2 ]; then echo 'ERROR: AddressSanitizer: heap-buffer-overflow' >&2; exit 1; fi\n"
-                    "  echo \"$id 0\"; n=$((n+1))\ndone\n")
+    fake.write_text(
+        '#!/bin/sh\nn=0\nwhile read -r id size out; do\n  head -c "$size" >/dev/null\n'
+        "  if [ \"$n\" = 2 ]; then echo 'ERROR: AddressSanitizer: heap-buffer-overflow' >&2; exit 1; fi\n"
+        '  echo "$id 0"; n=$((n+1))\ndone\n'
+    )
     fake.chmod(0o755)
     codes, rc = _serve_each(fake, [b"abc", b"", b"xyz", b"0123"], tmp_path / "o.npz", tmp_path / "log")
     assert codes == [0, 0] and rc == 1 and "AddressSanitizer" in (tmp_path / "log").read_text()
@@ -151,8 +178,11 @@ def test_differential_fuzz_short(fbadec, tmp_path):
     examples/fbadec/fbadec.toml --seconds 600`): no divergence from the reference."""
     d, _ = fbadec
     target = DecoderTarget(adapters.resolve(str(d / "fbadec.toml")), tmp_path / "work", timeout_s=5.0)
-    fz = Fuzzer(target, default_seeds(),
-                FuzzConfig(seed=4, seconds=120, progress=False, max_execs=1500, coverage_every=4, minimise_seconds=5))
+    fz = Fuzzer(
+        target,
+        default_seeds(),
+        FuzzConfig(seed=4, seconds=120, progress=False, max_execs=1500, coverage_every=4, minimise_seconds=5),
+    )
     assert target.persistent  # the manifest's [commands] serve: fbadec --serve
     fz.run()
     assert fz.stats.execs == 1500
@@ -175,6 +205,7 @@ def test_hand_vectors(fbadec, tmp_path):
             raise ValueError(r.stderr.strip())
         assert r.returncode == 0, r.stderr
         return FapFrames.load_npz(out)
+
     for name in vec["NAMES"]:
         vec["check_vector"](name, run, exact_error=False)
 
@@ -188,8 +219,9 @@ def test_speed_is_measured_through_the_persistent_protocol_or_by_spawning(fbadec
     a = adapters.resolve(str(d / "fbadec.toml"))
     lengths = [1000, 20000]  # 19,000 frames apart: ~0.3 s of decoding against milliseconds of start-up noise
     pers = speed.measure(a, "simple@2", "decode", lengths=lengths, repeats=1, work_dir=tmp_path / "p")
-    spawn = speed.measure(a, "simple@2", "decode", lengths=lengths, repeats=1, work_dir=tmp_path / "s",
-                          persistent=False)
+    spawn = speed.measure(
+        a, "simple@2", "decode", lengths=lengths, repeats=1, work_dir=tmp_path / "s", persistent=False
+    )
     assert "persistent protocol" in pers.message and "persistent protocol" not in spawn.message
     for r in (pers, spawn):
         assert sorted({x["frames"] for x in r.samples}) == lengths and r.per_frame_s > 0, r.message

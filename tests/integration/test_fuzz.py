@@ -8,6 +8,7 @@ The acceptance runs here are bounded by input counts (deterministic for a seed) 
 wall time, so they take a few seconds each on a loaded machine; the full 60-s runs are in
 docs/fuzzing.md.
 """
+
 from __future__ import annotations
 
 import json
@@ -67,18 +68,18 @@ def test_bit_helpers_match_a_text_oracle(data, at, n, value):
 
     def pack(s: str) -> bytes:
         s += "0" * (-len(s) % 8)
-        return bytes(int(s[i:i + 8], 2) for i in range(0, len(s), 8))
+        return bytes(int(s[i : i + 8], 2) for i in range(0, len(s), 8))
 
     nb = len(data) * 8
     at = at % nb
     value &= (1 << n) - 1
     v = format(value, f"0{n}b")
     assert bitedit.insert_bits(data, at, value, n) == pack(bits[:at] + v + bits[at:])
-    assert bitedit.remove_bits(data, at, n) == pack(bits[:at] + bits[at + n:])
+    assert bitedit.remove_bits(data, at, n) == pack(bits[:at] + bits[at + n :])
     assert bitedit.truncate_bits(data, at) == pack(bits[:at])
     if at + n <= nb:
-        assert bitedit.set_bits(data, at, n, value) == pack(bits[:at] + v + bits[at + n:])
-        assert bitedit.get_bits(data, at, n) == int(bits[at:at + n], 2)
+        assert bitedit.set_bits(data, at, n, value) == pack(bits[:at] + v + bits[at + n :])
+        assert bitedit.get_bits(data, at, n) == int(bits[at : at + n], 2)
 
 
 def test_syntax_model_locates_header_fields():
@@ -167,8 +168,10 @@ def test_minimise_finds_the_trigger():
 
 
 def test_stack_hash_kinds():
-    asan = ("==1==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x1\n"
-            "    #0 0x4005 in plane /src/dec.c:40\n    #1 0x4006 in main /src/dec.c:80\n")
+    asan = (
+        "==1==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x1\n"
+        "    #0 0x4005 in plane /src/dec.c:40\n    #1 0x4006 in main /src/dec.c:80\n"
+    )
     py = 'Traceback (most recent call last):\n  File "/x/dec.py", line 3, in f\n    g()\nIndexError: list index'
     assert stack_hash(asan)[0] == "AddressSanitizer heap-buffer-overflow"
     assert stack_hash(py)[0] == "uncaught Python exception IndexError"
@@ -178,9 +181,18 @@ def test_stack_hash_kinds():
 
 def test_self_fuzz_no_findings_and_entry(tmp_path, seeds):
     target = SelfTarget(checker_every=8, scene_stream=seeds[0].data)
-    fz = Fuzzer(target, seeds + short_prefixes(seeds[:4]),
-                FuzzConfig(seed=5, seconds=60, max_execs=400, kinds=("stream", "stream", "scene", "bifs"),
-                           progress=False, out_dir=tmp_path))
+    fz = Fuzzer(
+        target,
+        seeds + short_prefixes(seeds[:4]),
+        FuzzConfig(
+            seed=5,
+            seconds=60,
+            max_execs=400,
+            kinds=("stream", "stream", "scene", "bifs"),
+            progress=False,
+            out_dir=tmp_path,
+        ),
+    )
     st_ = fz.run()
     assert st_.execs == 400 and not fz.findings, [f.verdict.message for f in fz.findings.values()]
     doc = write_summary(tmp_path, fz)
@@ -209,13 +221,15 @@ def _planted(name: str, tmp_path: Path):
         (tmp_path / "skipchain.toml").write_text(
             'name = "planted-skipchain"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
             'faps_format = "fap"\n[commands]\ndecode = ["{manifest_dir}/skipchain", "{input}", "{faps_out}"]\n'
-            '[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n')
+            "[limits]\ntimeout_s = 2\nmemory_mb = 256\noutput_mb = 16\n"
+        )
         return load_manifest(tmp_path / "skipchain.toml")
     return load_manifest(HERE / f"{name}.toml")
 
 
-def _fuzz_planted(name: str, tmp_path: Path, seeds, max_execs: int, cls: str | None = None, jobs: int = 2,
-                  serve: bool = False):
+def _fuzz_planted(
+    name: str, tmp_path: Path, seeds, max_execs: int, cls: str | None = None, jobs: int = 2, serve: bool = False
+):
     adapter = _planted(name, tmp_path)
     if serve:  # the same program through the persistent protocol (skipchain --serve)
         p = Path(adapter.manifest_path)
@@ -224,19 +238,34 @@ def _fuzz_planted(name: str, tmp_path: Path, seeds, max_execs: int, cls: str | N
     out = tmp_path / "out"
     target = DecoderTarget(adapter, tmp_path / "work", timeout_s=1.0)
     assert target.persistent == serve
-    fz = Fuzzer(target, seeds,
-                FuzzConfig(seed=1, seconds=120, jobs=jobs, out_dir=out, progress=False, max_execs=max_execs,
-                           minimise_seconds=5, run_seeds_first=0, valid_pool=4),
-                decoder_info={"name": adapter.name, "manifest": str(adapter.manifest_path)},
-                stop_on=lambda f: f.verdict.cls == cls)
+    fz = Fuzzer(
+        target,
+        seeds,
+        FuzzConfig(
+            seed=1,
+            seconds=120,
+            jobs=jobs,
+            out_dir=out,
+            progress=False,
+            max_execs=max_execs,
+            minimise_seconds=5,
+            run_seeds_first=0,
+            valid_pool=4,
+        ),
+        decoder_info={"name": adapter.name, "manifest": str(adapter.manifest_path)},
+        stop_on=lambda f: f.verdict.cls == cls,
+    )
     fz.run()
     write_summary(out, fz)
     return fz, target, out
 
 
 # input budgets: the run stops at the first finding of the class (typically within 30 inputs)
-PLANTED = [("skipchain", "crash", "SIGSEGV", 300), ("hangdec", "hang", "timeout", 150),
-           ("allocdec", "memory", "memory-limit", 300)]
+PLANTED = [
+    ("skipchain", "crash", "SIGSEGV", 300),
+    ("hangdec", "hang", "timeout", 150),
+    ("allocdec", "memory", "memory-limit", 300),
+]
 
 
 @pytest.fixture(scope="module")
@@ -275,15 +304,26 @@ def test_one_at_a_time_runs_replay_exactly(tmp_path, seeds):
         target = DecoderTarget(adapter, tmp_path / f"w{k}", timeout_s=1.0)
         assert target.depth > 2
         recorded = []
-        fz = Fuzzer(target, seeds,
-                    FuzzConfig(seed=5, seconds=120, progress=False, max_execs=160, minimise_findings=False,
-                               run_seeds_first=0, valid_pool=4))
+        fz = Fuzzer(
+            target,
+            seeds,
+            FuzzConfig(
+                seed=5,
+                seconds=120,
+                progress=False,
+                max_execs=160,
+                minimise_findings=False,
+                run_seeds_first=0,
+                valid_pool=4,
+            ),
+        )
         record = fz._record
         fz._record = lambda i, inp, out, dl: (recorded.append((i, inp.data)), record(i, inp, out, dl))
         fz.run()
         assert [i for i, _d in recorded] == list(range(160))  # each input recorded once, in order
-        runs.append((recorded, [e.data for e in fz.new_corpus],
-                     sorted((f.index, f.verdict.key) for f in fz.findings.values())))
+        runs.append(
+            (recorded, [e.data for e in fz.new_corpus], sorted((f.index, f.verdict.key) for f in fz.findings.values()))
+        )
     assert runs[0] == runs[1]
     assert runs[0][1] and runs[0][2]  # the corpus grew and the planted crash was found
 
@@ -317,18 +357,29 @@ def test_promoted_finding_fails_buggy_decoder_passes_reference(skipchain_run, tm
     suite_dir = tmp_path / "suite"
     suite_dir.mkdir()
     shutil.copyfile(data_dir / c["file"], suite_dir / f"{c['id']}.fba")
-    case = Case(id=c["id"], suite=REGRESSION_SUITE, claim="simple@1", group="error", kind="error",
-                inputs={"fba": f"{c['id']}.fba"}, expect={"diagnostics": c["expect"]}, suite_dir=suite_dir)
+    case = Case(
+        id=c["id"],
+        suite=REGRESSION_SUITE,
+        claim="simple@1",
+        group="error",
+        kind="error",
+        inputs={"fba": f"{c['id']}.fba"},
+        expect={"diagnostics": c["expect"]},
+        suite_dir=suite_dir,
+    )
     bad = run_cases(target.adapter, [case], claim="simple@1", out_dir=tmp_path / "run-bad", jobs=1, progress=False)
-    ref = run_cases(resolve("reference-inprocess"), [case], claim="simple@1", out_dir=tmp_path / "run-ref", jobs=1,
-                    progress=False)
+    ref = run_cases(
+        resolve("reference-inprocess"), [case], claim="simple@1", out_dir=tmp_path / "run-ref", jobs=1, progress=False
+    )
     assert bad[0].outcome == Outcome.CRASH, bad[0].message
     assert ref[0].outcome == Outcome.PASS, ref[0].message
 
 
 def test_cli(tmp_path):
-    assert main(["fuzz", "--self", "--seconds", "30", "--max-execs", "60", "-o", str(tmp_path / "s"),
-                 "--no-progress"]) == 0
+    assert (
+        main(["fuzz", "--self", "--seconds", "30", "--max-execs", "60", "-o", str(tmp_path / "s"), "--no-progress"])
+        == 0
+    )
     doc = json.loads((tmp_path / "s" / "fuzz.json").read_text())
     assert doc["execs"] == 60 and doc["findings"] == 0
     assert main(["fuzz", "--promote", str(tmp_path / "s"), "--data-dir", str(tmp_path / "d")]) == 2
@@ -347,7 +398,8 @@ def test_text_fuzzing_finds_a_players_crash_and_a_copier(tmp_path):
     """Players (decoders that read only .fap text) are fuzzed with .fap text: a player that
     dies on a comment line is a crash finding; one that copies its input is wrong output."""
     crashy = tmp_path / "crashy.py"
-    crashy.write_text(textwrap.dedent("""\
+    crashy.write_text(
+        textwrap.dedent("""\
         import sys
         import numpy as np
         from fbaconf.bitstreams.faptext import read_fap_file, write_fap_file
@@ -357,16 +409,34 @@ def test_text_fuzzing_finds_a_players_crash_and_a_copier(tmp_path):
         f = read_fap_file(sys.argv[1])[0]
         f.status[:] = np.where(f.status == RETAINED, SET, f.status)
         write_fap_file(sys.argv[2], f)
-        """))
-    for name, argv, cls in (("crashy", f'"{{python}}", "{crashy}", "{{input}}", "{{faps_out}}"', "crash"),
-                            ("copier", '"/bin/cp", "{input}", "{faps_out}"', "wrong-output")):
+        """)
+    )
+    for name, argv, cls in (
+        ("crashy", f'"{{python}}", "{crashy}", "{{input}}", "{{faps_out}}"', "crash"),
+        ("copier", '"/bin/cp", "{input}", "{faps_out}"', "wrong-output"),
+    ):
         m = tmp_path / f"{name}.toml"
-        m.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fap"]\noutputs = ["faps"]\n'
-                     f'faps_format = "fap"\n[commands]\ndecode = [{argv}]\n')
+        m.write_text(
+            f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fap"]\noutputs = ["faps"]\n'
+            f'faps_format = "fap"\n[commands]\ndecode = [{argv}]\n'
+        )
         target = DecoderTarget(load_manifest(m), tmp_path / f"w-{name}", kind="text")
-        fz = Fuzzer(target, [],
-                    FuzzConfig(seed=3, seconds=60, max_execs=300, kinds=("text",), progress=False,
-                               out_dir=tmp_path / f"o-{name}", minimise_seconds=2),
-                    stop_on=lambda f: True)
+        fz = Fuzzer(
+            target,
+            [],
+            FuzzConfig(
+                seed=3,
+                seconds=60,
+                max_execs=300,
+                kinds=("text",),
+                progress=False,
+                out_dir=tmp_path / f"o-{name}",
+                minimise_seconds=2,
+            ),
+            stop_on=lambda f: True,
+        )
         fz.run()
-        assert any(f.verdict.cls == cls for f in fz.findings.values()), (name, [f.verdict.cls for f in fz.findings.values()])  # noqa: E501
+        assert any(f.verdict.cls == cls for f in fz.findings.values()), (
+            name,
+            [f.verdict.cls for f in fz.findings.values()],
+        )

@@ -2,6 +2,7 @@
 crashes on one input among many queued to it — through ``[commands] serve`` (the persistent
 protocol, framed per input), the fork server and a fresh sandbox per input — gives the same
 finding, naming that input; the finding replays, and is minimised."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -42,9 +43,11 @@ def _manifest(tmp_path: Path) -> Path:
     (tmp_path / "dec.py").write_text(DECODE)
     (tmp_path / "serve.py").write_text(SERVE)
     m = tmp_path / "boom.toml"
-    m.write_text('name = "boom"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n'
-                 f'[commands]\ndecode = ["{{python}}", "{tmp_path / "dec.py"}", "{{input}}", "{{faps_out}}"]\n'
-                 f'serve = ["{{python}}", "{tmp_path / "serve.py"}"]\n[limits]\ntimeout_s = 5\n')
+    m.write_text(
+        'name = "boom"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n'
+        f'[commands]\ndecode = ["{{python}}", "{tmp_path / "dec.py"}", "{{input}}", "{{faps_out}}"]\n'
+        f'serve = ["{{python}}", "{tmp_path / "serve.py"}"]\n[limits]\ntimeout_s = 5\n'
+    )
     return m
 
 
@@ -58,13 +61,23 @@ def _seeds() -> list[Entry]:
 
 @pytest.mark.parametrize("mode", ["persistent", "fork-server", "spawn"])
 def test_a_crash_among_queued_inputs_is_found_on_its_input_replays_and_is_minimised(tmp_path, mode):
-    target = DecoderTarget(adapters.resolve(_manifest(tmp_path)), tmp_path / "work",
-                           fork_server=mode != "spawn", persistent=mode == "persistent")
-    assert (target.persistent, target.fork_server) == {"persistent": (True, True), "fork-server": (False, True),
-                                                       "spawn": (False, False)}[mode]
+    target = DecoderTarget(
+        adapters.resolve(_manifest(tmp_path)),
+        tmp_path / "work",
+        fork_server=mode != "spawn",
+        persistent=mode == "persistent",
+    )
+    assert (target.persistent, target.fork_server) == {
+        "persistent": (True, True),
+        "fork-server": (False, True),
+        "spawn": (False, False),
+    }[mode]
     assert target.depth == (PIPELINE_DEPTH if mode != "spawn" else 1) and N < PIPELINE_DEPTH - 1
-    fz = Fuzzer(target, _seeds(), FuzzConfig(seed=3, max_execs=12, seconds=120, progress=False,
-                                              minimise_seconds=60, minimise_tests=400))
+    fz = Fuzzer(
+        target,
+        _seeds(),
+        FuzzConfig(seed=3, max_execs=12, seconds=120, progress=False, minimise_seconds=60, minimise_tests=400),
+    )
     fz.run()
     assert fz.stats.execs == 12
     (f,) = fz.findings.values()  # one finding: no crash blamed on a neighbour, no "exit-2" for the real one

@@ -1,5 +1,6 @@
 """``fbaconf fuzz export``: seeds, dictionary and OSS-Fuzz snippet for the fuzzers vendors
 run (issue 19), checked by a real libFuzzer build where clang has one."""
+
 from __future__ import annotations
 
 import re
@@ -51,7 +52,7 @@ def test_seed_corpus_is_valid_or_a_suite_case(exported):
     assert len(files) == doc["seeds"] and doc["generated"] == 8
     assert len({f.read_bytes() for f in files}) == len(files)  # deduplicated
     for f in files:
-        if f.name.startswith(("generated", )) or "planes" in f.name:
+        if f.name.startswith(("generated",)) or "planes" in f.name:
             decode(f.read_bytes())  # raises on an invalid stream
     errors = [f for f in files if f.name.startswith("simple-l1-error") and "planes" not in f.name]
     assert errors
@@ -64,8 +65,11 @@ def test_seed_corpus_is_valid_or_a_suite_case(exported):
 
 
 def test_cli_export(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "fuzz", "export", str(tmp_path / "x"), "--valid", "2"], capture_output=True,  # noqa: E501
-                       text=True)
+    r = subprocess.run(
+        [sys.executable, "-m", "fbaconf", "fuzz", "export", str(tmp_path / "x"), "--valid", "2"],
+        capture_output=True,
+        text=True,
+    )
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "x" / "oss-fuzz" / "build.sh").read_text().startswith("#!/bin/bash")
     r = subprocess.run([sys.executable, "-m", "fbaconf", "fuzz", "export"], capture_output=True, text=True)
@@ -92,8 +96,9 @@ def _libfuzzer(tmp_path: Path) -> Path:
     src = tmp_path / "t.c"
     src.write_text(TARGET)
     exe = tmp_path / "t"
-    r = subprocess.run([clang, "-g", "-O1", "-fsanitize=fuzzer,address", str(src), "-o", str(exe)],
-                       capture_output=True, text=True)
+    r = subprocess.run(
+        [clang, "-g", "-O1", "-fsanitize=fuzzer,address", str(src), "-o", str(exe)], capture_output=True, text=True
+    )
     if r.returncode != 0:
         pytest.skip(f"clang cannot build a libFuzzer target here: {r.stderr.strip()[-200:]}")
     return exe
@@ -102,8 +107,13 @@ def _libfuzzer(tmp_path: Path) -> Path:
 def test_libfuzzer_accepts_the_export(exported, tmp_path):
     out, doc = exported
     exe = _libfuzzer(tmp_path)
-    r = subprocess.run([str(exe), f"-dict={out / 'fba.dict'}", "-runs=300", str(out / "corpus")],
-                       capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    r = subprocess.run(
+        [str(exe), f"-dict={out / 'fba.dict'}", "-runs=300", str(out / "corpus")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     m = re.search(r"Dictionary: (\d+) entries", r.stderr)
     assert m and int(m.group(1)) == doc["tokens"], r.stderr[-2000:]

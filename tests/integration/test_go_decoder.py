@@ -9,6 +9,7 @@ whole run one set-up error from the canary (isolation/setup.py), which proves th
 the same stream without the address-space limit — no case counted, never a Fail.
 Skipped where ``go`` is not installed (the build needs no network: the standard library only).
 """
+
 from __future__ import annotations
 
 import os
@@ -63,12 +64,15 @@ def godec(tmp_path_factory) -> Path:
     (d / "main.go").write_text(GODEC)
     (d / "go.mod").write_text("module godec\n\ngo 1.21\n")
     env = {**os.environ, "GOTOOLCHAIN": "local", "GOFLAGS": "-mod=mod", "CGO_ENABLED": "0"}
-    r = subprocess.run([go, "build", "-o", str(d / "godec"), "."], cwd=d, env=env, capture_output=True, text=True,
-                       timeout=900)
+    r = subprocess.run(
+        [go, "build", "-o", str(d / "godec"), "."], cwd=d, env=env, capture_output=True, text=True, timeout=900
+    )
     assert r.returncode == 0, r.stderr
-    (d / "godec.toml").write_text('name = "godec"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                                  '[commands]\ndecode = ["{manifest_dir}/godec", "{input}", "{faps_out}"]\n'
-                                  '[limits]\ntimeout_s = 30\nmemory_mb = 256\n')
+    (d / "godec.toml").write_text(
+        'name = "godec"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        '[commands]\ndecode = ["{manifest_dir}/godec", "{input}", "{faps_out}"]\n'
+        "[limits]\ntimeout_s = 30\nmemory_mb = 256\n"
+    )
     return d
 
 
@@ -105,8 +109,9 @@ def test_a_go_decoder_over_the_limit_is_a_memory_ending(godec, tmp_path):
 
 def test_under_an_address_space_limit_the_runtime_is_named_with_the_fix(godec, tmp_path):
     m = godec / "godec-as.toml"
-    m.write_text((godec / "godec.toml").read_text().replace("memory_mb = 256", 'memory_mb = 256\nmemory_kind = '
-                                                            '"address-space"'))
+    m.write_text(
+        (godec / "godec.toml").read_text().replace("memory_mb = 256", 'memory_mb = 256\nmemory_kind = "address-space"')
+    )
     a = adapters.load_manifest(m)
     res, ending = _run(godec, tmp_path, b"\x00\x00\x01\xba" + bytes(60), a.limits)
     assert ending.kind == "setup", ending.message
@@ -119,10 +124,26 @@ def test_a_run_under_an_address_space_limit_is_one_set_up_error_naming_gos_words
     if sandbox.isolation() == "none":
         pytest.skip("bubblewrap (bwrap) is not installed: the canary's retry would run unisolated")
     m = godec / "godec-as-run.toml"
-    m.write_text((godec / "godec.toml").read_text().replace("memory_mb = 256", 'memory_mb = 256\nmemory_kind = '
-                                                            '"address-space"'))
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "run", "--decoder", str(m), "--case", "simple-l1-core/dct-q4",
-                        "-o", str(tmp_path / "run")], capture_output=True, text=True, timeout=600)
+    m.write_text(
+        (godec / "godec.toml").read_text().replace("memory_mb = 256", 'memory_mb = 256\nmemory_kind = "address-space"')
+    )
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "run",
+            "--decoder",
+            str(m),
+            "--case",
+            "simple-l1-core/dct-q4",
+            "-o",
+            str(tmp_path / "run"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 2, r.stdout + r.stderr
     assert r.stderr.count("fbaconf run: error: ") == 1 and "godec cannot run as set up" in r.stderr
     assert "| fatal error: failed to reserve page summary memory" in r.stderr

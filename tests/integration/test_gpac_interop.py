@@ -8,6 +8,7 @@ present (``FBACONF_MP4BOX`` or ``MP4Box`` on PATH): MP4Box reads every shipped `
 decodes every fbaconf-encoded shipped scene to the same scene — FaceDefMesh references aside,
 which MP4Box refuses (D10; ``fbaconf check`` warns FAP-SCENE-003), as a test shows.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -29,8 +30,7 @@ MANIFEST = json.loads((DATA / "MANIFEST.json").read_text())
 ENTRIES = [e for e in MANIFEST["entries"] if "bifs" in e]
 TEXT_DIGITS = 1e-5  # MP4Box prints floats with 6 significant digits (%g of the float32)
 
-FACE_FAMILY = {"Face", "FAP", "Viseme", "Expression", "FDP", "FIT", "FaceDefTables", "FaceDefMesh",
-               "FaceDefTransform"}
+FACE_FAMILY = {"Face", "FAP", "Viseme", "Expression", "FDP", "FIT", "FaceDefTables", "FaceDefMesh", "FaceDefTransform"}
 
 
 def source(e) -> bt.Scene:
@@ -113,13 +113,15 @@ def test_mp4box_od_urls_read_to_the_scene_of_their_bifs():
 def mp4box() -> str:
     exe = os.environ.get("FBACONF_MP4BOX") or shutil.which("MP4Box")
     if not exe or not Path(exe).exists():
-        pytest.skip("MP4Box not available (build it outside the repository: ../shared/interop/README.md; "
-                    "set FBACONF_MP4BOX)")
+        pytest.skip(
+            "MP4Box not available (build it outside the repository: ../shared/interop/README.md; set FBACONF_MP4BOX)"
+        )
     return exe
 
 
-SHIPPED = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "conformance" / "suites").glob("*/*.bt")) + \
-    ["animation/data/models/default-head.bt"]
+SHIPPED = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "conformance" / "suites").glob("*/*.bt")) + [
+    "animation/data/models/default-head.bt"
+]
 IOD = """InitialObjectDescriptor {
  objectDescriptorID 1
  esDescr [
@@ -163,11 +165,11 @@ def test_mp4box_loads_every_shipped_bt(rel, tmp_path):
     src = tmp_path / "s.bt"
     view = bifs.interop_view(scene)
     src.write_text((ROOT / rel).read_text() if view == scene else bt.write(view))
-    r = subprocess.run([exe, "-def", "-mp4", str(src), "-out", str(tmp_path / "s.mp4")], capture_output=True,
-                       text=True)
+    r = subprocess.run([exe, "-def", "-mp4", str(src), "-out", str(tmp_path / "s.mp4")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-500:]
-    subprocess.run([exe, "-bt", str(tmp_path / "s.mp4"), "-out", str(tmp_path / "d.bt")], capture_output=True,
-                   check=True)
+    subprocess.run(
+        [exe, "-bt", str(tmp_path / "s.mp4"), "-out", str(tmp_path / "d.bt")], capture_output=True, check=True
+    )
     assert bifs.equivalent_scene(bt.read(tmp_path / "d.bt"), view, rel=TEXT_DIGITS)
 
 

@@ -6,6 +6,7 @@ Cases come from the committed conformance suites (``conformance/suites``) and go
 written here, so every classification is produced by a real subprocess doing the real
 thing (SIGSEGV, an endless loop, 1 GiB of output...).
 """
+
 from __future__ import annotations
 
 import json
@@ -42,12 +43,25 @@ def case(full_id: str):
 SIMPLE = "simple-l1-core/arith-q8-visemes-expressions"
 
 
-def dummy_manifest(tmp_path: Path, mode: str, *, timeout=20.0, memory_mb=1024, output_mb=16, extra=(),
-                   name=None, claims='["simple@2"]', faps_format="fap") -> Path:
+def dummy_manifest(
+    tmp_path: Path,
+    mode: str,
+    *,
+    timeout=20.0,
+    memory_mb=1024,
+    output_mb=16,
+    extra=(),
+    name=None,
+    claims='["simple@2"]',
+    faps_format="fap",
+) -> Path:
     p = tmp_path / f"dummy-{name or mode}.toml"
-    args = ", ".join(json.dumps(a) for a in ["{python}", "-m", "fbaconf.harness.dummydec", "--mode", mode, *extra,
-                                             "{input}", "{faps_out}"])
-    p.write_text(textwrap.dedent(f"""\
+    args = ", ".join(
+        json.dumps(a)
+        for a in ["{python}", "-m", "fbaconf.harness.dummydec", "--mode", mode, *extra, "{input}", "{faps_out}"]
+    )
+    p.write_text(
+        textwrap.dedent(f"""\
         name = "dummy-{name or mode}"
         claims = {claims}
         inputs = ["fba"]
@@ -59,7 +73,8 @@ def dummy_manifest(tmp_path: Path, mode: str, *, timeout=20.0, memory_mb=1024, o
         timeout_s = {timeout}
         memory_mb = {memory_mb}
         output_mb = {output_mb}
-        """))
+        """)
+    )
     return p
 
 
@@ -114,7 +129,8 @@ def test_reference_subprocess_passes_one_case_per_suite(tmp_path):
 def test_fap_text_only_decoder_is_compared_on_values(tmp_path):
     """A player in Python: reads the sparse .fap text and writes its state (every held FAP)."""
     player = tmp_path / "player.py"
-    player.write_text(textwrap.dedent("""\
+    player.write_text(
+        textwrap.dedent("""\
         import sys
         import numpy as np
         from fbaconf.bitstreams.faptext import read_fap_file, write_fap_file
@@ -122,9 +138,11 @@ def test_fap_text_only_decoder_is_compared_on_values(tmp_path):
         f = read_fap_file(sys.argv[1])[0]
         f.status[:] = np.where(f.status == RETAINED, SET, f.status)
         write_fap_file(sys.argv[2], f)
-        """))
+        """)
+    )
     m = tmp_path / "textref.toml"
-    m.write_text(textwrap.dedent(f"""\
+    m.write_text(
+        textwrap.dedent(f"""\
         name = "text-player"
         claims = ["simple@1"]
         inputs = ["fap"]
@@ -132,7 +150,8 @@ def test_fap_text_only_decoder_is_compared_on_values(tmp_path):
         faps_format = "fap"
         [commands]
         decode = ["{{python}}", "{player}", "{{input}}", "{{faps_out}}"]
-        """))
+        """)
+    )
     a = adapters.resolve(m)
     r = run_one(a, case("simple-l1-core/arith-mask-interpolate"), tmp_path, claim="simple@1")
     assert r.outcome == Outcome.PASS, r.message
@@ -142,19 +161,22 @@ def test_fap_text_only_decoder_is_compared_on_values(tmp_path):
 # ----------------------------------------------------------------------------- misbehaviour
 
 
-@pytest.mark.parametrize("mode,outcome,words", [
-    ("segfault", Outcome.CRASH, "SIGSEGV"),
-    ("abort", Outcome.CRASH, "SIGABRT"),
-    ("hang", Outcome.TIMEOUT, "timeout of 3 s"),
-    ("sleep", Outcome.TIMEOUT, "did not finish"),
-    ("noout", Outcome.FAIL, "wrote no FAP output"),
-    ("garbage", Outcome.FAIL, "unreadable FAP output"),
-    ("huge", Outcome.FAIL, "16 MB output limit"),
-    ("wrong", Outcome.FAIL, "frame 3"),
-    ("notsupported", Outcome.NOT_SUPPORTED, "code 69"),
-    ("reject", Outcome.FAIL, "exited with code 1"),
-    ("alloc", Outcome.CRASH, "memory limit"),
-])
+@pytest.mark.parametrize(
+    "mode,outcome,words",
+    [
+        ("segfault", Outcome.CRASH, "SIGSEGV"),
+        ("abort", Outcome.CRASH, "SIGABRT"),
+        ("hang", Outcome.TIMEOUT, "timeout of 3 s"),
+        ("sleep", Outcome.TIMEOUT, "did not finish"),
+        ("noout", Outcome.FAIL, "wrote no FAP output"),
+        ("garbage", Outcome.FAIL, "unreadable FAP output"),
+        ("huge", Outcome.FAIL, "16 MB output limit"),
+        ("wrong", Outcome.FAIL, "frame 3"),
+        ("notsupported", Outcome.NOT_SUPPORTED, "code 69"),
+        ("reject", Outcome.FAIL, "exited with code 1"),
+        ("alloc", Outcome.CRASH, "memory limit"),
+    ],
+)
 def test_misbehaving_decoders_are_classified(tmp_path, mode, outcome, words):
     # a short time-out only where it is the point: a loaded machine may take more than 3 s to start
     # Python and fill the 1 GiB before the memory kill (seen once under four workers on two cores)
@@ -206,18 +228,31 @@ def test_sandbox_runs_argv_without_a_shell(tmp_path):
 # ----------------------------------------------------------------------------- manifests
 
 
-@pytest.mark.parametrize("body,rule", [
-    ('claims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\ndecode = ["x"]', "manifest-key"),
-    ('name = "x"\nclaims = ["simple@9"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\ndecode = ["x"]',
-     "manifest-claims"),
-    ('name = "x"\nclaims = ["simple@1"]\ninputs = ["mp4"]\noutputs = ["faps"]\n[commands]\ndecode = ["x"]',
-     "manifest-inputs"),
-    ('name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\ndecode = ["x", "{nope}"]',
-     "manifest-placeholder"),
-    ('name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\ndecode = ["x", "{input}"]',
-     "manifest-outputs"),
-    ('name = "x"\nclaims = [', "manifest-toml"),
-])
+@pytest.mark.parametrize(
+    "body,rule",
+    [
+        ('claims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\ndecode = ["x"]', "manifest-key"),
+        (
+            'name = "x"\nclaims = ["simple@9"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\ndecode = ["x"]',
+            "manifest-claims",
+        ),
+        (
+            'name = "x"\nclaims = ["simple@1"]\ninputs = ["mp4"]\noutputs = ["faps"]\n[commands]\ndecode = ["x"]',
+            "manifest-inputs",
+        ),
+        (
+            'name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\n'
+            'decode = ["x", "{nope}"]',
+            "manifest-placeholder",
+        ),
+        (
+            'name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n[commands]\n'
+            'decode = ["x", "{input}"]',
+            "manifest-outputs",
+        ),
+        ('name = "x"\nclaims = [', "manifest-toml"),
+    ],
+)
 def test_bad_manifests_are_typed_errors(tmp_path, body, rule):
     p = tmp_path / "m.toml"
     p.write_text(body)
@@ -260,25 +295,63 @@ def test_baseline_turns_known_failures_into_non_failures(tmp_path):
 
 
 def fbaconf(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "fbaconf.cli", *args], capture_output=True, text=True,
-                          cwd=cwd, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "fbaconf.cli", *args], capture_output=True, text=True, cwd=cwd, timeout=600
+    )
 
 
 def test_run_cli_exit_codes_and_reports(tmp_path):
-    ok = fbaconf("run", "--decoder", str(dummy_manifest(tmp_path, "ok")), "--claim", "simple@1",
-                 "--suite", "simple-l1-core", "--case", "arith-*", "--case", "dct-q4", "-o", str(tmp_path / "ok"),
-                 "--no-progress", "-j", "2")
+    ok = fbaconf(
+        "run",
+        "--decoder",
+        str(dummy_manifest(tmp_path, "ok")),
+        "--claim",
+        "simple@1",
+        "--suite",
+        "simple-l1-core",
+        "--case",
+        "arith-*",
+        "--case",
+        "dct-q4",
+        "-o",
+        str(tmp_path / "ok"),
+        "--no-progress",
+        "-j",
+        "2",
+    )
     assert ok.returncode == 0, ok.stdout + ok.stderr
     assert "result: PASS" in ok.stdout
     for f in ("report.json", "junit.xml", "index.html", "results.jsonl"):
         assert (tmp_path / "ok" / f).is_file()
-    bad = fbaconf("run", "--decoder", str(dummy_manifest(tmp_path, "wrong")), "--claim", "simple@1",
-                  "--case", "arith-q1-all-faps", "-o", str(tmp_path / "bad"), "--no-progress",
-                  "--write-baseline", str(tmp_path / "b.txt"))
+    bad = fbaconf(
+        "run",
+        "--decoder",
+        str(dummy_manifest(tmp_path, "wrong")),
+        "--claim",
+        "simple@1",
+        "--case",
+        "arith-q1-all-faps",
+        "-o",
+        str(tmp_path / "bad"),
+        "--no-progress",
+        "--write-baseline",
+        str(tmp_path / "b.txt"),
+    )
     assert bad.returncode == 1  # a case resting on public facts only (a provisional one would not fail the claim)
-    again = fbaconf("run", "--decoder", str(dummy_manifest(tmp_path, "wrong")), "--claim", "simple@1",
-                    "--case", "arith-q1-all-faps", "-o", str(tmp_path / "bad2"), "--no-progress",
-                    "--baseline", str(tmp_path / "b.txt"))
+    again = fbaconf(
+        "run",
+        "--decoder",
+        str(dummy_manifest(tmp_path, "wrong")),
+        "--claim",
+        "simple@1",
+        "--case",
+        "arith-q1-all-faps",
+        "-o",
+        str(tmp_path / "bad2"),
+        "--no-progress",
+        "--baseline",
+        str(tmp_path / "b.txt"),
+    )
     assert again.returncode == 0, again.stdout
     usage = fbaconf("run", "--decoder", str(tmp_path / "missing.toml"))
     assert usage.returncode == 2 and "Traceback" not in usage.stderr
@@ -318,12 +391,31 @@ def test_certify_runs_only_the_cases_the_claim_requires(certified_package):
 def test_pytest_plugin_gives_one_item_per_case(tmp_path):
     m = dummy_manifest(tmp_path, "wrong", claims='["simple@1"]')
     (tmp_path / "conftest.py").write_text("")
-    r = subprocess.run([sys.executable, "-m", "pytest", "-p",
-                        "no:cacheprovider", "-q", "--fbaconf-decoder", str(m), "--fbaconf-suite", "simple-l1-core",
-                        "--fbaconf-suite", "calibration-l1-core", "--fbaconf-strict", "-k",
-                        "arith-q8-visemes-expressions or fdp-all-points", "-rA",
-                        str(tmp_path)],
-                       capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-p",
+            "no:cacheprovider",
+            "-q",
+            "--fbaconf-decoder",
+            str(m),
+            "--fbaconf-suite",
+            "simple-l1-core",
+            "--fbaconf-suite",
+            "calibration-l1-core",
+            "--fbaconf-strict",
+            "-k",
+            "arith-q8-visemes-expressions or fdp-all-points",
+            "-rA",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=600,
+    )
     out = r.stdout
     assert r.returncode == 1, out
     assert "fbaconf::simple-l1-core/arith-q8-visemes-expressions" in out
@@ -332,9 +424,26 @@ def test_pytest_plugin_gives_one_item_per_case(tmp_path):
     assert "first difference" in out
     # no known reading changes that case: without --fbaconf-strict too, its difference fails; a case of the DCT
     # tool (open decision D8) is expected to fail unless --fbaconf-strict (the claim names the tool unverified)
-    r = subprocess.run([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-q", "-rx", "--fbaconf-decoder",
-                        str(m), "fbaconf::" + SIMPLE, "fbaconf::simple-l1-core/dct-q4", str(tmp_path)],
-                       capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-p",
+            "no:cacheprovider",
+            "-q",
+            "-rx",
+            "--fbaconf-decoder",
+            str(m),
+            "fbaconf::" + SIMPLE,
+            "fbaconf::simple-l1-core/dct-q4",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=600,
+    )
     assert r.returncode == 1 and "1 failed" in r.stdout and "1 xfailed" in r.stdout, r.stdout
     assert "rests on the open decision D8" in r.stdout
 
@@ -355,13 +464,17 @@ def test_worked_c_example_passes_every_case_it_can_take(tmp_path):
     # comments, wrapped lines ...); the invalid .fap ones it must reject
     cs = [c for s in load_suites(names=["simple-l1-core", "simple-l1-text"]) for c in s.cases]
     results = run_cases(a, cs, claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
-    assert [r.outcome for r in results] == [Outcome.PASS] * len(cs), \
-        [(r.case_id, r.message) for r in results if r.outcome != Outcome.PASS]
+    assert [r.outcome for r in results] == [Outcome.PASS] * len(cs), [
+        (r.case_id, r.message) for r in results if r.outcome != Outcome.PASS
+    ]
 
 
 def test_outputs_a_case_does_not_compare_are_not_requested():
-    job = adapters.Job(Path("/w"), {"input": "/w/a.fba", "faps_out": "/w/f.npz", "images_dir": "/w/img"},
-                       unwanted=frozenset({"images_dir"}))
+    job = adapters.Job(
+        Path("/w"),
+        {"input": "/w/a.fba", "faps_out": "/w/f.npz", "images_dir": "/w/img"},
+        unwanted=frozenset({"images_dir"}),
+    )
     t = ["dec", "{input}", "--faps-out", "{faps_out}", ["--images-dir", "{images_dir}"]]
     assert adapters.expand(t, job, None) == ["dec", "/w/a.fba", "--faps-out", "/w/f.npz"]
     # a required (non-optional) output placeholder still gets its path
@@ -383,11 +496,14 @@ def test_image_reports_name_the_sequence_frame(tmp_path):
         "img = oiio.ImageBuf(p); px = img.get_pixels(oiio.UINT8)\n"
         "px[:, :, :3] = 255 - px[:, :, :3]\n"
         "out = oiio.ImageOutput.create(p); out.open(p, oiio.ImageSpec(px.shape[1], px.shape[0], px.shape[2], oiio.UINT8))\n"  # noqa: E501
-        "out.write_image(px); out.close()\n")
+        "out.write_image(px); out.close()\n"
+    )
     m = tmp_path / "badlast.toml"
-    m.write_text('name = "badlast"\nclaims = ["predictable@1"]\ninputs = ["fba", "scene"]\noutputs = ["images"]\n'
-                 f'[commands]\ndecode = ["{{python}}", "{script}", "--in", "{{input}}", "--scene", "{{scene}}", '
-                 '"--scenario", "{scenario}", "--images", "{images_dir}"]\n[limits]\ntimeout_s = 120\n')
+    m.write_text(
+        'name = "badlast"\nclaims = ["predictable@1"]\ninputs = ["fba", "scene"]\noutputs = ["images"]\n'
+        f'[commands]\ndecode = ["{{python}}", "{script}", "--in", "{{input}}", "--scene", "{{scene}}", '
+        '"--scenario", "{scenario}", "--images", "{images_dir}"]\n[limits]\ntimeout_s = 120\n'
+    )
     (s,) = load_suites(names=["predictable-l1-core"])
     case = next(c for c in s.cases if c.id == "logo")
     (r,) = run_cases(ad.resolve(m), [case], claim="predictable@1", out_dir=tmp_path / "run", jobs=1, progress=False)

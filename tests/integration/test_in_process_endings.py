@@ -1,6 +1,7 @@
 """An in-process decoder is called one way (PythonAdapter.execute) and its ending judged by the one
 classifier, in run, the speed phase and fuzz alike: an uncaught exception was a Crash in run and a
 Fail in speed; a typed input error is a reject everywhere."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -17,6 +18,7 @@ from fbaconf.harness.speed import measure as speed
 
 class Raises(PythonAdapter):
     """A decoder with a bug: it raises on every stream."""
+
     name, claims, inputs, outputs, faps_format = "raises", ["simple@1"], ["fba"], ["faps"], "npz"
 
     def run(self, job: Job) -> None:

@@ -8,6 +8,7 @@ fix (proven by the canary's run without the limit); the named jar's folder is sh
 and the decoder runs; a jar the command does not name (a ``Class-Path`` entry outside every
 shown folder) is one set-up error naming the JVM's words and the fix. Never a Fail.
 """
+
 from __future__ import annotations
 
 import os
@@ -47,29 +48,38 @@ def jars(tmp_path_factory) -> Path:
     subprocess.run([javac, "-d", str(d / "classes"), str(d / "src" / "Dec.java")], check=True, timeout=300)
     (d / "jars").mkdir()  # the decoder's jar: outside the program's (/usr/bin) and the manifest's folders
     (d / "main.txt").write_text("Main-Class: Dec\n")
-    subprocess.run([jar, "cfm", str(d / "jars" / "dec.jar"), str(d / "main.txt"), "-C", str(d / "classes"), "."],
-                   check=True, timeout=300)
+    subprocess.run(
+        [jar, "cfm", str(d / "jars" / "dec.jar"), str(d / "main.txt"), "-C", str(d / "classes"), "."],
+        check=True,
+        timeout=300,
+    )
     (d / "libs").mkdir()  # a launcher whose Class-Path names a jar the command does not
     shutil.copyfile(d / "jars" / "dec.jar", d / "libs" / "dec-lib.jar")
     (d / "launcher.txt").write_text(f"Main-Class: Dec\nClass-Path: file:{d / 'libs' / 'dec-lib.jar'}\n")
     (d / "empty").mkdir()
     (d / "vendor").mkdir()
-    subprocess.run([jar, "cfm", str(d / "vendor" / "launcher.jar"), str(d / "launcher.txt"), "-C", str(d / "empty"),
-                    "."], check=True, timeout=300)
+    subprocess.run(
+        [jar, "cfm", str(d / "vendor" / "launcher.jar"), str(d / "launcher.txt"), "-C", str(d / "empty"), "."],
+        check=True,
+        timeout=300,
+    )
     return d
 
 
 def manifest(d: Path, name: str, jar: str, limits: str) -> Path:
     m = d / "vendor" / f"{name}.toml"
-    m.write_text(f'name = "acme-java"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 f'faps_format = "fap"\n[commands]\ndecode = ["java", "-jar", "{jar}", "{{input}}", "{{faps_out}}"]\n'
-                 f"[limits]\ntimeout_s = 60\n{limits}")
+    m.write_text(
+        f'name = "acme-java"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        f'faps_format = "fap"\n[commands]\ndecode = ["java", "-jar", "{jar}", "{{input}}", "{{faps_out}}"]\n'
+        f"[limits]\ntimeout_s = 60\n{limits}"
+    )
     return m
 
 
 def fbaconf(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fbaconf", *map(str, args)], capture_output=True, text=True,
-                          timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "fbaconf", *map(str, args)], capture_output=True, text=True, timeout=600
+    )
 
 
 def test_a_jvm_under_an_address_space_limit_is_one_set_up_error_with_its_words_and_the_fix(jars, tmp_path):

@@ -1,5 +1,6 @@
 """The per-case launcher (isolation/sandbox.py): prlimit applies the limits; with cgroups, a
 shell holds the launch until the harness has moved it into them."""
+
 from __future__ import annotations
 
 import shutil
@@ -17,7 +18,9 @@ needs_prlimit = pytest.mark.skipif(shutil.which("prlimit") is None, reason="util
 
 @needs_prlimit
 def test_limits_reach_the_program():
-    argv, held = sandbox.launch_argv(512 * 2**20, 3 * 2**20, 7, [], ["/bin/sh", "-c", "ulimit -v; ulimit -f; ulimit -t; ulimit -c"])  # noqa: E501
+    argv, held = sandbox.launch_argv(
+        512 * 2**20, 3 * 2**20, 7, [], ["/bin/sh", "-c", "ulimit -v; ulimit -f; ulimit -t; ulimit -c"]
+    )
     assert not held
     out = subprocess.run(argv, capture_output=True, text=True, check=True).stdout.split()
     # ulimit -v in KiB, -f in 512-byte blocks (dash), -t in seconds, -c core blocks
@@ -70,9 +73,12 @@ def test_without_prlimit_the_python_launcher_joins_and_limits(monkeypatch, tmp_p
 @needs_prlimit
 def test_a_lower_hard_limit_caps_the_value():
     """Under a hard CPU limit of 20 s (not root's to raise), asking for 50 gives 20, not an error."""
-    code = ("import subprocess; from fbaconf.isolation import sandbox; "
-            "a, _ = sandbox.launch_argv(0, 0, 50, [], ['/bin/sh', '-c', 'ulimit -t; ulimit -H -t']); "
-            "print(subprocess.run(a, capture_output=True, text=True, check=True).stdout)")
-    out = subprocess.run(["prlimit", "--cpu=20:20", "--", sys.executable, "-c", code],
-                         capture_output=True, text=True, check=True).stdout.split()
+    code = (
+        "import subprocess; from fbaconf.isolation import sandbox; "
+        "a, _ = sandbox.launch_argv(0, 0, 50, [], ['/bin/sh', '-c', 'ulimit -t; ulimit -H -t']); "
+        "print(subprocess.run(a, capture_output=True, text=True, check=True).stdout)"
+    )
+    out = subprocess.run(
+        ["prlimit", "--cpu=20:20", "--", sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split()
     assert out == ["20", "20"], out

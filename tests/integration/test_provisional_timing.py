@@ -8,6 +8,7 @@ text carries it. Decoders here are the reference with one change, run as subproc
 * ``ntsc`` — .fap output whose header drops the 1000/1001 factor of the coded rate;
 * ``fapref`` — the reference writing .fap: passes, and its timing is said not verified.
 """
+
 from __future__ import annotations
 
 import json
@@ -26,7 +27,7 @@ from fbaconf.harness import adapters
 from fbaconf.harness.results import Outcome
 from fbaconf.harness.runner import run_cases
 
-ALTVLC = '''
+ALTVLC = """
 from collections import defaultdict
 from fbaconf.bitstreams import dct
 real = dct.dct_tables()
@@ -42,8 +43,8 @@ doc = dct.read_table_document()
 doc["ac"]["table"] = table
 alt = dct.parse_tables(doc)
 dct.dct_tables = lambda: alt
-'''
-RENUMBER = '''
+"""
+RENUMBER = """
 import numpy as np
 from fbaconf.bitstreams import faptext
 real_write = faptext.write_fap
@@ -51,8 +52,8 @@ def write_fap(frames, **kw):
     frames.frame_number = np.arange(len(frames.frame_number))  # no skips, no offset
     return real_write(frames, **kw)
 faptext.write_fap = write_fap
-'''
-NTSC = '''
+"""
+NTSC = """
 from fbaconf.bitstreams import faptext
 real_write = faptext.write_fap
 def write_fap(frames, **kw):
@@ -61,26 +62,30 @@ def write_fap(frames, **kw):
         frames.frame_rate = round(r * 16) / 16
     return real_write(frames, **kw)
 faptext.write_fap = write_fap
-'''
+"""
 
 
-REWIND = '''
+REWIND = """
 from fbaconf.bitstreams import readings
 _by_rewind = readings.using(readings.REWIND_14)  # this process decodes by S1's rewind
 _by_rewind.__enter__()
-'''
+"""
 
 
 def decoder(tmp_path: Path, name: str, patch: str, *, fmt: str, extra: str = "") -> Path:
     d = tmp_path / name
     d.mkdir()
-    (d / f"{name}.py").write_text(textwrap.dedent(patch) + textwrap.dedent('''
+    (d / f"{name}.py").write_text(
+        textwrap.dedent(patch)
+        + textwrap.dedent("""
         import sys
         from fbaconf.reference.decoder import main
         sys.exit(main(sys.argv[1:]))
-        '''))
+        """)
+    )
     m = d / f"{name}.toml"
-    m.write_text(textwrap.dedent(f'''\
+    m.write_text(
+        textwrap.dedent(f'''\
         name = "{name}"
         claims = ["simple@2"]
         inputs = ["fba"]
@@ -91,7 +96,8 @@ def decoder(tmp_path: Path, name: str, patch: str, *, fmt: str, extra: str = "")
         decode = ["{{python}}", "{{manifest_dir}}/{name}.py", "decode", "{{input}}", "--faps-out", "{{faps_out}}"]
         decode_multi = ["{{python}}", "{{manifest_dir}}/{name}.py", "decode-multi", "--out-dir", "{{faps_out_dir}}",
                         "{{inputs}}"]
-        '''))
+        ''')
+    )
     return m
 
 
@@ -118,8 +124,13 @@ def test_what_cases_rest_on_is_derived_from_their_goldens_and_tools():
     assert all(got[f"simple-l1-core/{c}"] for c in ("dct-skips", "mode-switch", "dct-short-high-level"))
     assert all(not v for k, v in got.items() if k.startswith("simple-l1-text/"))  # text: no stream
     # no known reading makes these streams valid: what makes them invalid is no excuse for accepting them
-    for c in ("viseme-select-range", "expression-select-range", "first-predicted", "frame-rate-zero",
-              "trailing-zero-byte"):
+    for c in (
+        "viseme-select-range",
+        "expression-select-range",
+        "first-predicted",
+        "frame-rate-zero",
+        "trailing-zero-byte",
+    ):
         assert got[f"simple-l1-error/{c}"] == [], c
 
 
@@ -128,9 +139,27 @@ def test_what_cases_rest_on_is_derived_from_their_goldens_and_tools():
 
 def _certify_altvlc(tmp: Path) -> None:
     m = decoder(tmp, "altvlc", ALTVLC, fmt="npz")
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", str(m), "--claim", "simple@1",
-                        "--no-speed", "-j", "2", "-o", str(tmp / "pkg"), "--allow-unisolated"],  # not bwrap's verdict
-                       capture_output=True, text=True, timeout=900)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "certify",
+            "--decoder",
+            str(m),
+            "--claim",
+            "simple@1",
+            "--no-speed",
+            "-j",
+            "2",
+            "-o",
+            str(tmp / "pkg"),
+            "--allow-unisolated",
+        ],  # not bwrap's verdict
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     (tmp / "run.json").write_text(json.dumps({"returncode": r.returncode, "stdout": r.stdout, "stderr": r.stderr}))
 
 
@@ -139,8 +168,11 @@ def altvlc_package(made_once):
     """The altvlc decoder certified once per session (its two tests may run on two workers)."""
     tmp = made_once("fbaconf-altvlc", _certify_altvlc)
     run = json.loads((tmp / "run.json").read_text())
-    return (tmp / "altvlc" / "altvlc.toml", tmp / "pkg",
-            subprocess.CompletedProcess(["certify"], run["returncode"], run["stdout"], run["stderr"]))
+    return (
+        tmp / "altvlc" / "altvlc.toml",
+        tmp / "pkg",
+        subprocess.CompletedProcess(["certify"], run["returncode"], run["stdout"], run["stderr"]),
+    )
 
 
 def test_other_dct_tables_leave_dct_unverified_and_say_so(altvlc_package):
@@ -163,9 +195,27 @@ def test_other_dct_tables_leave_dct_unverified_and_say_so(altvlc_package):
 
 def _certify_rewind(tmp: Path) -> None:
     m = decoder(tmp, "rewind", REWIND, fmt="npz", extra='readings = ["D7:rewind-14"]')
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "certify", "--decoder", str(m), "--claim", "simple@1",
-                        "--no-speed", "-j", "2", "-o", str(tmp / "pkg"), "--allow-unisolated"],
-                       capture_output=True, text=True, timeout=900)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "certify",
+            "--decoder",
+            str(m),
+            "--claim",
+            "simple@1",
+            "--no-speed",
+            "-j",
+            "2",
+            "-o",
+            str(tmp / "pkg"),
+            "--allow-unisolated",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     (tmp / "run.json").write_text(json.dumps({"returncode": r.returncode, "stdout": r.stdout, "stderr": r.stderr}))
 
 
@@ -219,9 +269,31 @@ def test_a_reading_the_decoder_did_not_declare_fails_verify(rewind_package, tmp_
 
 def test_other_dct_tables_fail_under_strict(altvlc_package, tmp_path):
     m, _pkg, _r = altvlc_package
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "run", "--decoder", str(m), "--claim", "simple@1",
-                        "--strict", "--suite", "simple-l1-core", "--case", "dct-q4", "--case", "arith-q1-all-faps",
-                        "-o", str(tmp_path / "run"), "--no-progress"], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "run",
+            "--decoder",
+            str(m),
+            "--claim",
+            "simple@1",
+            "--strict",
+            "--suite",
+            "simple-l1-core",
+            "--case",
+            "dct-q4",
+            "--case",
+            "arith-q1-all-faps",
+            "-o",
+            str(tmp_path / "run"),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 1 and "result: FAIL" in r.stdout
 
 
@@ -230,10 +302,15 @@ def test_other_dct_tables_fail_under_strict(altvlc_package, tmp_path):
 
 def test_frames_numbered_without_the_skips_fail_even_on_a_provisional_case(tmp_path):
     m = decoder(tmp_path, "renumber", RENUMBER, fmt="fap")
-    ids = ["simple-l1-core/skips-14-15", "simple-l1-core/high-level-classes", "simple-l1-stress/dct-header-zeros",
-           "simple-l1-core/arith-q1-all-faps"]
-    rs = by_id(run_cases(adapters.resolve(m), cases(*ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2,
-                         progress=False))
+    ids = [
+        "simple-l1-core/skips-14-15",
+        "simple-l1-core/high-level-classes",
+        "simple-l1-stress/dct-header-zeros",
+        "simple-l1-core/arith-q1-all-faps",
+    ]
+    rs = by_id(
+        run_cases(adapters.resolve(m), cases(*ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
+    )
     for cid in ids[:3]:
         assert rs[cid].outcome == Outcome.FAIL and "frame number" in rs[cid].message, (cid, rs[cid].message)
     assert rs[ids[3]].outcome == Outcome.PASS  # no skips: nothing to number differently
@@ -243,8 +320,9 @@ def test_frames_numbered_without_the_skips_fail_even_on_a_provisional_case(tmp_p
 def test_a_header_rate_without_its_1000_1001_fails_on_the_sixteenths_rate(tmp_path):
     m = decoder(tmp_path, "ntsc", NTSC, fmt="fap")
     ids = ["simple-l1-core/rate-offset-sixteenths", "simple-l1-core/arith-ntsc-rate", "simple-l1-core/rate-half-hz"]
-    rs = by_id(run_cases(adapters.resolve(m), cases(*ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2,
-                         progress=False))
+    rs = by_id(
+        run_cases(adapters.resolve(m), cases(*ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
+    )
     assert rs[ids[0]].outcome == Outcome.FAIL and "header frame rate: expected 0.4995 Hz" in rs[ids[0]].message
     assert rs[ids[1]].outcome == Outcome.FAIL  # 29.97 written as 30
     assert rs[ids[2]].outcome == Outcome.PASS  # 0.5 Hz has no factor to drop
@@ -253,13 +331,19 @@ def test_a_header_rate_without_its_1000_1001_fails_on_the_sixteenths_rate(tmp_pa
 def test_a_fap_decoder_passes_and_its_timing_is_said_not_verified(tmp_path):
     m = decoder(tmp_path, "fapref", "", fmt="fap")
     a = adapters.resolve(m)
-    ids = ["simple-l1-core/timecode-past-a-minute", "simple-l1-core/rate-change", "simple-l1-core/skips-14-15",
-           "simple-l1-core/rate-offset-sixteenths", "simple-l1-core/time-backwards"]
+    ids = [
+        "simple-l1-core/timecode-past-a-minute",
+        "simple-l1-core/rate-change",
+        "simple-l1-core/skips-14-15",
+        "simple-l1-core/rate-offset-sixteenths",
+        "simple-l1-core/time-backwards",
+    ]
     rs = run_cases(a, cases(*ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
     assert [r.outcome for r in rs] == [Outcome.PASS] * len(ids), [r.message for r in rs]
 
     class Record:
         results = rs
+
     note = certify.timing_note(Record, a)
     assert note["verified"] is False
     assert sorted(note["cases_not_verified"]) == sorted([ids[0], ids[1], ids[4]])

@@ -1,6 +1,7 @@
 """The fuzzer's fast paths (issue 19): one sandbox per worker with a fork server, and the
 persistent decoder protocol. Each must judge an input exactly as a fresh sandbox would, keep
 inputs apart (files, processes, stderr), and survive a decoder that dies or hangs."""
+
 from __future__ import annotations
 
 import os
@@ -25,8 +26,15 @@ STREAM = b"\x00\x00\x01\xba" + bytes(40)
 def _manifest(tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 5") -> Path:
     prog = tmp_path / "dec.py"
     prog.write_text("import os, signal, sys, time\n" + body)
-    lines = ['name = "t"', 'claims = ["simple@1"]', 'inputs = ["fba"]', 'outputs = ["faps"]', 'faps_format = "fap"',
-             "[commands]", f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]']
+    lines = [
+        'name = "t"',
+        'claims = ["simple@1"]',
+        'inputs = ["fba"]',
+        'outputs = ["faps"]',
+        'faps_format = "fap"',
+        "[commands]",
+        f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]',
+    ]
     if serve is not None:
         srv = tmp_path / "serve.py"
         srv.write_text("import os, signal, sys, time\n" + serve)
@@ -99,8 +107,10 @@ sys.exit(69)
 
 def test_a_process_left_behind_dies_with_its_input(tmp_path, server):
     if sandbox.isolation() != "bwrap":
-        pytest.skip("bubblewrap (bwrap) is not installed: without its PID namespace a process that leaves its "
-                    "session outlives its input")
+        pytest.skip(
+            "bubblewrap (bwrap) is not installed: without its PID namespace a process that leaves its "
+            "session outlives its input"
+        )
     marker = f"sleep {900 + uuid.uuid4().int % 99}.{uuid.uuid4().int % 997}"
     body = f"""import subprocess
 subprocess.Popen({marker.split()!r}, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -161,8 +171,10 @@ def test_fork_server_environment_path_search_and_resident_memory(tmp_path, serve
     case = os.path.realpath(root / "case")
     with ForkServer(root, view, Limits(timeout_s=5.0, memory_mb=300, output_mb=4)) as fs:
         _check_server(fs, server)
-        r = fs.run([py, "-c", "import os; print(os.environ['HOME'], os.environ['TMPDIR'], os.getcwd(), sorted(os.environ))"],  # noqa: E501
-                   root / "case")
+        r = fs.run(
+            [py, "-c", "import os; print(os.environ['HOME'], os.environ['TMPDIR'], os.getcwd(), sorted(os.environ))"],
+            root / "case",
+        )
         home, tmp, cwd, names = r.stdout_tail.split(" ", 3)
         assert (r.returncode, home, tmp, cwd) == (0, case, os.path.join(case, "tmp"), case)
         assert "FBACONF" not in names and "PYTEST" not in names  # nothing of the harness's own environment
@@ -255,8 +267,10 @@ def test_persistent_protocol_survives_crashes_and_hangs(tmp_path):
     t = _target(tmp_path, m)
     assert t.persistent
     try:
+
         def run(payload):
             return t.execute(Entry(STREAM + payload)).verdict
+
         assert run(b"") is None and run(b"BAD") is None  # not supported; a clean reject
         v = run(b"SEGV")
         assert v.cls == "crash" and "SIGSEGV" in v.signature
@@ -332,8 +346,23 @@ def test_the_c_server_under_address_and_undefined_behaviour_sanitizers(tmp_path,
     limit: ASan cannot map its shadow memory under an address-space limit."""
     cc = forkserver_build.compiler()
     exe = tmp_path / "fbaconf-forkserver"
-    if cc is None or subprocess.run([cc, "-O1", "-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=all",
-                                     "-o", str(exe), str(forkserver_build.SOURCE)], capture_output=True).returncode != 0:  # noqa: E501
+    if (
+        cc is None
+        or subprocess.run(
+            [
+                cc,
+                "-O1",
+                "-g",
+                "-fsanitize=address,undefined",
+                "-fno-sanitize-recover=all",
+                "-o",
+                str(exe),
+                str(forkserver_build.SOURCE),
+            ],
+            capture_output=True,
+        ).returncode
+        != 0
+    ):
         pytest.skip("no compiler with AddressSanitizer and UndefinedBehaviorSanitizer here")
     monkeypatch.setattr(forkserver_build, "forkserver_binary", lambda: exe)
     monkeypatch.setenv("ASAN_OPTIONS", "detect_leaks=0")
@@ -343,9 +372,13 @@ def test_the_c_server_under_address_and_undefined_behaviour_sanitizers(tmp_path,
     py = os.path.realpath(sys.executable)
     with ForkServer(root, default_view([py], root / "case"), lim) as fs:
         assert fs.native == exe
-        expected = [(["/bin/sh", "-c", "exit 3"], "unexpected"), (["/bin/sh", "-c", "kill -SEGV $$"], "crash"),
-                   (["/nonexistent/decoder"], "setup"), (["/bin/sh", "-c", "sleep 5"], "timeout"),
-                   ([py, "-c", "x = [bytearray(8 << 20) for _ in range(60)]"], "memory")]
+        expected = [
+            (["/bin/sh", "-c", "exit 3"], "unexpected"),
+            (["/bin/sh", "-c", "kill -SEGV $$"], "crash"),
+            (["/nonexistent/decoder"], "setup"),
+            (["/bin/sh", "-c", "sleep 5"], "timeout"),
+            ([py, "-c", "x = [bytearray(8 << 20) for _ in range(60)]"], "memory"),
+        ]
         for argv, kind in expected * 2:
             assert endings.classify(fs.run(argv, root / "case"), lim, {1}).kind == kind, argv
         for i in range(100):

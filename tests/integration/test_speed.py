@@ -8,6 +8,7 @@ the seconds it reports and the machine's counters around it are a synthetic cloc
 :class:`FakeMachine`'s, so the fit, the adaptive lengths and the verdicts are exact. The one
 real run under busy loops (``test_a_saturated_machine_...``) asserts only what load cannot
 change. The measurement against real time is ``benchmarks/bench_harness_speed.py``."""
+
 from __future__ import annotations
 
 import json
@@ -58,8 +59,17 @@ class FakeMachine:
     decoder uses ``cpu`` (a fraction of those seconds) and waits ``stall`` (a fraction), other
     processes hold ``others`` of the CPUs; between runs (``gap`` seconds) they hold ``between``."""
 
-    def __init__(self, monkeypatch, *, cpus: int = 2, cpu: float = 1.0, stall: float = 0.0, others: float = 0.0,
-                 between: float = 0.0, gap: float = 0.2) -> None:
+    def __init__(
+        self,
+        monkeypatch,
+        *,
+        cpus: int = 2,
+        cpu: float = 1.0,
+        stall: float = 0.0,
+        others: float = 0.0,
+        between: float = 0.0,
+        gap: float = 0.2,
+    ) -> None:
         self.cpus, self.cpu, self.stall, self.others, self.between, self.gap = cpus, cpu, stall, others, between, gap
         self.t = self.busy = self.own = 0.0
         monkeypatch.setattr(sysinfo, "usable_cpus", lambda: cpus)
@@ -75,12 +85,14 @@ class FakeMachine:
         self.t += seconds
         self.busy += self.others * self.cpus * seconds + cpu
         self.own += cpu
-        return speed_load.Window(n, seconds, before, self._sample(), cpu_s=cpu, stall_s=self.stall * seconds,
-                                 stall_source="thread")
+        return speed_load.Window(
+            n, seconds, before, self._sample(), cpu_s=cpu, stall_s=self.stall * seconds, stall_source="thread"
+        )
 
 
-def synthetic_clock(monkeypatch, startup: float, per_frame: float, jitter: float = 0.0,
-                    machine: FakeMachine | None = None) -> list[int]:
+def synthetic_clock(
+    monkeypatch, startup: float, per_frame: float, jitter: float = 0.0, machine: FakeMachine | None = None
+) -> list[int]:
     """Every speed run takes ``startup + per_frame * n`` seconds (times ``1 +- jitter``,
     alternating) on ``machine`` (default: an idle one, the decoder on a CPU all the time); the
     decoder still runs. Returns the list of frame counts run."""
@@ -93,19 +105,26 @@ def synthetic_clock(monkeypatch, startup: float, per_frame: float, jitter: float
         runs.append(n)
         sign = 1 if len(runs) % 2 else -1
         return machine.window(n, (startup + per_frame * n) * (1 + sign * jitter))
+
     monkeypatch.setattr(speed._Runner, "run", run)
     return runs
 
 
-def _manifest(tmp_path: Path, startup: float, per_frame: float, *, extra: str = "",
-              claims=("simple@1",), name="timed") -> Path:
+def _manifest(
+    tmp_path: Path, startup: float, per_frame: float, *, extra: str = "", claims=("simple@1",), name="timed"
+) -> Path:
     script = tmp_path / "timed_decoder.py"
     script.write_text(DECODER)
     m = tmp_path / f"{name}.toml"
-    args = ", ".join(f'"{a}"' for a in ["{python}", str(script), str(startup), str(per_frame), "{input}",
-                                         "{frames}", "{faps_out}"] + ([extra] if extra else []))
-    m.write_text(f'name = "{name}"\nclaims = {json.dumps(list(claims))}\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 f'[commands]\ndecode = [{args}]\n[limits]\ntimeout_s = 30\n')
+    args = ", ".join(
+        f'"{a}"'
+        for a in ["{python}", str(script), str(startup), str(per_frame), "{input}", "{frames}", "{faps_out}"]
+        + ([extra] if extra else [])
+    )
+    m.write_text(
+        f'name = "{name}"\nclaims = {json.dumps(list(claims))}\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        f"[commands]\ndecode = [{args}]\n[limits]\ntimeout_s = 30\n"
+    )
     return m
 
 
@@ -117,8 +136,10 @@ def test_accuracy_known_startup_and_per_frame(tmp_path, monkeypatch):
     r = speed.measure(a, "simple@1", "decode", lengths=[20, 160, 320], repeats=3, work_dir=tmp_path / "w")
     assert r is not None
     err = r.per_frame_s / true_pf - 1
-    print(f"per-frame {r.per_frame_s * 1000:.4f} ms (true 2 ms, {err:+.2%}); "
-          f"start-up {r.startup_s:.3f} s; r2 {r.fit_r2:.4f}")
+    print(
+        f"per-frame {r.per_frame_s * 1000:.4f} ms (true 2 ms, {err:+.2%}); "
+        f"start-up {r.startup_s:.3f} s; r2 {r.fit_r2:.4f}"
+    )
     assert abs(err) <= 0.10, r.message
     assert 0.27 <= r.startup_s <= 0.33, r.message
     assert r.rate_fps == pytest.approx(1 / r.per_frame_s)
@@ -154,8 +175,9 @@ def test_too_slow_decoder_fails_speed_only(tmp_path, capsys, monkeypatch):
 def test_fast_decoder_passes_bench(tmp_path, capsys, monkeypatch):
     synthetic_clock(monkeypatch, 0.01, 0.001)
     m = _manifest(tmp_path, 0.0, 0.0)
-    code = main(["bench", "--decoder", str(m), "--claim", "simple@1", "--lengths", "10,100", "--repeats", "1",
-                 "--json"])
+    code = main(
+        ["bench", "--decoder", str(m), "--claim", "simple@1", "--lengths", "10,100", "--repeats", "1", "--json"]
+    )
     doc = json.loads(capsys.readouterr().out)
     assert code == 0 and doc["exit_code"] == 0
     [dec] = doc["speed"]
@@ -181,8 +203,10 @@ def test_missing_output_is_a_failure(tmp_path):
     script = tmp_path / "noout.py"
     script.write_text("pass\n")
     m = tmp_path / "noout.toml"
-    m.write_text(f'name = "noout"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{faps_out}}"]\n')
+    m.write_text(
+        f'name = "noout"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{faps_out}}"]\n'
+    )
     with pytest.raises(speed.SpeedRunError, match="wrote no output"):
         speed.measure(load_manifest(m), "simple@1", "decode", lengths=[1, 2], repeats=1)
 
@@ -190,20 +214,29 @@ def test_missing_output_is_a_failure(tmp_path):
 class _SleepyRenderer(PythonAdapter):
     """In-process adapter with images (its cost comes from the test's synthetic clock): the
     reference decoding and rendering of what it is given, as the scenario asks."""
+
     outputs = ["faps", "images"]
     claims = ["simple@2"]
 
     def run(self, job):
         from fbaconf.reference.pipeline import reference_outputs  # noqa: PLC0415
-        reference_outputs(job.path("input"), scenario=job.path("scenario"), faps_out=job.path("faps_out"),
-                          images_dir=job.path("images_dir"))
+
+        reference_outputs(
+            job.path("input"),
+            scenario=job.path("scenario"),
+            faps_out=job.path("faps_out"),
+            images_dir=job.path("images_dir"),
+        )
 
 
 def test_in_process_adapter_decode_and_render(monkeypatch):
     real = speed._Runner.run
     machine = FakeMachine(monkeypatch)
-    monkeypatch.setattr(speed._Runner, "run", lambda self, n: (real(self, n), machine.window(n, (
-        0.005 if self.operation == "decode" else 0.003) * n))[1])
+    monkeypatch.setattr(
+        speed._Runner,
+        "run",
+        lambda self, n: (real(self, n), machine.window(n, (0.005 if self.operation == "decode" else 0.003) * n))[1],
+    )
     a = _SleepyRenderer()
     res = speed.measure_claim(a, lengths=[10, 40], repeats=1)  # claim: the adapter's highest
     assert [r.operation for r in res] == ["decode", "render"]
@@ -237,7 +270,7 @@ def test_speed_content_is_fresh_and_its_sampled_reference_is_the_decoding(tmp_pa
         assert np.array_equal(e.values, f.values) and np.array_equal(e.status, f.status)
         assert np.array_equal(e.high, f.high) and np.array_equal(e.frame_number, f.frame_number)
         assert np.allclose(e.time_ms, f.time_ms)
-        blocks += [f.values[j:j + BLOCK_FRAMES].tobytes() for j in range(0, run.n, BLOCK_FRAMES)]
+        blocks += [f.values[j : j + BLOCK_FRAMES].tobytes() for j in range(0, run.n, BLOCK_FRAMES)]
         # every FAP but the two high-level ones moves from frame to frame (the noise is per frame)
         if run.n > 2:
             assert (np.diff(f.values[:, 2:], axis=0) != 0).mean() > 0.5
@@ -258,9 +291,27 @@ def test_fit_line_and_claims():
 def test_sandboxed_command_decoder_reads_the_generated_content(tmp_path):
     """The speed phase's content lives outside the case folder: the sandbox must show it
     (the subprocess reference could not open it: every speed run was a set-up Error)."""
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "bench", "--decoder", "reference", "--operation", "decode",
-                        "--repeats", "1", "--lengths", "4,16", "--json"], capture_output=True, text=True, timeout=300,
-                       cwd=tmp_path)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "bench",
+            "--decoder",
+            "reference",
+            "--operation",
+            "decode",
+            "--repeats",
+            "1",
+            "--lengths",
+            "4,16",
+            "--json",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
     # 0: fast enough, 3: below the level's minimum (this machine's speed is not the point);
     # never 1 (a decoder run failed) or 2 (set-up)
     assert r.returncode in (0, 3, 4), r.stdout + r.stderr  # 4: below it on a busy machine
@@ -273,7 +324,8 @@ def test_bifs_only_decoder_gets_a_bifs_scene(tmp_path):
     BIFS (it used to be refused: 'speed measurement supplies BT scenes only'). The decoder
     checks what it got: a .bifs file the BIFS reader accepts."""
     script = tmp_path / "bifs_only.py"
-    script.write_text(textwrap.dedent("""\
+    script.write_text(
+        textwrap.dedent("""\
         import sys
         if not sys.argv[2].endswith(".bifs"):
             sys.exit(7)
@@ -281,13 +333,15 @@ def test_bifs_only_decoder_gets_a_bifs_scene(tmp_path):
         bifs.read(sys.argv[2])  # BT text would raise BifsError: a non-zero exit
         from fbaconf.reference.pipeline import reference_outputs
         reference_outputs(sys.argv[1], faps_out=sys.argv[3])
-    """))
+    """)
+    )
     m = tmp_path / "bifs-only.toml"
-    m.write_text('name = "bifs-only"\nclaims = ["predictable@1"]\ninputs = ["fba", "bifs"]\noutputs = ["faps"]\n'
-                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{scene}}", "{{faps_out}}"]\n'
-                 '[limits]\ntimeout_s = 60\n')
-    r = speed.measure(load_manifest(m), "predictable@1", "decode", lengths=[4, 16], repeats=1,
-                      work_dir=tmp_path / "w")
+    m.write_text(
+        'name = "bifs-only"\nclaims = ["predictable@1"]\ninputs = ["fba", "bifs"]\noutputs = ["faps"]\n'
+        f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{scene}}", "{{faps_out}}"]\n'
+        "[limits]\ntimeout_s = 60\n"
+    )
+    r = speed.measure(load_manifest(m), "predictable@1", "decode", lengths=[4, 16], repeats=1, work_dir=tmp_path / "w")
     assert r is not None and len(r.samples) == 2, r.message
     # (two short lengths timed once: the fit may not resolve a slope, which is its own message)
     assert "cannot supply" not in r.message and "failed" not in r.message.lower(), r.message
@@ -298,13 +352,17 @@ def test_a_decoder_that_stops_early_on_long_streams_fails(tmp_path):
     """A lazy decoder cannot earn a rate by decoding only the start of a long stream: every
     run's output must hold the frames it was given."""
     script = tmp_path / "lazy.py"
-    script.write_text("import sys\nfrom fbaconf.bitstreams.decoder import decode\n"
-                      "from fbaconf.bitstreams.faptext import write_fap_file\n"
-                      "frames = decode(open(sys.argv[1], 'rb').read()).frames\n"
-                      "write_fap_file(sys.argv[2], frames.select(slice(0, 50)))\n")
+    script.write_text(
+        "import sys\nfrom fbaconf.bitstreams.decoder import decode\n"
+        "from fbaconf.bitstreams.faptext import write_fap_file\n"
+        "frames = decode(open(sys.argv[1], 'rb').read()).frames\n"
+        "write_fap_file(sys.argv[2], frames.select(slice(0, 50)))\n"
+    )
     m = tmp_path / "lazy.toml"
-    m.write_text('name = "lazy"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{faps_out}}"]\n')
+    m.write_text(
+        'name = "lazy"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{faps_out}}"]\n'
+    )
     a = load_manifest(m)
     with pytest.raises(speed.SpeedRunError, match="was given 200 frames but its output .* holds 50"):
         speed.measure(a, "simple@1", "decode", lengths=[20, 200], repeats=1)
@@ -320,14 +378,16 @@ class _OneImageRenderer(_SleepyRenderer):
             return super().run(job)
         from fbaconf.reference.pipeline import reference_outputs  # noqa: PLC0415
         from fbaconf.rendering.scenario import Scenario  # noqa: PLC0415
+
         one = job.workdir / "one.toml"
         one.write_text(Scenario.load(job.path("scenario")).with_(frames=(0,)).to_toml())
         reference_outputs(job.path("input"), scenario=one, images_dir=job.path("images_dir"))
 
 
 def test_a_renderer_that_skips_frames_fails():
-    with pytest.raises(speed.SpeedRunError,
-                       match="not the rendering of the content.*frame 9: .*frame_00009.png: cannot read"):
+    with pytest.raises(
+        speed.SpeedRunError, match="not the rendering of the content.*frame 9: .*frame_00009.png: cannot read"
+    ):
         speed.measure(_OneImageRenderer(), "simple@2", "render", lengths=[10, 20], repeats=1)
 
 
@@ -342,8 +402,7 @@ LOADED = dict(cpu=0.4, stall=0.6, others=0.8, between=0.8)
 
 def _loaded(tmp_path, monkeypatch, per_frame: float = 0.05, **machine):
     synthetic_clock(monkeypatch, 0.2, per_frame, machine=FakeMachine(monkeypatch, **{**LOADED, **machine}))
-    return speed.measure(load_manifest(_manifest(tmp_path, 0.0, 0.0)), "simple@1", "decode", lengths=[4, 24],
-                         repeats=1)
+    return speed.measure(load_manifest(_manifest(tmp_path, 0.0, 0.0)), "simple@1", "decode", lengths=[4, 24], repeats=1)
 
 
 def test_too_slow_only_under_load_is_inconclusive_not_fail(tmp_path, monkeypatch, capsys):
@@ -394,8 +453,13 @@ def test_speed_verdict_of_results():
     assert speed_verdict([{"passed": True}]) is None
     assert speed_verdict([{"passed": False}]) == ("SPEED FAIL", 3)
     # contradictions are failures: only a result that says it passed passes
-    for bad in ({"passed": True, "verdict": "fail"}, {"passed": True, "verdict": "inconclusive"},
-                {"passed": False, "verdict": "pass"}, {"verdict": "pass"}, {"passed": "yes"}):
+    for bad in (
+        {"passed": True, "verdict": "fail"},
+        {"passed": True, "verdict": "inconclusive"},
+        {"passed": False, "verdict": "pass"},
+        {"verdict": "pass"},
+        {"passed": "yes"},
+    ):
         assert speed_verdict([bad]) == ("SPEED FAIL", 3), bad
 
 
@@ -420,21 +484,26 @@ def test_a_saturated_machine_does_not_fail_a_decoder_that_is_fast_on_an_idle_one
     script = tmp_path / "burner.py"
     script.write_text(BURNER)
     m = tmp_path / "burner.toml"
-    m.write_text('name = "burner"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-                 f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{frames}}", "{{faps_out}}"]\n'
-                 '[limits]\ntimeout_s = 120\n')
+    m.write_text(
+        'name = "burner"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
+        f'[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", "{{frames}}", "{{faps_out}}"]\n'
+        "[limits]\ntimeout_s = 120\n"
+    )
     n = 3 * (os.cpu_count() or 1)
     # each loop's parent shell exits at once: the loops are no child of this process; each in a
     # session of its own, so a kernel that shares CPU time out by session (autogroup) weighs
     # every loop as much as the decoder's session
     loop = f"{sys.executable} -c 'import os; os.setsid()\nwhile True: pass'"
-    start = subprocess.run(["/bin/sh", "-c", f"for i in $(seq {n}); do {loop} </dev/null >/dev/null 2>&1 & "
-                            "echo $!; done"], capture_output=True, text=True, timeout=30)
+    start = subprocess.run(
+        ["/bin/sh", "-c", f"for i in $(seq {n}); do {loop} </dev/null >/dev/null 2>&1 & echo $!; done"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     loops = [int(x) for x in start.stdout.split()]
     try:
         assert len(loops) == n
-        r = speed.measure(load_manifest(m), "simple@1", "decode", lengths=[12, 72], repeats=1,
-                          work_dir=tmp_path / "w")
+        r = speed.measure(load_manifest(m), "simple@1", "decode", lengths=[12, 72], repeats=1, work_dir=tmp_path / "w")
     finally:
         for pid in loops:
             try:
@@ -466,8 +535,13 @@ def test_an_inconclusive_reading_in_the_verdict_reports_and_statement(tmp_path, 
     assert "c-QualityWarning'>INCONCLUSIVE" in html_report(rec, tmp_path)
     schema = json.loads((Path(speed.__file__).parents[1] / "data" / "run-report.schema.json").read_text())
     jsonschema.validate(report_json(rec), schema)
-    basis = {"tools": [], "coverage_points_exercised": 0, "coverage_points_of_claim": 0, "not_exercised": [],
-             "cases_not_taken": []}
+    basis = {
+        "tools": [],
+        "coverage_points_exercised": 0,
+        "coverage_points_of_claim": 0,
+        "not_exercised": [],
+        "cases_not_taken": [],
+    }
     st = _statement(rec, derive_verdict([], strict=False, speed=[r.to_json()]), True, basis)
     line = next(x for x in st.splitlines() if x.startswith("- decode:"))
     assert "20.0 frames/s measured, 30 required (provisional) — INCONCLUSIVE: the machine was busy" in line, line
@@ -478,7 +552,8 @@ def test_a_decoder_of_images_only_is_judged_on_the_frames_it_was_asked_to_draw(t
     """A decoder whose only output is images gets two small frames to draw per run (the first and
     one drawn for the run): judged as images, a faithful drawing passes, a blank one fails."""
     script = tmp_path / "painter.py"
-    script.write_text(textwrap.dedent("""\
+    script.write_text(
+        textwrap.dedent("""\
         import sys
         from fbaconf.reference.pipeline import reference_outputs
         from fbaconf.rendering.scenario import Scenario
@@ -490,13 +565,18 @@ def test_a_decoder_of_images_only_is_judged_on_the_frames_it_was_asked_to_draw(t
             from fbaconf.rendering.images import write_png
             for k in ks:
                 write_png(f"{sys.argv[3]}/frame_{k:05d}.png", np.zeros((8, 8, 3)))
-    """))
+    """)
+    )
     for extra, ok in (("", True), ("blank", False)):
         m = tmp_path / f"painter{extra}.toml"
-        args = ", ".join(f'"{a}"' for a in ["{python}", str(script), "{input}", "{scenario}", "{images_dir}"]
-                         + ([extra] if extra else []))
-        m.write_text(f'name = "painter"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["images"]\n'
-                     f'[commands]\ndecode = [{args}]\n')
+        args = ", ".join(
+            f'"{a}"'
+            for a in ["{python}", str(script), "{input}", "{scenario}", "{images_dir}"] + ([extra] if extra else [])
+        )
+        m.write_text(
+            f'name = "painter"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["images"]\n'
+            f"[commands]\ndecode = [{args}]\n"
+        )
         a = load_manifest(m)
         if ok:
             r = speed.measure(a, "simple@1", "decode", lengths=[6, 30], repeats=1)

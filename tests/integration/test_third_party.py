@@ -2,6 +2,7 @@
 skips cleanly when the implementation is not built (it is built outside the repository).
 The expected results are those measured with the real programs and attributed in the docs'
 tables: each case named here fails for the one behaviour the table gives it."""
+
 from __future__ import annotations
 
 import os
@@ -33,14 +34,27 @@ def _run(a, tmp_path, *ids):
     suites = load_suites(names=["simple-l1-core", "simple-l1-text"])
     cases = [c for s in suites for c in s.cases if c.id in ids]
     assert len(cases) == len(ids)
-    return {r.case_id.split("/")[-1]: r for r in run_cases(a, cases, claim="simple@1", out_dir=tmp_path, jobs=2,
-                                                             progress=False)}
+    return {
+        r.case_id.split("/")[-1]: r
+        for r in run_cases(a, cases, claim="simple@1", out_dir=tmp_path, jobs=2, progress=False)
+    }
 
 
 def test_greta_player_results_are_the_documented_ones(tmp_path):
     a = _adapter("FBACONF_GRETA_MANIFEST", "examples/third-party/greta/build.sh")
-    res = _run(a, tmp_path, "range-extremes", "no-frame-rate", "header-2-0", "viseme-def", "wrapped-values",
-               "comment-between-frames", "frame-repeated", "frames-out-of-order", "value-out-of-range")
+    res = _run(
+        a,
+        tmp_path,
+        "range-extremes",
+        "no-frame-rate",
+        "header-2-0",
+        "viseme-def",
+        "wrapped-values",
+        "comment-between-frames",
+        "frame-repeated",
+        "frames-out-of-order",
+        "value-out-of-range",
+    )
     assert res["range-extremes"].outcome == Outcome.PASS
     assert res["no-frame-rate"].outcome == Outcome.PASS  # the player holds values
     assert res["header-2-0"].outcome == Outcome.FAIL and "got 25 Hz" in res["header-2-0"].message
@@ -62,9 +76,20 @@ def test_greta_parser_alone_holds_nothing(tmp_path):
 
 def test_xface_results_are_the_documented_ones(tmp_path):
     a = _adapter("FBACONF_XFACE_MANIFEST", "examples/third-party/xface/build.sh")
-    res = _run(a, tmp_path, "range-extremes", "rate-fractional", "cr-line-ends", "lip-pairs", "numbered-from-one",
-               "viseme-def", "comment-between-frames", "name-with-space", "greta-69-mask-one-word-name",
-               "value-out-of-range")
+    res = _run(
+        a,
+        tmp_path,
+        "range-extremes",
+        "rate-fractional",
+        "cr-line-ends",
+        "lip-pairs",
+        "numbered-from-one",
+        "viseme-def",
+        "comment-between-frames",
+        "name-with-space",
+        "greta-69-mask-one-word-name",
+        "value-out-of-range",
+    )
     assert res["range-extremes"].outcome == Outcome.PASS
     assert "got 12 Hz" in res["rate-fractional"].message  # frame rate kept in a short
     assert "got 0" in res["cr-line-ends"].message  # no hold (CR line ends themselves are fine)

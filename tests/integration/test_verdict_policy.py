@@ -7,6 +7,7 @@ description (a tool declined, a tool faked, another reading followed, a plausibl
 the session ``run`` and ``certify`` share (``execute``: the claim's cases, the verdict). The
 verdict is the one ``certify`` writes and ``certify verify`` re-derives (tests/attacks/test_package.py).
 Readings are switched process-wide, so every run here is sequential (``jobs=1``)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -41,8 +42,14 @@ def certify_like(a, tmp_path: Path, *, strict: bool = False, suites=SIMPLE_2, gl
     """The claim simple@2 through the session certify runs (its required cases, no speed)."""
     ss = load_suites(names=list(suites))
     cases = select_cases(ss, "simple@2", [], list(globs), only_required=True, adapter=a)
-    return execute(a, "simple@2", cases, ss, tmp_path / f"run-{a.name}-{strict}",
-                   RunOptions(jobs=1, speed=False, strict=strict, progress=False))
+    return execute(
+        a,
+        "simple@2",
+        cases,
+        ss,
+        tmp_path / f"run-{a.name}-{strict}",
+        RunOptions(jobs=1, speed=False, strict=strict, progress=False),
+    )
 
 
 def by_id(record):
@@ -76,6 +83,7 @@ class FollowsRewind14(ReferenceAdapter):
 class RejectsD7(ReferenceAdapter):
     """The reference, except that it rejects every stream whose result rests on D7 (a decoder that
     finds those streams "invalid")."""
+
     rejected: set = set()
 
     def run(self, job: Job) -> None:
@@ -96,8 +104,9 @@ def dct_verdicts(tmp_path_factory):
     for a in (decline, reject):
         out[a.name] = certify_like(a, tmp)
     out["declines-dct-strict"] = certify_like(decline, tmp, strict=True)  # the session's --strict
-    out["rejects-dct-strict"] = claim_verdict([r.to_json() for r in out["rejects-dct"].results], strict=True,
-                                              speed=None)  # the same rule on the same results
+    out["rejects-dct-strict"] = claim_verdict(
+        [r.to_json() for r in out["rejects-dct"].results], strict=True, speed=None
+    )  # the same rule on the same results
     out["reference"] = certify_like(adapter(name="reference"), tmp)
     return out
 
@@ -124,6 +133,7 @@ def test_strict_fails_both_and_the_reference_passes(dct_verdicts):
 
 class OffOnOneDctStream(ReferenceAdapter):
     """Decodes DCT streams, ``dct-skips`` wrongly: ``how`` is "value" (one value off) or "reject"."""
+
     how = "value"
 
     def run(self, job: Job) -> None:
@@ -161,8 +171,7 @@ def test_a_crash_on_a_stream_of_an_open_tool_fails_the_claim(tmp_path):
 
 
 def test_declining_a_tool_whose_cases_are_not_provisional_fails(tmp_path):
-    rec = certify_like(adapter(name="no-high-level", tools=["arithmetic", "dct"]), tmp_path,
-                       suites=["simple-l1-core"])
+    rec = certify_like(adapter(name="no-high-level", tools=["arithmetic", "dct"]), tmp_path, suites=["simple-l1-core"])
     assert rec.verdict["verdict"] == "FAIL" and rec.exit_code == 1
     assert rec.verdict["tools"]["high_level_faps"]["state"] == "declined"
 
@@ -174,20 +183,29 @@ def test_declining_a_tool_whose_cases_are_not_provisional_fails(tmp_path):
 def d7_runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("d7")
     globs = ["*lookahead*", "arith-q1-all-faps", "dct-q4"]
-    return {"declared": certify_like(adapter(FollowsRewind14, name="d7", declared=[readings.REWIND_14]), tmp,
-                                     suites=["simple-l1-core"], globs=globs),
-            "undeclared": certify_like(adapter(FollowsRewind14, name="d7-undeclared"), tmp,
-                                       suites=["simple-l1-core"], globs=globs),
-            "declared-not-followed": certify_like(adapter(name="says-d7", declared=[readings.REWIND_14]), tmp,
-                                                  suites=["simple-l1-core"], globs=globs)}
+    return {
+        "declared": certify_like(
+            adapter(FollowsRewind14, name="d7", declared=[readings.REWIND_14]),
+            tmp,
+            suites=["simple-l1-core"],
+            globs=globs,
+        ),
+        "undeclared": certify_like(
+            adapter(FollowsRewind14, name="d7-undeclared"), tmp, suites=["simple-l1-core"], globs=globs
+        ),
+        "declared-not-followed": certify_like(
+            adapter(name="says-d7", declared=[readings.REWIND_14]), tmp, suites=["simple-l1-core"], globs=globs
+        ),
+    }
 
 
 def test_a_declared_reading_is_judged_by_what_it_gives(d7_runs):
     rec = d7_runs["declared"]
     d7 = [r for r in rec.results if "D7" in r.rests_on]
     assert len(d7) == 29  # every case S1's rewind changes (golden/<suite>/<case>/readings/D7-rewind-14/)
-    assert all(r.outcome == Outcome.PASS and r.reading == readings.REWIND_14 for r in d7), \
-        [(r.case_id, r.message) for r in d7 if r.outcome != Outcome.PASS][:3]
+    assert all(r.outcome == Outcome.PASS and r.reading == readings.REWIND_14 for r in d7), [
+        (r.case_id, r.message) for r in d7 if r.outcome != Outcome.PASS
+    ][:3]
     assert rec.verdict["verdict"] == "PASS (provisional differences: 29)"
     assert rec.verdict["decisions"]["D7"]["state"] == "differs"
     assert by_id(rec)["simple-l1-core/arith-q1-all-faps"].reading is None  # a case no reading changes
@@ -211,6 +229,7 @@ def test_declaring_a_reading_and_decoding_by_fbaconfs_fails(d7_runs):
 def test_rejecting_the_streams_that_rest_on_d7_is_no_provisional_difference(tmp_path):
     ss = load_suites(names=["simple-l1-core"])
     from fbaconf.conformance.provisional import rests_on  # noqa: PLC0415
+
     RejectsD7.rejected = {Path(c.inputs["fba"]).name for c in ss[0].cases if "D7" in rests_on(c)}
     assert len(RejectsD7.rejected) == 29
     rec = certify_like(adapter(RejectsD7, name="rejects-d7"), tmp_path, suites=["simple-l1-core"])
@@ -223,6 +242,7 @@ def test_rejecting_the_streams_that_rest_on_d7_is_no_provisional_difference(tmp_
 
 class MultiFaceBug(ReferenceAdapter):
     """Decodes several faces, wrongly: ``bug`` says how."""
+
     bug = ""
 
     def run(self, job: Job) -> None:
@@ -254,6 +274,7 @@ class MultiFaceBug(ReferenceAdapter):
 
 class AcceptsOnError(ReferenceAdapter):
     """Decodes what it can and exits 0 where the reference rejects for one of ``rules``."""
+
     rules: frozenset = frozenset()
 
     def run(self, job: Job) -> None:
@@ -277,11 +298,14 @@ def test_multi_face_bugs_fail_the_claim(tmp_path, bug):
     assert failing and rec.provisional_differences == [] and rec.verdict["unverified"] == []
 
 
-@pytest.mark.parametrize("rules, cases", [
-    (["viseme-select-range", "expression-select-range"], ["viseme-select-range", "expression-select-range"]),
-    (["first-plane-intra"], ["first-predicted", "first-predicted-decodable"]),
-    (["frame-rate-zero"], ["frame-rate-zero"]),
-])
+@pytest.mark.parametrize(
+    "rules, cases",
+    [
+        (["viseme-select-range", "expression-select-range"], ["viseme-select-range", "expression-select-range"]),
+        (["first-plane-intra"], ["first-predicted", "first-predicted-decodable"]),
+        (["frame-rate-zero"], ["frame-rate-zero"]),
+    ],
+)
 def test_accepting_what_no_reading_makes_valid_fails_the_claim(tmp_path, rules, cases):
     cls = type("Accepts", (AcceptsOnError,), {"rules": frozenset(rules)})
     rec = certify_like(adapter(cls, name="accepts-" + rules[0]), tmp_path, suites=["simple-l1-error"])

@@ -2,6 +2,7 @@
 
 Lazy and broken decoders, written here as tiny programs, must not certify; every process
 ending on the error suite gets the outcome the harness guide's table gives it."""
+
 from __future__ import annotations
 
 import subprocess
@@ -36,9 +37,13 @@ def manifest(tmp_path: Path, name: str, decode: list, *, inputs=("fba",), tools=
     argv = ", ".join(f'"{a}"' for a in decode)
     tools_line = f"tools = {list(tools)!r}\n".replace("'", '"') if tools is not None else ""
     p = tmp_path / f"{name}.toml"
-    p.write_text(f'name = "{name}"\nclaims = ["simple@1"]\ninputs = {list(inputs)!r}\n'.replace("'", '"') +
-                 tools_line + 'outputs = ["faps"]\nfaps_format = "fap"\n' + extra +
-                 f"[commands]\ndecode = [{argv}]\n[limits]\ntimeout_s = 20\n")
+    p.write_text(
+        f'name = "{name}"\nclaims = ["simple@1"]\ninputs = {list(inputs)!r}\n'.replace("'", '"')
+        + tools_line
+        + 'outputs = ["faps"]\nfaps_format = "fap"\n'
+        + extra
+        + f"[commands]\ndecode = [{argv}]\n[limits]\ntimeout_s = 20\n"
+    )
     return p
 
 
@@ -63,22 +68,52 @@ def run_one(m: Path, full_id: str, tmp_path: Path):
 # ------------------------------------------------------------------ the error-case matrix
 MATRIX = [
     # name, program body, outcome on the invalid stream, words in the message
-    ("clean-reject", "sys.stderr.write('dec: error: byte 9: truncated\\n'); sys.exit(1)", Outcome.PASS,
-     "rejected cleanly"),
-    ("rust-panic", "sys.stderr.write(\"thread 'main' panicked at src/parse.rs:41:9:\\nindex out of bounds\\n\");"
-                   " sys.exit(101)", Outcome.CRASH, "Rust panic"),
-    ("asan", "sys.stderr.write('==12==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x1\\n"
-             "    #0 0x4 in parse_plane dec.c:10\\n'); sys.exit(1)", Outcome.CRASH, "AddressSanitizer"),
-    ("ubsan-exit0", "sys.stderr.write('dec.c:88:14: runtime error: signed integer overflow: 2147483647 + 1\\n');"
-                    " sys.exit(0)", Outcome.CRASH, "UndefinedBehaviorSanitizer"),
-    ("go-panic", "sys.stderr.write('panic: runtime error: index out of range [3] with length 3\\n\\n"
-                 "goroutine 1 [running]:\\nmain.parse(0x1)\\n'); sys.exit(2)", Outcome.CRASH, "Go panic"),
-    ("java-exception", "sys.stderr.write('Exception in thread \"main\" java.lang.ArrayIndexOutOfBoundsException: 3\\n"
-                       "\\tat Dec.parse(Dec.java:10)\\n'); sys.exit(1)", Outcome.CRASH,
-     "java.lang.ArrayIndexOutOfBoundsException"),
+    (
+        "clean-reject",
+        "sys.stderr.write('dec: error: byte 9: truncated\\n'); sys.exit(1)",
+        Outcome.PASS,
+        "rejected cleanly",
+    ),
+    (
+        "rust-panic",
+        "sys.stderr.write(\"thread 'main' panicked at src/parse.rs:41:9:\\nindex out of bounds\\n\"); sys.exit(101)",
+        Outcome.CRASH,
+        "Rust panic",
+    ),
+    (
+        "asan",
+        "sys.stderr.write('==12==ERROR: AddressSanitizer: heap-buffer-overflow on address 0x1\\n"
+        "    #0 0x4 in parse_plane dec.c:10\\n'); sys.exit(1)",
+        Outcome.CRASH,
+        "AddressSanitizer",
+    ),
+    (
+        "ubsan-exit0",
+        "sys.stderr.write('dec.c:88:14: runtime error: signed integer overflow: 2147483647 + 1\\n'); sys.exit(0)",
+        Outcome.CRASH,
+        "UndefinedBehaviorSanitizer",
+    ),
+    (
+        "go-panic",
+        "sys.stderr.write('panic: runtime error: index out of range [3] with length 3\\n\\n"
+        "goroutine 1 [running]:\\nmain.parse(0x1)\\n'); sys.exit(2)",
+        Outcome.CRASH,
+        "Go panic",
+    ),
+    (
+        "java-exception",
+        'sys.stderr.write(\'Exception in thread "main" java.lang.ArrayIndexOutOfBoundsException: 3\\n'
+        "\\tat Dec.parse(Dec.java:10)\\n'); sys.exit(1)",
+        Outcome.CRASH,
+        "java.lang.ArrayIndexOutOfBoundsException",
+    ),
     ("segfault", "os.kill(os.getpid(), signal.SIGSEGV)", Outcome.CRASH, "SIGSEGV"),
-    ("exit0-output", "open(sys.argv[2], 'w').write('2.1 x 25 1\\n' + '0 ' * 68 + '\\n0\\n'); sys.exit(0)",
-     Outcome.FAIL, "without complaint"),
+    (
+        "exit0-output",
+        "open(sys.argv[2], 'w').write('2.1 x 25 1\\n' + '0 ' * 68 + '\\n0\\n'); sys.exit(0)",
+        Outcome.FAIL,
+        "without complaint",
+    ),
     # a decoder that cannot open a file ran: its ending is its own (no set-up failure read from its text)
     ("missing-input", "open(sys.argv[1] + '.nope'); sys.exit(0)", Outcome.CRASH, "FileNotFoundError"),
     ("odd-exit", "sys.exit(7)", Outcome.FAIL, "not a documented reject code"),
@@ -145,9 +180,11 @@ def test_arithmetic_only_decoder_passes_with_dct_unverified(tmp_path):
     tests/integration/test_verdict_policy.py for the rule itself). In-process through the session
     certify runs (the claim policy is the point, not the sandbox)."""
     m = tmp_path / "arith-only.toml"
-    m.write_text('name = "arith-only"\npython = "fbaconf.harness.refadapter:ReferenceAdapter"\n'
-                 'claims = ["simple@1"]\ntools = ["arithmetic", "high_level_faps"]\ninputs = ["fba"]\n'
-                 'outputs = ["faps"]\nfaps_format = "npz"\n')
+    m.write_text(
+        'name = "arith-only"\npython = "fbaconf.harness.refadapter:ReferenceAdapter"\n'
+        'claims = ["simple@1"]\ntools = ["arithmetic", "high_level_faps"]\ninputs = ["fba"]\n'
+        'outputs = ["faps"]\nfaps_format = "npz"\n'
+    )
     a = adapters.resolve(m)
     suites = load_suites(names=["simple-l1-core", "simple-l1-error"])
     cases = select_cases(suites, "simple@1", [], [], only_required=True, adapter=a)
@@ -170,37 +207,37 @@ NTSC_CASE = "simple-l1-core/arith-ntsc-rate"
 
 def rewriting_decoder(tmp_path, name, edit: str) -> Path:
     """The reference decoder writing .fap text, then ``edit`` applied to the text lines."""
-    body = f'''from fbaconf.reference.pipeline import reference_outputs
+    body = f"""from fbaconf.reference.pipeline import reference_outputs
 reference_outputs(sys.argv[1], faps_out=sys.argv[2])
 lines = open(sys.argv[2]).read().splitlines()
 {edit}
 open(sys.argv[2], "w").write("\\n".join(lines) + "\\n")
-'''
+"""
     return pydec(tmp_path, name, body)
 
 
 def test_truncated_header_rate_fails_naming_the_rate(tmp_path):
-    m = rewriting_decoder(tmp_path, "rate30", '''h = lines[0].split(); h[2] = "30"; lines[0] = " ".join(h)''')
+    m = rewriting_decoder(tmp_path, "rate30", """h = lines[0].split(); h[2] = "30"; lines[0] = " ".join(h)""")
     r = run_one(m, NTSC_CASE, tmp_path)
     assert r.outcome == Outcome.FAIL and "frame rate" in r.message and "29.97" in r.message, r.message
 
 
 def test_header_rate_with_two_decimals_passes(tmp_path):
-    m = rewriting_decoder(tmp_path, "rate2", '''h = lines[0].split(); h[2] = "29.97"; lines[0] = " ".join(h)''')
+    m = rewriting_decoder(tmp_path, "rate2", """h = lines[0].split(); h[2] = "29.97"; lines[0] = " ".join(h)""")
     assert run_one(m, NTSC_CASE, tmp_path).outcome == Outcome.PASS
 
 
 def test_frames_numbered_from_one_pass(tmp_path):
-    edit = '''for i in range(2, len(lines), 2):
-    t = lines[i].split(); t[0] = str(int(t[0]) + 1); lines[i] = " ".join(t)'''
+    edit = """for i in range(2, len(lines), 2):
+    t = lines[i].split(); t[0] = str(int(t[0]) + 1); lines[i] = " ".join(t)"""
     r = run_one(rewriting_decoder(tmp_path, "from1", edit), NTSC_CASE, tmp_path)
     assert r.outcome == Outcome.PASS, r.message
     assert r.stages[0].metrics["frame_number_offset"] == 1.0
 
 
 def test_frames_numbered_from_two_fail(tmp_path):
-    edit = '''for i in range(2, len(lines), 2):
-    t = lines[i].split(); t[0] = str(int(t[0]) + 2); lines[i] = " ".join(t)'''
+    edit = """for i in range(2, len(lines), 2):
+    t = lines[i].split(); t[0] = str(int(t[0]) + 2); lines[i] = " ".join(t)"""
     assert run_one(rewriting_decoder(tmp_path, "from2", edit), NTSC_CASE, tmp_path).outcome == Outcome.FAIL
 
 
@@ -254,8 +291,9 @@ def test_run_and_fuzz_agree(tmp_path, name, body, outcome, words):
     if name != "missing-input":  # a persistent decoder gets the bytes, not a path
         s = tmp_path / f"{name}-serve.py"
         s.write_text(SERVE.format(body=body))
-        p = manifest(tmp_path, f"{name}-serve", ["{python}", str(script(tmp_path, name, body)), "{input}",
-                                                   "{faps_out}"])
+        p = manifest(
+            tmp_path, f"{name}-serve", ["{python}", str(script(tmp_path, name, body)), "{input}", "{faps_out}"]
+        )
         p.write_text(p.read_text().replace("[limits]", f'serve = ["{{python}}", "{s}"]\n[limits]'))
         assert _fuzz_class(p, tmp_path / "serve") == expected
 
@@ -276,6 +314,7 @@ open(sys.argv[2], "w").write(chr(10).join(lines) + chr(10))
 
 def _junit_failures(path: Path) -> int:
     import junitparser  # noqa: PLC0415 (test-only dependency)
+
     xml = junitparser.JUnitXml.fromfile(str(path))
     return sum(s.failures + s.errors for s in xml)
 
@@ -287,9 +326,30 @@ def test_baseline_scenario(tmp_path):
     def run(bug: str, *extra):
         m = pydec(tmp_path, f"dec{bug or 'ok'}", BUGGY, extra=f'[env]\nBUG = "{bug}"\n')
         out = tmp_path / f"run-{bug or 'ok'}-{len(extra)}"
-        r = subprocess.run([_sys.executable, "-m", "fbaconf", "run", "--decoder", str(m), "--suite", "simple-l1-core",
-                            "--case", "arith-ntsc-rate", "--case", "arith-q8-visemes-expressions", "-o", str(out),
-                            "--no-progress", "--strict", *extra], capture_output=True, text=True, timeout=600)
+        r = subprocess.run(
+            [
+                _sys.executable,
+                "-m",
+                "fbaconf",
+                "run",
+                "--decoder",
+                str(m),
+                "--suite",
+                "simple-l1-core",
+                "--case",
+                "arith-ntsc-rate",
+                "--case",
+                "arith-q8-visemes-expressions",
+                "-o",
+                str(out),
+                "--no-progress",
+                "--strict",
+                *extra,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         return r, out  # --strict: the bug is in a case resting on decision D5, a provisional difference otherwise
 
     bfile = tmp_path / "baseline.txt"
@@ -316,7 +376,9 @@ def test_a_copying_player_fails_every_case_with_a_held_value(tmp_path):
         text = read_fap_file(c.input_path("fap"))[0]
         gold = FapFrames.load_npz(c.golden_dir() / c.goldens["faps"])
         return bool(((text.status == RETAINED) & (gold.status != FREE)).any())
+
     held = {c.full_id for c in s.cases if holds(c)}
     assert len(held) >= 15
-    assert all(r.outcome == Outcome.FAIL for r in rs if r.case_id in held), \
-        [(r.case_id, r.outcome) for r in rs if r.case_id in held and r.outcome != Outcome.FAIL]
+    assert all(r.outcome == Outcome.FAIL for r in rs if r.case_id in held), [
+        (r.case_id, r.outcome) for r in rs if r.case_id in held and r.outcome != Outcome.FAIL
+    ]

@@ -22,6 +22,7 @@ module and each data file); then the verbs run two at a time, each from ``/``:
 The full cell -- every suite built, every golden regenerated, ``certify --claim predictable@2`` --
 is the platform matrix's (``noxfile.py``, README), in minutes, not a test's.
 """
+
 from __future__ import annotations
 
 import filecmp
@@ -53,20 +54,51 @@ def _tree_differences(a: Path, b: Path) -> list[str]:
 
 def _make_wheel_venv(tmp: Path) -> None:
     venv = tmp / "venv"
-    build = subprocess.Popen([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
-                              "-w", str(tmp / "wheels"), str(ROOT)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    build = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(tmp / "wheels"),
+            str(ROOT),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
     out, _ = build.communicate(timeout=600)
     assert build.returncode == 0, out.decode(errors="replace")[-2000:]
     (whl,) = (tmp / "wheels").glob("fbaconf-*.whl")
     py = venv / "bin" / "python"
-    subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", "--no-index",
-                    "--no-compile", str(whl)], check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "--python",
+            str(py),
+            "install",
+            "-q",
+            "--no-deps",
+            "--no-index",
+            "--no-compile",
+            str(whl),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
     code = "import json, sysconfig; print(json.dumps(sysconfig.get_paths()))"
     paths = json.loads(subprocess.run([str(py), "-c", code], capture_output=True, text=True, check=True).stdout)
     ours = sysconfig.get_paths()
     (Path(paths["purelib"]) / "zz-fbaconf-test-deps.pth").write_text(
-        "\n".join(dict.fromkeys([ours["purelib"], ours["platlib"]])) + "\n")
+        "\n".join(dict.fromkeys([ours["purelib"], ours["platlib"]])) + "\n"
+    )
 
 
 @pytest.fixture(scope="module")
@@ -76,8 +108,13 @@ def wheel_venv(made_once):
     if importlib.util.find_spec("wheel") is None:
         pytest.fail("the 'wheel' package is part of the test extras; reinstall with .[test]")
     venv = made_once("fbaconf-wheel", _make_wheel_venv) / "venv"
-    where = subprocess.run([str(venv / "bin" / "python"), "-c", "import fbaconf; print(fbaconf.__file__)"],
-                           capture_output=True, text=True, check=True, cwd="/").stdout.strip()
+    where = subprocess.run(
+        [str(venv / "bin" / "python"), "-c", "import fbaconf; print(fbaconf.__file__)"],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd="/",
+    ).stdout.strip()
     assert Path(where).is_relative_to(venv), where  # the wheel, not the source tree
     return venv, Path(where).parent
 
@@ -118,10 +155,24 @@ def test_every_data_verb_runs_from_the_installed_wheel(wheel_venv, tmp_path):
         "suites build": ([fb, "suites", "build", *DATA_SUITES], {"FBACONF_SUITES": str(tmp_path / "suites")}),
         "mutants --list": ([fb, "suites", "mutants", "--list"], {}),
         "golden verify": ([fb, "golden", "verify", "--suite", "calibration-l1-stress"], {}),
-        "run": ([fb, "run", "--decoder", "reference-inprocess", "--suite", "simple-l1-core", "--no-progress",
-                 "-o", str(tmp_path / "run")], {}),
-        "check": ([fb, "check", str(cal / "fdp-texture-ortho.fba"), "--scene", str(cal / "fdp-texture-ortho.bifs")],
-                  {}),
+        "run": (
+            [
+                fb,
+                "run",
+                "--decoder",
+                "reference-inprocess",
+                "--suite",
+                "simple-l1-core",
+                "--no-progress",
+                "-o",
+                str(tmp_path / "run"),
+            ],
+            {},
+        ),
+        "check": (
+            [fb, "check", str(cal / "fdp-texture-ortho.fba"), "--scene", str(cal / "fdp-texture-ortho.bifs")],
+            {},
+        ),
         "animate": ([fb, "animate", "--faps", str(cal / "fdp-few.fap"), "-o", str(tmp_path / "state.npz")], {}),
         "render": ([fb, "render", "--faps", str(cal / "fdp-few.fap"), "-o", str(tmp_path / "images")], {}),
         "fuzz --self": ([fb, "fuzz", "--self", "--seconds", "2", "--no-progress", "-o", str(tmp_path / "fuzz")], {}),
@@ -146,6 +197,7 @@ def test_every_data_verb_runs_from_the_installed_wheel(wheel_venv, tmp_path):
         assert _tree_differences(tmp_path / "suites" / name, ROOT / "conformance" / "suites" / name) == [], name
     assert "reference conditioning: worst condition number" in results["suites build"].stdout
     from fbaconf.mutation.own import MUTANTS_LIST  # noqa: PLC0415 (the source tree's count, for comparison)
+
     assert results["mutants --list"].stdout.strip().splitlines()[-1] == f"{len(MUTANTS_LIST)} mutant(s)"
     assert "golden verify: OK" in results["golden verify"].stdout
     report = json.loads((tmp_path / "run" / "report.json").read_text())

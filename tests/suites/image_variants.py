@@ -25,6 +25,7 @@ expressions ignored) — so the vertices a player reports may be right while its
 ``python tests/suites/image_variants.py --drop`` lists, per image case, the FAPs that move its
 geometry and whether dropping each fails the case.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -49,14 +50,34 @@ from fbaconf.rendering.scenario import Scenario
 
 # 4x rotated grid (RGSS) and D3D's standard 8x sample positions, in pixel units from the corner
 RGSS4 = [(0.375, 0.125), (0.875, 0.375), (0.125, 0.625), (0.625, 0.875)]
-D3D8 = [(0.5625, 0.3125), (0.4375, 0.6875), (0.8125, 0.5625), (0.3125, 0.1875),
-        (0.1875, 0.8125), (0.0625, 0.4375), (0.6875, 0.9375), (0.9375, 0.0625)]
+D3D8 = [
+    (0.5625, 0.3125),
+    (0.4375, 0.6875),
+    (0.8125, 0.5625),
+    (0.3125, 0.1875),
+    (0.1875, 0.8125),
+    (0.0625, 0.4375),
+    (0.6875, 0.9375),
+    (0.9375, 0.0625),
+]
 
 FAITHFUL = ("ss2", "ss3", "ss4", "rgss4", "msaa8")
 FLOAT_PIPELINE = "float32"  # faithful too: the ss2 image with its linear light and encoding in float32
-WRONG = ("lights-mirrored", "light-missing", "specular-off", "fov-wrong", "camera-shift", "region-displaced",
-         "texture-flipped", "texture-clamp", "gamma22", "gamma-twice", "cull-backfaces", "wrong-shading",
-         "ss1")
+WRONG = (
+    "lights-mirrored",
+    "light-missing",
+    "specular-off",
+    "fov-wrong",
+    "camera-shift",
+    "region-displaced",
+    "texture-flipped",
+    "texture-clamp",
+    "gamma22",
+    "gamma-twice",
+    "cull-backfaces",
+    "wrong-shading",
+    "ss1",
+)
 
 
 @contextlib.contextmanager
@@ -67,6 +88,7 @@ def _screen_offset(dx: float, dy: float):
     def project(vertices, camera, width, height):
         p = orig(vertices, camera, width, height)
         return dataclasses.replace(p, sx=p.sx + dx, sy=p.sy + dy)
+
     raster.project = project
     try:
         yield
@@ -82,8 +104,13 @@ def _texture_sampler(kind: str):
         return orig(tex, np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1))
 
     def clamped(tex, uv):
-        return orig(tex, np.clip(uv, 0.5 / np.array([tex.shape[1], tex.shape[0]]),
-                                 1.0 - 0.5 / np.array([tex.shape[1], tex.shape[0]])))
+        return orig(
+            tex,
+            np.clip(
+                uv, 0.5 / np.array([tex.shape[1], tex.shape[0]]), 1.0 - 0.5 / np.array([tex.shape[1], tex.shape[0]])
+            ),
+        )
+
     raster.sample_bilinear_repeat = flipped if kind == "flipped" else clamped
     try:
         yield
@@ -148,6 +175,7 @@ def _fap_dropped(fap: int):
     def high_level_weights(high, status):
         wv, we = orig_w(high, status)
         return (np.zeros_like(wv) if fap == 1 else wv), (np.zeros_like(we) if fap == 2 else we)
+
     engine.effective_faps, engine.high_level_weights = effective_faps, high_level_weights
     try:
         yield
@@ -197,16 +225,18 @@ def render_variant(state, sc, k: int, variant: str, scene_dir=None) -> np.ndarra
     if variant == "msaa8":
         return _pattern(state, sc, k, scene_dir, D3D8)
     if variant == "lights-mirrored":
-        lights = tuple(dataclasses.replace(li, direction=(-li.direction[0], li.direction[1], li.direction[2]))
-                       for li in sc.lights)
+        lights = tuple(
+            dataclasses.replace(li, direction=(-li.direction[0], li.direction[1], li.direction[2])) for li in sc.lights
+        )
         return _render(state, sc.with_(lights=lights), k, scene_dir)
     if variant == "light-missing":
         return _render(state, sc.with_(lights=sc.lights[:-1] if len(sc.lights) > 1 else ()), k, scene_dir)
     if variant == "specular-off":
         return _render(state, sc.with_(specular=False), k, scene_dir)
     if variant == "fov-wrong":
-        return _render(state, sc.with_(camera=dataclasses.replace(sc.camera, fov_deg=sc.camera.fov_deg * 1.1)),
-                       k, scene_dir)
+        return _render(
+            state, sc.with_(camera=dataclasses.replace(sc.camera, fov_deg=sc.camera.fov_deg * 1.1)), k, scene_dir
+        )
     if variant == "camera-shift":
         with _screen_offset(float(n), 0.0):
             return _render(state, sc, k, scene_dir)
@@ -231,8 +261,11 @@ def encoded(linear: np.ndarray, variant: str) -> np.ndarray:
     x = np.clip(linear, 0.0, 1.0)
     if variant == "float32":  # the exact sRGB encode (IEC 61966-2-1), every step in float32
         x = x.astype(np.float32)
-        e = np.where(x <= np.float32(0.0031308), np.float32(12.92) * x,
-                     np.float32(1.055) * x ** np.float32(1.0 / 2.4) - np.float32(0.055)).astype(np.float32)
+        e = np.where(
+            x <= np.float32(0.0031308),
+            np.float32(12.92) * x,
+            np.float32(1.055) * x ** np.float32(1.0 / 2.4) - np.float32(0.055),
+        ).astype(np.float32)
         return np.floor(e * np.float32(255.0) + np.float32(0.5)).astype(np.uint8)
     if variant == "gamma22":
         return np.floor(x ** (1.0 / 2.2) * 255.0 + 0.5).astype(np.uint8)
@@ -294,8 +327,10 @@ def drop_matrix(cases=None, log=print, faps=None) -> dict:
                         break
                 cache.pop((_key(views[0]), fap), None)
             out[f"{views[0].suite}/{views[0].id}"] = row
-            log(f"{views[0].suite}/{views[0].id}: {len(row)} FAPs move it; survive dropped: "
-                f"{sorted(f for f, v in row.items() if v is None)}")
+            log(
+                f"{views[0].suite}/{views[0].id}: {len(row)} FAPs move it; survive dropped: "
+                f"{sorted(f for f, v in row.items() if v is None)}"
+            )
     return out
 
 
@@ -329,8 +364,10 @@ def main(argv: list[str]) -> int:
             for c in cases:
                 r = run_variant(c, v, Path(tmp) / v / c.suite / c.id, cache)
                 m = r.metrics
-                cells.append(f"{c.id}:{r.outcome.value[0]}{int(m.get('violations_max', -1))}"
-                             f"/{m.get('interior_deltae_mean_max', float('nan')):.2f}")
+                cells.append(
+                    f"{c.id}:{r.outcome.value[0]}{int(m.get('violations_max', -1))}"
+                    f"/{m.get('interior_deltae_mean_max', float('nan')):.2f}"
+                )
             fails = sum(cell.split(":")[1][0] == "F" for cell in cells)
             print(f"{v:18s} fails {fails:2d}/{len(cases)}  " + " ".join(cells), flush=True)
     return 0
@@ -338,4 +375,3 @@ def main(argv: list[str]) -> int:
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))
-

@@ -8,6 +8,7 @@ differ rests on D5; a predicted value outside the range its intra alphabet codes
 (decided valid); an error that is one whatever the D5 reading (a select outside 0..14 / 0..6,
 a blend outside 0..63 at fap_quant 1, a 0 marker bit) rests on none.
 """
+
 from __future__ import annotations
 
 import pytest
@@ -64,5 +65,8 @@ def test_blends_reach_both_ends_of_every_alphabet(case_id):
         assert fr.is_intra[rows[0]] and not fr.is_intra[rows[1:]].any()
         for col in (2, 5, 7):  # viseme_blend, expression_intensity1, expression_intensity2
             seg = fr.high[rows, col].tolist()
-            assert seg[0] == top and 0 in seg[1:] and any(a == 0 and b == top for a, b in zip(seg, seg[1:])), \
-                (q, col, seg)
+            assert seg[0] == top and 0 in seg[1:] and any(a == 0 and b == top for a, b in zip(seg, seg[1:])), (
+                q,
+                col,
+                seg,
+            )

@@ -8,6 +8,7 @@ reference parser, independently of suites.toml; for an invalid stream from the p
 parser read before the error, the plane it stopped in included as far as it got (a plane cut
 short before its coding_type says nothing of its mode).
 """
+
 from __future__ import annotations
 
 import pytest

@@ -1,5 +1,6 @@
 """The case counts the docs print are the built suites' (conformance/counts.py), and each claim's
 count is what the harness selects for a decoder of the binary stream (harness/selection.py)."""
+
 from __future__ import annotations
 
 from pathlib import Path

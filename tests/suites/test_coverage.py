@@ -1,4 +1,5 @@
 """The coverage model (conformance/data/coverage.toml) and its extractors."""
+
 from __future__ import annotations
 
 import copy
@@ -25,15 +26,24 @@ def test_model_loads_with_unique_ids_and_clauses():
 
 
 def _stream(**opts) -> bytes:
-    c = make_content({"frames": 30, "rate": 12.5, "seed": 3, "visemes": True, "expressions": False,
-                      "faps": [3, 4, 5]})
+    c = make_content({"frames": 30, "rate": 12.5, "seed": 3, "visemes": True, "expressions": False, "faps": [3, 4, 5]})
     return encode(c, EncoderOptions(**opts)).data
 
 
 def test_stream_extractor_reads_the_content_not_labels():
     hits = coverage.stream_points(_stream(fap_quant=31, time_codes=True, intra_period=5))
-    assert {"plane.intra", "plane.predicted", "fap_quant.31", "timecode.present", "timecode.nonzero",
-            "rate.sixteenths", "fap.1", "fap.3", "mask.type-0", "stream.end-code"} <= hits
+    assert {
+        "plane.intra",
+        "plane.predicted",
+        "fap_quant.31",
+        "timecode.present",
+        "timecode.nonzero",
+        "rate.sixteenths",
+        "fap.1",
+        "fap.3",
+        "mask.type-0",
+        "stream.end-code",
+    } <= hits
     assert "fap_quant.0" not in hits and "dct.segment" not in hits and "fap.6" not in hits
     hits = coverage.stream_points(_stream(fap_quant=0, coding="dct"))
     assert {"dct.segment", "dct.segment-short", "dct.highlevel"} <= hits
@@ -43,8 +53,10 @@ def test_stream_extractor_reads_the_content_not_labels():
 def computed(made_once):
     """(case, coverage) of every committed case, computed once per session (it reads every case)
     and shared by the workers that run this module's tests."""
+
     def make(root):
         (root / "computed.pickle").write_bytes(pickle.dumps(coverage.case_coverages()))
+
     return pickle.loads((made_once("fbaconf-coverage", make) / "computed.pickle").read_bytes())  # noqa: S301 - this session's own file, written just before
 
 
@@ -118,8 +130,11 @@ def test_a_case_not_as_committed_is_computed_not_looked_up(tmp_path):
     key = coverage_table.case_key(case)
     table = tmp_path / "t.json"
     for k, expect in ((key, {"planted"}), ("0" * 64, None)):
-        table.write_text(json.dumps({"format": coverage_table.TABLE_FORMAT,
-                                     "cases": {case.full_id: {"key": k, "points": ["planted"]}}}))
+        table.write_text(
+            json.dumps(
+                {"format": coverage_table.TABLE_FORMAT, "cases": {case.full_id: {"key": k, "points": ["planted"]}}}
+            )
+        )
         assert coverage_table.stored_points(case, table) == expect
     table.write_text("{not json")
     assert coverage_table.stored_points(case, table) is None

@@ -8,6 +8,7 @@ some view (``close-up`` for the small parts: eyelids, irises, pupils, tongue, no
 measurement — every FAP dropped in turn, every view, every image case — is
 ``python tests/suites/image_variants.py --drop`` (minutes); here a sample of the FAPs, each rendered
 only in the frame its group occupies (seconds)."""
+
 from __future__ import annotations
 
 import tomllib
@@ -29,8 +30,9 @@ VIEWS = ("close-up", None, "three-quarter", "flat-culled")  # None = the case it
 # a sample, split between the two sweeps: the FAPs a drop-one renderer got away with before the
 # sweep (lower lip, jaw thrust, tongue tip, nose, left ear), the eyes' smallest parts (lids, iris,
 # pupil), a head rotation and the two high-level FAPs
-SAMPLE = [("predictable-l1-core", f) for f in (1, 5, 19, 23, 44, 48, 65)] + \
-         [("calibration-l1-core", f) for f in (2, 14, 21, 29, 45, 61)]
+SAMPLE = [("predictable-l1-core", f) for f in (1, 5, 19, 23, 44, 48, 65)] + [
+    ("calibration-l1-core", f) for f in (2, 14, 21, 29, 45, 61)
+]
 
 
 def _sweep_groups(suite: str) -> list[list[int]]:
@@ -100,8 +102,11 @@ def test_a_float_pipeline_passes_the_sweeps_three_quarter_views(sweeps, cache, t
 
 def _scenarios():
     data = resources.files("fbaconf.conformance").joinpath("data", "scenarios")
-    out = {p.name: Scenario.from_dict(tomllib.loads(p.read_text("utf-8")), file=p.name)
-           for p in data.iterdir() if p.name.endswith(".toml")}
+    out = {
+        p.name: Scenario.from_dict(tomllib.loads(p.read_text("utf-8")), file=p.name)
+        for p in data.iterdir()
+        if p.name.endswith(".toml")
+    }
     for s in load_suites():
         for c in s.cases:
             p = c.input_path("scenario")
@@ -121,8 +126,11 @@ def test_no_scenario_colour_on_a_rounding_tie():
         assert np.all(np.abs(frac - 0.5) >= 0.05), (name, bg * 255.0)
         lin = srgb_to_linear(bg)
         x = lin.astype(np.float32)
-        e = np.where(x <= np.float32(0.0031308), np.float32(12.92) * x,
-                     np.float32(1.055) * x ** np.float32(1.0 / 2.4) - np.float32(0.055)).astype(np.float32)
+        e = np.where(
+            x <= np.float32(0.0031308),
+            np.float32(12.92) * x,
+            np.float32(1.055) * x ** np.float32(1.0 / 2.4) - np.float32(0.055),
+        ).astype(np.float32)
         f32 = np.floor(e * np.float32(255.0) + np.float32(0.5)).astype(np.uint8)
         assert f32.tolist() == encode_srgb8(lin).tolist(), name
     # the old three-quarter background: the check is not blind

@@ -6,6 +6,7 @@ Skipped (with the reason) when moderngl is not installed or no OpenGL 3.3 contex
 (headless EGL; on Debian: libegl1 libegl-mesa0 libgl1-mesa-dri, then ``pip install moderngl``).
 The software counterparts (the reference rasteriser with one thing changed) are in
 tests/suites/test_image_matrix.py."""
+
 from __future__ import annotations
 
 import json
@@ -110,10 +111,26 @@ def test_manifest_runs_through_the_harness(variant, expect, ctx, tmp_path):
     """The decoder manifest as a user runs it: fbaconf run in a subprocess (sandboxed when
     bubblewrap is available), one textured image case."""
     out = tmp_path / "run"
-    p = subprocess.run([sys.executable, "-m", "fbaconf", "run", "--no-progress", "--decoder",
-                        str(GLDIR / "manifests" / f"{variant}.toml"), "--suite", "predictable-l1-stress",
-                        "--case", "grid-limits-l1", "-o", str(out)],
-                       capture_output=True, text=True, timeout=120)
+    p = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "run",
+            "--no-progress",
+            "--decoder",
+            str(GLDIR / "manifests" / f"{variant}.toml"),
+            "--suite",
+            "predictable-l1-stress",
+            "--case",
+            "grid-limits-l1",
+            "-o",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert p.returncode in (0, 1), p.stdout + p.stderr
     report = json.loads((out / "report.json").read_text())
     (res,) = [r for r in report["results"] if r["case_id"].endswith("/grid-limits-l1")]

@@ -4,6 +4,7 @@ renderer (a realistic player bug each) fails at least one case, so it cannot cer
 
 The renderers are the reference rasteriser with one thing changed (tests/suites/image_variants.py);
 the OpenGL ones are in tests/suites/test_glrender.py."""
+
 from __future__ import annotations
 
 import pytest
@@ -26,8 +27,13 @@ def states():
 
 
 def test_every_calibration_and_predictable_case_compares_images_under_three_scenarios(cases):
-    decode = [c for s in load_suites() if s.claim.split("@")[0] in ("calibration", "predictable")
-              for c in s.cases if c.kind == "decode" and "faps" in c.stages]
+    decode = [
+        c
+        for s in load_suites()
+        if s.claim.split("@")[0] in ("calibration", "predictable")
+        for c in s.cases
+        if c.kind == "decode" and "faps" in c.stages
+    ]
     assert decode and all("images" in c.stages for c in decode)
     ids = {(c.suite, c.id) for c in cases}
     for c in decode:

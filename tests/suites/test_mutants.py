@@ -1,6 +1,7 @@
 """Mutant decoders: every mutation applies to the current reference source; the reference passes
 every required case and a handful of mutants are each killed by a case (the full score is
 `fbaconf suites mutants`, or benchmarks/bench_mutants.py)."""
+
 from __future__ import annotations
 
 import subprocess
@@ -56,17 +57,19 @@ def test_a_source_mutant_reaches_the_modules_that_imported_its_function():
     """engine.py does ``from .faceparams import fapu_from_feature_points`` at import time: the
     mutant of faceparams' function must replace that name too, or the mutant never runs (it
     survived every case until core._rebind)."""
-    code = ("from fbaconf.mutation import own\n"
-            "from fbaconf.mutation.core import apply_mutant\n"
-            "from fbaconf.animation import calibrate, engine, faceparams\n"
-            "old = faceparams.fapu_from_feature_points\n"
-            "apply_mutant(own.MUTANTS['wrong-fapu'])\n"
-            "new = faceparams.fapu_from_feature_points\n"
-            "import sys\n"
-            "left = [n for n, m in sys.modules.items() if n.startswith('fbaconf') and m is not None\n"
-            "        and any(v is old for v in vars(m).values())]\n"
-            "print(new is not old, engine.fapu_from_feature_points is new, calibrate.fapu_from_feature_points is new,"
-            " left)\n")
+    code = (
+        "from fbaconf.mutation import own\n"
+        "from fbaconf.mutation.core import apply_mutant\n"
+        "from fbaconf.animation import calibrate, engine, faceparams\n"
+        "old = faceparams.fapu_from_feature_points\n"
+        "apply_mutant(own.MUTANTS['wrong-fapu'])\n"
+        "new = faceparams.fapu_from_feature_points\n"
+        "import sys\n"
+        "left = [n for n, m in sys.modules.items() if n.startswith('fbaconf') and m is not None\n"
+        "        and any(v is old for v in vars(m).values())]\n"
+        "print(new is not old, engine.fapu_from_feature_points is new, calibrate.fapu_from_feature_points is new,"
+        " left)\n"
+    )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.stdout.split() == ["True", "True", "True", "[]"], r.stdout + r.stderr
 
@@ -93,14 +96,16 @@ def test_mutant_adapter_manifest(tmp_path):
 
 # The rules of the cases independent faulty decoders got past: each with a mutant that breaks it and the
 # case that must kill it.
-_RUN = ("import json, sys\n"
-        "from fbaconf.conformance.suite import load_suites\n"
-        "from fbaconf.mutation import run\n"
-        "ids = sys.argv[2:]\n"
-        "cases = [c for s in load_suites() for c in s.cases if c.full_id in ids]\n"
-        "assert sorted(c.full_id for c in cases) == sorted(ids), ids\n"
-        "name = None if sys.argv[1] == 'reference' else sys.argv[1]\n"
-        "print(json.dumps(run.run_mutant(name, cases=cases, stop_at_first=False)))\n")
+_RUN = (
+    "import json, sys\n"
+    "from fbaconf.conformance.suite import load_suites\n"
+    "from fbaconf.mutation import run\n"
+    "ids = sys.argv[2:]\n"
+    "cases = [c for s in load_suites() for c in s.cases if c.full_id in ids]\n"
+    "assert sorted(c.full_id for c in cases) == sorted(ids), ids\n"
+    "name = None if sys.argv[1] == 'reference' else sys.argv[1]\n"
+    "print(json.dumps(run.run_mutant(name, cases=cases, stop_at_first=False)))\n"
+)
 MARKERS = [f"simple-l1-error/list-marker-{x}" for x in ("i-max", "i-min", "p-max", "p-min")]
 GUARDS = {
     "hl-alphabet-first-quant": ["simple-l1-core/high-level-quant-change"],

@@ -1,4 +1,5 @@
 """Suite generation: determinism, error cases' diagnostics, regression.toml, the external suite."""
+
 from __future__ import annotations
 
 import json
@@ -68,22 +69,31 @@ def test_suite_groups_and_claims():
             if c.kind == "decode" and c.inputs.get("fba") and c.full_id not in NO_TEXT:
                 assert c.inputs.get("fap"), f"{c.full_id}: every stream case also comes as .fap text"
                 # the coder corners that need predicted models skewed by 20-216 planes first are longer
-                assert 1 <= c.frames <= 60 or c.id in ("lookahead-stuffing",) or c.id.startswith("coder-"), \
-                    c.full_id
+                assert 1 <= c.frames <= 60 or c.id in ("lookahead-stuffing",) or c.id.startswith("coder-"), c.full_id
 
 
 def test_regression_toml_is_merged(tmp_path):
     data = Path(suite_module.__file__).parent / "data"
     d = tmp_path / "data"
     shutil.copytree(data, d, ignore=shutil.ignore_patterns("regression*"))
-    (d / "regression.toml").write_text('[[suite]]\nname = "simple-l1-regression"\nclaim = "simple@1"\n'
-                                       'group = "regression"\n\n[[case]]\nsuite = "simple-l1-regression"\n'
-                                       'id = "fuzz-1"\ngenerator = "file"\nfile = "regression/x.fba"\nexpect = []\n')
+    (d / "regression.toml").write_text(
+        '[[suite]]\nname = "simple-l1-regression"\nclaim = "simple@1"\n'
+        'group = "regression"\n\n[[case]]\nsuite = "simple-l1-regression"\n'
+        'id = "fuzz-1"\ngenerator = "file"\nfile = "regression/x.fba"\nexpect = []\n'
+    )
     s = build.spec(d)
     assert any(x["name"] == "simple-l1-regression" for x in s["suite"])
     assert s["case"][-1]["id"] == "fuzz-1"
-    assert len(s["case"]) == len(build.spec()["case"]) + (0 if not (data / "regression.toml").is_file() else -len(
-        __import__("tomllib").loads((data / "regression.toml").read_text()).get("case", []))) + 1
+    assert (
+        len(s["case"])
+        == len(build.spec()["case"])
+        + (
+            0
+            if not (data / "regression.toml").is_file()
+            else -len(__import__("tomllib").loads((data / "regression.toml").read_text()).get("case", []))
+        )
+        + 1
+    )
 
 
 def test_external_suite_skips_cleanly_without_files(tmp_path):
@@ -115,8 +125,7 @@ def test_every_suite_rebuilds_byte_for_byte(tmp_path):
     assert sorted(s.name for s in built) == sorted(committed)
     for s in built:
         mine = sorted(p.relative_to(s.path) for p in s.path.rglob("*") if p.is_file())
-        theirs = sorted(p.relative_to(committed[s.name].path) for p in committed[s.name].path.rglob("*")
-                        if p.is_file())
+        theirs = sorted(p.relative_to(committed[s.name].path) for p in committed[s.name].path.rglob("*") if p.is_file())
         assert mine == theirs, s.name
         for rel in mine:
             assert (s.path / rel).read_bytes() == (committed[s.name].path / rel).read_bytes(), f"{s.name}/{rel}"

@@ -99,23 +99,45 @@ def test_cli_animate(tmp_path):
     fr.values[1, 2], fr.status[1, 2] = 300, SET
     fr.save_npz(tmp_path / "f.npz")
     out = tmp_path / "out.npz"
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "animate", "--faps", str(tmp_path / "f.npz"), "-o", str(out),
-                        "--json"], capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "fbaconf", "animate", "--faps", str(tmp_path / "f.npz"), "-o", str(out), "--json"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr
     st = load_npz(out)
     assert st.vertices.shape[0] == 3 and "fap_values" in st.extras
     ref = engine.animate(fr)
     assert np.array_equal(st.vertices, ref.vertices)
     write_fap_file(tmp_path / "f.fap", fr)
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "animate", "--faps", str(tmp_path / "f.fap"), "-o",
-                        str(tmp_path / "o3.npz")], capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, "-m", "fbaconf", "animate", "--faps", str(tmp_path / "f.fap"), "-o", str(tmp_path / "o3.npz")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr
     np.testing.assert_allclose(load_npz(tmp_path / "o3.npz").vertices[1], ref.vertices[1])
     bad = tmp_path / "bad.bt"
     bad.write_text("Face { fdp FDP { faceDefTables [ FaceDefTables { fapID x } ] } }")
-    r = subprocess.run([sys.executable, "-m", "fbaconf", "animate", "--scene", str(bad), "--faps",
-                        str(tmp_path / "f.npz"), "-o", str(tmp_path / "o2.npz")], capture_output=True, text=True,
-                       timeout=60)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "fbaconf",
+            "animate",
+            "--scene",
+            str(bad),
+            "--faps",
+            str(tmp_path / "f.npz"),
+            "-o",
+            str(tmp_path / "o2.npz"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 2 and "1:" in r.stderr and "fapID" in r.stderr
     assert not (tmp_path / "o2.npz").exists()
 

@@ -39,8 +39,19 @@ def test_default_head_geometry(neutral):
     n_tri = sum(len(p.triangles) for p in m.parts.values())
     assert 2000 <= n_tri <= 8000 and m.vertex_count() < 5000
     names = {p.name for p in neutral.parts}
-    for part in ("Skin", "LeftEyeball", "RightEyeball", "LeftIris", "LeftPupilDisc", "LeftBrow", "UpperTeeth",
-                 "LowerTeeth", "Tongue", "LeftEar", "RightEar"):
+    for part in (
+        "Skin",
+        "LeftEyeball",
+        "RightEyeball",
+        "LeftIris",
+        "LeftPupilDisc",
+        "LeftBrow",
+        "UpperTeeth",
+        "LowerTeeth",
+        "Tongue",
+        "LeftEar",
+        "RightEar",
+    ):
         assert part in names
     assert np.all(np.isfinite(neutral.vertices))
     # all 84 feature points on real vertices, equal to the FDP's featurePointsCoord
@@ -78,8 +89,11 @@ def test_tables_cover_all_low_level_faps():
     fdp = scene.nodes[0].fields["fdp"]
     ids = sorted(t.fields["fapID"] for t in fdp.fields["faceDefTables"])
     assert ids == list(range(3, 69))
-    n_int = [len(m.fields["intervalBorders"]) - 1 for t in fdp.fields["faceDefTables"]
-             for m in t.fields.get("faceDefMesh", [])]
+    n_int = [
+        len(m.fields["intervalBorders"]) - 1
+        for t in fdp.fields["faceDefTables"]
+        for m in t.fields.get("faceDefMesh", [])
+    ]
     assert min(n_int) >= 4 and len(n_int) > 60
     transforms = {t.fields["fapID"] for t in fdp.fields["faceDefTables"] if "faceDefTransform" in t.fields}
     assert {23, 24, 25, 26, 27, 28, 29, 30, 48, 49, 50} <= transforms
@@ -163,12 +177,14 @@ def small_scene(table_text, extra_fps=None):
 
 
 def test_downloaded_model_exact_tables():
-    s = bt.parse(small_scene("""FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { faceSceneGraphNode USE M
+    s = bt.parse(
+        small_scene("""FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { faceSceneGraphNode USE M
           intervalBorders [-1000 0 500 1000] coordIndex [3] displacements [1 0 0, 0.9 0 0, 1.5 0 4] } ] }
         FaceDefTables { fapID 2 highLevelSelect 1 faceDefMesh [ FaceDefMesh { faceSceneGraphNode USE M
           intervalBorders [0 63] coordIndex [0] displacements [0 0.1 0] } ] }
         FaceDefTables { fapID 48 faceDefTransform [ FaceDefTransform { faceSceneGraphNode USE T
-          rotationDef 1 0 0 1 } ] }"""))
+          rotationDef 1 0 0 1 } ] }""")
+    )
     model = engine.compile_scene(s)
     mw = model.fapu.MW
     fr = frames(3)
@@ -186,18 +202,35 @@ def test_downloaded_model_exact_tables():
     assert st.vertices.shape == (3, 4, 3)
 
 
-@pytest.mark.parametrize("table, rule, where", [
-    ("FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { faceSceneGraphNode USE M intervalBorders [0 1] "
-     "coordIndex [9] displacements [1 0 0] } ] }", "facedef-missing-vertex", "faceDefMesh[0].coordIndex"),
-    ("FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { faceSceneGraphNode IndexedFaceSet { } "
-     "intervalBorders [0 1] coordIndex [0] displacements [1 0 0] } ] }", "facedef-missing-node",
-     "faceSceneGraphNode"),
-    ("FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { faceSceneGraphNode USE M intervalBorders [0 5 1] "
-     "coordIndex [0] displacements [1 0 0 1 0 0] } ] }", "facedef-borders-unsorted", "intervalBorders"),
-    ("FaceDefTables { fapID 99 }", "facedef-fap-id", "fapID"),
-    ("FaceDefTables { fapID 23 faceDefTransform [ FaceDefTransform { faceSceneGraphNode USE T fieldId 9 } ] }",
-     "facedef-field-id", "fieldId"),
-])
+@pytest.mark.parametrize(
+    "table, rule, where",
+    [
+        (
+            "FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { faceSceneGraphNode USE M intervalBorders [0 1] "
+            "coordIndex [9] displacements [1 0 0] } ] }",
+            "facedef-missing-vertex",
+            "faceDefMesh[0].coordIndex",
+        ),
+        (
+            "FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { faceSceneGraphNode IndexedFaceSet { } "
+            "intervalBorders [0 1] coordIndex [0] displacements [1 0 0] } ] }",
+            "facedef-missing-node",
+            "faceSceneGraphNode",
+        ),
+        (
+            "FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { faceSceneGraphNode USE M intervalBorders [0 5 1] "
+            "coordIndex [0] displacements [1 0 0 1 0 0] } ] }",
+            "facedef-borders-unsorted",
+            "intervalBorders",
+        ),
+        ("FaceDefTables { fapID 99 }", "facedef-fap-id", "fapID"),
+        (
+            "FaceDefTables { fapID 23 faceDefTransform [ FaceDefTransform { faceSceneGraphNode USE T fieldId 9 } ] }",
+            "facedef-field-id",
+            "fieldId",
+        ),
+    ],
+)
 def test_bad_scene_tables(table, rule, where):
     s = bt.parse(small_scene(table))
     with pytest.raises(SceneError) as e:
@@ -220,8 +253,7 @@ def test_bundled_test_models(tmp_path):
         assert np.abs(st.vertices[1] - st.vertices[0]).max() > 1.0, p.name
         if p.name == "level_limit_head.bt":
             assert st.vertices.shape[1] == models.PREDICTABLE_L1_MAX_VERTICES
-            n = sum(len(n.get("coord") and s.resolve(n.get("coord")).get("point"))
-                    for n, _ in s.find("IndexedFaceSet"))
+            n = sum(len(n.get("coord") and s.resolve(n.get("coord")).get("point")) for n, _ in s.find("IndexedFaceSet"))
             assert n == models.PREDICTABLE_L1_MAX_VERTICES
     assert bt.read(paths[0]) == models.default_head_scene()
 
@@ -232,15 +264,44 @@ FUZZ_BASE = small_scene("""FaceDefTables { fapID 6 faceDefMesh [ FaceDefMesh { f
           intervalBorders [0 63] coordIndex [0] displacements [0 0.1 0] } ] }
         FaceDefTables { fapID 48 faceDefTransform [ FaceDefTransform { faceSceneGraphNode USE T
           rotationDef 1 0 0 1 } ] }""").replace(
-    "Face {", "Face { fit FIT { FAPs [4 -1 51] Graph [0 1] numeratorTerms [1] denominatorTerms [1] "
-    "numeratorCoefs [2.0] numeratorExp [1] denominatorCoefs [1] denominatorExp [1] }", 1)
-
+    "Face {",
+    "Face { fit FIT { FAPs [4 -1 51] Graph [0 1] numeratorTerms [1] denominatorTerms [1] "
+    "numeratorCoefs [2.0] numeratorExp [1] denominatorCoefs [1] denominatorExp [1] }",
+    1,
+)
 
 
 @settings(max_examples=80, deadline=None)
-@given(st.lists(st.tuples(st.integers(0, 10**6), st.sampled_from(
-    ["0", "-1", "1e30", "99", "-0", "3.4e38", "2147483647", "0.0", "7", "-1000", "1000", "5", "[", "}", "USE M",
-     "USE T", "TRUE"])), min_size=1, max_size=2))
+@given(
+    st.lists(
+        st.tuples(
+            st.integers(0, 10**6),
+            st.sampled_from(
+                [
+                    "0",
+                    "-1",
+                    "1e30",
+                    "99",
+                    "-0",
+                    "3.4e38",
+                    "2147483647",
+                    "0.0",
+                    "7",
+                    "-1000",
+                    "1000",
+                    "5",
+                    "[",
+                    "}",
+                    "USE M",
+                    "USE T",
+                    "TRUE",
+                ]
+            ),
+        ),
+        min_size=1,
+        max_size=2,
+    )
+)
 def test_mutated_scenes_give_typed_errors_only(edits):
     words = FUZZ_BASE.split(" ")
     for pos, tok in edits:

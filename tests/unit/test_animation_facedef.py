@@ -27,16 +27,19 @@ def test_seed_worked_example():
     assert not pos[0, :50].any()
 
 
-@pytest.mark.parametrize("fap, expected", [
-    (0, [0, 0, 0]),                              # zero
-    (250, [250 * 0.9, 0, 0]),                    # inside first positive interval
-    (500, [450, 0, 0]),                          # exactly on a border
-    (1000, [450 + 750, 0, 2000]),                # on the last border
-    (1500, [450 + 1000 * 1.5, 0, 4000]),         # above the last border (step 3)
-    (-400, [400, 0, 0]),                         # inside the negative interval (step 4, literal)
-    (-1000, [1000, 0, 0]),                       # on the first border
-    (-1500, [1500, 0, 0]),                       # below the first border (step 5)
-])
+@pytest.mark.parametrize(
+    "fap, expected",
+    [
+        (0, [0, 0, 0]),  # zero
+        (250, [250 * 0.9, 0, 0]),  # inside first positive interval
+        (500, [450, 0, 0]),  # exactly on a border
+        (1000, [450 + 750, 0, 2000]),  # on the last border
+        (1500, [450 + 1000 * 1.5, 0, 4000]),  # above the last border (step 3)
+        (-400, [400, 0, 0]),  # inside the negative interval (step 4, literal)
+        (-1000, [1000, 0, 0]),  # on the first border
+        (-1500, [1500, 0, 0]),  # below the first border (step 5)
+    ],
+)
 def test_interval_cases(fap, expected):
     np.testing.assert_allclose(seed_table().displacement([fap], 1.0)[0, 0], expected)
 
@@ -70,19 +73,29 @@ def test_vectorised_over_frames():
         np.testing.assert_allclose(d[k], t.displacement([f], 1.0)[0])
 
 
-@pytest.mark.parametrize("kw, rule", [
-    (dict(borders=[0, 500, 100], idx=[0], disp=[[1, 0, 0]] * 2), "facedef-borders-unsorted"),
-    (dict(borders=[-10, 10, 500], idx=[0], disp=[[1, 0, 0]] * 2), "facedef-borders-zero"),
-    (dict(borders=[0], idx=[0], disp=[[1, 0, 0]]), "facedef-interval-count"),
-    (dict(borders=[-1, 0, 1], idx=[0, 1], disp=[[1, 0, 0]] * 3), "facedef-displacement-count"),
-    (dict(borders=[-1, 0, 1], idx=[0, 7], disp=[[1, 0, 0]] * 4), "facedef-missing-vertex"),
-    (dict(borders=[-1, 0, 1], idx=[-1], disp=[[1, 0, 0]] * 2), "facedef-missing-vertex"),
-    (dict(borders=[-1, 0, 1], idx=[0], disp=[[np.nan, 0, 0]] * 2), "facedef-displacement-finite"),
-])
+@pytest.mark.parametrize(
+    "kw, rule",
+    [
+        (dict(borders=[0, 500, 100], idx=[0], disp=[[1, 0, 0]] * 2), "facedef-borders-unsorted"),
+        (dict(borders=[-10, 10, 500], idx=[0], disp=[[1, 0, 0]] * 2), "facedef-borders-zero"),
+        (dict(borders=[0], idx=[0], disp=[[1, 0, 0]]), "facedef-interval-count"),
+        (dict(borders=[-1, 0, 1], idx=[0, 1], disp=[[1, 0, 0]] * 3), "facedef-displacement-count"),
+        (dict(borders=[-1, 0, 1], idx=[0, 7], disp=[[1, 0, 0]] * 4), "facedef-missing-vertex"),
+        (dict(borders=[-1, 0, 1], idx=[-1], disp=[[1, 0, 0]] * 2), "facedef-missing-vertex"),
+        (dict(borders=[-1, 0, 1], idx=[0], disp=[[np.nan, 0, 0]] * 2), "facedef-displacement-finite"),
+    ],
+)
 def test_bad_tables(kw, rule):
     with pytest.raises(SceneError) as e:
-        MeshTable.build(3, "m", kw["borders"], kw["idx"], np.array(kw["disp"], float), n_vertices=5,
-                        node_path="Face.fdp.FDP.faceDefTables[0].faceDefMesh[0]")
+        MeshTable.build(
+            3,
+            "m",
+            kw["borders"],
+            kw["idx"],
+            np.array(kw["disp"], float),
+            n_vertices=5,
+            node_path="Face.fdp.FDP.faceDefTables[0].faceDefMesh[0]",
+        )
     assert e.value.rule == rule
     assert "faceDefTables[0].faceDefMesh[0]" in str(e.value)
 
@@ -112,8 +125,16 @@ def test_transform_scale_translation():
 def test_feature_points_and_fapu():
     assert len(FEATURE_POINTS) == 84 and FEATURE_POINTS[0] == "2.1" and FEATURE_POINTS[-1] == "11.6"
     assert fp_index("3.14") + 1 == fp_index("4.1")
-    pts = {"3.1": (0, 10, 0), "3.3": (0, 8.976, 0), "3.5": (30, 9, 0), "3.6": (-30, 9, 0), "9.15": (0, -31.96, 0),
-           "2.2": (0, -62.68, 0), "8.3": (25, -63, 0), "8.4": (-26.2, -63, 0)}
+    pts = {
+        "3.1": (0, 10, 0),
+        "3.3": (0, 8.976, 0),
+        "3.5": (30, 9, 0),
+        "3.6": (-30, 9, 0),
+        "9.15": (0, -31.96, 0),
+        "2.2": (0, -62.68, 0),
+        "8.3": (25, -63, 0),
+        "8.4": (-26.2, -63, 0),
+    }
     f = fapu_from_feature_points(pts)
     assert f.IRISD == pytest.approx(1.024 / 1024) and f.ES == pytest.approx(60 / 1024)
     assert f.ENS == pytest.approx(40.96 / 1024) and f.MNS == pytest.approx(30.72 / 1024)
@@ -152,11 +173,12 @@ def naive_seed_formula(I, D, fap):
     return out
 
 
-
-
 @settings(max_examples=150, deadline=None)
-@given(st.lists(st.integers(-3000, 3000), min_size=1, max_size=7, unique=True), st.integers(0, 10**6),
-       st.lists(st.integers(-4000, 4000), min_size=1, max_size=6))
+@given(
+    st.lists(st.integers(-3000, 3000), min_size=1, max_size=7, unique=True),
+    st.integers(0, 10**6),
+    st.lists(st.integers(-4000, 4000), min_size=1, max_size=6),
+)
 def test_vectorised_equals_literal_formula(others, seed, faps):
     borders = sorted(set(others) | {0})
     if len(borders) < 2:

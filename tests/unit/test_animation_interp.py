@@ -12,9 +12,20 @@ from fbaconf.scenes import bt
 
 def _fit(faps, graph, ne=(), de=(), ni=(), nt=(), dt=(), nc=(), dc=()):
     """FitGraph.from_fields with the function fields in the order the FIT node lists them."""
-    return FitGraph.from_fields(faps, graph, {"numeratorExp": ne, "denominatorExp": de, "numeratorImpulse": ni,
-                                              "numeratorTerms": nt, "denominatorTerms": dt, "numeratorCoefs": nc,
-                                              "denominatorCoefs": dc})
+    return FitGraph.from_fields(
+        faps,
+        graph,
+        {
+            "numeratorExp": ne,
+            "denominatorExp": de,
+            "numeratorImpulse": ni,
+            "numeratorTerms": nt,
+            "denominatorTerms": dt,
+            "numeratorCoefs": nc,
+            "denominatorCoefs": dc,
+        },
+    )
+
 
 def blank(n=1):
     return np.zeros((n, 68)), np.zeros((n, 68), np.uint8), np.zeros((n, 10), np.int64)
@@ -22,9 +33,9 @@ def blank(n=1):
 
 def test_lr_fill():
     v, s, _ = blank(3)
-    v[0, 5], s[0, 5] = 120, SET          # FAP 6 set, FAP 7 free -> copied
-    v[1, 6], s[1, 6] = -40, RETAINED     # FAP 7 retained, FAP 6 free -> copied
-    v[2, 5], s[2, 5] = 10, SET           # both set: untouched
+    v[0, 5], s[0, 5] = 120, SET  # FAP 6 set, FAP 7 free -> copied
+    v[1, 6], s[1, 6] = -40, RETAINED  # FAP 7 retained, FAP 6 free -> copied
+    v[2, 5], s[2, 5] = 10, SET  # both set: untouched
     v[2, 6], s[2, 6] = 20, SET
     v2, s2 = lr_fill(v, s)
     assert v2[0, 6] == 120 and s2[0, 6] == DERIVED and s2[0, 5] == SET
@@ -52,11 +63,11 @@ def test_blending_and_free_only():
     v, s, h = blank(2)
     s[:, 0] = SET
     s[:, 1] = SET
-    h[0, :4] = (10, 13, 21, 0)        # viseme 10 * 21/63 + viseme 13 * 42/63
-    h[0, 4:8] = (1, 63, 0, 0)         # joy full
+    h[0, :4] = (10, 13, 21, 0)  # viseme 10 * 21/63 + viseme 13 * 42/63
+    h[0, 4:8] = (1, 63, 0, 0)  # joy full
     h[1, 4:8] = (6, 31, 2, 10)
     jaw = 2
-    v[0, 3], s[0, 3] = 7, SET         # lower_t_midlip SET: must stay
+    v[0, 3], s[0, 3] = 7, SET  # lower_t_midlip SET: must stay
     v2, s2 = apply_high_level(v, s, h)
     expect = vis[10] * (21 / 63) + vis[13] * (42 / 63) + exp[1]
     assert v2[0, jaw] == pytest.approx(expect[jaw]) and s2[0, jaw] == DERIVED

@@ -1,4 +1,5 @@
 """The adaptive arithmetic coder: round trips, stuffing, and the end-of-block rule (D7)."""
+
 from __future__ import annotations
 
 import random
@@ -75,8 +76,13 @@ def blocks_strategy(draw):
     return out
 
 
-@given(blocks=blocks_strategy(), prefix=st.integers(0, 15), trailer_bits=st.integers(1, 40),
-       trailer_kind=st.sampled_from(["zeros", "ones", "random"]), seed=st.integers(0, 2**32 - 1))
+@given(
+    blocks=blocks_strategy(),
+    prefix=st.integers(0, 15),
+    trailer_bits=st.integers(1, 40),
+    trailer_kind=st.sampled_from(["zeros", "ones", "random"]),
+    seed=st.integers(0, 2**32 - 1),
+)
 def test_blocks_round_trip_and_reposition(blocks, prefix, trailer_bits, trailer_kind, seed):
     rnd = random.Random(seed)
     tv = {"zeros": 0, "ones": (1 << trailer_bits) - 1, "random": rnd.getrandbits(trailer_bits)}[trailer_kind]
@@ -112,8 +118,11 @@ def test_stuffing_violation_inside_block_is_an_error():
     i = "".join(bits).index("0" * ZERO_RUN_LIMIT + "1") + ZERO_RUN_LIMIT
     bits[i] = "0"  # the stuffing '1' becomes '0'
     s = "".join(bits) + "1" * 32
-    data = int(s, 2).to_bytes((len(s) + 7) // 8, "big") if len(s) % 8 == 0 else \
-        int(s + "0" * (8 - len(s) % 8), 2).to_bytes((len(s) + 7) // 8, "big")
+    data = (
+        int(s, 2).to_bytes((len(s) + 7) // 8, "big")
+        if len(s) % 8 == 0
+        else int(s + "0" * (8 - len(s) % 8), 2).to_bytes((len(s) + 7) // 8, "big")
+    )
     r = BitReader(data)
     dec = ArithDecoder(r)
     m = make_model(2, adaptive=False)
@@ -249,6 +258,7 @@ def test_a_predicted_model_is_halved_at_16383_in_the_suite():
             if self.total() == arith.MAX_FREQUENCY:
                 seen["halved_at"].append(seen["updates"])
         orig(self, sym)
+
     native = arith.native_decoder
     try:
         arith.native_decoder = lambda: None  # the pure decoder, whose models we can watch

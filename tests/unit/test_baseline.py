@@ -1,6 +1,7 @@
 """Baselines (harness/baseline.py): what ``--write-baseline`` records and keeps, how a file is
 checked, and how results are classified against it. The expected files are written out by hand
 below (the format of docs/harness.md, "Gating a project's CI")."""
+
 from __future__ import annotations
 
 import pytest
@@ -12,10 +13,14 @@ from fbaconf.harness.results import CaseResult, Outcome, StageResult
 def res(cid: str, outcome: Outcome, *, required: bool = True, fap: int | None = None, **kw) -> CaseResult:
     stages = []
     if fap is not None:
-        stages = [StageResult("faps", Outcome.FAIL, "FAP differs",
-                              first_difference={"frame": 0, "fap": fap, "expected": 1, "got": 2})]
-    return CaseResult(case_id=cid, suite=cid.split("/")[0], claim="simple@1", outcome=outcome, required=required,
-                      stages=stages, **kw)
+        stages = [
+            StageResult(
+                "faps", Outcome.FAIL, "FAP differs", first_difference={"frame": 0, "fap": fap, "expected": 1, "got": 2}
+            )
+        ]
+    return CaseResult(
+        case_id=cid, suite=cid.split("/")[0], claim="simple@1", outcome=outcome, required=required, stages=stages, **kw
+    )
 
 
 def run_results() -> list[CaseResult]:
@@ -34,8 +39,12 @@ def test_write_records_every_required_case_that_did_not_pass(tmp_path):
     f = tmp_path / "b.txt"
     rep = bl.write(run_results(), f)
     entries = [ln for ln in f.read_text().splitlines() if not ln.startswith("#")]
-    assert entries == ["s/hang,Timeout", "s/no-multi,NotSupported", "s/segv,Crash,crash:SIGSEGV",
-                       "s/wrong-fap,Fail,faps:31"]
+    assert entries == [
+        "s/hang,Timeout",
+        "s/no-multi,NotSupported",
+        "s/segv,Crash,crash:SIGSEGV",
+        "s/wrong-fap,Fail,faps:31",
+    ]
     assert sorted(rep.added) == ["s/hang", "s/no-multi", "s/segv", "s/wrong-fap"]
     # read back, the unchanged results are all known: nothing new, the run passes
     again = run_results()
@@ -63,7 +72,9 @@ def test_write_keeps_hand_written_lines_comments_and_flakes(tmp_path):
     f = tmp_path / "b.txt"
     f.write_text(HAND)
     rep = bl.write(run_results(), f)
-    assert f.read_text() == """\
+    assert (
+        f.read_text()
+        == """\
 # acme's known problems
 s/wrong-fap,Fail   # issue 12: accepts any Fail
 s/no-multi,NotSupported   # multi-face output later (issue 7)
@@ -72,6 +83,7 @@ s/segv,Crash,crash:SIGSEGV  # was a bus error
 other/not-run,Crash   # a case this run did not run
 
 """
+    )
     assert rep.updated == ["s/segv"] and rep.removed == ["s/passes"] and rep.added == [] and rep.kept == 4
     assert "1 rewritten" in rep.line() and "1 removed (passing now): s/passes" in rep.line()
 
@@ -83,12 +95,15 @@ def test_a_case_that_passed_on_a_rerun_is_written_as_a_flake(tmp_path):
     assert f.read_text().splitlines()[-1] == "s/sometimes,Flake"
 
 
-@pytest.mark.parametrize("text,words", [
-    ("s/a,Failed,faps:3\n", 'line 1: expected \'suite/case,Outcome[,signature]\''),
-    ("s/a,Failed\n", "(did you mean Fail?)"),
-    ("just-a-case\n", "line 1"),
-    ("# c\ns/a,Fail\n\ns/a,Flake\n", "line 4: s/a is listed again (first on line 2)"),
-])
+@pytest.mark.parametrize(
+    "text,words",
+    [
+        ("s/a,Failed,faps:3\n", "line 1: expected 'suite/case,Outcome[,signature]'"),
+        ("s/a,Failed\n", "(did you mean Fail?)"),
+        ("just-a-case\n", "line 1"),
+        ("# c\ns/a,Fail\n\ns/a,Flake\n", "line 4: s/a is listed again (first on line 2)"),
+    ],
+)
 def test_a_malformed_baseline_names_its_line(tmp_path, text, words):
     f = tmp_path / "b.txt"
     f.write_text(text)
@@ -109,13 +124,18 @@ def test_write_target_is_checked_before_the_run(tmp_path):
 
 def test_classification_tags_what_fails_the_run():
     rs = run_results()
-    known = {"s/wrong-fap": bl.Entry("Fail", "faps:30"), "s/optional-fail": bl.Entry("Fail", "faps:9"),
-             "s/passes": bl.Entry("Crash")}
+    known = {
+        "s/wrong-fap": bl.Entry("Fail", "faps:30"),
+        "s/optional-fail": bl.Entry("Fail", "faps:9"),
+        "s/passes": bl.Entry("Crash"),
+    }
     s = bl.classify(rs, known)
     by = {r.case_id: r.baseline for r in rs}
     # a second bug in a listed case is new; a case outside the claim is never new
-    assert by["s/wrong-fap"] == "new" and "fails differently from the baseline (Fail,faps:30 -> Fail,faps:31)" in \
-        rs[1].message
+    assert (
+        by["s/wrong-fap"] == "new"
+        and "fails differently from the baseline (Fail,faps:30 -> Fail,faps:31)" in rs[1].message
+    )
     assert by["s/optional-fail"] is None and by["s/optional"] is None
     assert by["s/passes"] == "fixed" and by["s/no-multi"] == "new"
     assert s.line() == "4 new, 0 known, 1 fixed, 0 flaky"

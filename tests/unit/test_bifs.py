@@ -1,4 +1,5 @@
 """Binary BIFS (issue 9): tables, round trips, typed errors, robustness, CLI and checker."""
+
 from __future__ import annotations
 
 import random
@@ -39,8 +40,16 @@ def test_tables_cover_the_scene_model_with_provenance():
     # face-specific NDTs have a single member coded with 1 bit
     sf3d = t.ndts["SF3DNode"]
     assert (len(sf3d.nodes), sf3d.bits, sf3d.code("Face")) == (52, 6, 14)
-    for ndt in ("SFFAPNode", "SFFDPNode", "SFFITNode", "SFVisemeNode", "SFExpressionNode", "SFFaceDefTablesNode",
-                "SFFaceDefMeshNode", "SFFaceDefTransformNode"):
+    for ndt in (
+        "SFFAPNode",
+        "SFFDPNode",
+        "SFFITNode",
+        "SFVisemeNode",
+        "SFExpressionNode",
+        "SFFaceDefTablesNode",
+        "SFFaceDefMeshNode",
+        "SFFaceDefTransformNode",
+    ):
         assert t.ndts[ndt].bits == 1 and len(t.ndts[ndt].nodes) == 1
     assert t.ndts["SFTopNode"].nodes == ("Group", "Layer2D", "Layer3D", "OrderedGroup")
     assert t.ndts["SFGeometryNode"].code("IndexedFaceSet") == 9 and t.ndts["SFGeometryNode"].bits == 5
@@ -84,7 +93,7 @@ def test_scene_files_under_animation_data_round_trip():
 
 
 def test_floats_are_float32_and_decode_to_the_shortest_decimal():
-    scene = bt.parse('Transform { translation 0.1 -2.5 1e-3 scale 1.2345678901 1 1 children [] }')
+    scene = bt.parse("Transform { translation 0.1 -2.5 1e-3 scale 1.2345678901 1 1 children [] }")
     back = bifs.decode(bifs.encode(scene))
     n = back.nodes[0]
     assert n.fields["translation"] == (0.1, -2.5, 0.001)  # <= 7 significant digits: exact
@@ -93,10 +102,12 @@ def test_floats_are_float32_and_decode_to_the_shortest_decimal():
 
 
 def test_field_order_and_presence_survive_masked_and_list_descriptions():
-    text = ('DEF F Face { fdp FDP { faceSceneGraph [ DEF G Group { children [] } ] '
-            'featurePointsCoord Coordinate { point [] } } fap NULL }\n'
-            'Shape { geometry IndexedFaceSet { solid FALSE coordIndex [0 1 2 -1] '
-            'coord Coordinate { point [0 0 0] } } }')
+    text = (
+        "DEF F Face { fdp FDP { faceSceneGraph [ DEF G Group { children [] } ] "
+        "featurePointsCoord Coordinate { point [] } } fap NULL }\n"
+        "Shape { geometry IndexedFaceSet { solid FALSE coordIndex [0 1 2 -1] "
+        "coord Coordinate { point [0 0 0] } } }"
+    )
     scene = bt.parse(text)
     back = bifs.decode(bifs.encode(scene))
     assert back == scene  # no floats but 0: exact
@@ -107,8 +118,9 @@ def test_no_quantisation_decision():
     """fbaconf never sends a QuantizationParameter node: coordinates are 32-bit floats on the
     wire, and a stream with a QuantizationParameter node is refused as outside the subset."""
     pts = np.array([[1.5, -2.25, 3.0]] * 10)  # (vector form: the floats are contiguous)
-    scene = bt.Scene([bt.Node("Shape", {"geometry": bt.Node("IndexedFaceSet", {
-        "coord": bt.Node("Coordinate", {"point": pts})})})])
+    scene = bt.Scene(
+        [bt.Node("Shape", {"geometry": bt.Node("IndexedFaceSet", {"coord": bt.Node("Coordinate", {"point": pts})})})]
+    )
     data = bifs.encode(scene)
     assert pts.astype(">f4").tobytes() in _realign(data)
     w = _prefix()
@@ -132,13 +144,13 @@ _SIMPLE_TYPES = ["Group", "Transform", "Shape", "Face"]
 def scenes(draw, max_depth=4):
     specs = bt.node_specs()
     t = bifs.tables()
-    done: dict[str, str] = {}   # completed DEF name -> type
+    done: dict[str, str] = {}  # completed DEF name -> type
     used: set[str] = set()
 
     def value(ftype):
         f32 = st.floats(-1e6, 1e6, allow_nan=False, width=32)
         if ftype == "SFInt32":
-            return draw(st.integers(-2**31, 2**31 - 1))
+            return draw(st.integers(-(2**31), 2**31 - 1))
         if ftype == "SFBool":
             return draw(st.booleans())
         if ftype in ("SFFloat",):
@@ -149,7 +161,7 @@ def scenes(draw, max_depth=4):
             return draw(st.text(max_size=6))
         n = draw(st.sampled_from([0, 1, 2, 3, 5, 17]))
         if ftype == "MFInt32":
-            return np.array(draw(st.lists(st.integers(-2**31, 2**31 - 1), min_size=n, max_size=n)), np.int64)
+            return np.array(draw(st.lists(st.integers(-(2**31), 2**31 - 1), min_size=n, max_size=n)), np.int64)
         if ftype == "MFFloat":
             return np.array(draw(st.lists(f32, min_size=n, max_size=n)), np.float64)
         if ftype in bifs.MF_VEC:
@@ -179,7 +191,7 @@ def scenes(draw, max_depth=4):
             used.add(name)
         fields = {}
         names = list(specs[ntype])
-        chosen = draw(st.permutations(names))[:draw(st.integers(0, min(len(names), 6)))]
+        chosen = draw(st.permutations(names))[: draw(st.integers(0, min(len(names), 6)))]
         for fname in chosen:
             spec = specs[ntype][fname]
             bf = t.nodes[ntype].by_name[fname]
@@ -217,11 +229,34 @@ def test_random_scenes_round_trip(scene):
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.lists(st.floats(allow_nan=False, allow_infinity=False, min_value=-3e38, max_value=3e38),
-                min_size=1, max_size=9))
+@given(
+    st.lists(st.floats(allow_nan=False, allow_infinity=False, min_value=-3e38, max_value=3e38), min_size=1, max_size=9)
+)
 def test_any_float64_round_trips_within_float32(xs):
-    scene = bt.Scene([bt.Node("Group", {"children": [bt.Node("Face", {"fdp": bt.Node("FDP", {
-        "featurePointsCoord": bt.Node("Coordinate", {"point": np.array(xs * 3).reshape(-1, 3)})})})]})])
+    scene = bt.Scene(
+        [
+            bt.Node(
+                "Group",
+                {
+                    "children": [
+                        bt.Node(
+                            "Face",
+                            {
+                                "fdp": bt.Node(
+                                    "FDP",
+                                    {
+                                        "featurePointsCoord": bt.Node(
+                                            "Coordinate", {"point": np.array(xs * 3).reshape(-1, 3)}
+                                        )
+                                    },
+                                )
+                            },
+                        )
+                    ]
+                },
+            )
+        ]
+    )
     back = bifs.decode(bifs.encode(scene))
     assert bifs.same_scene(scene, back)
     assert bifs.decode(bifs.encode(back)) == back
@@ -236,8 +271,8 @@ def _prefix(id_bits: int = 3) -> BifsWriter:
     w.write(id_bits, 5), w.write(0, 5), w.bit(1), w.bit(0), w.bit(0), w.align()
     w.write(3, 2), w.write(0, 6), w.bit(1), w.bit(0)  # ReplaceScene: reserved, useNames, protoList (D10)
     w.bit(0), w.write(t.ndts["SFTopNode"].code("OrderedGroup"), 3), w.bit(0)
-    w.bit(1), w.bit(1)             # masked; children present (order's mask bit: in _finish)
-    w.bit(0), w.bit(1)             # MF reserved 0, list description
+    w.bit(1), w.bit(1)  # masked; children present (order's mask bit: in _finish)
+    w.bit(0), w.bit(1)  # MF reserved 0, list description
     w._id_bits = id_bits
     return w
 
@@ -255,9 +290,9 @@ def _node_header(w, ndt, ntype, *, def_id=None, name=b"", masked_none=True, item
 
 
 def _finish(w) -> bytes:
-    w.bit(1)       # end of children
-    w.bit(0)       # OrderedGroup.order absent
-    w.bit(0), w.bit(0)             # hasROUTEs, continue
+    w.bit(1)  # end of children
+    w.bit(0)  # OrderedGroup.order absent
+    w.bit(0), w.bit(0)  # hasROUTEs, continue
     w._unpadded = w.position
     w.align()
     return w.getvalue()
@@ -298,17 +333,17 @@ def test_wrong_node_types():
     t = bifs.tables()
     w = _prefix()
     _node_header(w, "SF3DNode", "Face")
-    w.bit(0)                                    # Face: list description
+    w.bit(0)  # Face: list description
     w.bit(0), w.write(t.nodes["Face"].by_name["fdp"].def_id, 3)
     _node_header(w, "SFFDPNode", "FDP", item=False)
     w.bit(0)
     w.bit(0), w.write(t.nodes["FDP"].by_name["faceDefTables"].def_id, 3)
-    w.bit(0), w.bit(1), w.bit(0)                # MF list, one item
+    w.bit(0), w.bit(1), w.bit(0)  # MF list, one item
     _node_header(w, "SFFaceDefTablesNode", "FaceDefTables", item=False)
     w.bit(0), w.bit(0), w.write(t.nodes["FaceDefTables"].by_name["faceDefTransform"].def_id, 2)
     w.bit(0), w.bit(1), w.bit(0)
     _node_header(w, "SFFaceDefTransformNode", "FaceDefTransform", item=False)
-    w.bit(0), w.bit(0), w.write(0, 3)           # faceSceneGraphNode
+    w.bit(0), w.bit(0), w.write(0, 3)  # faceSceneGraphNode
     _empty_node(w, "SF3DNode", "Face", item=False)
     e = _rule(_finish(w))
     assert e.rule == "bifs-node-type" and e.node_path.endswith("faceDefTransform[0].faceSceneGraphNode")
@@ -316,15 +351,15 @@ def test_wrong_node_types():
     # a USE of a Coordinate among Group children
     w = _prefix()
     _node_header(w, "SF3DNode", "Group")
-    w.bit(1), w.bit(1)                          # masked: children present
-    w.bit(0), w.bit(1), w.bit(0)                # MF list, one item
+    w.bit(1), w.bit(1)  # masked: children present
+    w.bit(0), w.bit(1), w.bit(0)  # MF list, one item
     _node_header(w, "SF3DNode", "Shape", item=False)
-    w.bit(0), w.bit(0), w.write(1, 1)           # list: geometry
+    w.bit(0), w.bit(0), w.write(1, 1)  # list: geometry
     _node_header(w, "SFGeometryNode", "IndexedFaceSet", item=False)
-    w.bit(0), w.bit(0), w.write(1, 4)           # coord
+    w.bit(0), w.bit(0), w.write(1, 4)  # coord
     _empty_node(w, "SFCoordinateNode", "Coordinate", item=False, def_id=0, name=b"C")
-    w.bit(1), w.bit(1)                          # end IFS fields, end Shape fields
-    w.bit(0), w.bit(1), w.write(0, 3)           # second child: USE C
+    w.bit(1), w.bit(1)  # end IFS fields, end Shape fields
+    w.bit(0), w.bit(1), w.write(0, 3)  # second child: USE C
     e = _rule(_finish(w))
     assert e.rule == "bifs-node-type"
 
@@ -333,7 +368,7 @@ def test_use_of_undefined_and_cyclic_ids():
     w = _prefix()
     w.bit(0), w.bit(1), w.write(5, 3)
     assert _rule(_finish(w)).rule == "bifs-use-undefined"
-    w = _prefix()                               # a Group that USEs itself
+    w = _prefix()  # a Group that USEs itself
     _node_header(w, "SF3DNode", "Group", def_id=0, name=b"G")
     w.bit(1), w.bit(1), w.bit(0), w.bit(1), w.bit(0), w.bit(1), w.write(0, 3), w.bit(1)
     assert _rule(_finish(w)).rule == "bifs-use-undefined"
@@ -369,7 +404,7 @@ def test_absurd_counts_are_refused_before_allocation():
     _node_header(w, "SFAppearanceNode", "Appearance", item=False)
     w.bit(0), w.bit(0), w.write(1, 2)
     _node_header(w, "SFTextureNode", "ImageTexture", item=False)
-    w.bit(1), w.bit(1), w.bit(0), w.bit(1)      # masked: url, MF list
+    w.bit(1), w.bit(1), w.bit(0), w.bit(1)  # masked: url, MF list
     w.bit(0), w.bit(0), w.write(31, 5), w.write(2**31 - 1, 31)  # endFlag, isOD 0 (MFURL, D10), string
     assert _rule(_finish(w)).rule == "bifs-truncated"
 
@@ -410,7 +445,7 @@ def test_encoder_refuses_models_bifs_cannot_carry():
 
 # ---------------------------------------------------------------------------------- robustness
 def _seed_scene() -> bt.Scene:
-    return bt.parse('''
+    return bt.parse("""
 DEF FACE Face {
   fap FAP { viseme Viseme { viseme_select1 3 viseme_blend 40 viseme_def TRUE }
             expression Expression { expression_select1 2 expression_intensity1 63 init_face TRUE }
@@ -430,39 +465,45 @@ DEF FACE Face {
   }
   fit FIT { FAPs [3 -1 4] Graph [0 1] numeratorCoefs [0.5 1] }
 }
-''')
+""")
 
 
 def _mutants(seeds: list[bytes], n: int, rng: random.Random):
     for i in range(n):
         d = bytearray(seeds[i % len(seeds)])
         k = rng.randrange(7)
-        if k <= 2:                      # flip 1..3 bits
+        if k <= 2:  # flip 1..3 bits
             for _ in range(k + 1):
                 p = rng.randrange(len(d) * 8)
                 d[p >> 3] ^= 0x80 >> (p & 7)
-        elif k == 3:                    # truncate
-            d = d[:rng.randrange(len(d))]
-        elif k == 4:                    # overwrite a byte
+        elif k == 3:  # truncate
+            d = d[: rng.randrange(len(d))]
+        elif k == 4:  # overwrite a byte
             d[rng.randrange(len(d))] = rng.randrange(256)
-        elif k == 5:                    # insert or delete bytes
+        elif k == 5:  # insert or delete bytes
             p = rng.randrange(len(d))
             if rng.random() < 0.5:
                 d[p:p] = bytes(rng.randrange(256) for _ in range(rng.randint(1, 4)))
             else:
-                del d[p:p + rng.randint(1, 4)]
-        else:                           # 0xFF run (huge counts / lengths)
+                del d[p : p + rng.randint(1, 4)]
+        else:  # 0xFF run (huge counts / lengths)
             p = rng.randrange(len(d))
-            d[p:p + 4] = b"\xff\xff\xff\xff"
+            d[p : p + 4] = b"\xff\xff\xff\xff"
         yield bytes(d)
 
 
 def test_ten_thousand_mutants_give_only_typed_errors():
-    small = bt.parse('Group { children [ DEF T Transform { rotation 0 1 0 0.5 children [ Shape { geometry '
-                     'IndexedFaceSet { coord Coordinate { point [0 0 0, 1 0 0, 0 1 0] } coordIndex [0 1 2 -1] } } ] } '
-                     'Face { fit FIT { FAPs [3 4] numeratorCoefs [1] } } ] } USE T')
-    seeds = [bifs.encode(_seed_scene()), bifs.encode(_seed_scene(), use_names=False),
-             bifs.encode(small), bifs.encode(small, use_names=False)]
+    small = bt.parse(
+        "Group { children [ DEF T Transform { rotation 0 1 0 0.5 children [ Shape { geometry "
+        "IndexedFaceSet { coord Coordinate { point [0 0 0, 1 0 0, 0 1 0] } coordIndex [0 1 2 -1] } } ] } "
+        "Face { fit FIT { FAPs [3 4] numeratorCoefs [1] } } ] } USE T"
+    )
+    seeds = [
+        bifs.encode(_seed_scene()),
+        bifs.encode(_seed_scene(), use_names=False),
+        bifs.encode(small),
+        bifs.encode(small, use_names=False),
+    ]
     rng = random.Random(9)
     n_ok = n_err = 0
     rules = set()
@@ -568,8 +609,18 @@ def test_animate_and_render_read_bifs_scenes_like_bt(tmp_path, capsys):
 def test_d10_proto_list_bit_and_mfurl():
     """D10: a ReplaceScene carries the proto-list bit after useNames (PROTOs refused), and url is
     MFURL: per URL isOD(1), then a 10-bit object descriptor ID ("od:N") or a string."""
-    scene = bt.Scene([bt.Node("Shape", {"appearance": bt.Node("Appearance", {"texture": bt.Node(
-        "ImageTexture", {"url": ["face.png", "od:12"]})})})])
+    scene = bt.Scene(
+        [
+            bt.Node(
+                "Shape",
+                {
+                    "appearance": bt.Node(
+                        "Appearance", {"texture": bt.Node("ImageTexture", {"url": ["face.png", "od:12"]})}
+                    )
+                },
+            )
+        ]
+    )
     data = bifs.encode(scene)
     assert bifs.decode(data) == scene
     w = _prefix()

@@ -1,4 +1,5 @@
 """BitReader's run readers against reading bit by bit / chunk by chunk (property tests)."""
+
 from __future__ import annotations
 
 from hypothesis import given, settings
@@ -8,8 +9,9 @@ from fbaconf.bitstreams.bitio import BitReader
 from fbaconf.errors import BitstreamError
 
 # bytes rich in 0xff (long chains) with a few others
-_bytes = st.lists(st.sampled_from([0xFF, 0xFF, 0xFF, 0xFE, 0x7F, 0xF0, 0x0F, 0x00]) | st.integers(0, 255),
-                  max_size=40).map(bytes)
+_bytes = st.lists(
+    st.sampled_from([0xFF, 0xFF, 0xFF, 0xFE, 0x7F, 0xF0, 0x0F, 0x00]) | st.integers(0, 255), max_size=40
+).map(bytes)
 
 
 def _chunkwise(r: BitReader) -> int:

@@ -1,6 +1,7 @@
 """Claims: reference-encoder streams for every profile@level check clean against that claim;
 the same stream exceeding exactly one limit (bitrate, frame rate, a tool outside the
 profile, a scene size) gives exactly the expected code."""
+
 from __future__ import annotations
 
 import struct
@@ -18,12 +19,16 @@ from fbaconf.scenes import bt
 
 # stream parameters per level: clean, over the bitrate limit only, over the frame-rate limit only
 STREAMS = {
-    1: {"clean": dict(n=60, rate=30.0, faps=range(3, 40)),
+    1: {
+        "clean": dict(n=60, rate=30.0, faps=range(3, 40)),
         "bitrate": dict(n=60, rate=30.0, faps=range(3, 69), intra_period=10),
-        "frame_rate": dict(n=120, rate=60.0, faps=range(3, 15))},
-    2: {"clean": dict(n=120, rate=60.0, faps=range(3, 30)),
+        "frame_rate": dict(n=120, rate=60.0, faps=range(3, 15)),
+    },
+    2: {
+        "clean": dict(n=120, rate=60.0, faps=range(3, 30)),
         "bitrate": dict(n=120, rate=60.0, faps=range(3, 69), intra_period=10),
-        "frame_rate": dict(n=240, rate=120.0, faps=range(3, 15))},
+        "frame_rate": dict(n=240, rate=120.0, faps=range(3, 15)),
+    },
 }
 
 _cache: dict = {}
@@ -89,8 +94,15 @@ def test_one_scene_limit_exceeded_gives_exactly_its_code(claim):
     assert [d.code for d in ds] == [R.LEVEL_FACES]
 
 
-@pytest.mark.parametrize("claim,tool", [("simple@1", "fit"), ("simple@2", "fdp_feature_points"),
-                                        ("calibration@1", "downloaded_model"), ("calibration@2", "downloaded_model")])
+@pytest.mark.parametrize(
+    "claim,tool",
+    [
+        ("simple@1", "fit"),
+        ("simple@2", "fdp_feature_points"),
+        ("calibration@1", "downloaded_model"),
+        ("calibration@2", "downloaded_model"),
+    ],
+)
 def test_tool_outside_the_profile_gives_exactly_profile_code(claim, tool):
     c = Claim.parse(claim)
     s = scene_for(c) or SceneSummary(faces=1)
@@ -100,9 +112,17 @@ def test_tool_outside_the_profile_gives_exactly_profile_code(claim, tool):
     assert tool in ds[0].message and ds[0].location.node_path == "Face.fdp.FDP"
 
 
-@pytest.mark.parametrize("level,kind,expected", [
-    (1, "clean", "simple@1"), (1, "bitrate", "simple@2"), (1, "frame_rate", "simple@2"),
-    (2, "clean", "simple@2"), (2, "bitrate", None), (2, "frame_rate", None)])
+@pytest.mark.parametrize(
+    "level,kind,expected",
+    [
+        (1, "clean", "simple@1"),
+        (1, "bitrate", "simple@2"),
+        (1, "frame_rate", "simple@2"),
+        (2, "clean", "simple@2"),
+        (2, "bitrate", None),
+        (2, "frame_rate", None),
+    ],
+)
 def test_smallest_claim(level, kind, expected):
     rep = analyse(stream(level, kind), smallest_claim=True)
     assert rep.summary["smallest_claim"] == expected
@@ -132,8 +152,9 @@ def test_bitrate_window_is_sliding():
     holds the burst, not the average, decides."""
     f = smooth_frames(150, 30.0, range(3, 69))
     data_avg = encode(f, EncoderOptions()).data
-    burst = encode(f, EncoderOptions(fap_quant_per_frame=np.array(
-        [1] * 60 + [1, 2] * 15 + [1] * 60))).data  # every plane intra in seconds 2-3
+    burst = encode(
+        f, EncoderOptions(fap_quant_per_frame=np.array([1] * 60 + [1, 2] * 15 + [1] * 60))
+    ).data  # every plane intra in seconds 2-3
     ra, rb = analyse(data_avg), analyse(burst)
     assert rb.summary["peak_bitrate_bps"] > 2 * ra.summary["peak_bitrate_bps"]
     assert len(burst) * 8 / 5.0 < rb.summary["peak_bitrate_bps"]  # the peak beats the average
@@ -142,9 +163,11 @@ def test_bitrate_window_is_sliding():
 def test_real_scene_file_through_the_bt_reader(tmp_path):
     # 84 points in label order, 3 of them sent (the rest 3.4e38: not sent)
     pts = " ".join("0 0 0" if k < 3 else "3.4e38 3.4e38 3.4e38" for k in range(84))
-    text = ("Face {\n  fdp FDP {\n    featurePointsCoord Coordinate { point [ " + pts + " ] }\n  }\n"
-            "  fit FIT { FAPs [ 3 -1 4 ] Graph [ 0 1 ] numeratorTerms [ 1 ] denominatorTerms [ 0 ]"
-            " numeratorExp [ 1 ] numeratorCoefs [ 1.0 ] }\n}\n")
+    text = (
+        "Face {\n  fdp FDP {\n    featurePointsCoord Coordinate { point [ " + pts + " ] }\n  }\n"
+        "  fit FIT { FAPs [ 3 -1 4 ] Graph [ 0 1 ] numeratorTerms [ 1 ] denominatorTerms [ 0 ]"
+        " numeratorExp [ 1 ] numeratorCoefs [ 1.0 ] }\n}\n"
+    )
     p = tmp_path / "face.bt"
     p.write_text(text)
     s = summarize_scene(bt.read(p))
@@ -176,17 +199,24 @@ def _png(path, width: int, height: int) -> None:
 
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
     raw = b"".join(b"\x00" + bytes(width) for _ in range(height))
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
-                     + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(raw))
+        + chunk(b"IEND", b"")
+    )
 
 
 @pytest.mark.parametrize("width,codes", [(512, set()), (600, {R.LEVEL_TEXTURE})])
 def test_texture_size_from_the_scene_image(tmp_path, width, codes):
     _png(tmp_path / "skin.png", width, 4)
-    text = ("Face {\n  fdp FDP {\n    textureCoord TextureCoordinate { point [ 0 0, 1 1 ] }\n"
-            "    faceSceneGraph [ Shape { appearance Appearance { texture ImageTexture { url \"skin.png\" } } } ]\n"
-            "  }\n}\n")
+    text = (
+        "Face {\n  fdp FDP {\n    textureCoord TextureCoordinate { point [ 0 0, 1 1 ] }\n"
+        '    faceSceneGraph [ Shape { appearance Appearance { texture ImageTexture { url "skin.png" } } } ]\n'
+        "  }\n}\n"
+    )
     p = tmp_path / "tex.bt"
     p.write_text(text)
     ds = check_stream(stream(1, "clean"), scene=str(p), claim="calibration@1")

@@ -1,5 +1,6 @@
 """`fbaconf check` on the command line: exit codes, text and JSON output, the JSON schema,
 --max-issues / --only / --ignore / --smallest-claim, and the generated catalogue."""
+
 from __future__ import annotations
 
 import json
@@ -36,8 +37,13 @@ def files(tmp_path_factory):
     f.values[:, 2] = -f.values[:, 2]
     warn = encode(f, EncoderOptions()).data
     at = decode(clean).planes[0].marker_offsets[0][0]
-    out = {"clean": clean, "warn": warn, "broken": flip_bit(clean, at), "notface": b"hello world",
-           "heavy": make_stream(n=60, rate=30.0, faps=range(3, 69), intra_period=10)}
+    out = {
+        "clean": clean,
+        "warn": warn,
+        "broken": flip_bit(clean, at),
+        "notface": b"hello world",
+        "heavy": make_stream(n=60, rate=30.0, faps=range(3, 69), intra_period=10),
+    }
     paths = {}
     for k, v in out.items():
         p = d / f"{k}.fba"

@@ -4,6 +4,7 @@ Streams come from the reference encoder (profiles.sample_streams), bit-edited wh
 (bitstreams/bitedit.py). ``CASES`` maps every registered code to its builder; a test fails when
 a code has no case, so a new code cannot land untested.
 """
+
 from __future__ import annotations
 
 import json
@@ -105,8 +106,10 @@ def case_stuffing(**_):
 def case_arith_state(monkeypatch, **_):
     """The reference decoder keeps low <= value <= high for any input bits, so this rule is
     defensive: simulated by making the block decoder report it."""
+
     def decode_sym(self, model):
         raise self.r.error("arithmetic decoder state out of range (corrupt block)", "arith-state")
+
     monkeypatch.setattr(arith.ArithDecoder, "decode", decode_sym)
     return base(), {}
 
@@ -128,6 +131,7 @@ def case_unexpected_start_code(**_):
 def case_other(monkeypatch, **_):
     def boom(self, start, has_sc):
         raise self.err("synthetic failure", "synthetic-rule")
+
     monkeypatch.setattr(decmod._Decoder, "plane", boom)
     return base(), {}
 
@@ -336,6 +340,7 @@ def _level_scene_case(code):
     def build(**_):
         key, value = LEVEL_SCENE[code]
         return base(), {"claim": "predictable@1", "scene": _scene(key, value)}
+
     return build
 
 
@@ -375,8 +380,10 @@ def case_scene_ill_conditioned(tmp_path, **_):
     pts = ", ".join(sent.get(k, "3.4e38 3.4e38 3.4e38") for k in range(84))
     uv = ", ".join("0.5 0.5" for _ in range(84))
     p = tmp_path / "fdp.bt"
-    p.write_text(f"Face {{ fdp FDP {{ featurePointsCoord Coordinate {{ point [ {pts} ] }} "
-                 f"textureCoord TextureCoordinate {{ point [ {uv} ] }} useOrthoTexture TRUE }} }}\n")
+    p.write_text(
+        f"Face {{ fdp FDP {{ featurePointsCoord Coordinate {{ point [ {pts} ] }} "
+        f"textureCoord TextureCoordinate {{ point [ {uv} ] }} useOrthoTexture TRUE }} }}\n"
+    )
     return base(), {"scene": str(p)}
 
 
@@ -386,6 +393,7 @@ def case_check_dct(monkeypatch, **_):
     def intra_header(self, info):
         real(self, info)
         raise self.err("coding_type 1 (DCT segment mode) is not supported by this decoder", "dct-unsupported")
+
     monkeypatch.setattr(decmod._Decoder, "intra_header", intra_header)
     return base(), {}
 
@@ -393,6 +401,7 @@ def case_check_dct(monkeypatch, **_):
 def case_internal(monkeypatch, **_):
     def boom(*a, **k):
         raise RuntimeError("synthetic checker bug")
+
     monkeypatch.setattr(checker, "_semantics", boom)
     return base(), {}
 
@@ -500,6 +509,7 @@ def test_lookahead_warning_matches_a_real_disagreement(monkeypatch):
             raise self.r.error("stuffing bit after 22 consecutive zeros is not '1'", "stuffing")
         self.r.pos -= arith.LOOKAHEAD
         return self.r.pos - self.start
+
     monkeypatch.setattr(arith.ArithDecoder, "finish", s1_finish)
     try:
         other = decode(data)
@@ -523,8 +533,9 @@ def test_profile_tool_from_a_narrower_profile_data_file():
     """A stream tool outside the claimed profile (high-level FAPs) with profile data that
     leaves them out of Simple: the tool check is data-driven."""
     text = resources.files("fbaconf.profiles").joinpath("data", "profiles.toml").read_text("utf-8")
-    narrow = parse_profiles(text.replace('tools = ["arithmetic", "dct", "high_level_faps"]',
-                                         'tools = ["arithmetic", "dct"]'), "narrow")
+    narrow = parse_profiles(
+        text.replace('tools = ["arithmetic", "dct", "high_level_faps"]', 'tools = ["arithmetic", "dct"]'), "narrow"
+    )
     f = smooth_frames(10, 30.0, FEW, amplitude=3)
     f.status[:, 0] = SET
     f.high[:, 0] = 3
@@ -584,8 +595,19 @@ def test_registry_codes_are_well_formed():
 # (D5) and 0..ceil(63/q), for q = 1..31: 63/q = 6.3 (q 10): 6 vs 7; 5.25 (12): 5 vs 6; 4.2 (15): 4 vs 5;
 # 3.32 (19) and 3.15 (20): 3 vs 4; 2.42 .. 2.03 (26..31): 2 vs 3. Everywhere else 63/q is whole or its
 # fraction is at least one half (e.g. 15.75 at q 4: 16 and 16; 4.5 at q 14: 5 and 5), so both agree.
-D5_DIFFERS = {10: (6, 7), 12: (5, 6), 15: (4, 5), 19: (3, 4), 20: (3, 4), 26: (2, 3), 27: (2, 3), 28: (2, 3),
-              29: (2, 3), 30: (2, 3), 31: (2, 3)}
+D5_DIFFERS = {
+    10: (6, 7),
+    12: (5, 6),
+    15: (4, 5),
+    19: (3, 4),
+    20: (3, 4),
+    26: (2, 3),
+    27: (2, 3),
+    28: (2, 3),
+    29: (2, 3),
+    30: (2, 3),
+    31: (2, 3),
+}
 
 
 def test_the_quantisers_where_the_d5_readings_differ():

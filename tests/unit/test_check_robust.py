@@ -1,6 +1,7 @@
 """The checker never raises and never fails internally, on any input: random bytes, bytes
 behind a face_object_start_code, and valid streams with flipped bits, truncations and
 spliced pieces (both coding modes)."""
+
 from __future__ import annotations
 
 import json
@@ -24,8 +25,9 @@ SEEDS = [
     make_stream(n=12, faps=range(3, 69), plane_start_codes="none"),
     make_stream(n=20, faps=range(3, 20), coding="dct"),
 ]
-VALIDATOR = jsonschema.Draft202012Validator(json.loads(
-    resources.files("fbaconf.profiles").joinpath("data", "check-report.schema.json").read_text("utf-8")))
+VALIDATOR = jsonschema.Draft202012Validator(
+    json.loads(resources.files("fbaconf.profiles").joinpath("data", "check-report.schema.json").read_text("utf-8"))
+)
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -67,8 +69,13 @@ def test_truncations(which, cut):
 
 
 @SETTINGS
-@given(st.integers(0, len(SEEDS) - 1), st.integers(0, len(SEEDS) - 1), st.integers(0, 10**9),
-       st.integers(0, 10**9), st.integers(0, 10**9))
+@given(
+    st.integers(0, len(SEEDS) - 1),
+    st.integers(0, len(SEEDS) - 1),
+    st.integers(0, 10**9),
+    st.integers(0, 10**9),
+    st.integers(0, 10**9),
+)
 def test_splices(a, b, x, y, z):
     da, db = SEEDS[a], SEEDS[b]
     na, nb = len(da) * 8, len(db) * 8
@@ -87,9 +94,14 @@ def test_non_bytes_input():
     assert rep.diagnostics == []
 
 
-@pytest.mark.parametrize("borders, why", [([-100, 0, 0, 100], "strictly increasing"),
-                                          ([-100, 50, 10, 100], "strictly increasing"),
-                                          ([-100, 40, 100], "must be 0")])
+@pytest.mark.parametrize(
+    "borders, why",
+    [
+        ([-100, 0, 0, 100], "strictly increasing"),
+        ([-100, 50, 10, 100], "strictly increasing"),
+        ([-100, 40, 100], "must be 0"),
+    ],
+)
 def test_scene_interval_borders_are_checked(tmp_path, borders, why):
     """The checker applies the engine's FaceDefMesh border rules (found by the independent mutant
     ind-anim-borders-equal-accepted: the checker passed a scene the engine refuses)."""

@@ -1,5 +1,6 @@
 """`fbaconf check F.fap`: the ASCII .fap form checked against the text rules of its reader
 (FAP-TEXT-* codes at line:column). Expected locations are counted by hand in the files written here."""
+
 from __future__ import annotations
 
 import json
@@ -30,12 +31,20 @@ def mask(*set_faps, bad: dict[int, str] | None = None) -> str:
 # line 1 "2.1 acceptance 25 4": the count token '4' is at column 19
 # line 4: mask entry 4 (column 7) is '2'
 # line 7 "2 30": FAP4's value is missing; the end of the file is just past '30' (column 5)
-THREE_FAULTS = "\n".join([
-    "2.1 acceptance 25 4",
-    mask(3), "0 17",
-    mask(3, bad={4: "2"}), "1 18",
-    mask(3, 4), "2 30",
-]) + "\n"
+THREE_FAULTS = (
+    "\n".join(
+        [
+            "2.1 acceptance 25 4",
+            mask(3),
+            "0 17",
+            mask(3, bad={4: "2"}),
+            "1 18",
+            mask(3, 4),
+            "2 30",
+        ]
+    )
+    + "\n"
+)
 
 
 @pytest.fixture(scope="module")
@@ -57,8 +66,7 @@ def test_bad_mask_truncated_frame_and_wrong_count_each_with_line_column_and_code
     doc = json.loads(out)
     jsonschema.validate(doc, schema)
     got = {(i["code"], i["severity"], loc["line"], loc["column"]) for i in doc["issues"] for loc in i["locations"]}
-    assert got == {("FAP-TEXT-013", "warning", 1, 19), ("FAP-TEXT-005", "error", 4, 7),
-                   ("FAP-TEXT-009", "error", 7, 5)}
+    assert got == {("FAP-TEXT-013", "warning", 1, 19), ("FAP-TEXT-005", "error", 4, 7), ("FAP-TEXT-009", "error", 7, 5)}
     assert doc["counts"] == {"error": 2, "warning": 1, "info": 0}
     assert doc["summary"]["frames"] == 2 and doc["summary"]["frame_rate"] == 25
     rc, text = run(capsys, str(p))

@@ -1,4 +1,5 @@
 """The encode / decode / demo verbs end to end through the CLI entry point."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -12,8 +13,23 @@ from fbaconf.cli import main
 def test_encode_decode_round_trip_through_cli(tmp_path, capsys):
     src = synthetic_sequence(30, 25.0)
     (tmp_path / "in.fap").write_text(write_fap(src))
-    assert main(["encode", str(tmp_path / "in.fap"), "-o", str(tmp_path / "s.fba"), "--quant", "2",
-                 "--intra-every", "10", "--recon", str(tmp_path / "recon.npz")]) == 0
+    assert (
+        main(
+            [
+                "encode",
+                str(tmp_path / "in.fap"),
+                "-o",
+                str(tmp_path / "s.fba"),
+                "--quant",
+                "2",
+                "--intra-every",
+                "10",
+                "--recon",
+                str(tmp_path / "recon.npz"),
+            ]
+        )
+        == 0
+    )
     assert main(["decode", str(tmp_path / "s.fba"), "-o", str(tmp_path / "out.npz")]) == 0
     assert main(["decode", str(tmp_path / "s.fba"), "-o", str(tmp_path / "out.fap")]) == 0
     recon = FapFrames.load_npz(tmp_path / "recon.npz")

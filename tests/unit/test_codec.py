@@ -1,4 +1,5 @@
 """Reference encoder + decoder (frame-based arithmetic mode): property tests and rules."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -38,13 +39,13 @@ def sequences(draw):
         for g in GROUPS:
             kind = draw(st.sampled_from(["none", "all", "partial"]))
             if kind == "all":
-                coded[g.first_fap - 1:g.last_fap] = True
+                coded[g.first_fap - 1 : g.last_fap] = True
                 types.append(3)
             elif kind == "none":
                 types.append(draw(st.sampled_from([0, 1, 2])))
             else:
                 bits = draw(st.lists(st.booleans(), min_size=g.size, max_size=g.size))
-                coded[g.first_fap - 1:g.last_fap] = bits
+                coded[g.first_fap - 1 : g.last_fap] = bits
                 types.append(draw(st.sampled_from([1, 2])))
         for _ in range(seg_len):
             rows.append((q, tuple(types), coded.copy()))
@@ -62,18 +63,32 @@ def sequences(draw):
             unit = int(QP[f - 1]) if q else 1
             frames.values[k, f - 1] = draw(value_draw) * unit // draw(st.integers(1, 4))
         if coded[0]:
-            frames.high[k, 0:4] = [draw(st.integers(0, 14)), draw(st.integers(0, 14)), draw(st.integers(0, 63)),
-                                   draw(st.integers(0, 1))]
+            frames.high[k, 0:4] = [
+                draw(st.integers(0, 14)),
+                draw(st.integers(0, 14)),
+                draw(st.integers(0, 63)),
+                draw(st.integers(0, 1)),
+            ]
         if coded[1]:
-            frames.high[k, 4:10] = [draw(st.integers(0, 6)), draw(st.integers(0, 63)), draw(st.integers(0, 6)),
-                                    draw(st.integers(0, 63)), draw(st.integers(0, 1)), draw(st.integers(0, 1))]
+            frames.high[k, 4:10] = [
+                draw(st.integers(0, 6)),
+                draw(st.integers(0, 63)),
+                draw(st.integers(0, 6)),
+                draw(st.integers(0, 63)),
+                draw(st.integers(0, 1)),
+                draw(st.integers(0, 1)),
+            ]
     rate = draw(st.sampled_from([25.0, 30.0, 30000 / 1001, 10.0, 12.5, 0.5, 60.0]))
     frames.frame_rate = rate
-    opts = EncoderOptions(fap_quant_per_frame=quants, group_types=types,
-                          intra_period=draw(st.sampled_from([0, 0, 1, 3])),
-                          time_codes=draw(st.booleans()),
-                          plane_start_codes=draw(st.sampled_from(["none", "intra", "all"])),
-                          ranges=draw(st.sampled_from(["auto", "persist"])), gender=draw(st.integers(0, 1)))
+    opts = EncoderOptions(
+        fap_quant_per_frame=quants,
+        group_types=types,
+        intra_period=draw(st.sampled_from([0, 0, 1, 3])),
+        time_codes=draw(st.booleans()),
+        plane_start_codes=draw(st.sampled_from(["none", "intra", "all"])),
+        ranges=draw(st.sampled_from(["auto", "persist"])),
+        gender=draw(st.integers(0, 1)),
+    )
     return frames, opts, types
 
 
@@ -141,8 +156,10 @@ def test_encoding_is_deterministic(case):
 
 def test_plane_start_code_modes_decode_identically():
     f = synthetic_sequence(60, 25.0)
-    outs = [decode(encode(f, EncoderOptions(plane_start_codes=m, intra_period=10)).data).frames
-            for m in ("none", "intra", "all")]
+    outs = [
+        decode(encode(f, EncoderOptions(plane_start_codes=m, intra_period=10)).data).frames
+        for m in ("none", "intra", "all")
+    ]
     assert first_difference(outs[0], outs[1]) is None and first_difference(outs[0], outs[2]) is None
 
 
@@ -178,10 +195,19 @@ def test_quantiser_matches_spec_rule():
             assert quantise(x, step) == (exp if x >= 0 else -exp)
 
 
-@pytest.mark.parametrize("text,expected", [
-    ("25", (25, 0, False)), ("30", (30, 0, False)), ("29.97", (30, 0, True)), ("30000/1001", (30, 0, True)),
-    ("12.5", (12, 8, False)), ("0.5", (0, 8, False)), ("24000/1001", (24, 0, True)), ("255.9375", (255, 15, False)),
-])
+@pytest.mark.parametrize(
+    "text,expected",
+    [
+        ("25", (25, 0, False)),
+        ("30", (30, 0, False)),
+        ("29.97", (30, 0, True)),
+        ("30000/1001", (30, 0, True)),
+        ("12.5", (12, 8, False)),
+        ("0.5", (0, 8, False)),
+        ("24000/1001", (24, 0, True)),
+        ("255.9375", (255, 15, False)),
+    ],
+)
 def test_frame_rate_codes(text, expected):
     c = frame_rate_code(text)
     assert (c.frame_rate, c.seconds, c.frequency_offset) == expected
@@ -224,6 +250,7 @@ def test_time_codes_set_the_plane_time():
 
 # ------------------------------------------------------------------------ decoder error rules
 
+
 def _stream(bits: str) -> bytes:
     bits = bits + "0" * (-len(bits) % 8)
     return int(bits, 2).to_bytes(len(bits) // 8, "big") if bits else b""
@@ -232,16 +259,19 @@ def _stream(bits: str) -> bytes:
 START = f"{0x000001BA:032b}"
 
 
-@pytest.mark.parametrize("bits,rule,offset", [
-    ("", "truncated", 0),
-    (f"{0x000001BB:032b}", "start-code", 0),
-    (START + "1" + "11", "object-mask", 33),
-    (START + "0" + "01" + "0", "first-plane-intra", 32),
-    (START + "1" + "01" + "1" + "00000000" + "0000" + "0", "frame-rate-zero", 36),
-    (START + "1" + "01" + "0" + "1" + "00000" + "000000" + "0", "marker", 48),
-    (START + "1" + "01" + "0" + "0" + "0" + "00001" + "0", "marker", 43),
-    (START + "1" + "01" + "0" + "0", "truncated", 38),  # fap_quant starts at 38
-])
+@pytest.mark.parametrize(
+    "bits,rule,offset",
+    [
+        ("", "truncated", 0),
+        (f"{0x000001BB:032b}", "start-code", 0),
+        (START + "1" + "11", "object-mask", 33),
+        (START + "0" + "01" + "0", "first-plane-intra", 32),
+        (START + "1" + "01" + "1" + "00000000" + "0000" + "0", "frame-rate-zero", 36),
+        (START + "1" + "01" + "0" + "1" + "00000" + "000000" + "0", "marker", 48),
+        (START + "1" + "01" + "0" + "0" + "0" + "00001" + "0", "marker", 43),
+        (START + "1" + "01" + "0" + "0", "truncated", 38),  # fap_quant starts at 38
+    ],
+)
 def test_decoder_rules(bits, rule, offset):
     with pytest.raises(BitstreamError) as e:
         decode(_stream(bits))

@@ -1,5 +1,6 @@
 """The harness comparison ladder (harness/compare/): FAPs, vertices, images, tolerances,
 and untrusted decoder outputs."""
+
 from __future__ import annotations
 
 import io
@@ -84,11 +85,18 @@ def test_tolerance_overrides_and_validation():
     base = ImageTolerances.defaults()
     t = ImageTolerances.from_dict(base, {"abs_tol": 0.5, "fail_percent": 3})
     assert t.abs_tol == 0.5 and t.fail_percent == 3.0 and t.contrast_k == base.contrast_k
-    assert ImageTolerances.from_dict(None, {"abs_tol": 0.5}) == t.__class__(**{**base.to_dict(), "abs_tol": 0.5,
-                                                                              "fail_percent": base.fail_percent})
+    assert ImageTolerances.from_dict(None, {"abs_tol": 0.5}) == t.__class__(
+        **{**base.to_dict(), "abs_tol": 0.5, "fail_percent": base.fail_percent}
+    )
     assert VertexTolerances.from_dict({"max_tol": 1, "rms_tol": 0.5}, None) == VertexTolerances(1.0, 0.5)
-    for bad in ({"absTol": 1}, {"abs_tol": "x"}, {"abs_tol": True}, {"abs_tol": -1},
-                {"abs_tol": float("nan")}, {"interior_deltae_warn_mean": 2, "interior_deltae_fail_mean": 1}):
+    for bad in (
+        {"absTol": 1},
+        {"abs_tol": "x"},
+        {"abs_tol": True},
+        {"abs_tol": -1},
+        {"abs_tol": float("nan")},
+        {"interior_deltae_warn_mean": 2, "interior_deltae_fail_mean": 1},
+    ):
         with pytest.raises(ToleranceError):
             ImageTolerances.from_dict(base, bad)
     with pytest.raises(ToleranceError):
@@ -97,7 +105,7 @@ def test_tolerance_overrides_and_validation():
 
 # ----------------------------------------------------------------------------- FAPs
 @FAST
-@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 6), text=st.booleans())
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6), text=st.booleans())
 def test_identical_faps_pass(seed, n, text):
     f = random_frames(seed, n)
     r = compare_faps(f, f.copy(), text_output=text)
@@ -107,8 +115,13 @@ def test_identical_faps_pass(seed, n, text):
 
 
 @FAST
-@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 6), pick=st.integers(0, 10 ** 6),
-       delta=st.integers(1, 50), text=st.booleans())
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(1, 6),
+    pick=st.integers(0, 10**6),
+    delta=st.integers(1, 50),
+    text=st.booleans(),
+)
 def test_one_changed_normative_value_fails_naming_frame_and_fap(seed, n, pick, delta, text):
     e = random_frames(seed, n)
     cells = np.argwhere(e.status != FREE)
@@ -134,8 +147,7 @@ def test_one_changed_normative_value_fails_naming_frame_and_fap(seed, n, pick, d
 
 
 @FAST
-@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 6), pick=st.integers(0, 10 ** 6),
-       text=st.booleans())
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 6), pick=st.integers(0, 10**6), text=st.booleans())
 def test_changed_free_values_pass(seed, n, pick, text):
     e = random_frames(seed, n)
     e.status[pick % n, :] = FREE  # a whole frame FREE: also FAP 1/2 -> high-level fields free
@@ -154,8 +166,15 @@ def test_status_matters_for_npz_but_not_for_text():
     assert r.outcome is Outcome.FAIL
     fd = dict(r.first_difference)
     assert fd.pop("faps") == [{"fap": 31, "name": name_of(31), "frames": 1, "first": 2, "last": 2}]
-    assert fd == {"frame": 2, "frame_number": 2, "fap": 31, "name": name_of(31), "what": "status",
-                  "expected": "SET", "got": "RETAINED"}
+    assert fd == {
+        "frame": 2,
+        "frame_number": 2,
+        "fap": 31,
+        "name": name_of(31),
+        "what": "status",
+        "expected": "SET",
+        "got": "RETAINED",
+    }
     assert compare_faps(e, g, text_output=True).outcome is Outcome.PASS
 
 
@@ -169,8 +188,13 @@ def test_every_differing_fap_is_listed_with_counts():
     r = compare_faps(e, g, text_output=False)
     diff3 = int((e.values[:, 2] != e.values[:, 3]).sum())
     rows = {x["fap"]: x for x in r.first_difference["faps"]}
-    assert rows[3]["frames"] == diff3 and rows[19] == {"fap": 19, "name": name_of(19), "frames": 3, "first": 5,
-                                                       "last": 7}
+    assert rows[3]["frames"] == diff3 and rows[19] == {
+        "fap": 19,
+        "name": name_of(19),
+        "frames": 3,
+        "first": 5,
+        "last": 7,
+    }
     assert "differing FAPs: 3 " in r.message and "19 " in r.message
 
 
@@ -227,9 +251,16 @@ def _npz(path: Path, **arrays) -> Path:
 
 def _fapframes_arrays(n=3, **changes):
     f = synthetic_sequence(n, faps=[3, 4])
-    a = {"format": np.array("fbaconf.FapFrames/1"), "values": f.values, "status": f.status, "high": f.high,
-         "frame_number": f.frame_number, "time_ms": f.time_ms, "frame_rate": np.float64(25.0),
-         "gender": np.int64(0)}
+    a = {
+        "format": np.array("fbaconf.FapFrames/1"),
+        "values": f.values,
+        "status": f.status,
+        "high": f.high,
+        "frame_number": f.frame_number,
+        "time_ms": f.time_ms,
+        "frame_rate": np.float64(25.0),
+        "gender": np.int64(0),
+    }
     a.update(changes)
     return {k: v for k, v in a.items() if v is not None}
 
@@ -237,7 +268,7 @@ def _fapframes_arrays(n=3, **changes):
 def _huge_header_npz(path: Path) -> Path:
     """A valid zip whose values.npy header claims a (10**9, 68) int32 array."""
     hdr = io.BytesIO()
-    np.lib.format.write_array_header_1_0(hdr, {"descr": "<i4", "fortran_order": False, "shape": (10 ** 9, 68)})
+    np.lib.format.write_array_header_1_0(hdr, {"descr": "<i4", "fortran_order": False, "shape": (10**9, 68)})
     with zipfile.ZipFile(path, "w") as z:
         z.writestr("format.npy", _npy(np.array("fbaconf.FapFrames/1")))
         z.writestr("values.npy", hdr.getvalue() + b"\0" * 64)
@@ -263,8 +294,7 @@ GARBAGE_FAPS = {
     "status rows differ": lambda p: _npz(p / "r.npz", **_fapframes_arrays(status=np.zeros((2, 68), np.uint8))),
     "float values": lambda p: _npz(p / "f.npz", **_fapframes_arrays(values=np.zeros((3, 68)))),
     "status 7": lambda p: _npz(p / "s7.npz", **_fapframes_arrays(status=np.full((3, 68), 7, np.uint8))),
-    "values beyond int32": lambda p: _npz(p / "big.npz",
-                                          **_fapframes_arrays(values=np.full((3, 68), 2 ** 40, np.int64))),
+    "values beyond int32": lambda p: _npz(p / "big.npz", **_fapframes_arrays(values=np.full((3, 68), 2**40, np.int64))),
     "NaN time": lambda p: _npz(p / "nan.npz", **_fapframes_arrays(time_ms=np.array([0.0, np.nan, 80.0]))),
     "NaN frame rate": lambda p: _npz(p / "fr.npz", **_fapframes_arrays(frame_rate=np.float64(np.nan))),
     "frame rate array": lambda p: _npz(p / "fra.npz", **_fapframes_arrays(frame_rate=np.ones(3))),
@@ -312,8 +342,10 @@ def test_mutated_outputs_never_raise_anything_else(tmp_path_factory, data):
         blob[data.draw(st.integers(0, len(blob) - 1))] = data.draw(st.integers(0, 255))
     cut = data.draw(st.integers(0, len(blob)))
     d = tmp_path_factory.mktemp("mut")
-    for name, content in (("m.npz", bytes(blob[:cut] if data.draw(st.booleans()) else blob)),
-                          ("m.fap", data.draw(st.binary(max_size=300)))):
+    for name, content in (
+        ("m.npz", bytes(blob[:cut] if data.draw(st.booleans()) else blob)),
+        ("m.fap", data.draw(st.binary(max_size=300))),
+    ):
         (d / name).write_bytes(content)
         try:
             out = load_output_faps(d / name)
@@ -328,7 +360,7 @@ def _verts(seed=0, F=3, N=40):
 
 
 @FAST
-@given(seed=st.integers(0, 2 ** 32 - 1), frac=st.floats(0.0, 0.9), F=st.integers(1, 4))
+@given(seed=st.integers(0, 2**32 - 1), frac=st.floats(0.0, 0.9), F=st.integers(1, 4))
 def test_vertex_perturbation_within_tolerance_passes(seed, frac, F):
     e = _verts(seed, F)
     g = e.copy()
@@ -343,7 +375,7 @@ def test_vertex_perturbation_within_tolerance_passes(seed, frac, F):
 
 
 @FAST
-@given(seed=st.integers(0, 2 ** 32 - 1), factor=st.floats(1.5, 1000.0), F=st.integers(1, 4))
+@given(seed=st.integers(0, 2**32 - 1), factor=st.floats(1.5, 1000.0), F=st.integers(1, 4))
 def test_vertex_perturbation_over_tolerance_fails_naming_it(seed, factor, F):
     e = _verts(seed, F)
     g = e.copy()
@@ -395,13 +427,16 @@ def test_load_output_vertices(tmp_path):
     assert load_output_vertices(tmp_path / "plain.npz").shape == (2, 5, 3)
 
 
-@pytest.mark.parametrize("arrays, match", [
-    ({"vertices": np.zeros((2, 5, 2))}, "shape"),
-    ({"vertices": np.zeros((10, 3))}, "shape"),
-    ({"vertices": np.zeros((2, 5, 3), np.int32)}, "dtype"),
-    ({"vertices": np.array([[[0.0, np.inf, 0.0]]])}, "frame 0, vertex 0"),
-    ({"verts": np.zeros((2, 5, 3))}, "no array 'vertices'"),
-])
+@pytest.mark.parametrize(
+    "arrays, match",
+    [
+        ({"vertices": np.zeros((2, 5, 2))}, "shape"),
+        ({"vertices": np.zeros((10, 3))}, "shape"),
+        ({"vertices": np.zeros((2, 5, 3), np.int32)}, "dtype"),
+        ({"vertices": np.array([[[0.0, np.inf, 0.0]]])}, "frame 0, vertex 0"),
+        ({"verts": np.zeros((2, 5, 3))}, "no array 'vertices'"),
+    ],
+)
 def test_garbage_vertex_outputs_raise_output_error(tmp_path, arrays, match):
     p = _npz(tmp_path / "v.npz", **arrays)
     with pytest.raises(OutputError, match=match):
@@ -421,12 +456,14 @@ def rendered(tmp_path_factory) -> list[Path]:
 
 def _read8(path: Path) -> np.ndarray:
     import OpenImageIO as oiio  # noqa: PLC0415 (image I/O loads on first use)
+
     buf = oiio.ImageBuf(str(path))
     return np.asarray(buf.get_pixels(oiio.UINT8))
 
 
 def _write8(path: Path, px: np.ndarray) -> Path:
     import OpenImageIO as oiio  # noqa: PLC0415 (image I/O loads on first use)
+
     out = oiio.ImageOutput.create(str(path))
     h, w, c = px.shape
     out.open(str(path), oiio.ImageSpec(w, h, c, oiio.UINT8))
@@ -464,7 +501,7 @@ def test_a_visible_blob_fails_naming_it(rendered, tmp_path):
     ys, xs = np.nonzero(bg[:-4, :-4] & bg[4:, 4:] & bg[4:, :-4] & bg[:-4, 4:])
     x, y = int(xs[0]), int(ys[0])
     expected_rgb = px[y + 2, x + 2].tolist()
-    px[y:y + 5, x:x + 5] = 255
+    px[y : y + 5, x : x + 5] = 255
     got = [rendered[0], _write8(tmp_path / "f1.png", px)]
     r = compare_images(rendered, got, TOL, tmp_path / "art", frames=[10, 11], relative_to=tmp_path)
     assert r.outcome is Outcome.FAIL and r.metrics["violations_max"] == 25, r.message
@@ -500,8 +537,9 @@ def test_small_uniform_noise_passes_and_a_small_uniform_shift_warns(rendered, tm
     loose = ImageTolerances.from_dict(TOL, {"interior_deltae_warn_mean": 0.7})
     assert compare_images(rendered, shifted, loose, tmp_path / "art2").outcome is Outcome.PASS
     # 3 codes: about one just-noticeable difference, visible -> Fail, never hidden in a warning
-    three = [_write8(tmp_path / f"t{i}.png", np.clip(_read8(p).astype(np.int16) + 3, 0, 255))
-             for i, p in enumerate(rendered)]
+    three = [
+        _write8(tmp_path / f"t{i}.png", np.clip(_read8(p).astype(np.int16) + 3, 0, 255)) for i, p in enumerate(rendered)
+    ]
     r = compare_images(rendered, three, TOL, tmp_path / "art3")
     assert r.outcome is Outcome.FAIL and "interior ΔE2000 mean" in r.message, r.message
 
@@ -518,15 +556,16 @@ def _disc(cx: float, cy: float, radius: float, size: int = 48, n: int = 16) -> n
     analytically enough (n x n samples per pixel): the ideal image of a sharp silhouette."""
     o = (np.arange(size * n) + 0.5) / n
     X, Y = np.meshgrid(o, o)
-    inside = ((X - cx) ** 2 + (Y - cy) ** 2 <= radius ** 2).astype(np.float64)
+    inside = ((X - cx) ** 2 + (Y - cy) ** 2 <= radius**2).astype(np.float64)
     cov = inside.reshape(size, n, size, n).mean(axis=(1, 3))
     lin = 0.02 + cov[:, :, None] * np.array([0.8, 0.55, 0.4])
     return encode_srgb8(lin)
 
 
 @FAST
-@given(st.floats(18.0, 30.0), st.floats(18.0, 30.0), st.floats(8.0, 15.0), st.sampled_from([1, 2, 3]),
-       st.floats(-0.2, 0.2))
+@given(
+    st.floats(18.0, 30.0), st.floats(18.0, 30.0), st.floats(8.0, 15.0), st.sampled_from([1, 2, 3]), st.floats(-0.2, 0.2)
+)
 def test_silhouettes_any_sampler_passes_and_a_one_pixel_shift_fails(tmp_path_factory, cx, cy, r, n, jitter):
     """The per-pixel rule on an analytic silhouette: the same disc sampled with 1 x 1 to 3 x 3
     samples at a sub-pixel offset of the pattern (any faithful anti-aliasing) stays within the
@@ -575,6 +614,7 @@ def test_image_size_mismatch_missing_and_garbage_fail(rendered, tmp_path):
 # ----------------------------------------------------------------------------- report contract
 def test_stage_results_fit_the_run_report_schema(rendered, tmp_path):
     import jsonschema  # noqa: PLC0415 (test-only dependency)
+
     schema_path = Path(__file__).resolve().parents[2] / "harness" / "data" / "run-report.schema.json"
     schema = json.loads(schema_path.read_text("utf-8"))
     stage_schema = {"$defs": schema["$defs"], "$ref": "#/$defs/stage"}
@@ -591,10 +631,13 @@ def test_stage_results_fit_the_run_report_schema(rendered, tmp_path):
     e = random_frames(3, 4)
     g = e.copy()
     g.values[e.status != FREE] += 1
-    results = [compare_faps(e, g, text_output=True), compare_faps(e, e.select(slice(0, 2)), text_output=False),
-               compare_vertices(_verts(), _verts(1), max_tol=0.1, rms_tol=0.1),
-               compare_vertices(_verts(), _verts()[:, :3], max_tol=0.1, rms_tol=0.1),
-               compare_images(rendered, [rendered[0], tmp_path / "absent.png"], TOL, tmp_path / "art")]
+    results = [
+        compare_faps(e, g, text_output=True),
+        compare_faps(e, e.select(slice(0, 2)), text_output=False),
+        compare_vertices(_verts(), _verts(1), max_tol=0.1, rms_tol=0.1),
+        compare_vertices(_verts(), _verts()[:, :3], max_tol=0.1, rms_tol=0.1),
+        compare_images(rendered, [rendered[0], tmp_path / "absent.png"], TOL, tmp_path / "art"),
+    ]
     for r in results:
         jsonschema.validate(nan_as_text(r.to_json()), stage_schema)
 
@@ -646,8 +689,13 @@ def test_player_npz_state_times_and_presence_are_compared():
     dropped.status[1, 2] = FREE  # the held FAP 3 left out of the state
     r = compare_faps(e, dropped, text_output=False, player=True)
     fd = r.first_difference
-    assert r.outcome.value == "Fail" and (fd["frame"], fd["fap"], fd["what"], fd["expected"], fd["got"]) == \
-        (1, 3, "missing", 100, None)
+    assert r.outcome.value == "Fail" and (fd["frame"], fd["fap"], fd["what"], fd["expected"], fd["got"]) == (
+        1,
+        3,
+        "missing",
+        100,
+        None,
+    )
 
 
 @pytest.mark.parametrize("declared, ok", [(2, True), (3, False), (0, False)])

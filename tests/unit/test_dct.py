@@ -1,5 +1,6 @@
 """DCT segment coding mode (coding_type 1): tables, integer transform, VLCs, round trips,
 mode switching, bad input. Tables come from bitstreams/data/dct_provisional.toml."""
+
 from __future__ import annotations
 
 import math
@@ -28,6 +29,7 @@ def _err(msg, rule, at=None, fap=None):
 
 
 # ---------------------------------------------------------------------------- the data file
+
 
 def test_data_file_is_tagged_provisional_with_rationales():
     doc = dct.read_table_document()
@@ -66,6 +68,7 @@ def test_invalid_data_file_is_refused():
 
 # ---------------------------------------------------------------------------- integer transform
 
+
 def test_matrix_matches_an_independent_float_dct_ii():
     S = 1 << T.scale_bits
     N = T.length
@@ -95,8 +98,11 @@ def test_fixed_point_pair_is_exactly_invertible(x):
     assert back == x
 
 
-@given(st.lists(st.integers(-LIMIT * 4, LIMIT * 4), min_size=16, max_size=16),
-       st.sampled_from([3, 4, 19, 48, 47]), st.integers(0, 31))
+@given(
+    st.lists(st.integers(-LIMIT * 4, LIMIT * 4), min_size=16, max_size=16),
+    st.sampled_from([3, 4, 19, 48, 47]),
+    st.integers(0, 31),
+)
 def test_quantised_transform_error_within_bound(x, fap, index):
     step = T.ac_step(fap, index)
     y = dct.inverse(dct.forward_levels(x, step, T), step, T)
@@ -109,6 +115,7 @@ def test_rdiv_rounds_half_away_from_zero():
 
 
 # ---------------------------------------------------------------------------- VLCs
+
 
 def test_vlc_table_prefix_free_and_every_entry_decodes():
     words = [T.eob, T.escape] + [c for *_, c in T.table]
@@ -128,8 +135,11 @@ def test_vlc_table_prefix_free_and_every_entry_decodes():
             assert r.pos == w.position
 
 
-@given(st.lists(st.integers(-T.ac_max_level, T.ac_max_level) | st.just(0), min_size=15, max_size=15),
-       st.integers(-T.dc_max_level, T.dc_max_level), st.sampled_from([T.dc_intra_order, T.dc_pred_order]))
+@given(
+    st.lists(st.integers(-T.ac_max_level, T.ac_max_level) | st.just(0), min_size=15, max_size=15),
+    st.integers(-T.dc_max_level, T.dc_max_level),
+    st.sampled_from([T.dc_intra_order, T.dc_pred_order]),
+)
 def test_segment_codes_round_trip(ac, dc, order):
     levels = [dc] + ac
     w = BitWriter()
@@ -142,6 +152,7 @@ def test_segment_codes_round_trip(ac, dc, order):
 
 
 # ---------------------------------------------------------------------------- sequences
+
 
 def _sequence(n: int, seed: int, *, hl: bool = True, gaps: bool = False, rate: float = 25.0) -> FapFrames:
     rng = np.random.default_rng(seed)
@@ -156,8 +167,9 @@ def _sequence(n: int, seed: int, *, hl: bool = True, gaps: bool = False, rate: f
     t = np.arange(n)
     for i in range(2, 68):
         amp = rng.integers(1, 300) * QP[i]
-        f.values[:, i] = np.clip(amp * np.sin(t / rng.uniform(2, 12) + rng.uniform(0, 6)), -LIMIT * QP[i],
-                                 LIMIT * QP[i]).astype(np.int32)
+        f.values[:, i] = np.clip(
+            amp * np.sin(t / rng.uniform(2, 12) + rng.uniform(0, 6)), -LIMIT * QP[i], LIMIT * QP[i]
+        ).astype(np.int32)
     f.status[:] = np.where(coded, SET, FREE)
     f.high[:, 0] = rng.integers(0, 15, n)
     f.high[:, 1] = rng.integers(0, 15, n)
@@ -189,7 +201,7 @@ def fap_sequences(draw):
             coded = np.zeros(68, bool)
             for g in tables.groups():
                 if rng.random() < 0.5:
-                    coded[g.first_fap - 1:g.last_fap] = True
+                    coded[g.first_fap - 1 : g.last_fap] = True
         else:
             coded = rng.random(68) < rng.uniform(0.05, 0.95)
         free = rng.random(68) < 0.5
@@ -236,11 +248,23 @@ def _check_error_bound(src: FapFrames, recon: FapFrames, index: int, t=None):
 
 
 @settings(max_examples=60)
-@given(fap_sequences(), st.integers(0, 31), st.sampled_from(["none", "intra", "all"]),
-       st.sampled_from([None, 1, 2]), st.sampled_from([0, 0, 5, 20]), st.booleans())
+@given(
+    fap_sequences(),
+    st.integers(0, 31),
+    st.sampled_from(["none", "intra", "all"]),
+    st.sampled_from([None, 1, 2]),
+    st.sampled_from([0, 0, 5, 20]),
+    st.booleans(),
+)
 def test_round_trip_decoded_equals_recon(frames, index, start_codes, partial, intra_period, time_codes):
-    opts = EncoderOptions(coding="dct", fap_quant=index, plane_start_codes=start_codes, partial_mask_type=partial,
-                          intra_period=intra_period, time_codes=time_codes)
+    opts = EncoderOptions(
+        coding="dct",
+        fap_quant=index,
+        plane_start_codes=start_codes,
+        partial_mask_type=partial,
+        intra_period=intra_period,
+        time_codes=time_codes,
+    )
     res = encode(frames, opts)
     out = decode(res.data)
     got = out.frames
@@ -289,7 +313,7 @@ def test_uncodable_value_is_refused():
     frames = _sequence(5, seed=1, hl=False)
     frames.status[:] = FREE
     frames.status[:, 2] = SET
-    frames.values[:, 2] = [0, 2**30, -2**30, 0, 0]
+    frames.values[:, 2] = [0, 2**30, -(2**30), 0, 0]
     with pytest.raises(EncodeError) as ei:
         encode(frames, EncoderOptions(coding="dct", fap_quant=0))
     assert ei.value.rule == "value-range" and ei.value.fap == 3
@@ -297,16 +321,20 @@ def test_uncodable_value_is_refused():
 
 # ---------------------------------------------------------------------------- mode switching
 
-@pytest.mark.parametrize("pattern", [
-    ["arithmetic"] * 10 + ["dct"] * 20 + ["arithmetic"] * 7,
-    ["dct"] * 17 + ["arithmetic"] * 3 + ["dct"] * 5,
-    [1, 0] * 6,
-])
+
+@pytest.mark.parametrize(
+    "pattern",
+    [
+        ["arithmetic"] * 10 + ["dct"] * 20 + ["arithmetic"] * 7,
+        ["dct"] * 17 + ["arithmetic"] * 3 + ["dct"] * 5,
+        [1, 0] * 6,
+    ],
+)
 def test_mode_switch_stream(pattern):
     n = len(pattern)
     frames = _sequence(n, seed=n)
     # a FAP coded only in the first section must be RETAINED (with its value) later
-    frames.status[n // 2:, 2] = RETAINED
+    frames.status[n // 2 :, 2] = RETAINED
     res = encode(frames, EncoderOptions(coding_per_frame=pattern, fap_quant=2))
     out = decode(res.data)
     assert first_difference(res.recon, out.frames) is None
@@ -314,7 +342,7 @@ def test_mode_switch_stream(pattern):
     assert (out.frames.coding_type == modes).all()
     switches = [k for k in range(n) if k == 0 or modes[k] != modes[k - 1]]
     assert all(out.frames.is_intra[k] for k in switches)
-    assert (out.frames.values[n // 2:, 2] == out.frames.values[n // 2 - 1, 2]).all()
+    assert (out.frames.values[n // 2 :, 2] == out.frames.values[n // 2 - 1, 2]).all()
 
 
 @settings(max_examples=25)
@@ -334,6 +362,7 @@ def test_arithmetic_stream_unchanged_by_dct_option_absence():
 
 
 # ---------------------------------------------------------------------------- bad input
+
 
 def _hand_stream(segment_bits) -> bytes:
     """Object start code, an intra DCT plane coding only FAP 3, then ``segment_bits(w)``."""
@@ -370,20 +399,40 @@ def test_hand_built_stream_decodes():
     def seg(w):
         dct.write_se(w, 8, T.dc_intra_order)
         _code(w, T.eob)
+
     out = decode(_hand_stream(seg)).frames
     assert len(out) == 16 and (out.coding_type == 1).all()
     assert (out.values[:, 2] == dct.inverse([8] + [0] * 15, T.ac_step(3, 0), T)).all()
 
 
-@pytest.mark.parametrize("rule,seg", [
-    ("run-overflow", lambda w: (dct.write_se(w, 1, T.dc_intra_order), _code(w, T.escape),
-                                w.write(15, T.escape_run_bits), w.write(3, T.escape_level_bits), w.bit(0))),
-    ("invalid-vlc", lambda w: (dct.write_se(w, 1, T.dc_intra_order), _code(w, T.escape),
-                               w.write(0, T.escape_run_bits), w.write(0, T.escape_level_bits), w.bit(0))),
-    ("invalid-vlc", lambda w: w.write(0, T.dc_max_prefix + 1)),
-    ("coefficient-overflow", lambda w: (dct.write_se(w, T.dc_max_level + 1, T.dc_intra_order), _code(w, T.eob))),
-    ("truncated", lambda w: dct.write_se(w, 100000, T.dc_intra_order)),
-])
+@pytest.mark.parametrize(
+    "rule,seg",
+    [
+        (
+            "run-overflow",
+            lambda w: (
+                dct.write_se(w, 1, T.dc_intra_order),
+                _code(w, T.escape),
+                w.write(15, T.escape_run_bits),
+                w.write(3, T.escape_level_bits),
+                w.bit(0),
+            ),
+        ),
+        (
+            "invalid-vlc",
+            lambda w: (
+                dct.write_se(w, 1, T.dc_intra_order),
+                _code(w, T.escape),
+                w.write(0, T.escape_run_bits),
+                w.write(0, T.escape_level_bits),
+                w.bit(0),
+            ),
+        ),
+        ("invalid-vlc", lambda w: w.write(0, T.dc_max_prefix + 1)),
+        ("coefficient-overflow", lambda w: (dct.write_se(w, T.dc_max_level + 1, T.dc_intra_order), _code(w, T.eob))),
+        ("truncated", lambda w: dct.write_se(w, 100000, T.dc_intra_order)),
+    ],
+)
 def test_bad_segments_give_typed_errors(rule, seg):
     data = _hand_stream(seg)
     if rule == "truncated":  # cut inside the DC code (zero padding alone could read as EOB '0')
@@ -396,8 +445,10 @@ def test_bad_segments_give_typed_errors(rule, seg):
 
 def test_missing_dct_stuffing_bit_is_an_error():
     """D9 in the DCT mode: after 22 consecutive zeros of a payload a '1' must follow."""
+
     def seg(w):
         w.w.write(0, 30)  # a DC prefix of 30 zeros straight into the stream, no stuffing bit
+
     with pytest.raises(BitstreamError) as ei:
         decode(_hand_stream(seg))
     assert ei.value.rule == "dct-stuffing"
@@ -423,6 +474,7 @@ def test_sixteen_coefficients_then_more_is_run_overflow():
             _code(w, code11)
             w.bit(0)
         _code(w, T.eob)
+
     with pytest.raises(BitstreamError) as ei:
         decode(_hand_stream(seg))
     assert ei.value.rule == "run-overflow"
@@ -431,11 +483,14 @@ def test_sixteen_coefficients_then_more_is_run_overflow():
 def test_mutated_and_truncated_streams_only_raise_bitstream_errors():
     rng = random.Random(1234)
     seeds = []
-    for k, (n, opts) in enumerate([(20, EncoderOptions(coding="dct", fap_quant=0)),
-                                   (33, EncoderOptions(coding="dct", fap_quant=7, plane_start_codes="all")),
-                                   (40, EncoderOptions(coding_per_frame=["dct"] * 18 + ["arithmetic"] * 22,
-                                                       fap_quant=3)),
-                                   (9, EncoderOptions(coding="dct", fap_quant=31, time_codes=True))]):
+    for k, (n, opts) in enumerate(
+        [
+            (20, EncoderOptions(coding="dct", fap_quant=0)),
+            (33, EncoderOptions(coding="dct", fap_quant=7, plane_start_codes="all")),
+            (40, EncoderOptions(coding_per_frame=["dct"] * 18 + ["arithmetic"] * 22, fap_quant=3)),
+            (9, EncoderOptions(coding="dct", fap_quant=31, time_codes=True)),
+        ]
+    ):
         seeds.append(encode(_sequence(n, seed=100 + k), opts).data)
     count = 0
     for i in range(3200):
@@ -446,10 +501,10 @@ def test_mutated_and_truncated_streams_only_raise_bitstream_errors():
                 p = rng.randrange(len(data) * 8)
                 data[p >> 3] ^= 0x80 >> (p & 7)
         elif op == 1:
-            data = data[:rng.randrange(len(data))]
+            data = data[: rng.randrange(len(data))]
         elif op == 2:
             p = rng.randrange(len(data))
-            data[p:p + rng.randint(1, 4)] = bytes(rng.randrange(256) for _ in range(rng.randint(0, 4)))
+            data[p : p + rng.randint(1, 4)] = bytes(rng.randrange(256) for _ in range(rng.randint(0, 4)))
         else:
             p = rng.randrange(4, len(data))
             data = data[:p] + bytes([rng.choice([0, 255, rng.randrange(256)])]) * rng.randint(1, 8) + data[p:]
@@ -462,6 +517,7 @@ def test_mutated_and_truncated_streams_only_raise_bitstream_errors():
 
 
 # ---------------------------------------------------------------------------- real files
+
 
 def _read(path):
     return read_fap_file(path)[0]

@@ -1,4 +1,5 @@
 """D9: the encoder never emulates a start code; the scan finds what it must (issue 18)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,8 +23,7 @@ SET_ = settings(max_examples=60, deadline=None, suppress_health_check=list(Healt
 
 def test_scan_by_hand():
     # object start code at 0, a plane start code after stuffing, an emulation, the end code
-    data = (b"\x00\x00\x01\xba" + b"\x80\x7f\x00\x00\x01\xbb" + b"\x12\x00\x00\x01\x44"
-            + b"\x7f\x00\x00\x01\xb1")
+    data = b"\x00\x00\x01\xba" + b"\x80\x7f\x00\x00\x01\xbb" + b"\x12\x00\x00\x01\x44" + b"\x7f\x00\x00\x01\xb1"
     assert find_emulations(data, start_codes=[0, 6, 16]) == [11]
     assert find_emulations(data, start_codes=[0, 6, 11, 16]) == []
 
@@ -44,8 +44,9 @@ def zero_heavy(draw):
 
 
 @SET_
-@given(zero_heavy(), st.integers(0, 31), st.sampled_from(["arithmetic", "dct"]),
-       st.sampled_from(["none", "intra", "all"]))
+@given(
+    zero_heavy(), st.integers(0, 31), st.sampled_from(["arithmetic", "dct"]), st.sampled_from(["none", "intra", "all"])
+)
 def test_no_emulation_in_any_encoding(frames, q, coding, psc):
     try:
         r = encode(frames, EncoderOptions(fap_quant=q, coding=coding, plane_start_codes=psc))

@@ -1,4 +1,5 @@
 """Tests for the ASCII .fap reader/writer (bitstreams/faptext.py)."""
+
 from __future__ import annotations
 
 import math
@@ -38,12 +39,24 @@ def needs_data():
 
 # Frame counts from ../shared/data/fap/README.md (each equals the file's declared count).
 EXPECTED_FRAMES = {
-    "greta/AU_Interpolation_1111.fap": 1, "greta/AU_Interpolation_1140.fap": 1,
+    "greta/AU_Interpolation_1111.fap": 1,
+    "greta/AU_Interpolation_1140.fap": 1,
     "greta/AU_Interpolation_1175.fap": 1,
-    "vreng/anger.fap": 23, "vreng/eyes.fap": 52, "vreng/fear.fap": 14, "vreng/jag.fap": 169,
-    "vreng/joy.fap": 20, "vreng/sad.fap": 14, "vreng/surp.fap": 15,
-    "xface/anger.fap": 108, "xface/beg.fap": 107, "xface/disgust.fap": 107, "xface/fear.fap": 107,
-    "xface/happy-for.fap": 107, "xface/hate.fap": 107, "xface/joy.fap": 108, "xface/pride.fap": 107,
+    "vreng/anger.fap": 23,
+    "vreng/eyes.fap": 52,
+    "vreng/fear.fap": 14,
+    "vreng/jag.fap": 169,
+    "vreng/joy.fap": 20,
+    "vreng/sad.fap": 14,
+    "vreng/surp.fap": 15,
+    "xface/anger.fap": 108,
+    "xface/beg.fap": 107,
+    "xface/disgust.fap": 107,
+    "xface/fear.fap": 107,
+    "xface/happy-for.fap": 107,
+    "xface/hate.fap": 107,
+    "xface/joy.fap": 108,
+    "xface/pride.fap": 107,
     "xface/test.fap": 43,
 }
 README_RANGES = {"xface": (43, 108), "vreng": (14, 169), "greta": (1, 1)}
@@ -83,7 +96,9 @@ def test_real_file_parses(rel):
     np.testing.assert_allclose(frames.time_ms, frames.frame_number * 1000.0 / header.frame_rate)
     if rel.startswith("greta/"):
         assert sorted((w.rule, w.line, w.column) for w in warnings) == [
-            ("fap-text-mask-length", 2, 137), ("fap-text-name", 1, 5)]
+            ("fap-text-mask-length", 2, 137),
+            ("fap-text-name", 1, 5),
+        ]
         assert header.name == rel.split("/")[1].replace("_", " ", 1)
         assert list(np.nonzero(frames.mask[0])[0] + 1) == [19, 20, 21, 22]  # the eyelid closures
         assert (frames.values[0] == 0).all() and frames.frame_number[0] == 0
@@ -135,16 +150,27 @@ def test_read_fap_dispatch(tmp_path):
 
 # ------------------------------------------------------------------------------- semantics
 def test_retain_semantics_and_high_level():
-    text = "\n".join([
-        "2.2 synth 30 3",
-        mask_line({1, 2, 5}), "0  3 7 40 1  2 50 4 10 1 0  -12",
-        mask_line({6}), "1 99",
-        mask_line({1, 5}), "2 0 0 0 0 8",
-    ]) + "\n"
+    text = (
+        "\n".join(
+            [
+                "2.2 synth 30 3",
+                mask_line({1, 2, 5}),
+                "0  3 7 40 1  2 50 4 10 1 0  -12",
+                mask_line({6}),
+                "1 99",
+                mask_line({1, 5}),
+                "2 0 0 0 0 8",
+            ]
+        )
+        + "\n"
+    )
     frames, header, warnings = read_fap_text(text)
     assert warnings == [] and header == FapFileHeader("2.2", "synth", 30.0, 3)
     assert list(frames.status[:, [0, 1, 4, 5, 6]].tolist()) == [
-        [SET, SET, SET, FREE, FREE], [RETAINED, RETAINED, RETAINED, SET, FREE], [SET, RETAINED, SET, RETAINED, FREE]]
+        [SET, SET, SET, FREE, FREE],
+        [RETAINED, RETAINED, RETAINED, SET, FREE],
+        [SET, RETAINED, SET, RETAINED, FREE],
+    ]
     assert list(frames.values[:, 4]) == [-12, -12, 8]
     assert list(frames.values[:, 5]) == [0, 99, 99]
     assert (frames.values[:, :2] == 0).all()
@@ -156,9 +182,15 @@ def test_retain_semantics_and_high_level():
 
 
 def test_whitespace_free_and_comments():
-    text = ("# leading comment\r\n\r\n  2.1\tname  12.5 1  # trailing\r\n"
-            + " ".join(["0"] * 30) + " # c 1 1 1\r\n" + "\t".join(["0"] * 30) + "\r\n"
-            + "0 0 0 0 0 0 0 1\r" + "1\r\n# x\r\n-3 \r\n")
+    text = (
+        "# leading comment\r\n\r\n  2.1\tname  12.5 1  # trailing\r\n"
+        + " ".join(["0"] * 30)
+        + " # c 1 1 1\r\n"
+        + "\t".join(["0"] * 30)
+        + "\r\n"
+        + "0 0 0 0 0 0 0 1\r"
+        + "1\r\n# x\r\n-3 \r\n"
+    )
     frames, header, warnings = read_fap_text(text)
     assert warnings == [] and header.frame_rate == 12.5 and header.name == "name"
     assert frames.values[0, 67] == -3 and frames.frame_number[0] == 1 and frames.mask[0].sum() == 1
@@ -256,7 +288,7 @@ def test_huge_declared_count_does_not_allocate():
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    assert header.declared_frames == 10 ** 15 and len(frames) == 1
+    assert header.declared_frames == 10**15 and len(frames) == 1
     assert [w.rule for w in warnings] == ["fap-text-frame-count"]
     assert peak < 5_000_000
 
@@ -333,9 +365,14 @@ def make_frames(n: int, rate: float, density: float, seed: int, first: int) -> F
     return f
 
 
-frames_strategy = st.builds(make_frames, n=st.integers(0, 8), rate=st.sampled_from(RATES),
-                            density=st.sampled_from([0.0, 0.05, 0.3, 0.9, 1.0]),
-                            seed=st.integers(0, 2 ** 32 - 1), first=st.integers(0, 3))
+frames_strategy = st.builds(
+    make_frames,
+    n=st.integers(0, 8),
+    rate=st.sampled_from(RATES),
+    density=st.sampled_from([0.0, 0.05, 0.3, 0.9, 1.0]),
+    seed=st.integers(0, 2**32 - 1),
+    first=st.integers(0, 3),
+)
 
 
 def check_same(frames: FapFrames, back: FapFrames, warnings) -> None:
@@ -387,7 +424,7 @@ def perturb(text: str, rnd: random.Random) -> str:
 
 
 @settings(max_examples=60, deadline=None)
-@given(frames=frames_strategy, seed=st.integers(0, 2 ** 32 - 1))
+@given(frames=frames_strategy, seed=st.integers(0, 2**32 - 1))
 def test_round_trip_perturbed(frames, seed):
     text = perturb(write_fap(frames, name="rt"), random.Random(seed))
     back, header, warnings = read_fap_text(text)
@@ -436,26 +473,49 @@ def test_random_bytes(data, enc):
         pass
 
 
-TOKENS = ["0", "1", "0", "1", "2", "-1", "x", "1.5", "#", "\n", "\r\n", "\r", " ", "\t", "99999999999",
-          "2.1", "25", "a b"]
+TOKENS = [
+    "0",
+    "1",
+    "0",
+    "1",
+    "2",
+    "-1",
+    "x",
+    "1.5",
+    "#",
+    "\n",
+    "\r\n",
+    "\r",
+    " ",
+    "\t",
+    "99999999999",
+    "2.1",
+    "25",
+    "a b",
+]
 
 
 @settings(max_examples=150, deadline=None)
-@given(head=st.sampled_from(["2.1 a 25 3\n", "2.0 a b 10 1\n", "2.2 x 0.5 999999999999999\n", ""]),
-       toks=st.lists(st.sampled_from(TOKENS), max_size=400))
+@given(
+    head=st.sampled_from(["2.1 a 25 3\n", "2.0 a b 10 1\n", "2.2 x 0.5 999999999999999\n", ""]),
+    toks=st.lists(st.sampled_from(TOKENS), max_size=400),
+)
 def test_random_token_soup(head, toks):
     read_or_error(head + " ".join(toks))
 
 
 @settings(max_examples=150, deadline=None)
-@given(head=st.sampled_from(["2.1 a 25 3\n", "2.1 AU x 25 1\n"]), nmasks=st.integers(1, 3),
-       width=st.sampled_from([67, 68, 69]), bits=st.lists(st.sampled_from(["0", "0", "0", "1"]), min_size=210,
-                                                        max_size=210),
-       tail=st.lists(st.sampled_from(["0", "1", "-7", "12", "\n", "x"]), max_size=80))
+@given(
+    head=st.sampled_from(["2.1 a 25 3\n", "2.1 AU x 25 1\n"]),
+    nmasks=st.integers(1, 3),
+    width=st.sampled_from([67, 68, 69]),
+    bits=st.lists(st.sampled_from(["0", "0", "0", "1"]), min_size=210, max_size=210),
+    tail=st.lists(st.sampled_from(["0", "1", "-7", "12", "\n", "x"]), max_size=80),
+)
 def test_near_valid_frames(head, nmasks, width, bits, tail):
     parts = []
     for m in range(nmasks):
-        parts.append(" ".join(bits[m * 70:m * 70 + width]) + "\n" + " ".join(tail[m * 20:(m + 1) * 20]) + "\n")
+        parts.append(" ".join(bits[m * 70 : m * 70 + width]) + "\n" + " ".join(tail[m * 20 : (m + 1) * 20]) + "\n")
     read_or_error(head + "".join(parts))
 
 
@@ -469,13 +529,15 @@ def mutate(text: str, rnd: random.Random) -> str:
         if op == 0:
             text = text[:i] + text[j:]
         elif op == 1:
-            text = text[:i] + "".join(rnd.choice("01-9#x. \t\n\r\x00\u00e9") for _ in range(rnd.randint(1, 6))) + text[i:]  # noqa: E501
+            text = (
+                text[:i] + "".join(rnd.choice("01-9#x. \t\n\r\x00\u00e9") for _ in range(rnd.randint(1, 6))) + text[i:]
+            )
         elif op == 2:
             text = text[:i]
         elif op == 3:
             text = text[:i] + text[i:j] + text[i:]
         elif op == 4:
-            text = text[:i] + rnd.choice("0123456789") + text[i + 1:]
+            text = text[:i] + rnd.choice("0123456789") + text[i + 1 :]
         elif op == 5:
             lines = text.split("\n")
             rnd.shuffle(lines)
@@ -487,7 +549,7 @@ def mutate(text: str, rnd: random.Random) -> str:
 
 @pytest.mark.external
 @settings(max_examples=120, deadline=None)
-@given(idx=st.integers(0, 10 ** 6), seed=st.integers(0, 2 ** 32 - 1))
+@given(idx=st.integers(0, 10**6), seed=st.integers(0, 2**32 - 1))
 def test_mutated_real_files(idx, seed):
     files = real_files()
     if not files:

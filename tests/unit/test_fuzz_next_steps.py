@@ -1,5 +1,6 @@
 """``fbaconf fuzz --promote`` says what to do next (issue 31): build the regression suite with
 its goldens, run the decoder on it, commit the files — each named as a user types it."""
+
 from __future__ import annotations
 
 import argparse
@@ -25,8 +26,9 @@ def test_promote_names_the_next_commands(tmp_path):
     lines = _after_promotion([{"id": "crash-1a2b"}], args)
     assert lines[1].startswith("  (the cases went to /tmp/mine; `suites build` reads the package's conformance/data")
     assert lines[-1].startswith("  3. commit /tmp/mine/regression.toml")
-    assert _after_promotion([], args) == ["nothing new: every finding is already a regression case (or none is a "
-                                          "stream)"]
+    assert _after_promotion([], args) == [
+        "nothing new: every finding is already a regression case (or none is a stream)"
+    ]
 
 
 def test_the_scene_seeds_hold_the_face_family_of_the_suites():
@@ -34,6 +36,7 @@ def test_the_scene_seeds_hold_the_face_family_of_the_suites():
     grid), not generator output: a generator call that failed was swallowed and no promised scene was
     ever added."""
     from fbaconf.fuzz.corpus import scene_seeds  # noqa: PLC0415 (this test only)
+
     seeds = scene_seeds()
     texts = [e.data.decode("utf-8", "replace") for e in seeds if e.origin.startswith("seed:")]
     assert any("featurePointsCoord" in t for t in texts) and any("FIT" in t for t in texts)

@@ -1,6 +1,7 @@
 """``fuzz --self``'s ``slow`` class counts the parsers' CPU time, not wall time: on a loaded
 machine a 0.2 s parse waiting 7 s for a core is no finding (issue 29's fresh ``--self`` run
 reported two such inputs; replayed alone they took 0.03 s and 0.23 s of CPU)."""
+
 from __future__ import annotations
 
 import time
@@ -24,5 +25,6 @@ def test_computing_is_slow():
         t0 = time.thread_time()
         while time.thread_time() - t0 < 0.3:
             pass
+
     v = _target(busy).execute(Entry(b"x")).verdict
     assert v is not None and v.cls == "slow" and "s of CPU (> 0.15 s)" in v.message

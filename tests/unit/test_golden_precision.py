@@ -1,6 +1,7 @@
 """Float goldens and their rounding steps (issue 30): the margin of a value to its rounding
 boundary, and golden verify's fallback to a stated tolerance where regeneration on another
 platform is not byte for byte."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,7 +18,7 @@ def test_vertex_margins_by_hand():
     # 1.25 sits mid-step: 0.5e-6 from both boundaries, ulp(1.25) = 2^-52
     u = precision.vertex_ulps_to_flip(np.array([-112.0234375, 1.25, 0.0]))
     assert u[0] == 0.0
-    assert u[1] == pytest.approx(0.5e-6 / 2.0 ** -52, rel=1e-6)
+    assert u[1] == pytest.approx(0.5e-6 / 2.0**-52, rel=1e-6)
     assert u[2] > 1e300  # zero is infinitely far (in ulps) from +-0.5e-6
 
 
@@ -41,15 +42,24 @@ def test_npz_within_one_rounding_step(tmp_path):
     a = _npz(tmp_path / "a.npz", vertices=v, extra_fap_values=np.array([0.12345649]), time_ms=np.array([40.0]))
     # one step apart after rounding (another platform's value on the other side of a boundary):
     # 0.12345649 -> 0.123456, 0.12345651 -> 0.123457
-    b = _npz(tmp_path / "b.npz", vertices=v + [[1e-6, 0.0], [0, 0]], extra_fap_values=np.array([0.12345651]),
-             time_ms=np.array([40.0]))
+    b = _npz(
+        tmp_path / "b.npz",
+        vertices=v + [[1e-6, 0.0], [0, 0]],
+        extra_fap_values=np.array([0.12345651]),
+        time_ms=np.array([40.0]),
+    )
     assert sha256_file(a) != sha256_file(b)
     assert precision.within_tolerance(a, b) == "2 value(s) differ, each by at most one rounding step (1e-06)"
-    far = _npz(tmp_path / "c.npz", vertices=v + [[3e-6, 0.0], [0, 0]], extra_fap_values=np.array([0.12345649]),
-               time_ms=np.array([40.0]))
+    far = _npz(
+        tmp_path / "c.npz",
+        vertices=v + [[3e-6, 0.0], [0, 0]],
+        extra_fap_values=np.array([0.12345649]),
+        time_ms=np.array([40.0]),
+    )
     assert precision.within_tolerance(a, far) is None
-    exact = _npz(tmp_path / "d.npz", vertices=v, extra_fap_values=np.array([0.12345649]),
-                 time_ms=np.array([40.0000001]))
+    exact = _npz(
+        tmp_path / "d.npz", vertices=v, extra_fap_values=np.array([0.12345649]), time_ms=np.array([40.0000001])
+    )
     assert precision.within_tolerance(a, exact) is None  # time_ms is exact arithmetic: no tolerance
 
 

@@ -1,5 +1,6 @@
 """`fbaconf run` and `certify` say in one line whether decoders are isolated on this machine
 (issue 30): bubblewrap present, missing, or switched off; an in-process adapter says so too."""
+
 from __future__ import annotations
 
 import pytest
@@ -10,11 +11,14 @@ from fbaconf.isolation import sandbox
 from fbaconf.isolation.report import report
 
 
-@pytest.mark.parametrize("have,env,words", [
-    ("bwrap", None, "decoders run in a bubblewrap sandbox on this machine"),
-    ("none", None, "bubblewrap (bwrap) is not available: decoders run UNISOLATED"),
-    ("none", "none", "bubblewrap (bwrap) is switched off (FBACONF_SANDBOX=none): decoders run UNISOLATED"),
-])
+@pytest.mark.parametrize(
+    "have,env,words",
+    [
+        ("bwrap", None, "decoders run in a bubblewrap sandbox on this machine"),
+        ("none", None, "bubblewrap (bwrap) is not available: decoders run UNISOLATED"),
+        ("none", "none", "bubblewrap (bwrap) is switched off (FBACONF_SANDBOX=none): decoders run UNISOLATED"),
+    ],
+)
 def test_one_line_says_whether_decoders_are_isolated(monkeypatch, capsys, have, env, words):
     monkeypatch.setattr(sandbox, "isolation", lambda: have)
     if env:

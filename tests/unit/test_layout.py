@@ -6,6 +6,7 @@
 * every rule id a typed error is raised with is registered in ``fbaconf/rules.py``;
 * no document or module names a repository file that does not exist.
 """
+
 from __future__ import annotations
 
 import ast
@@ -30,8 +31,12 @@ def _package_dirs() -> dict[str, Path]:
     one its sub-packages): nothing is hand-listed."""
     out: dict[str, Path] = {}
     for top in sorted(ROOT.iterdir()):
-        if not top.is_dir() or top.name.startswith((".", "_")) or top.name in NOT_INSTALLED \
-                or not (top / "__init__.py").is_file():
+        if (
+            not top.is_dir()
+            or top.name.startswith((".", "_"))
+            or top.name in NOT_INSTALLED
+            or not (top / "__init__.py").is_file()
+        ):
             continue
         name = "fbaconf" if top.name == "fbaconf" else f"fbaconf.{top.name}"
         for init in sorted(top.rglob("__init__.py")):
@@ -55,6 +60,7 @@ def _modules() -> dict[str, Path]:
 def _setup_discovery() -> dict[str, str]:
     """What setup.py installs (its package map), read without building anything."""
     import setuptools  # noqa: PLC0415 (build-time tool)
+
     src = (ROOT / "setup.py").read_text("utf-8")
     ns: dict = {"__file__": str(ROOT / "setup.py"), "__name__": "fbaconf_setup"}
     real = setuptools.setup
@@ -86,8 +92,12 @@ def test_no_python_folder_hides_outside_a_package():
     stray = []
     for _pkg, d in _package_dirs().items():
         for sub in d.iterdir():
-            if sub.is_dir() and sub.name != "__pycache__" and any(sub.glob("*.py")) \
-                    and not (sub / "__init__.py").is_file():
+            if (
+                sub.is_dir()
+                and sub.name != "__pycache__"
+                and any(sub.glob("*.py"))
+                and not (sub / "__init__.py").is_file()
+            ):
                 stray.append(str(sub.relative_to(ROOT)))
     assert stray == []
 
@@ -193,21 +203,35 @@ def test_no_import_cycle_between_stages():
 # only the core and the stages before it (stages grouped in a tuple stand side by side: golden is
 # data beside conformance; certification and mutation both rest on the harness); fuzz may fuzz every
 # reader below it; generators (run on purpose) may use anything and nothing but the verbs uses them.
-LAYERS = ("bitstreams", "scenes", "animation", "rendering", "reference", "profiles", ("conformance", "golden"),
-          "isolation", "harness", ("certification", "mutation"), "fuzz", "generators")
+LAYERS = (
+    "bitstreams",
+    "scenes",
+    "animation",
+    "rendering",
+    "reference",
+    "profiles",
+    ("conformance", "golden"),
+    "isolation",
+    "harness",
+    ("certification", "mutation"),
+    "fuzz",
+    "generators",
+)
 CORE = "fbaconf"  # errors, rules, safefs, _atomic and the verb dispatcher (cli, __main__)
 GLUE = ("fbaconf.cli", "fbaconf.__main__")
 
 
 def _rank() -> dict[str, int]:
-    return {(name if isinstance(names, str) else name): i
-            for i, names in enumerate(LAYERS) for name in ((names,) if isinstance(names, str) else names)}
+    return {
+        (name if isinstance(names, str) else name): i
+        for i, names in enumerate(LAYERS)
+        for name in ((names,) if isinstance(names, str) else names)
+    }
 
 
 def _stage_of(module: str) -> str:
     parts = module.split(".")
-    return parts[1] if len(parts) > 1 and parts[0] == "fbaconf" and f"fbaconf.{parts[1]}" in _package_dirs() \
-        else CORE
+    return parts[1] if len(parts) > 1 and parts[0] == "fbaconf" and f"fbaconf.{parts[1]}" in _package_dirs() else CORE
 
 
 def _is_glue(module: str) -> bool:
@@ -245,11 +269,13 @@ def test_imports_go_down_the_layers():
 
 
 def test_the_direction_rules_catch_what_they_name():
-    g = {"fbaconf.harness.speed.measure": {"fbaconf.generators.models"},
-         "fbaconf.reference.pipeline": {"fbaconf.bitstreams.cli"},
-         "fbaconf.errors": {"fbaconf.harness.adapters"},
-         "fbaconf.bitstreams.decoder": {"fbaconf.harness.adapters"},
-         "fbaconf.harness.cli": {"fbaconf.generators.models", "fbaconf.fuzz.engine"}}
+    g = {
+        "fbaconf.harness.speed.measure": {"fbaconf.generators.models"},
+        "fbaconf.reference.pipeline": {"fbaconf.bitstreams.cli"},
+        "fbaconf.errors": {"fbaconf.harness.adapters"},
+        "fbaconf.bitstreams.decoder": {"fbaconf.harness.adapters"},
+        "fbaconf.harness.cli": {"fbaconf.generators.models", "fbaconf.fuzz.engine"},
+    }
     got = direction_problems(g)
     assert len(got) == 4 and all("harness.cli" not in x.split()[0] for x in got), got
 
@@ -261,8 +287,11 @@ def test_the_architecture_page_names_the_layers_as_they_are():
 
 
 def test_no_module_over_the_size_limit():
-    big = {str(p.relative_to(ROOT)): n for p in _modules().values()
-           if (n := len(p.read_text("utf-8").splitlines())) > MAX_LINES}
+    big = {
+        str(p.relative_to(ROOT)): n
+        for p in _modules().values()
+        if (n := len(p.read_text("utf-8").splitlines())) > MAX_LINES
+    }
     assert big == {}
 
 
@@ -302,8 +331,23 @@ def test_rule_registry_codes_exist():
 
 
 # ------------------------------------------------------------------ references to files
-_TOP = ("bitstreams", "profiles", "animation", "scenes", "rendering", "harness", "conformance", "fuzz", "fbaconf",
-        "generators", "golden", "docs", "tests", "benchmarks", "examples")
+_TOP = (
+    "bitstreams",
+    "profiles",
+    "animation",
+    "scenes",
+    "rendering",
+    "harness",
+    "conformance",
+    "fuzz",
+    "fbaconf",
+    "generators",
+    "golden",
+    "docs",
+    "tests",
+    "benchmarks",
+    "examples",
+)
 # Files fbaconf writes (not in the tree) and the shared folder beside the checkout.
 _PRODUCED = {"statement.md"}
 _SHARED = ROOT.parent / "shared"
@@ -326,9 +370,14 @@ def _texts():
 @pytest.mark.parametrize("doc", [pytest.param(p, id=str(p.relative_to(ROOT))) for p in _texts()])
 def test_no_reference_to_a_missing_file(doc: Path):
     text = doc.read_text("utf-8", errors="replace")
-    missing = {m for m in _PATH.findall(text)
-               if "*" not in m and not (ROOT / m).exists() and not (doc.parent / m).exists()}
-    missing |= {m for m in _BARE_MD.findall(text)
-                if m not in _PRODUCED and m not in _SHARED_NAMES
-                and not any((d / m).exists() for d in (ROOT, ROOT / "docs", doc.parent))}
+    missing = {
+        m for m in _PATH.findall(text) if "*" not in m and not (ROOT / m).exists() and not (doc.parent / m).exists()
+    }
+    missing |= {
+        m
+        for m in _BARE_MD.findall(text)
+        if m not in _PRODUCED
+        and m not in _SHARED_NAMES
+        and not any((d / m).exists() for d in (ROOT, ROOT / "docs", doc.parent))
+    }
     assert sorted(missing) == []

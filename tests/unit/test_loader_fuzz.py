@@ -3,6 +3,7 @@ finds no traceback in the manifest and suite loaders, and a loader that raises a
 typed error is reported (the package target, which needs a certified package, is in
 tests/integration/test_loader_fuzz_package.py). The 10-minute campaign is a documented command
 (``python -m fbaconf.fuzz.loaders``), not a test."""
+
 from __future__ import annotations
 
 import os
@@ -32,6 +33,7 @@ def test_suite_loader_gives_typed_errors_only(tmp_path):
 
 class _Raising(loaders.Target):
     """A loader with one typed refusal and one bug: the bug is the only finding."""
+
     name = "raising"
 
     def seeds(self):
@@ -58,6 +60,7 @@ def test_a_target_without_seeds_is_a_typed_error(tmp_path):
     class Empty(_Raising):
         def seeds(self):
             return []
+
     with pytest.raises(FbaconfInputError) as e:
         loaders.fuzz(Empty(tmp_path), 1.0, seed=1)
     assert e.value.rule == "fuzz-setup"

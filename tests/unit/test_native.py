@@ -5,6 +5,7 @@ Both paths must produce identical streams, identical FapFrames and plane records
 identical errors (type, message, bit offset, rule, plane, frame, FAP, partial frames) for
 valid streams, mutated streams and random bytes. Skipped when the extension is not built.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -27,13 +28,23 @@ from fbaconf.errors import BitstreamError
 from fbaconf.profiles.checker import analyse
 from fbaconf.profiles.sample_streams import value_overflow_stream
 
-pytestmark = pytest.mark.skipif(not arith.native_available(),
-                                reason="native extension fbaconf.bitstreams._fastarith not built (no C compiler?)")
+pytestmark = pytest.mark.skipif(
+    not arith.native_available(), reason="native extension fbaconf.bitstreams._fastarith not built (no C compiler?)"
+)
 
 GROUPS = tables.groups()
 QP = tables.quant_steps()
-FRAME_FIELDS = ("values", "status", "high", "frame_number", "time_ms", "is_intra", "fap_quant", "coding_type",
-                "bit_offset")
+FRAME_FIELDS = (
+    "values",
+    "status",
+    "high",
+    "frame_number",
+    "time_ms",
+    "is_intra",
+    "fap_quant",
+    "coding_type",
+    "bit_offset",
+)
 
 
 NAT = arith._native_module  # the extension itself (whatever FBACONF_PURE_PYTHON says)
@@ -79,10 +90,28 @@ def outcome(data: bytes):
     try:
         res = decode(data, file="t.fba")
     except BitstreamError as e:
-        return ("error", type(e).__name__, e.message, e.bit_offset, e.rule, e.plane, e.frame, e.fap, e.file,
-                str(e), frames_key(e.partial))
-    return ("ok", frames_key(res.frames), [plane_key(p) for p in res.planes], res.end_code, res.end_offset,
-            res.used_default_frame_rate, res.notes)
+        return (
+            "error",
+            type(e).__name__,
+            e.message,
+            e.bit_offset,
+            e.rule,
+            e.plane,
+            e.frame,
+            e.fap,
+            e.file,
+            str(e),
+            frames_key(e.partial),
+        )
+    return (
+        "ok",
+        frames_key(res.frames),
+        [plane_key(p) for p in res.planes],
+        res.end_code,
+        res.end_offset,
+        res.used_default_frame_rate,
+        res.notes,
+    )
 
 
 def both(data: bytes):
@@ -103,6 +132,7 @@ def check(data: bytes) -> None:
 
 # ---------------------------------------------------------------------------- strategies
 
+
 @st.composite
 def sequences(draw):
     """Random FAP sequences (segments of mask/quantiser settings) and encoder options."""
@@ -115,12 +145,12 @@ def sequences(draw):
         for g in GROUPS:
             kind = draw(st.sampled_from(["none", "all", "partial"]))
             if kind == "all":
-                coded[g.first_fap - 1:g.last_fap] = True
+                coded[g.first_fap - 1 : g.last_fap] = True
                 types.append(3)
             elif kind == "none":
                 types.append(draw(st.sampled_from([0, 1, 2])))
             else:
-                coded[g.first_fap - 1:g.last_fap] = draw(st.lists(st.booleans(), min_size=g.size, max_size=g.size))
+                coded[g.first_fap - 1 : g.last_fap] = draw(st.lists(st.booleans(), min_size=g.size, max_size=g.size))
                 types.append(draw(st.sampled_from([1, 2])))
         rows += [(q, tuple(types), coded.copy())] * seg_len
     n = len(rows)
@@ -133,18 +163,30 @@ def sequences(draw):
             unit = int(QP[f - 1]) if q else 1
             frames.values[k, f - 1] = draw(st.integers(-amp, amp)) * unit
         if coded[0]:
-            frames.high[k, 0:4] = [draw(st.integers(0, 14)), draw(st.integers(0, 14)), draw(st.integers(0, 63)),
-                                   draw(st.integers(0, 1))]
+            frames.high[k, 0:4] = [
+                draw(st.integers(0, 14)),
+                draw(st.integers(0, 14)),
+                draw(st.integers(0, 63)),
+                draw(st.integers(0, 1)),
+            ]
         if coded[1]:
-            frames.high[k, 4:10] = [draw(st.integers(0, 6)), draw(st.integers(0, 63)), draw(st.integers(0, 6)),
-                                    draw(st.integers(0, 63)), draw(st.integers(0, 1)), draw(st.integers(0, 1))]
+            frames.high[k, 4:10] = [
+                draw(st.integers(0, 6)),
+                draw(st.integers(0, 63)),
+                draw(st.integers(0, 6)),
+                draw(st.integers(0, 63)),
+                draw(st.integers(0, 1)),
+                draw(st.integers(0, 1)),
+            ]
     frames.frame_rate = draw(st.sampled_from([25.0, 30.0, 10.0]))
-    opts = EncoderOptions(fap_quant_per_frame=np.array([r[0] for r in rows]),
-                          group_types=np.array([r[1] for r in rows]),
-                          intra_period=draw(st.sampled_from([0, 0, 1, 3])),
-                          time_codes=draw(st.booleans()),
-                          plane_start_codes=draw(st.sampled_from(["none", "intra", "all"])),
-                          ranges=draw(st.sampled_from(["auto", "persist"])))
+    opts = EncoderOptions(
+        fap_quant_per_frame=np.array([r[0] for r in rows]),
+        group_types=np.array([r[1] for r in rows]),
+        intra_period=draw(st.sampled_from([0, 0, 1, 3])),
+        time_codes=draw(st.booleans()),
+        plane_start_codes=draw(st.sampled_from(["none", "intra", "all"])),
+        ranges=draw(st.sampled_from(["auto", "persist"])),
+    )
     return frames, opts
 
 
@@ -163,7 +205,7 @@ def mutate(rnd: random.Random, data: bytes) -> bytes:
     b = bytearray(data)
     kind = rnd.randrange(4)
     if kind == 0:  # truncation
-        return bytes(b[:rnd.randrange(len(b) + 1)])
+        return bytes(b[: rnd.randrange(len(b) + 1)])
     if kind == 1:  # bit flips
         for _ in range(rnd.randint(1, 6)):
             i = rnd.randrange(len(b) * 8)
@@ -171,7 +213,7 @@ def mutate(rnd: random.Random, data: bytes) -> bytes:
         return bytes(b)
     if kind == 2:  # a run of zero bytes (long zero runs: stuffing)
         i = rnd.randrange(len(b) + 1)
-        b[i:i + rnd.randint(1, 6)] = bytes(rnd.randint(1, 6))
+        b[i : i + rnd.randint(1, 6)] = bytes(rnd.randint(1, 6))
         return bytes(b)
     i = rnd.randrange(len(b) + 1)  # random bytes spliced in
     b[i:i] = bytes(rnd.randrange(256) for _ in range(rnd.randint(1, 8)))
@@ -179,6 +221,7 @@ def mutate(rnd: random.Random, data: bytes) -> bytes:
 
 
 # ---------------------------------------------------------------------------- stream-level differential tests
+
 
 @settings(max_examples=60)
 @given(sequences(), st.randoms(use_true_random=False))
@@ -217,9 +260,17 @@ def _wide_range_stream(n: int = 6, seed: int = 0, visemes: bool = True) -> bytes
 def test_exhaustive_truncations_and_bit_flips_of_small_streams():
     """Every truncation and every single bit flip of a small stream (every 3rd bit of the
     stuffing-heavy ones, to keep the suite fast)."""
-    streams = [(encode(synthetic_sequence(5, 25.0, faps=[3, 4, 5, 48], visemes=True, expressions=True),
-                       EncoderOptions(fap_quant=2, plane_start_codes="none")).data, 1),
-               (_wide_range_stream(2), 3), (_wide_range_stream(2, seed=3, visemes=False), 3)]
+    streams = [
+        (
+            encode(
+                synthetic_sequence(5, 25.0, faps=[3, 4, 5, 48], visemes=True, expressions=True),
+                EncoderOptions(fap_quant=2, plane_start_codes="none"),
+            ).data,
+            1,
+        ),
+        (_wide_range_stream(2), 3),
+        (_wide_range_stream(2, seed=3, visemes=False), 3),
+    ]
     n = 0
     for data, stride in streams:
         assert both(data)[0] == "ok"
@@ -263,13 +314,17 @@ def test_value_overflow_is_reported_identically():
 def test_lookahead_and_large_streams_agree():
     check(_wide_range_stream(40, seed=7))
     frames = synthetic_sequence(200, 30.0)
-    for opts in (EncoderOptions(fap_quant=1), EncoderOptions(fap_quant=5, intra_period=50),
-                 EncoderOptions(fap_quant=31, ranges="persist", plane_start_codes="all")):
+    for opts in (
+        EncoderOptions(fap_quant=1),
+        EncoderOptions(fap_quant=5, intra_period=50),
+        EncoderOptions(fap_quant=31, ranges="persist", plane_start_codes="all"),
+    ):
         data = encode_both(frames, opts)
         assert both(data)[0] == "ok"
 
 
 # ---------------------------------------------------------------------------- block-level differential tests
+
 
 @settings(max_examples=80)
 @given(st.lists(st.integers(1, 40), min_size=1, max_size=6), st.booleans(), st.data())
@@ -290,7 +345,7 @@ def test_blocks_with_adaptive_and_uniform_models(alphabets, adaptive, data):
     spec, pool = arith.block_spec(alphabets, 0, adaptive=adaptive)
     bspec = spec[rows] if k else np.zeros((0, 5), np.int32)
     st_, out, nbits = NAT.encode_block(bspec, pool, np.array(syms, dtype=np.int32))
-    assert st_ == 0 and out == ref[:len(out)] and (nbits + 7) // 8 == len(ref) and nbits == w.position
+    assert st_ == 0 and out == ref[: len(out)] and (nbits + 7) // 8 == len(ref) and nbits == w.position
     # decode both ways from an offset, with trailing bits
     pre = data.draw(st.integers(0, 7))
     tail = data.draw(st.binary(max_size=4))
@@ -372,6 +427,7 @@ def test_bad_arguments_raise_python_errors():
 
 # ---------------------------------------------------------------------------- switches
 
+
 def test_env_var_and_patched_classes_select_the_pure_path(monkeypatch):
     data = _wide_range_stream()
     monkeypatch.delenv(PURE_PYTHON_ENV, raising=False)
@@ -385,6 +441,7 @@ def test_env_var_and_patched_classes_select_the_pure_path(monkeypatch):
 
     def patched(self, model):
         raise self.r.error("synthetic", "arith-state")
+
     monkeypatch.setattr(arith.ArithDecoder, "decode", patched)
     assert decoder._Decoder(data, None).native is None
     with pytest.raises(BitstreamError) as e:
@@ -393,12 +450,17 @@ def test_env_var_and_patched_classes_select_the_pure_path(monkeypatch):
 
 
 def test_checker_reports_identically():
-    for data in (_wide_range_stream(), value_overflow_stream(), _wide_range_stream()[:-9],
-                 encode(synthetic_sequence(60, 30.0), EncoderOptions(fap_quant=1, intra_period=20)).data):
+    for data in (
+        _wide_range_stream(),
+        value_overflow_stream(),
+        _wide_range_stream()[:-9],
+        encode(synthetic_sequence(60, 30.0), EncoderOptions(fap_quant=1, intra_period=20)).data,
+    ):
         with fast_path():
             fast = analyse(data, claim="simple@1")
         with pure_python():
             ref = analyse(data, claim="simple@1")
-        assert [d.to_dict() if hasattr(d, "to_dict") else repr(d) for d in fast.diagnostics] == \
-               [d.to_dict() if hasattr(d, "to_dict") else repr(d) for d in ref.diagnostics]
+        assert [d.to_dict() if hasattr(d, "to_dict") else repr(d) for d in fast.diagnostics] == [
+            d.to_dict() if hasattr(d, "to_dict") else repr(d) for d in ref.diagnostics
+        ]
         assert fast.summary == ref.summary

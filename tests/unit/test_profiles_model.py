@@ -1,4 +1,5 @@
 """The profiles data file and its loader."""
+
 from __future__ import annotations
 
 from importlib import resources
@@ -24,9 +25,22 @@ def test_profiles_are_nested():
 def test_every_limit_has_provenance_unit_and_all_levels():
     ps = load_profiles()
     assert ps.levels == (1, 2)
-    expected = {"faces", "bitrate", "coded_frame_rate", "decode_rate", "render_rate", "fdp_feature_points",
-                "fit_nodes", "fit_links", "fit_terms", "mesh_vertices", "facedeftables_entries",
-                "intervals_per_facedefmesh", "texture_width", "texture_height"}
+    expected = {
+        "faces",
+        "bitrate",
+        "coded_frame_rate",
+        "decode_rate",
+        "render_rate",
+        "fdp_feature_points",
+        "fit_nodes",
+        "fit_links",
+        "fit_terms",
+        "mesh_vertices",
+        "facedeftables_entries",
+        "intervals_per_facedefmesh",
+        "texture_width",
+        "texture_height",
+    }
     assert set(ps.limits) == expected
     for lim in ps.limits.values():
         assert lim.provenance in PROVENANCES and lim.unit and set(lim.values) == {1, 2}
@@ -52,15 +66,21 @@ def test_limits_for_claims():
     assert "mesh_vertices" not in ids("calibration@2") and "mesh_vertices" in ids("predictable@1")
 
 
-@pytest.mark.parametrize("old,new,msg", [
-    ('provenance = "provisional"\nvalues = { 1 = 16, 2 = 32 }', 'provenance = "guess"\nvalues = { 1 = 16, 2 = 32 }',
-     "provenance"),
-    ('includes = ["simple"]', 'includes = ["predictable"]', "cycle"),
-    ('tools = ["downloaded_model"]', 'tools = ["teleport"]', "unknown tool"),
-    ('values = { 1 = 16, 2 = 32 }', 'values = { 1 = 16 }', "every level"),
-    ('values = { 1 = 16, 2 = 32 }', 'values = { 1 = 32, 2 = 16 }', "decrease"),
-    ('format = "fbaconf.profiles/1"', 'format = "x"', "format"),
-])
+@pytest.mark.parametrize(
+    "old,new,msg",
+    [
+        (
+            'provenance = "provisional"\nvalues = { 1 = 16, 2 = 32 }',
+            'provenance = "guess"\nvalues = { 1 = 16, 2 = 32 }',
+            "provenance",
+        ),
+        ('includes = ["simple"]', 'includes = ["predictable"]', "cycle"),
+        ('tools = ["downloaded_model"]', 'tools = ["teleport"]', "unknown tool"),
+        ("values = { 1 = 16, 2 = 32 }", "values = { 1 = 16 }", "every level"),
+        ("values = { 1 = 16, 2 = 32 }", "values = { 1 = 32, 2 = 16 }", "decrease"),
+        ('format = "fbaconf.profiles/1"', 'format = "x"', "format"),
+    ],
+)
 def test_malformed_data_is_refused(old, new, msg):
     assert old in TEXT
     with pytest.raises(ProfileDataError, match=msg):

@@ -2,6 +2,7 @@
 are merged, every system's condition number is checked against a documented bound, and a scene
 above it is refused by the reference, reported by the checker (FAP-SCENE-004) and refused by the
 suite builder -- instead of the result depending on how a LAPACK build meets a singular matrix."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -102,8 +103,10 @@ def _texture_scene(tmp_path: Path, move) -> Path:
     fpc = ", ".join(" ".join(repr(float(c)) for c in p) for p in pts)
     tcc = ", ".join(" ".join(repr(float(c)) for c in p) for p in uv)
     path = tmp_path / "scene.bt"
-    path.write_text(f"Face {{ fdp FDP {{ featurePointsCoord Coordinate {{ point [{fpc}] }} "
-                    f"textureCoord TextureCoordinate {{ point [{tcc}] }} useOrthoTexture TRUE }} }}\n")
+    path.write_text(
+        f"Face {{ fdp FDP {{ featurePointsCoord Coordinate {{ point [{fpc}] }} "
+        f"textureCoord TextureCoordinate {{ point [{tcc}] }} useOrthoTexture TRUE }} }}\n"
+    )
     return path
 
 

@@ -1,6 +1,7 @@
 """The other readings of fbaconf's provisional decisions (bitstreams/readings.py,
 bitstreams/data/readings.toml): each does what its line of the spec notes says, is off unless
 asked for, and changes a stream's decoding only where the checker warns that it may."""
+
 from __future__ import annotations
 
 import tomllib
@@ -39,18 +40,33 @@ def same(a, b) -> bool:
     decodings with the same values, statuses, high-level fields, frame numbers, times and rate."""
     if isinstance(a, str) or isinstance(b, str):
         return isinstance(a, str) and isinstance(b, str)
-    return (a.frame_rate == b.frame_rate and len(a) == len(b)
-            and all(np.array_equal(getattr(a, k), getattr(b, k))
-                    for k in ("values", "status", "high", "frame_number", "time_ms")))
+    return (
+        a.frame_rate == b.frame_rate
+        and len(a) == len(b)
+        and all(
+            np.array_equal(getattr(a, k), getattr(b, k))
+            for k in ("values", "status", "high", "frame_number", "time_ms")
+        )
+    )
 
 
 def test_the_catalogue_names_known_decisions_and_checker_codes():
-    decisions = {r["id"] for r in tomllib.loads(resources.files("fbaconf.conformance").joinpath(
-        "data/provisional.toml").read_text("utf-8"))["rule"]}
+    decisions = {
+        r["id"]
+        for r in tomllib.loads(
+            resources.files("fbaconf.conformance").joinpath("data/provisional.toml").read_text("utf-8")
+        )["rule"]
+    }
     cat = readings.catalogue()
-    assert set(cat) == {"D3:type10-keeps", "D4:keep-scaling", "D4:defaults-unrounded", "D4:value-range-enforced",
-                        "D5:blend-ceil",
-                        "D6:default-30hz", "D7:rewind-14"}
+    assert set(cat) == {
+        "D3:type10-keeps",
+        "D4:keep-scaling",
+        "D4:defaults-unrounded",
+        "D4:value-range-enforced",
+        "D5:blend-ceil",
+        "D6:default-30hz",
+        "D7:rewind-14",
+    }
     for r in cat.values():
         assert r.id.startswith(r.decision + ":") and r.decision in decisions
         assert r.warning in CODES and r.decision in CODES[r.warning].clause
@@ -141,6 +157,7 @@ def test_every_suite_case_a_reading_changes_carries_its_warning():
     """Over the committed suites: where a reading's goldens exist the checker warned, and a
     reading's goldens exist exactly where its decoding differs (conformance/golden.py)."""
     from fbaconf.conformance.golden import reading_goldens  # noqa: PLC0415
+
     for s in load_suites():
         for c in s.cases:
             fba = c.input_path("fba")

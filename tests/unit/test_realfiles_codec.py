@@ -1,4 +1,5 @@
 """Issue acceptance on the real .fap files of ../shared/data/fap (skipped when absent)."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -2,6 +2,7 @@
 
 Meshes are built here; expected values are computed independently of the renderer
 (pinhole camera maths, Lambert's cosine law, the IEC 61966-2-1 sRGB formula)."""
+
 from __future__ import annotations
 
 import hashlib
@@ -40,11 +41,30 @@ D = 4.0  # camera distance for the test scenes
 
 
 # ----------------------------------------------------------------------------- helpers
-def cam_scenario(w=64, h=64, *, ss=1, pos=(0.0, 0.0, D), look=(0.0, 0.0, 0.0), ambient=1.0, lights=(),
-                 shading="flat", bg=(0.0, 0.0, 0.0), **kw) -> Scenario:
-    return Scenario(width=w, height=h, supersample=ss, background=bg, shading=shading,
-                    camera=CameraSpec(fit=False, position=pos, look_at=look, fov_deg=FOV, near=0.1, far=100.0),
-                    ambient_intensity=ambient, lights=tuple(lights), **kw)
+def cam_scenario(
+    w=64,
+    h=64,
+    *,
+    ss=1,
+    pos=(0.0, 0.0, D),
+    look=(0.0, 0.0, 0.0),
+    ambient=1.0,
+    lights=(),
+    shading="flat",
+    bg=(0.0, 0.0, 0.0),
+    **kw,
+) -> Scenario:
+    return Scenario(
+        width=w,
+        height=h,
+        supersample=ss,
+        background=bg,
+        shading=shading,
+        camera=CameraSpec(fit=False, position=pos, look_at=look, fov_deg=FOV, near=0.1, far=100.0),
+        ambient_intensity=ambient,
+        lights=tuple(lights),
+        **kw,
+    )
 
 
 def focal(h):
@@ -86,6 +106,7 @@ def uv_sphere(nlat=16, nlon=24, r=1.0):
 
     def idx(i, j):
         return 1 + i * nlon + (j % nlon)
+
     tris = [[0, idx(0, j), idx(0, j + 1)] for j in range(nlon)]
     for i in range(nlat - 2):
         for j in range(nlon):
@@ -181,8 +202,11 @@ def test_square_covers_exactly_its_pixel_centres_once():
 
 
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.filter_too_much])
-@given(st.integers(2, 29), st.integers(2, 29), st.lists(
-    st.tuples(st.integers(0, 31), st.integers(0, 31)), min_size=3, max_size=8, unique=True))
+@given(
+    st.integers(2, 29),
+    st.integers(2, 29),
+    st.lists(st.tuples(st.integers(0, 31), st.integers(0, 31)), min_size=3, max_size=8, unique=True),
+)
 def test_fan_is_watertight_no_sample_twice(cx, cy, rim):
     """Triangles sharing edges through sample centres: each sample goes to exactly one."""
     pts = [(cx + 0.5, cy + 0.5)] + [(x + 0.5, y + 0.5) for x, y in rim]
@@ -268,9 +292,12 @@ def test_texture_checker_lands_in_the_right_quadrants(tmp_path, shading):
     state = state_of(("q", v, t, {"texcoords": uv, "texture": path.name}))
     img = render_frame(state, 0, cam_scenario(shading=shading), scene_dir=tmp_path)
     # lit head-on at 0.5 + ambient 0.25: the texture colour times 0.75
-    lit = render_frame(state, 0, cam_scenario(shading=shading, ambient=0.25,
-                                              lights=[DirectionalLight((0, 0, -1), intensity=0.5)]),
-                       scene_dir=tmp_path)
+    lit = render_frame(
+        state,
+        0,
+        cam_scenario(shading=shading, ambient=0.25, lights=[DirectionalLight((0, 0, -1), intensity=0.5)]),
+        scene_dir=tmp_path,
+    )
     expect = {(-0.5, 0.5): (1, 0, 0), (0.5, 0.5): (0, 1, 0), (-0.5, -0.5): (0, 0, 1), (0.5, -0.5): (1, 1, 1)}
     for (x, y), col in expect.items():
         px, py = to_px(x, y, 0)
@@ -318,8 +345,16 @@ def test_render_twice_is_bit_identical_and_one_pixel_camera_change_is_not(tmp_pa
     b = render_frames(state, sc, tmp_path / "b")
     assert a[0].read_bytes() == b[0].read_bytes()
     dx = D / focal(64)  # one pixel at the depth of z = 0
-    moved = cam_scenario(64, 64, ss=2, pos=(dx, 0.0, D), look=(dx, 0.0, 0.0), ambient=0.2,
-                         lights=[DirectionalLight((0.4, -0.5, -1))], shading="gouraud")
+    moved = cam_scenario(
+        64,
+        64,
+        ss=2,
+        pos=(dx, 0.0, D),
+        look=(dx, 0.0, 0.0),
+        ambient=0.2,
+        lights=[DirectionalLight((0.4, -0.5, -1))],
+        shading="gouraud",
+    )
     c = render_frames(state, moved, tmp_path / "c")
     assert c[0].read_bytes() != a[0].read_bytes()
     # and the image content moved by one pixel to the left (exact for the z = 0 plane)
@@ -342,11 +377,18 @@ def test_bit_identical_across_processes(tmp_path):
         render_frames(sphere_state(color=(0.7, 0.5, 0.4), specular=0.5), sc, sys.argv[1])
     """)
     (tmp_path / "s.py").write_text(script)
-    here = render_frames(sphere_state(color=(0.7, 0.5, 0.4), specular=0.5),
-                         cam_scenario(48, 48, ss=3, ambient=0.2, lights=[DirectionalLight((0.4, -0.5, -1))],
-                                      shading="gouraud", format="exr"), tmp_path / "a")
-    subprocess.run([sys.executable, str(tmp_path / "s.py"), str(tmp_path / "b")], check=True,
-                   env={**os.environ, "PYTHONHASHSEED": "123"})
+    here = render_frames(
+        sphere_state(color=(0.7, 0.5, 0.4), specular=0.5),
+        cam_scenario(
+            48, 48, ss=3, ambient=0.2, lights=[DirectionalLight((0.4, -0.5, -1))], shading="gouraud", format="exr"
+        ),
+        tmp_path / "a",
+    )
+    subprocess.run(
+        [sys.executable, str(tmp_path / "s.py"), str(tmp_path / "b")],
+        check=True,
+        env={**os.environ, "PYTHONHASHSEED": "123"},
+    )
     assert here[0].name == "frame_00000.exr"
     assert (tmp_path / "b" / "frame_00000.exr").read_bytes() == here[0].read_bytes()
 
@@ -366,6 +408,7 @@ def test_exr_and_png_round_trip_through_oiio(tmp_path):
 
 def test_srgb_encoding_matches_colour_science_and_the_formula():
     import colour  # noqa: PLC0415 (colour-science loads in ~1 s)
+
     vals = np.array([0.0, 0.001, 0.0031308, 0.01, 0.18, 0.5, 0.9, 1.0, 1.7, -0.2])
     clipped = np.clip(vals, 0, 1)
     formula = np.where(clipped <= 0.0031308, 12.92 * clipped, 1.055 * clipped ** (1 / 2.4) - 0.055)
@@ -391,8 +434,11 @@ def test_nan_vertex_is_an_error_naming_part_vertex_and_frame():
     v, t = quad(-1, -1, 1, 1)
     frames = np.stack([np.asarray(v, float)] * 3)
     frames[2, 3, 1] = np.nan
-    state = state_of(("a", [(0, 0, 0)], np.zeros((0, 3)), {}), ("lips", v, t, {}),
-                     frames=np.concatenate([np.zeros((3, 1, 3)), frames], axis=1))
+    state = state_of(
+        ("a", [(0, 0, 0)], np.zeros((0, 3)), {}),
+        ("lips", v, t, {}),
+        frames=np.concatenate([np.zeros((3, 1, 3)), frames], axis=1),
+    )
     r = Renderer(state, cam_scenario())
     r.render(1)
     with pytest.raises(GeometryError) as ei:
@@ -421,8 +467,11 @@ def test_near_plane_and_zero_area_are_defined():
     tri_behind = [(-1, -1, 0), (1, -1, 0), (0, 1, D + 1)]  # one vertex behind the camera
     tri_zero = [(-1, -1, 0), (0, 0, 0), (1, 1, 0)]  # collinear
     ok = [(-0.2, -0.2, 0), (0.2, -0.2, 0), (0, 0.2, 0)]
-    state = state_of(("a", tri_behind, [[0, 1, 2]], {}), ("b", tri_zero, [[0, 1, 2]], {}),
-                     ("c", ok, [[0, 1, 2]], {"color": (0, 1, 0)}))
+    state = state_of(
+        ("a", tri_behind, [[0, 1, 2]], {}),
+        ("b", tri_zero, [[0, 1, 2]], {}),
+        ("c", ok, [[0, 1, 2]], {"color": (0, 1, 0)}),
+    )
     r = Renderer(state, cam_scenario(shading="gouraud"))
     img = r.render(0)
     assert np.isfinite(img).all()
@@ -435,24 +484,31 @@ finite = st.floats(-1.2, 1.2, allow_nan=False)
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(st.tuples(finite, finite, st.floats(-2, 1.5)), min_size=3, max_size=12),
-       st.sampled_from(["flat", "gouraud"]), st.integers(1, 3),
-       st.tuples(st.floats(0, 1), st.floats(0, 1), st.floats(0, 1)))
+@given(
+    st.lists(st.tuples(finite, finite, st.floats(-2, 1.5)), min_size=3, max_size=12),
+    st.sampled_from(["flat", "gouraud"]),
+    st.integers(1, 3),
+    st.tuples(st.floats(0, 1), st.floats(0, 1), st.floats(0, 1)),
+)
 def test_random_triangles_give_finite_pixels_in_unit_range(pts, shading, ss, col):
     n = len(pts) - len(pts) % 3
     tris = np.arange(n).reshape(-1, 3)
     state = state_of(("r", pts[:n], tris, {"color": col, "specular": 0.0}))
-    sc = cam_scenario(24, 24, ss=ss, ambient=0.3, shading=shading,
-                      lights=[DirectionalLight((0.2, -0.3, -1.0), intensity=0.4),
-                              DirectionalLight((-1.0, 0.0, 0.2), intensity=0.3)])
+    sc = cam_scenario(
+        24,
+        24,
+        ss=ss,
+        ambient=0.3,
+        shading=shading,
+        lights=[DirectionalLight((0.2, -0.3, -1.0), intensity=0.4), DirectionalLight((-1.0, 0.0, 0.2), intensity=0.3)],
+    )
     img = render_frame(state, 0, sc)
     assert img.shape == (24, 24, 3)
     assert np.isfinite(img).all() and img.min() >= 0.0 and img.max() <= 1.0 + 1e-12
 
 
 @settings(max_examples=30, deadline=None)
-@given(st.floats(-1.0, 0.9), st.floats(-1.0, 0.9), st.floats(0.05, 1.0), st.floats(0.05, 1.0),
-       st.integers(1, 4))
+@given(st.floats(-1.0, 0.9), st.floats(-1.0, 0.9), st.floats(0.05, 1.0), st.floats(0.05, 1.0), st.integers(1, 4))
 def test_rectangle_coverage_matches_analytic_area(x0, y0, w, h, ss):
     x1, y1 = min(x0 + w, 1.1), min(y0 + h, 1.1)
     state = state_of(("rect", *quad(x0, y0, x1, y1), {"color": (1, 1, 1)}))
@@ -478,28 +534,31 @@ def test_default_scenario_and_toml_round_trip(tmp_path):
     assert Scenario.from_toml(cam_scenario(frames=(4, 1)).to_toml()).frames == (4, 1)
 
 
-@pytest.mark.parametrize("text, key", [
-    ("width = 0", "width"),
-    ("widht = 5", "widht"),
-    ("width = 2.5", "width"),
-    ("supersample = 9", "supersample"),
-    ("shading = 'phong'", "shading"),
-    ("format = 'jpg'", "format"),
-    ("background = [0.1, 2.0, 0.1]", "background[1]"),
-    ("background = [0.1, 0.1]", "background"),
-    ("frames = [1, -2]", "frames[1]"),
-    ("frames = 'all'", "frames"),
-    ("[camera]\nfit = true\nposition = [0, 0, 1]", "camera.position"),
-    ("[camera]\nfit = false\nlook_at = [0, 0, 0]", "camera.position"),
-    ("[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 1]", "camera.look_at"),
-    ("[camera]\nposition = [0, 5, 0]\nlook_at = [0, 0, 0]", "camera.up"),
-    ("[camera]\nfov_deg = 0", "camera.fov_deg"),
-    ("[camera]\nposition = [0, 0, 5]\nlook_at = [0, 0, 0]\nnear = 2\nfar = 1", "camera.far"),
-    ("[[lights]]\ncolor = [1, 1, 1]", "lights[0].direction"),
-    ("[[lights]]\ndirection = [0, 0, 0]", "lights[0].direction"),
-    ("[[lights]]\ndirection = [0, 0, -1]\nintensity = -1", "lights[0].intensity"),
-    ("[ambient]\nbrightness = 1", "ambient.brightness"),
-])
+@pytest.mark.parametrize(
+    "text, key",
+    [
+        ("width = 0", "width"),
+        ("widht = 5", "widht"),
+        ("width = 2.5", "width"),
+        ("supersample = 9", "supersample"),
+        ("shading = 'phong'", "shading"),
+        ("format = 'jpg'", "format"),
+        ("background = [0.1, 2.0, 0.1]", "background[1]"),
+        ("background = [0.1, 0.1]", "background"),
+        ("frames = [1, -2]", "frames[1]"),
+        ("frames = 'all'", "frames"),
+        ("[camera]\nfit = true\nposition = [0, 0, 1]", "camera.position"),
+        ("[camera]\nfit = false\nlook_at = [0, 0, 0]", "camera.position"),
+        ("[camera]\nposition = [0, 0, 1]\nlook_at = [0, 0, 1]", "camera.look_at"),
+        ("[camera]\nposition = [0, 5, 0]\nlook_at = [0, 0, 0]", "camera.up"),
+        ("[camera]\nfov_deg = 0", "camera.fov_deg"),
+        ("[camera]\nposition = [0, 0, 5]\nlook_at = [0, 0, 0]\nnear = 2\nfar = 1", "camera.far"),
+        ("[[lights]]\ncolor = [1, 1, 1]", "lights[0].direction"),
+        ("[[lights]]\ndirection = [0, 0, 0]", "lights[0].direction"),
+        ("[[lights]]\ndirection = [0, 0, -1]\nintensity = -1", "lights[0].intensity"),
+        ("[ambient]\nbrightness = 1", "ambient.brightness"),
+    ],
+)
 def test_scenario_errors_are_typed_and_name_the_key(text, key):
     with pytest.raises(ScenarioError) as ei:
         Scenario.from_toml(text, file="sc.toml")
@@ -558,6 +617,7 @@ def _fake_engine(monkeypatch, state):
     def animate(frames, scene=None):
         calls.append((len(frames), scene))
         return state
+
     mod.animate = animate
     monkeypatch.setitem(sys.modules, "fbaconf.animation.engine", mod)
     return calls
@@ -565,8 +625,7 @@ def _fake_engine(monkeypatch, state):
 
 def test_cli_render_verb(tmp_path, monkeypatch, capsys):
     v, t = uv_sphere()
-    state = state_of(("ball", v, t, {"color": (0.8, 0.7, 0.6)}),
-                     frames=np.stack([v, v * 1.1]))
+    state = state_of(("ball", v, t, {"color": (0.8, 0.7, 0.6)}), frames=np.stack([v, v * 1.1]))
     calls = _fake_engine(monkeypatch, state)
     faps = tmp_path / "f.npz"
     FapFrames.empty(2).save_npz(faps)
@@ -616,8 +675,20 @@ def test_cli_end_to_end_with_the_animation_stage(tmp_path):
     sc = tmp_path / "sc.toml"
     Scenario.default().with_(width=48, height=48, supersample=1).save(sc)
     for name in ("f.npz", "f.fap"):
-        assert main(["render", "--faps", str(tmp_path / name), "--scenario", str(sc),
-                     "-o", str(tmp_path / name.replace(".", "_"))]) == 0
+        assert (
+            main(
+                [
+                    "render",
+                    "--faps",
+                    str(tmp_path / name),
+                    "--scenario",
+                    str(sc),
+                    "-o",
+                    str(tmp_path / name.replace(".", "_")),
+                ]
+            )
+            == 0
+        )
     a = sorted((tmp_path / "f_npz").iterdir())
     b = sorted((tmp_path / "f_fap").iterdir())
     assert [p.name for p in a] == ["frame_00000.png", "frame_00001.png"]
@@ -643,8 +714,11 @@ def test_failed_image_write_leaves_no_file(tmp_path, monkeypatch):
         def close(self):
             return True
 
-    fake = types.SimpleNamespace(ImageOutput=types.SimpleNamespace(create=lambda p: FailingOutput()),
-                                 ImageSpec=oiio.ImageSpec, geterror=lambda: "")
+    fake = types.SimpleNamespace(
+        ImageOutput=types.SimpleNamespace(create=lambda p: FailingOutput()),
+        ImageSpec=oiio.ImageSpec,
+        geterror=lambda: "",
+    )
     monkeypatch.setattr(images, "openimageio", lambda: fake)
     with pytest.raises(ImageIOError, match="disk full"):
         write_png(tmp_path / "frame_00000.png", np.zeros((4, 4, 3)))
@@ -682,8 +756,7 @@ needs_native = pytest.mark.skipif(raster.native() is None, reason="rendering/_fa
 
 def _coverage_by_pixel(cov):
     order = np.argsort(cov.pix, kind="stable")
-    return {k: np.asarray(getattr(cov, k))[order] for k in ("pix", "tri", "v0", "v1", "v2", "b0", "b1", "b2",
-                                                               "front")}
+    return {k: np.asarray(getattr(cov, k))[order] for k in ("pix", "tri", "v0", "v1", "v2", "b0", "b1", "b2", "front")}
 
 
 @needs_native
@@ -721,8 +794,7 @@ def test_native_scan_conversion_equals_the_numpy_reference(seed, n_tri, cull, si
 def test_native_images_equal_the_numpy_reference(monkeypatch, shading, texture):
     """Whole frames (scan conversion, Gouraud interpolation, box filter) byte for byte: the
     goldens do not depend on whether the extension was built."""
-    case = next(c for s in load_suites() for c in s.cases
-                if c.id == ("grid-limits-l1" if texture else "default-head"))
+    case = next(c for s in load_suites() for c in s.cases if c.id == ("grid-limits-l1" if texture else "default-head"))
     state = animate(load_stream(case.input_path("fba")), scene=case.input_path("scene"))
     sc = Scenario.load(case.input_path("scenario")).with_(shading=shading, supersample=3)
     scene_dir = case.input_path("scene").parent

@@ -1,4 +1,5 @@
 """Harness reports: terminal summary, JSON (+ schema), JUnit XML, the HTML page, system info."""
+
 from __future__ import annotations
 
 import json
@@ -37,8 +38,13 @@ def tiny_png(path: Path, rgb=(200, 30, 30), size=4) -> Path:
 
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", size, size, 8, 2, 0, 0, 0))
-           + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+    png = (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", size, size, 8, 2, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(raw))
+        + chunk(b"IEND", b"")
+    )
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(png)
     return path
@@ -53,48 +59,114 @@ def make_record(elsewhere: Path | None = None, inside: str | None = None) -> Run
     """A record with every outcome; image artefacts when folders are given."""
     arte = {}
     if elsewhere is not None:
-        arte = {"expected": str(tiny_png(elsewhere / "exp.png", (20, 160, 40))),
-                "got": str(tiny_png(elsewhere / "got.png", (200, 30, 30))),
-                "diff": str(tiny_png(elsewhere / "diff.png", (250, 250, 0)))}
+        arte = {
+            "expected": str(tiny_png(elsewhere / "exp.png", (20, 160, 40))),
+            "got": str(tiny_png(elsewhere / "got.png", (200, 30, 30))),
+            "diff": str(tiny_png(elsewhere / "diff.png", (250, 250, 0))),
+        }
     if inside is not None:
         arte["inside"] = inside
     results = [
         case("basic/q0-neutral", Outcome.PASS, duration_s=0.12),
         case("basic/q8-smile", Outcome.PASS, duration_s=0.2, baseline="fixed"),
-        case("basic/q31-anger", Outcome.FAIL, message=f"FAP 31 differs {HOSTILE}", duration_s=0.3,
-             baseline="known-failure",
-             stages=[StageResult("faps", Outcome.FAIL, message="FAP mismatch",
-                                 first_difference={"frame": 12, "fap": 31, "name": "raise_l_i_eyebrow",
-                                                   "expected": 120, "got": 121},
-                                 metrics={"max_abs": 1.0, "psnr": math.inf},
-                                 series={"max abs error": [0, 0, 0.5, 1.0, 0.25, 0.0],
-                                         "rms <error>": [0, 0.1, 0.2, 0.1, 0.0, 0.0]})]),
-        case("render/teeth", Outcome.QUALITY_WARNING, claim="predictable@2", message="dE p95 2.1 above warn 2.0",
-             stages=[StageResult("images", Outcome.QUALITY_WARNING, message="dE warn",
-                                 first_difference={"frame": 0, "pixel": [10, 20], "expected": [1, 2, 3],
-                                                   "got": [4, 5, 6]},
-                                 metrics={"de_p95": 2.1}, artefacts=arte)]),
-        case("render/eyes", Outcome.CRASH, claim="predictable@2", message="decoder died",
-             command=["dec", "--in", "x y.fba"], exit_code=-11, signal="SIGSEGV",
-             stderr_tail="line1\n\x1b[31mSegmentation fault\x1b[0m \x00\n" + HOSTILE),
+        case(
+            "basic/q31-anger",
+            Outcome.FAIL,
+            message=f"FAP 31 differs {HOSTILE}",
+            duration_s=0.3,
+            baseline="known-failure",
+            stages=[
+                StageResult(
+                    "faps",
+                    Outcome.FAIL,
+                    message="FAP mismatch",
+                    first_difference={"frame": 12, "fap": 31, "name": "raise_l_i_eyebrow", "expected": 120, "got": 121},
+                    metrics={"max_abs": 1.0, "psnr": math.inf},
+                    series={"max abs error": [0, 0, 0.5, 1.0, 0.25, 0.0], "rms <error>": [0, 0.1, 0.2, 0.1, 0.0, 0.0]},
+                )
+            ],
+        ),
+        case(
+            "render/teeth",
+            Outcome.QUALITY_WARNING,
+            claim="predictable@2",
+            message="dE p95 2.1 above warn 2.0",
+            stages=[
+                StageResult(
+                    "images",
+                    Outcome.QUALITY_WARNING,
+                    message="dE warn",
+                    first_difference={"frame": 0, "pixel": [10, 20], "expected": [1, 2, 3], "got": [4, 5, 6]},
+                    metrics={"de_p95": 2.1},
+                    artefacts=arte,
+                )
+            ],
+        ),
+        case(
+            "render/eyes",
+            Outcome.CRASH,
+            claim="predictable@2",
+            message="decoder died",
+            command=["dec", "--in", "x y.fba"],
+            exit_code=-11,
+            signal="SIGSEGV",
+            stderr_tail="line1\n\x1b[31mSegmentation fault\x1b[0m \x00\n" + HOSTILE,
+        ),
         case("render/slow", Outcome.TIMEOUT, claim="predictable@2", message="no output after 30 s"),
-        case("basic/bad-setup", Outcome.ERROR, message="golden missing & \"quoted\""),
+        case("basic/bad-setup", Outcome.ERROR, message='golden missing & "quoted"'),
         case("basic/dct", Outcome.NOT_SUPPORTED, message="exit 69: DCT mode", required=False),
         case("render/skipme", Outcome.SKIPPED, claim="predictable@2", message="no render command"),
     ]
-    speed = [SpeedResult("decode", "simple@1", 0.001, 0.05, 1000.0, 25.0, True, "seed",
-                         samples=[{"frames": 100, "seconds": 0.15}], fit_r2=0.999),
-             SpeedResult("render", "predictable@2", 0.1, 0.5, 10.0, 25.0, False, "provisional",
-                         samples=[{"frames": 10, "seconds": 1.5}], fit_r2=0.98, message="too slow")]
-    return RunRecord(decoder={"name": "exampledec", "manifest_sha256": "ab" * 32, "kind": "manifest",
-                              "claims": ["simple@1"], "inputs": ["fba"], "outputs": ["faps", "images"]},
-                     claim="simple@1",
-                     suites=[{"name": "basic", "version": "1.0", "sha256": "cd" * 32, "cases": 5},
-                             {"name": "render", "version": "0.3", "sha256": "ef" * 32, "cases": 4}],
-                     system={"cpu_model": "Test CPU", "cpu_count": 2, "versions": {"numpy": "2.0"}},
-                     results=results, speed=speed, started="2024-01-01T00:00:00Z",
-                     finished="2024-01-01T00:01:00Z", duration_s=60.0,
-                     provisional=["level numbers are provisional", f"DCT tables {HOSTILE}"], exit_code=1)
+    speed = [
+        SpeedResult(
+            "decode",
+            "simple@1",
+            0.001,
+            0.05,
+            1000.0,
+            25.0,
+            True,
+            "seed",
+            samples=[{"frames": 100, "seconds": 0.15}],
+            fit_r2=0.999,
+        ),
+        SpeedResult(
+            "render",
+            "predictable@2",
+            0.1,
+            0.5,
+            10.0,
+            25.0,
+            False,
+            "provisional",
+            samples=[{"frames": 10, "seconds": 1.5}],
+            fit_r2=0.98,
+            message="too slow",
+        ),
+    ]
+    return RunRecord(
+        decoder={
+            "name": "exampledec",
+            "manifest_sha256": "ab" * 32,
+            "kind": "manifest",
+            "claims": ["simple@1"],
+            "inputs": ["fba"],
+            "outputs": ["faps", "images"],
+        },
+        claim="simple@1",
+        suites=[
+            {"name": "basic", "version": "1.0", "sha256": "cd" * 32, "cases": 5},
+            {"name": "render", "version": "0.3", "sha256": "ef" * 32, "cases": 4},
+        ],
+        system={"cpu_model": "Test CPU", "cpu_count": 2, "versions": {"numpy": "2.0"}},
+        results=results,
+        speed=speed,
+        started="2024-01-01T00:00:00Z",
+        finished="2024-01-01T00:01:00Z",
+        duration_s=60.0,
+        provisional=["level numbers are provisional", f"DCT tables {HOSTILE}"],
+        exit_code=1,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -112,10 +184,19 @@ def validator(schema):
 
 # ----------------------------------------------------------------------------- system info
 
+
 def test_system_info_fields_and_no_hostname():
     info = system_info({"jobs": 3})
-    for k in ("cpu_model", "cpu_count", "os", "kernel", "python_version", "python_implementation",
-              "versions", "timestamp_utc"):
+    for k in (
+        "cpu_model",
+        "cpu_count",
+        "os",
+        "kernel",
+        "python_version",
+        "python_implementation",
+        "versions",
+        "timestamp_utc",
+    ):
         assert k in info
     assert info["jobs"] == 3
     assert set(info["versions"]) == {"fbaconf", "numpy", "OpenImageIO", "colour-science"}
@@ -132,6 +213,7 @@ def test_system_info_fields_and_no_hostname():
 
 # ----------------------------------------------------------------------------- terminal
 
+
 def _row(text: str, first: str) -> list[str]:
     for line in text.splitlines():
         cells = line.split()
@@ -146,11 +228,31 @@ def test_terminal_tables_and_verdict():
     assert "\x1b" not in text and "\x00" not in text
     header = _row(text, "suite")
     # a required case the decoder could not take has a column of its own (it fails the claim)
-    assert header[1:] == ["Pass", "Fail", "QualityWarning", "RequiredNotSupported", "NotSupported", "Timeout",
-                          "Crash", "Error", "Skipped", "total"]
+    assert header[1:] == [
+        "Pass",
+        "Fail",
+        "QualityWarning",
+        "RequiredNotSupported",
+        "NotSupported",
+        "Timeout",
+        "Crash",
+        "Error",
+        "Skipped",
+        "total",
+    ]
     basic = dict(zip(header[1:], map(int, _row(text, "basic")[1:])))
-    assert basic == {"Pass": 2, "Fail": 1, "QualityWarning": 0, "RequiredNotSupported": 0, "NotSupported": 1,
-                     "Timeout": 0, "Crash": 0, "Error": 1, "Skipped": 0, "total": 5}
+    assert basic == {
+        "Pass": 2,
+        "Fail": 1,
+        "QualityWarning": 0,
+        "RequiredNotSupported": 0,
+        "NotSupported": 1,
+        "Timeout": 0,
+        "Crash": 0,
+        "Error": 1,
+        "Skipped": 0,
+        "total": 5,
+    }
     render = dict(zip(header[1:], map(int, _row(text, "render")[1:])))
     assert render["total"] == 4 and render["Crash"] == 1 and render["Timeout"] == 1
     pheader = _row(text, "profile")
@@ -161,15 +263,20 @@ def test_terminal_tables_and_verdict():
     assert "first difference: frame 12, FAP 31 (raise_l_i_eyebrow): expected 120, got 121" in text
     assert "first difference: frame 0, pixel [10, 20]: expected [1, 2, 3], got [4, 5, 6]" in text
     assert "baseline: fixed" in text and "signal SIGSEGV" in text and "Segmentation fault" in text
-    order = [line.split()[0] for line in text.split("cases to look at")[1].split("speed:")[0].splitlines()
-             if line.startswith("  ") and not line.startswith("   ")]
+    order = [
+        line.split()[0]
+        for line in text.split("cases to look at")[1].split("speed:")[0].splitlines()
+        if line.startswith("  ") and not line.startswith("   ")
+    ]
     assert order == ["Pass", "Crash", "Timeout", "Fail", "Error", "QualityWarning"]  # what fails the run (fixed) first
     # speed
     speed = [line for line in text.splitlines() if line.strip().startswith("render ") and "provisional" in line]
     assert speed and "FAIL" in speed[0] and "10.00" in speed[0] and "25.00" in speed[0]
     last = text.rstrip().splitlines()[-1]
-    assert last.startswith("result: FAIL (9 cases: 2 Pass, 1 Fail, 1 QualityWarning, 1 NotSupported, "
-                           "1 Timeout, 1 Crash, 1 Error, 1 Skipped")
+    assert last.startswith(
+        "result: FAIL (9 cases: 2 Pass, 1 Fail, 1 QualityWarning, 1 NotSupported, "
+        "1 Timeout, 1 Crash, 1 Error, 1 Skipped"
+    )
     assert "speed: 1 of 2 pass" in last
 
 
@@ -195,6 +302,7 @@ def test_terminal_limits_and_colour():
 
 # ----------------------------------------------------------------------------- JSON
 
+
 def test_json_schema_strict_and_round_trip(tmp_path, schema):
     rec = make_record(tmp_path / "elsewhere")
     p = write_json(rec, tmp_path / "out" / "run.json")
@@ -211,15 +319,24 @@ def test_json_schema_strict_and_round_trip(tmp_path, schema):
 
 def test_json_handles_numpy_values(tmp_path, schema):
     rec = make_record()
-    rec.results[2].stages[0].first_difference = {"frame": np.int64(3), "vertex": np.int32(7),
-                                                 "expected": np.array([1.0, 2.0]), "got": np.float32(0.5)}
+    rec.results[2].stages[0].first_difference = {
+        "frame": np.int64(3),
+        "vertex": np.int32(7),
+        "expected": np.array([1.0, 2.0]),
+        "got": np.float32(0.5),
+    }
     doc = json.loads(write_json(rec, tmp_path / "r.json").read_text())
     jsonschema.validate(doc, schema)
-    assert doc["results"][2]["stages"][0]["first_difference"] == {"frame": 3, "vertex": 7,
-                                                                  "expected": [1.0, 2.0], "got": 0.5}
+    assert doc["results"][2]["stages"][0]["first_difference"] == {
+        "frame": 3,
+        "vertex": 7,
+        "expected": [1.0, 2.0],
+        "got": 0.5,
+    }
 
 
 # ----------------------------------------------------------------------------- JUnit
+
 
 def _suites(xml: JUnitXml) -> dict:
     return {s.name: s for s in xml}
@@ -265,6 +382,7 @@ def test_junit_counts_names_messages(tmp_path):
 
 
 # ----------------------------------------------------------------------------- HTML
+
 
 class _Collector(HTMLParser):
     def __init__(self):
@@ -344,39 +462,74 @@ def test_svg_plot_edge_cases():
 
 _text = st.text(max_size=30)
 _finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
-_json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6), _finite, _text)
+_json_leaf = st.one_of(st.none(), st.booleans(), st.integers(-(10**6), 10**6), _finite, _text)
 _anyjson = st.one_of(_json_leaf, st.lists(_json_leaf, max_size=3))
-_diff = st.one_of(st.none(), st.fixed_dictionaries(
-    {"frame": st.one_of(st.none(), st.integers(0, 10**6))},
-    optional={k: _anyjson for k in ("fap", "vertex", "pixel", "expected", "got", "name", "distance", "extra")}))
-_stage = st.builds(StageResult, stage=st.sampled_from(["faps", "vertices", "images", "process"]),
-                   outcome=st.sampled_from(list(Outcome)), message=_text, first_difference=_diff,
-                   metrics=st.dictionaries(_text, _finite, max_size=3),
-                   series=st.dictionaries(_text, st.lists(_finite, max_size=6), max_size=2),
-                   artefacts=st.dictionaries(_text, _text, max_size=2))
-_case = st.builds(CaseResult, case_id=_text, suite=st.sampled_from(["basic", "render", "ünï<&>"]),
-                  claim=st.sampled_from(["simple@1", "predictable@2", "calibration@1"]),
-                  outcome=st.sampled_from(list(Outcome)), message=_text, required=st.booleans(),
-                  stages=st.lists(_stage, max_size=2), duration_s=st.floats(0, 1e4),
-                  command=st.one_of(st.none(), st.lists(_text, max_size=3)),
-                  exit_code=st.one_of(st.none(), st.integers(-64, 255)), signal=st.one_of(st.none(), _text),
-                  stderr_tail=_text, baseline=st.sampled_from([None, "known-failure", "flake", "fixed"]))
-_speed = st.builds(SpeedResult, operation=st.sampled_from(["decode", "render"]), claim=st.just("simple@1"),
-                   per_frame_s=_finite, startup_s=_finite, rate_fps=_finite, required_fps=_finite,
-                   passed=st.booleans(), provenance=st.sampled_from(["seed", "provisional"]),
-                   samples=st.lists(st.fixed_dictionaries({"frames": st.integers(0, 100),
-                                                           "seconds": st.floats(0, 10)}), max_size=2),
-                   fit_r2=_finite, message=_text)
-_record = st.builds(RunRecord, decoder=st.fixed_dictionaries({"name": _text}),
-                    claim=st.one_of(st.none(), st.just("simple@1")),
-                    suites=st.just([{"name": "basic", "version": "1"}]), system=st.just({"os": "Linux"}),
-                    results=st.lists(_case, max_size=6), speed=st.lists(_speed, max_size=2), started=_text,
-                    finished=_text, duration_s=st.floats(0, 1e5), provisional=st.lists(_text, max_size=2),
-                    exit_code=st.sampled_from([0, 1, 2, 3]))
+_diff = st.one_of(
+    st.none(),
+    st.fixed_dictionaries(
+        {"frame": st.one_of(st.none(), st.integers(0, 10**6))},
+        optional={k: _anyjson for k in ("fap", "vertex", "pixel", "expected", "got", "name", "distance", "extra")},
+    ),
+)
+_stage = st.builds(
+    StageResult,
+    stage=st.sampled_from(["faps", "vertices", "images", "process"]),
+    outcome=st.sampled_from(list(Outcome)),
+    message=_text,
+    first_difference=_diff,
+    metrics=st.dictionaries(_text, _finite, max_size=3),
+    series=st.dictionaries(_text, st.lists(_finite, max_size=6), max_size=2),
+    artefacts=st.dictionaries(_text, _text, max_size=2),
+)
+_case = st.builds(
+    CaseResult,
+    case_id=_text,
+    suite=st.sampled_from(["basic", "render", "ünï<&>"]),
+    claim=st.sampled_from(["simple@1", "predictable@2", "calibration@1"]),
+    outcome=st.sampled_from(list(Outcome)),
+    message=_text,
+    required=st.booleans(),
+    stages=st.lists(_stage, max_size=2),
+    duration_s=st.floats(0, 1e4),
+    command=st.one_of(st.none(), st.lists(_text, max_size=3)),
+    exit_code=st.one_of(st.none(), st.integers(-64, 255)),
+    signal=st.one_of(st.none(), _text),
+    stderr_tail=_text,
+    baseline=st.sampled_from([None, "known-failure", "flake", "fixed"]),
+)
+_speed = st.builds(
+    SpeedResult,
+    operation=st.sampled_from(["decode", "render"]),
+    claim=st.just("simple@1"),
+    per_frame_s=_finite,
+    startup_s=_finite,
+    rate_fps=_finite,
+    required_fps=_finite,
+    passed=st.booleans(),
+    provenance=st.sampled_from(["seed", "provisional"]),
+    samples=st.lists(st.fixed_dictionaries({"frames": st.integers(0, 100), "seconds": st.floats(0, 10)}), max_size=2),
+    fit_r2=_finite,
+    message=_text,
+)
+_record = st.builds(
+    RunRecord,
+    decoder=st.fixed_dictionaries({"name": _text}),
+    claim=st.one_of(st.none(), st.just("simple@1")),
+    suites=st.just([{"name": "basic", "version": "1"}]),
+    system=st.just({"os": "Linux"}),
+    results=st.lists(_case, max_size=6),
+    speed=st.lists(_speed, max_size=2),
+    started=_text,
+    finished=_text,
+    duration_s=st.floats(0, 1e5),
+    provisional=st.lists(_text, max_size=2),
+    exit_code=st.sampled_from([0, 1, 2, 3]),
+)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
-                                                                 HealthCheck.too_slow])
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow]
+)
 @given(rec=_record)
 def test_property_json_round_trip_and_junit_parses(tmp_path, validator, rec):
     p = write_json(rec, tmp_path / "r.json")
@@ -395,13 +548,22 @@ def test_property_json_round_trip_and_junit_parses(tmp_path, validator, rec):
         # required NotSupported cases fail
         excused = [r.baseline in ("known-failure", "flake") and not r.outcome.ok for r in mine]
         fixed = [r.baseline == "fixed" and not ex for r, ex in zip(mine, excused)]
-        assert s.failures == sum(not ex and (fx or r.outcome in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH) or
-                                             (r.outcome is Outcome.NOT_SUPPORTED and r.required))
-                                 for r, ex, fx in zip(mine, excused, fixed))
-        assert s.errors == sum(not ex and not fx and r.outcome is Outcome.ERROR for r, ex, fx in zip(mine, excused, fixed))  # noqa: E501
-        assert s.skipped == sum(ex or (not fx and (r.outcome is Outcome.SKIPPED or
-                                                   (r.outcome is Outcome.NOT_SUPPORTED and not r.required)))
-                                for r, ex, fx in zip(mine, excused, fixed))
+        assert s.failures == sum(
+            not ex
+            and (
+                fx
+                or r.outcome in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH)
+                or (r.outcome is Outcome.NOT_SUPPORTED and r.required)
+            )
+            for r, ex, fx in zip(mine, excused, fixed)
+        )
+        assert s.errors == sum(
+            not ex and not fx and r.outcome is Outcome.ERROR for r, ex, fx in zip(mine, excused, fixed)
+        )
+        assert s.skipped == sum(
+            ex or (not fx and (r.outcome is Outcome.SKIPPED or (r.outcome is Outcome.NOT_SUPPORTED and not r.required)))
+            for r, ex, fx in zip(mine, excused, fixed)
+        )
     if rec.speed:
         assert by["speed"].failures == sum(not s.passed for s in rec.speed)
     text = terminal_summary(rec)
@@ -420,14 +582,30 @@ def test_html_in_headless_chromium(tmp_path):
     out = tmp_path / "report"
     page = write_html(make_record(tmp_path / "elsewhere", inside=None), out)
     try:
-        proc = subprocess.run([CHROMIUM, "--headless=new", "--no-sandbox", "--disable-gpu", "--enable-logging=stderr",
-                               "--v=0", f"--user-data-dir={tmp_path / 'profile'}", "--dump-dom", page.as_uri()],
-                              capture_output=True, text=True, timeout=60)
+        proc = subprocess.run(
+            [
+                CHROMIUM,
+                "--headless=new",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--enable-logging=stderr",
+                "--v=0",
+                f"--user-data-dir={tmp_path / 'profile'}",
+                "--dump-dom",
+                page.as_uri(),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
     except subprocess.TimeoutExpired:
         pytest.skip("chromium did not finish in time")
     assert "Failures and warnings" in proc.stdout
-    bad = [line for line in proc.stderr.splitlines() if "CONSOLE" in line or "Uncaught" in line
-           or "Content Security Policy" in line]
+    bad = [
+        line
+        for line in proc.stderr.splitlines()
+        if "CONSOLE" in line or "Uncaught" in line or "Content Security Policy" in line
+    ]
     assert not bad, bad
 
 
@@ -450,17 +628,50 @@ def _qualified_record() -> RunRecord:
     """A decoder that declines dct: every other required case passes (harness/verdict.py sets the
     tool aside: PASS (unverified: dct))."""
     rs = [case("s/a", Outcome.PASS, tools=["arithmetic"]), case("s/b", Outcome.PASS, tools=["arithmetic"])]
-    rs += [case(f"s/d{i}", Outcome.NOT_SUPPORTED, message="case uses tool(s) dct the decoder does not declare",
-                tools=["dct"], rests_on=["D8"]) for i in range(3)]
-    verdict = {"verdict": "PASS (unverified: dct)", "exit_code": 0, "unverified": ["dct"],
-               "tools": {"arithmetic": {"tool": "arithmetic", "state": "verified", "cases": 2, "passed": 2,
-                                        "provisional": False, "note": ""},
-                         "dct": {"tool": "dct", "state": "declined", "cases": 3, "passed": 0, "provisional": True,
-                                 "note": "not taken (3 valid stream(s) NotSupported)"}},
-               "decisions": {"D8": {"decision": "D8", "state": "declined", "cases": 3, "passed": 0, "readings": []}}}
-    return RunRecord(decoder={"name": "honest", "env": {"JAVA_OPTS": "-Xss4m"}}, claim="simple@1", suites=[],
-                     system={}, results=rs, exit_code=0, verdict=verdict,
-                     missing=["3 required case(s): case uses tool(s) dct the decoder does not declare"])
+    rs += [
+        case(
+            f"s/d{i}",
+            Outcome.NOT_SUPPORTED,
+            message="case uses tool(s) dct the decoder does not declare",
+            tools=["dct"],
+            rests_on=["D8"],
+        )
+        for i in range(3)
+    ]
+    verdict = {
+        "verdict": "PASS (unverified: dct)",
+        "exit_code": 0,
+        "unverified": ["dct"],
+        "tools": {
+            "arithmetic": {
+                "tool": "arithmetic",
+                "state": "verified",
+                "cases": 2,
+                "passed": 2,
+                "provisional": False,
+                "note": "",
+            },
+            "dct": {
+                "tool": "dct",
+                "state": "declined",
+                "cases": 3,
+                "passed": 0,
+                "provisional": True,
+                "note": "not taken (3 valid stream(s) NotSupported)",
+            },
+        },
+        "decisions": {"D8": {"decision": "D8", "state": "declined", "cases": 3, "passed": 0, "readings": []}},
+    }
+    return RunRecord(
+        decoder={"name": "honest", "env": {"JAVA_OPTS": "-Xss4m"}},
+        claim="simple@1",
+        suites=[],
+        system={},
+        results=rs,
+        exit_code=0,
+        verdict=verdict,
+        missing=["3 required case(s): case uses tool(s) dct the decoder does not declare"],
+    )
 
 
 def test_a_qualified_pass_reads_declined_with_its_reason_beside_an_amber_badge(tmp_path):
@@ -475,15 +686,28 @@ def test_a_qualified_pass_reads_declined_with_its_reason_beside_an_amber_badge(t
     # the required NotSupported cases have their own column and colour, not the informative one's
     assert page.count("<td class='num c-NotSupportedRequired'>3</td>") == 2  # the suite row and the total
     text = terminal_summary(_qualified_record())
-    assert text.rstrip().splitlines()[-1].startswith("result: PASS (unverified: dct) (5 cases: 2 Pass, "
-                                                      "3 RequiredNotSupported)")
+    assert (
+        text.rstrip()
+        .splitlines()[-1]
+        .startswith("result: PASS (unverified: dct) (5 cases: 2 Pass, 3 RequiredNotSupported)")
+    )
     assert "  tool dct: declined" in text
 
 
 def test_identical_failures_that_name_their_own_input_are_one_group():
-    rs = [case(f"s/dct-{n}", Outcome.FAIL, tools=["dct"], exit_code=1, message=(
-        f"acme-java exited with code 1, a reject; stderr: Exception in thread main: in/dct-{n}.fba: DCT segment "
-        f"mode not implemented: a valid stream was rejected")) for n in ("q4", "skips", "mode-switch", "short")]
+    rs = [
+        case(
+            f"s/dct-{n}",
+            Outcome.FAIL,
+            tools=["dct"],
+            exit_code=1,
+            message=(
+                f"acme-java exited with code 1, a reject; stderr: Exception in thread main: in/dct-{n}.fba: "
+                f"DCT segment mode not implemented: a valid stream was rejected"
+            ),
+        )
+        for n in ("q4", "skips", "mode-switch", "short")
+    ]
     rec = RunRecord(decoder={"name": "acme-java"}, claim="simple@1", suites=[], system={}, results=rs, exit_code=1)
     groups = failure_groups(rec)
     assert len(groups) == 1 and len(groups[0][1]) == 4
@@ -491,8 +715,14 @@ def test_identical_failures_that_name_their_own_input_are_one_group():
 
 def test_reproduce_lines_carry_the_manifests_env(tmp_path):
     r = case("s/a", Outcome.FAIL, message="x", command=["/opt/acme/dec", "/run/work/case-ab12/in/a.fba"])
-    rec = RunRecord(decoder={"name": "acme", "env": {"ACME_LICENSE": "ci", "B": "two words"}}, claim="simple@1",
-                    suites=[], system={}, results=[r], exit_code=1)
+    rec = RunRecord(
+        decoder={"name": "acme", "env": {"ACME_LICENSE": "ci", "B": "two words"}},
+        claim="simple@1",
+        suites=[],
+        system={},
+        results=[r],
+        exit_code=1,
+    )
     line = next(x for x in terminal_summary(rec).splitlines() if "reproduce:" in x)
     assert line.split("reproduce: ")[1].startswith("env ACME_LICENSE=ci 'B=two words' /opt/acme/dec ")
     assert "env ACME_LICENSE=ci &#x27;B=two words&#x27; /opt/acme/dec" in write_html(rec, tmp_path).read_text()

@@ -1,6 +1,7 @@
 """The run's live log (``results.jsonl``, harness/results.py ResultLog): one whole JSON line per
 case however many threads finish cases at once, and a line cut short by an interruption never
 swallows the next record."""
+
 from __future__ import annotations
 
 import json
@@ -10,8 +11,7 @@ from fbaconf.harness.results import CaseResult, Outcome, ResultLog
 
 
 def _result(i: int, size: int) -> CaseResult:
-    return CaseResult(case_id=f"s/c{i:04d}", suite="s", claim="simple@1", outcome=Outcome.PASS,
-                      message="m" * size)
+    return CaseResult(case_id=f"s/c{i:04d}", suite="s", claim="simple@1", outcome=Outcome.PASS, message="m" * size)
 
 
 def test_threads_appending_long_lines_at_once_leave_one_whole_line_each(tmp_path):
@@ -25,6 +25,7 @@ def test_threads_appending_long_lines_at_once_leave_one_whole_line_each(tmp_path
         start.wait()
         for k in range(40):
             log.append(_result(t * 100 + k, 20_000 + 37 * k))
+
     threads = [threading.Thread(target=work, args=(t,)) for t in range(8)]
     for th in threads:
         th.start()

@@ -1,4 +1,5 @@
 """Any byte string given to the decoder ends as FapFrames or a typed BitstreamError."""
+
 from __future__ import annotations
 
 import random
@@ -19,12 +20,18 @@ def seed_corpus() -> list[bytes]:
     out = []
     cases = [
         (synthetic_sequence(12, 25.0, faps=[3, 4, 5, 19, 20, 48]), EncoderOptions(fap_quant=1, intra_period=4)),
-        (synthetic_sequence(10, 30000 / 1001), EncoderOptions(fap_quant=0 + 2, plane_start_codes="all",
-                                                              time_codes=True)),
-        (synthetic_sequence(8, 10.0, visemes=True, expressions=False, faps=[6, 7, 31, 32]),
-         EncoderOptions(fap_quant=31, ranges="persist", plane_start_codes="none")),
-        (synthetic_sequence(8, 12.5, visemes=False, expressions=True, faps=list(range(3, 19))),
-         EncoderOptions(fap_quant=5, partial_mask_type=2)),
+        (
+            synthetic_sequence(10, 30000 / 1001),
+            EncoderOptions(fap_quant=0 + 2, plane_start_codes="all", time_codes=True),
+        ),
+        (
+            synthetic_sequence(8, 10.0, visemes=True, expressions=False, faps=[6, 7, 31, 32]),
+            EncoderOptions(fap_quant=31, ranges="persist", plane_start_codes="none"),
+        ),
+        (
+            synthetic_sequence(8, 12.5, visemes=False, expressions=True, faps=list(range(3, 19))),
+            EncoderOptions(fap_quant=5, partial_mask_type=2),
+        ),
     ]
     for frames, opts in cases:
         out.append(encode(frames, opts).data)
@@ -54,7 +61,7 @@ def mutate(rnd: random.Random, data: bytes, corpus: list[bytes]) -> bytes:
         return bytes(b)
     if kind == 3:  # splice two streams
         other = rnd.choice(corpus)
-        return bytes(b[: rnd.randrange(len(b) + 1)] + other[rnd.randrange(len(other)):])
+        return bytes(b[: rnd.randrange(len(b) + 1)] + other[rnd.randrange(len(other)) :])
     if kind == 4:  # random bytes after a valid start code
         return b"\x00\x00\x01\xba" + bytes(rnd.randrange(256) for _ in range(rnd.randrange(64)))
     # random bytes, any length

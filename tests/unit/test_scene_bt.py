@@ -13,7 +13,7 @@ finite = st.floats(allow_nan=False, allow_infinity=False)
 def value_strategy(spec, depth):
     t = spec.type
     if t == "SFInt32":
-        return st.integers(-2**31, 2**31 - 1)
+        return st.integers(-(2**31), 2**31 - 1)
     if t in ("SFFloat", "SFTime"):
         return finite
     if t == "SFBool":
@@ -30,7 +30,7 @@ def value_strategy(spec, depth):
     if t == "MFString":
         return st.lists(st.text(max_size=5), max_size=3)
     if t == "MFInt32":
-        return st.lists(st.integers(-2**31, 2**31 - 1), max_size=20).map(lambda x: np.array(x, np.int64))
+        return st.lists(st.integers(-(2**31), 2**31 - 1), max_size=20).map(lambda x: np.array(x, np.int64))
     if t == "MFFloat":
         return st.lists(finite, max_size=12).map(lambda x: np.array(x, np.float64))
     k = bt._MF_VEC[t]
@@ -43,8 +43,14 @@ def node_strategy(draw, depth=2, types=None):
     specs = bt.node_specs()[ntype]
     names = draw(st.lists(st.sampled_from(sorted(specs)), unique=True, max_size=5)) if specs else []
     fields = {n: draw(value_strategy(specs[n], depth)) for n in names}
-    def_name = draw(st.one_of(st.none(), st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{2,8}", fullmatch=True)
-                              .filter(lambda s: s not in ("USE", "DEF", "NULL", "TRUE", "FALSE"))))
+    def_name = draw(
+        st.one_of(
+            st.none(),
+            st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{2,8}", fullmatch=True).filter(
+                lambda s: s not in ("USE", "DEF", "NULL", "TRUE", "FALSE")
+            ),
+        )
+    )
     return bt.Node(ntype, fields, def_name)
 
 
@@ -105,23 +111,29 @@ def test_sample_and_defaults():
     assert bt.parse(bt.write(s)) == s
 
 
-@pytest.mark.parametrize("text, where, rule", [
-    ("Face { fdp FDP { faceDefTables [ FaceDefTables { } FaceDefTables { faceDefMesh [ FaceDefMesh { coordIndex [1 2.5] } ] } ] } }",  # noqa: E501
-     "Face.fdp.FDP.faceDefTables[1].faceDefMesh[0].coordIndex", "bt-number"),
-    ("Face {\n  fap FAP { open_jawx 3 } }", "Face.fap.FAP", "bt-unknown-field"),
-    ("Group { children [ Foo { } ] }", "Group.children[0]", "bt-unknown-node"),
-    ("Group { children [ USE X ] }", "Group.children[0]", "bt-use-undefined"),
-    ("Face { fdp FAP { } }", "Face.fdp", "bt-node-type"),
-    ("DEF A Group { } DEF A Group { }", None, "bt-def-duplicate"),
-    ("DEF C Coordinate { } Group { children [ USE C ] }", "Group.children[0]", "bt-node-type"),
-    ("FDP { useOrthoTexture yes }", "FDP.useOrthoTexture", "bt-bool"),
-    ("Transform { rotation 0 1 0 }", "Transform.rotation", "bt-number"),
-    ("Group { children [ ", "Group.children", "bt-eof"),
-    ('ImageTexture { url ["abc] }', None, "bt-token"),
-    ("Transform { translation 1 2 3 translation 1 2 3 }", "Transform", "bt-duplicate-field"),
-    ("Transform { scale 1e999 1 1 }", "Transform.scale", "bt-number"),
-    ("FAP { open_jaw 99999999999 }", "FAP.open_jaw", "bt-number"),
-])
+@pytest.mark.parametrize(
+    "text, where, rule",
+    [
+        (
+            "Face { fdp FDP { faceDefTables [ FaceDefTables { } FaceDefTables { faceDefMesh [ FaceDefMesh { coordIndex [1 2.5] } ] } ] } }",  # noqa: E501
+            "Face.fdp.FDP.faceDefTables[1].faceDefMesh[0].coordIndex",
+            "bt-number",
+        ),
+        ("Face {\n  fap FAP { open_jawx 3 } }", "Face.fap.FAP", "bt-unknown-field"),
+        ("Group { children [ Foo { } ] }", "Group.children[0]", "bt-unknown-node"),
+        ("Group { children [ USE X ] }", "Group.children[0]", "bt-use-undefined"),
+        ("Face { fdp FAP { } }", "Face.fdp", "bt-node-type"),
+        ("DEF A Group { } DEF A Group { }", None, "bt-def-duplicate"),
+        ("DEF C Coordinate { } Group { children [ USE C ] }", "Group.children[0]", "bt-node-type"),
+        ("FDP { useOrthoTexture yes }", "FDP.useOrthoTexture", "bt-bool"),
+        ("Transform { rotation 0 1 0 }", "Transform.rotation", "bt-number"),
+        ("Group { children [ ", "Group.children", "bt-eof"),
+        ('ImageTexture { url ["abc] }', None, "bt-token"),
+        ("Transform { translation 1 2 3 translation 1 2 3 }", "Transform", "bt-duplicate-field"),
+        ("Transform { scale 1e999 1 1 }", "Transform.scale", "bt-number"),
+        ("FAP { open_jaw 99999999999 }", "FAP.open_jaw", "bt-number"),
+    ],
+)
 def test_errors_name_line_column_and_path(text, where, rule):
     with pytest.raises(TextFormatError) as e:
         bt.parse(text, "x.bt")
@@ -149,7 +161,7 @@ def test_depth_limit():
 @settings(max_examples=200, deadline=None)
 @given(st.integers(0, len(SAMPLE) - 1), st.integers(0, len(SAMPLE)), st.text(max_size=4))
 def test_mutated_text_only_typed_errors(i, j, insert):
-    text = SAMPLE[:i] + insert + SAMPLE[max(i, j):]
+    text = SAMPLE[:i] + insert + SAMPLE[max(i, j) :]
     try:
         s = bt.parse(text)
     except TextFormatError:
@@ -159,10 +171,10 @@ def test_mutated_text_only_typed_errors(i, j, insert):
 
 def test_reads_booleans_as_mp4box_writes_them():
     """GPAC's MP4Box dumps SFBool as lowercase true/false (issue 18); both spellings read the same."""
-    upper = bt.parse('Face { fap FAP { viseme Viseme { viseme_def TRUE } } }')
-    lower = bt.parse('Face { fap FAP { viseme Viseme { viseme_def true } } }')
+    upper = bt.parse("Face { fap FAP { viseme Viseme { viseme_def TRUE } } }")
+    lower = bt.parse("Face { fap FAP { viseme Viseme { viseme_def true } } }")
     assert upper == lower
-    assert bt.parse('Face { fap FAP { viseme Viseme { viseme_def false } } }') != upper
+    assert bt.parse("Face { fap FAP { viseme Viseme { viseme_def false } } }") != upper
 
 
 def _urls(text):
@@ -173,16 +185,19 @@ def test_reads_object_descriptor_urls_as_mp4box_writes_them():
     """MP4Box dumps an MFURL's object-descriptor items unquoted (od:5) and the empty URL as od:0
     (GPAC's scene_dump.c); the quoted forms read the same, and the writer keeps them quoted."""
     assert _urls('ImageTexture { url ["face.jpg" od:5 od:0] }') == [["face.jpg", "od:5", ""]]
-    assert _urls('ImageTexture { url od:1023 }') == _urls('ImageTexture { url "od:1023" }') == [["od:1023"]]
+    assert _urls("ImageTexture { url od:1023 }") == _urls('ImageTexture { url "od:1023" }') == [["od:1023"]]
     assert 'url ["face.jpg" "od:5" ""]' in bt.write(bt.parse('ImageTexture { url ["face.jpg" od:5 od:0] }'))
 
 
-@pytest.mark.parametrize("text,bad", [
-    ('ImageTexture { url [face.jpg] }', "'face.jpg'"),
-    ('ImageTexture { url [od:] }', "'od:'"),
-    ('ImageTexture { url [od:x5] }', "'od:x5'"),
-    ('ImageTexture { url [od:12345678901] }', "'od:12345678901'"),
-])
+@pytest.mark.parametrize(
+    "text,bad",
+    [
+        ("ImageTexture { url [face.jpg] }", "'face.jpg'"),
+        ("ImageTexture { url [od:] }", "'od:'"),
+        ("ImageTexture { url [od:x5] }", "'od:x5'"),
+        ("ImageTexture { url [od:12345678901] }", "'od:12345678901'"),
+    ],
+)
 def test_other_unquoted_urls_are_typed_errors(text, bad):
     with pytest.raises(TextFormatError) as e:
         bt.parse(text)

@@ -1,5 +1,6 @@
 """Hand-annotated bit vectors (tests/vectors/README.md): streams and expected frames written by
 hand from the spec notes, run against the reference decoder — independent of its goldens."""
+
 from __future__ import annotations
 
 import json
@@ -17,7 +18,7 @@ from fbaconf.bitstreams.frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, ST
 from fbaconf.errors import BitstreamError
 
 VECTORS = Path(__file__).resolve().parents[1] / "vectors"
-NAMES = sorted(p.name[:-len(".bits")] for p in VECTORS.glob("*.bits"))
+NAMES = sorted(p.name[: -len(".bits")] for p in VECTORS.glob("*.bits"))
 
 
 def assemble(text: str) -> bytes:
@@ -38,7 +39,7 @@ def assemble(text: str) -> bytes:
             else:
                 raise ValueError(f"bad token {tok!r}")
     assert len(bits) % 8 == 0, f"{len(bits)} bits: a vector must end on a byte boundary"
-    return bytes(int("".join(bits[i:i + 8]), 2) for i in range(0, len(bits), 8))
+    return bytes(int("".join(bits[i : i + 8]), 2) for i in range(0, len(bits), 8))
 
 
 def test_assembler():
@@ -72,8 +73,12 @@ def check_vector(name: str, decoder, exact_error: bool = True) -> None:
     assert len(fr) == want["stream"]["frames"]
     assert fr.frame_rate == pytest.approx(want["stream"]["frame_rate"], rel=1e-12)
     for i, w in enumerate(want["frame"]):
-        got = {"frame_number": int(fr.frame_number[i]), "time_ms": float(fr.time_ms[i]),
-               "is_intra": bool(fr.is_intra[i]), "fap_quant": int(fr.fap_quant[i])}
+        got = {
+            "frame_number": int(fr.frame_number[i]),
+            "time_ms": float(fr.time_ms[i]),
+            "is_intra": bool(fr.is_intra[i]),
+            "fap_quant": int(fr.fap_quant[i]),
+        }
         exp = {k: w[k] for k in got}
         assert got == pytest.approx(exp, rel=1e-9), f"frame {i}"
         for col, key in ((0, "fap1"), (1, "fap2")):
@@ -111,20 +116,45 @@ def failing(names: list[str] | None = None, first: bool = False) -> list[str]:
 # was written for. Not killed by these vectors: stuffing-not-removed (no vector has a stuffing
 # bit inside a block where that mutant's rewind does not compensate it; the suite's
 # lookahead-stuffing case kills it).
-KILLED = ["dequant-step-index", "dequant-quant-plus-one", "prediction-sign", "intra-symbol-offset",
-          "alphabet-floor-division", "predicted-alphabet-from-intra-range", "ignore-retained", "mask-type-2-as-1",
-          "mask-bits-reversed", "minmax-marker-skipped", "minmax-lists-ignored", "minmax-sign-swapped",
-          "intensity-not-scaled", "expression-field-order", "init-face-def-swapped", "skip-not-counted",
-          "skip-chain-not-continued", "time-code-ignored", "time-code-minutes-as-seconds", "default-rate-30",
-          "skip-not-in-time", "frequency-offset-ignored", "viseme-prediction-sign",
-          "non-adaptive-model", "wrong-rewind", "ind-cod-d7-rewind-14-stream-bits",
-          "ind-cod-d7-lookahead-stuffing-error"]
+KILLED = [
+    "dequant-step-index",
+    "dequant-quant-plus-one",
+    "prediction-sign",
+    "intra-symbol-offset",
+    "alphabet-floor-division",
+    "predicted-alphabet-from-intra-range",
+    "ignore-retained",
+    "mask-type-2-as-1",
+    "mask-bits-reversed",
+    "minmax-marker-skipped",
+    "minmax-lists-ignored",
+    "minmax-sign-swapped",
+    "intensity-not-scaled",
+    "expression-field-order",
+    "init-face-def-swapped",
+    "skip-not-counted",
+    "skip-chain-not-continued",
+    "time-code-ignored",
+    "time-code-minutes-as-seconds",
+    "default-rate-30",
+    "skip-not-in-time",
+    "frequency-offset-ignored",
+    "viseme-prediction-sign",
+    "non-adaptive-model",
+    "wrong-rewind",
+    "ind-cod-d7-rewind-14-stream-bits",
+    "ind-cod-d7-lookahead-stuffing-error",
+]
 
 
 # The coder corner vectors (tests/vectors/make_coder_corners.py, issue 33): each kills the mutant of the
 # decoder rule it was made for — a tie taken the other way, a look-ahead position mishandled.
-TIE_MUTANTS = {"high-q2": "ind-cod-renorm-high-le-q2", "low-q2": "ind-cod-renorm-low-gt-q2",
-               "low-q1": "ind-cod-renorm-middle-low-gt-q1", "high-q3": "ind-cod-renorm-middle-high-le-q3"}
+TIE_MUTANTS = {
+    "high-q2": "ind-cod-renorm-high-le-q2",
+    "low-q2": "ind-cod-renorm-low-gt-q2",
+    "low-q1": "ind-cod-renorm-middle-low-gt-q1",
+    "high-q3": "ind-cod-renorm-middle-high-le-q3",
+}
 
 
 def corner_mutant(name: str) -> str:
@@ -141,7 +171,8 @@ CORNERS = [n for n in NAMES if "-coder-" in n]
 def test_there_are_corner_vectors_for_every_tie_and_position():
     assert len(CORNERS) == 4 + 2 * 14
     assert sorted({corner_mutant(n) for n in CORNERS}) == sorted(
-        list(TIE_MUTANTS.values()) + [f"lookahead-{r}-at-{p}" for r in ("rewind", "error") for p in range(1, 15)])
+        list(TIE_MUTANTS.values()) + [f"lookahead-{r}-at-{p}" for r in ("rewind", "error") for p in range(1, 15)]
+    )
 
 
 # Under a mutant, in a process of its own: one driver process imports fbaconf and the mutants once,
@@ -187,8 +218,12 @@ print(json.dumps(results))
 def failing_under(jobs: list[tuple[str, list[str] | None]], first: bool = False) -> dict[str, list[str] | None]:
     """{mutant: the vectors of its ``names`` (None: all) that fail under it (``first``: the first
     only)} for each (mutant, names)."""
-    r = subprocess.run([sys.executable, "-c", DRIVER, str(Path(__file__).resolve()), json.dumps(jobs),
-                        "first" if first else "all"], capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [sys.executable, "-c", DRIVER, str(Path(__file__).resolve()), json.dumps(jobs), "first" if first else "all"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr[-1500:]
     out = json.loads(r.stdout.strip().splitlines()[-1])
     assert not [m for m, v in out.items() if not isinstance(v, list)], out  # every child reported its vectors

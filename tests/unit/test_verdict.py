@@ -1,5 +1,6 @@
 """The claim verdict rule (harness/verdict.py) on hand-made result lines: each expected verdict is
 read off the rule as docs/harness.md states it, not computed."""
+
 from __future__ import annotations
 
 import pytest
@@ -7,10 +8,29 @@ import pytest
 from fbaconf.harness.verdict import claim_verdict
 
 
-def res(cid, outcome="Pass", *, kind="decode", tools=("arithmetic",), rests_on=(), ending="decoded", reading=None,
-        required=True, stages=()):
-    return {"case_id": f"s/{cid}", "outcome": outcome, "kind": kind, "tools": list(tools), "rests_on": list(rests_on),
-            "ending": ending, "reading": reading, "required": required, "stages": list(stages)}
+def res(
+    cid,
+    outcome="Pass",
+    *,
+    kind="decode",
+    tools=("arithmetic",),
+    rests_on=(),
+    ending="decoded",
+    reading=None,
+    required=True,
+    stages=(),
+):
+    return {
+        "case_id": f"s/{cid}",
+        "outcome": outcome,
+        "kind": kind,
+        "tools": list(tools),
+        "rests_on": list(rests_on),
+        "ending": ending,
+        "reading": reading,
+        "required": required,
+        "stages": list(stages),
+    }
 
 
 def dct(cid, outcome="Pass", **kw):
@@ -34,20 +54,36 @@ def test_everything_passing_is_a_plain_pass_with_every_tool_verified():
     assert v.decisions["D8"].state == v.decisions["D7"].state == "verified"
 
 
-DECLINED = [dct("d1", "NotSupported", ending=None), dct("d2", "NotSupported", ending=None),
-            dct("mix", "NotSupported", ending=None, tools=("arithmetic", "dct")),
-            dct("dbad", "NotSupported", kind="error", ending=None)]
-REJECTED = [dct("d1", "Fail", ending="reject"), dct("d2", "Fail", ending="reject"),
-            dct("mix", "Fail", ending="reject", tools=("arithmetic", "dct")),
-            dct("dbad", kind="error", ending="reject")]
-FAKED = [dct("d1", "Fail"), dct("d2", "Fail"), dct("mix", "Fail", tools=("arithmetic", "dct")),
-         dct("dbad", kind="error", ending="reject")]
-PARTLY = [dct("d1"), dct("d2", "Fail"), dct("mix", "Fail", ending="reject", tools=("arithmetic", "dct")),
-          dct("dbad", "Fail", kind="error")]
+DECLINED = [
+    dct("d1", "NotSupported", ending=None),
+    dct("d2", "NotSupported", ending=None),
+    dct("mix", "NotSupported", ending=None, tools=("arithmetic", "dct")),
+    dct("dbad", "NotSupported", kind="error", ending=None),
+]
+REJECTED = [
+    dct("d1", "Fail", ending="reject"),
+    dct("d2", "Fail", ending="reject"),
+    dct("mix", "Fail", ending="reject", tools=("arithmetic", "dct")),
+    dct("dbad", kind="error", ending="reject"),
+]
+FAKED = [
+    dct("d1", "Fail"),
+    dct("d2", "Fail"),
+    dct("mix", "Fail", tools=("arithmetic", "dct")),
+    dct("dbad", kind="error", ending="reject"),
+]
+PARTLY = [
+    dct("d1"),
+    dct("d2", "Fail"),
+    dct("mix", "Fail", ending="reject", tools=("arithmetic", "dct")),
+    dct("dbad", "Fail", kind="error"),
+]
 
 
-@pytest.mark.parametrize("dct_results, state", [(DECLINED, "declined"), (REJECTED, "declined"),
-                                                (FAKED, "unverified"), (PARTLY, "unverified")])
+@pytest.mark.parametrize(
+    "dct_results, state",
+    [(DECLINED, "declined"), (REJECTED, "declined"), (FAKED, "unverified"), (PARTLY, "unverified")],
+)
 def test_an_open_tool_not_decoded_as_fbaconf_does_is_unverified_whatever_the_mix(dct_results, state):
     v = verdict(BASE + dct_results)
     assert (v.verdict, v.exit_code, v.unverified) == ("PASS (unverified: dct)", 0, ["dct"])
@@ -69,8 +105,10 @@ def test_an_open_tool_decoded_right_must_reject_its_invalid_streams():
 
 
 def test_declining_a_tool_an_open_decision_does_not_cover_fails():
-    hl = [res("h1", "NotSupported", ending=None, tools=("high_level_faps",)),
-          res("h2", "NotSupported", ending=None, tools=("high_level_faps",), rests_on=("D5",))]
+    hl = [
+        res("h1", "NotSupported", ending=None, tools=("high_level_faps",)),
+        res("h2", "NotSupported", ending=None, tools=("high_level_faps",), rests_on=("D5",)),
+    ]
     v = verdict(BASE + hl)
     assert v.verdict == "FAIL" and v.tools["high_level_faps"].state == "declined" and v.unverified == []
 

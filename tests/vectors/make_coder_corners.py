@@ -31,6 +31,7 @@ the §3.3 decoder. The same bytes are the suite's ``coder-*`` cases (``conforman
   Every stream has that one stuffing position in a look-ahead and no byte-aligned 0x000001 other
   than its start codes (D9).
 """
+
 from __future__ import annotations
 
 import itertools
@@ -51,9 +52,14 @@ PROVENANCE = "made by tests/vectors/make_coder_corners.py (issue 33): fields by 
 
 # spec notes §2: FAP number -> (name, QP, default intra range, default predicted range); D4 rounds
 # ranges to multiples of 60, which these already are
-FAPS = {3: ("open_jaw", 4, 1080, 360), 4: ("lower_t_midlip", 2, 600, 180), 5: ("raise_b_midlip", 2, 1860, 600),
-        10: ("raise_b_lip_lm", 2, 1860, 600), 11: ("raise_b_lip_rm", 2, 1860, 600),
-        52: ("raise_b_midlip_o", 2, 1860, 600)}
+FAPS = {
+    3: ("open_jaw", 4, 1080, 360),
+    4: ("lower_t_midlip", 2, 600, 180),
+    5: ("raise_b_midlip", 2, 1860, 600),
+    10: ("raise_b_lip_lm", 2, 1860, 600),
+    11: ("raise_b_lip_rm", 2, 1860, 600),
+    52: ("raise_b_midlip_o", 2, 1860, 600),
+}
 GROUPS = [(1, 2), (3, 18), (19, 30), (31, 38), (39, 42), (43, 47), (48, 50), (51, 60), (61, 64), (65, 68)]
 SEL_N, INT_N = 7, 64  # intra expression_select 0..6, intensity 0..63 at fap_quant 1 (D5)
 PSEL, PINT = 6, 63  # predicted differences -6..6 and -63..63
@@ -143,16 +149,17 @@ class Encoder:
                         break
             low, high = 2 * low, 2 * high + 1
         shown = ", ".join(steps) if len(steps) < 6 else f"{len(steps)} shifts ({', '.join(sorted(set(steps)))})"
-        self.trace.append(f"{what}: index {s} of {len(freq)} (c[{s}] = {c[s]}, c[{s + 1}] = {c[s + 1]}, "
-                          f"c[0] = {c[0]}): {before} -> {shown or 'no shift'} -> [{low}, {high}], "
-                          f"pending {self.pending}")
+        self.trace.append(
+            f"{what}: index {s} of {len(freq)} (c[{s}] = {c[s]}, c[{s + 1}] = {c[s + 1]}, "
+            f"c[0] = {c[0]}): {before} -> {shown or 'no shift'} -> [{low}, {high}], "
+            f"pending {self.pending}"
+        )
         self.low, self.high = low, high
 
     def flush(self) -> str:
         self.pending += 1
         b = 0 if self.low < Q1 else 1
-        self.trace.append(f"flush: low {self.low} {'<' if b == 0 else '>='} q1: {b} and {self.pending} "
-                          f"pending {1 - b}")
+        self.trace.append(f"flush: low {self.low} {'<' if b == 0 else '>='} q1: {b} and {self.pending} pending {1 - b}")
         self._bit_plus_follow(b)
         return "".join(self.out)
 
@@ -199,8 +206,9 @@ def decode_block(bits: str, start: int, models: list[list[int]], wrong: str = ""
                 pass
             elif (low > Q2) if wrong == "low-q2" else (low >= Q2):
                 value, low, high = value - Q2, low - Q2, high - Q2
-            elif ((low > Q1) if wrong == "low-q1" else (low >= Q1)) and \
-                    ((high <= Q3) if wrong == "high-q3" else (high < Q3)):
+            elif ((low > Q1) if wrong == "low-q1" else (low >= Q1)) and (
+                (high <= Q3) if wrong == "high-q3" else (high < Q3)
+            ):
                 value, low, high = value - Q1, low - Q1, high - Q1
             else:
                 break
@@ -229,6 +237,7 @@ class Block:
 @dataclass
 class Stream:
     """Stream bits with the .bits text of each field, and the arithmetic blocks written."""
+
     bits: list[str] = field(default_factory=list)
     lines: list[str] = field(default_factory=list)
     blocks: list[Block] = field(default_factory=list)
@@ -247,8 +256,9 @@ class Stream:
     def comment(self, text: str) -> None:
         self.lines += [f"# {ln}".rstrip() for ln in text.splitlines()]
 
-    def block(self, items: list[tuple[list[int], int, str]], note: str, trace: bool = True,
-              adaptive: bool = False) -> str:
+    def block(
+        self, items: list[tuple[list[int], int, str]], note: str, trace: bool = True, adaptive: bool = False
+    ) -> str:
         """An arithmetic block of (frequency table, symbol index, what) items; predicted (adaptive)
         tables are updated after each symbol."""
         enc = Encoder()
@@ -283,7 +293,7 @@ class Stream:
     def data(self) -> bytes:
         assert len(self.bits) % 8 == 0
         s = "".join(self.bits)
-        return bytes(int(s[i:i + 8], 2) for i in range(0, len(s), 8))
+        return bytes(int(s[i : i + 8], 2) for i in range(0, len(s), 8))
 
     def check(self) -> list[tuple[int, int, int]]:
         """Decode every block again (§3.3): the symbols and lengths written. Returns the look-ahead
@@ -300,8 +310,11 @@ class Stream:
 
 def emulations(data: bytes) -> list[int]:
     """Byte offsets of a 0x000001 that does not start one of the written start codes (D9)."""
-    return [i for i in range(len(data) - 2) if data[i:i + 3] == b"\x00\x00\x01"
-            and (i + 3 >= len(data) or data[i + 3] not in (0xBA, 0xB1))]
+    return [
+        i
+        for i in range(len(data) - 2)
+        if data[i : i + 3] == b"\x00\x00\x01" and (i + 3 >= len(data) or data[i + 3] not in (0xBA, 0xB1))
+    ]
 
 
 def intra_header(w: Stream, masked: set[int], p_lists: dict[int, int] | None = None) -> None:
@@ -319,8 +332,10 @@ def intra_header(w: Stream, masked: set[int], p_lists: dict[int, int] | None = N
     for g, (a, b) in enumerate(GROUPS, 1):
         faps = [f for f in range(a, b + 1) if f in masked]
         if faps:
-            w.put("1" + "01" + "".join("1" if f in masked else "0" for f in range(a, b + 1)),
-                  f"group {g}: marker, type 01, mask: FAP {', '.join(map(str, faps))}")
+            w.put(
+                "1" + "01" + "".join("1" if f in masked else "0" for f in range(a, b + 1)),
+                f"group {g}: marker, type 01, mask: FAP {', '.join(map(str, faps))}",
+            )
         else:
             w.put("100", f"group {g}: marker, type 00")
     w.put("0", "suggested_gender")
@@ -336,8 +351,11 @@ def intra_header(w: Stream, masked: set[int], p_lists: dict[int, int] | None = N
                 if j % 4 == 0:
                     w.put("1", "marker")
                 if f in masked:
-                    w.uint(p_lists[f], 5, f"FAP {f}: v = {p_lists[f]} ({'+' if which == 'p_max' else '-'}"
-                           f"{60 * p_lists[f]})")
+                    w.uint(
+                        p_lists[f],
+                        5,
+                        f"FAP {f}: v = {p_lists[f]} ({'+' if which == 'p_max' else '-'}{60 * p_lists[f]})",
+                    )
 
 
 def predicted_header(w: Stream, k: int) -> None:
@@ -350,10 +368,12 @@ def low_values(faps: list[int], symbols: dict[int, int]) -> dict[int, int]:
 
 # ------------------------------------------------------------------------------ ties
 TIE_FAPS = [5, 10, 11, 52]  # intra alphabets of 3721 symbols: values -1860..1860 at fap_quant 1
-TIES = {"high-q2": "high = q2 = 32768: the lower-half test high < q2 is false",
-        "low-q2": "low = q2 = 32768: the upper-half test low >= q2 is true",
-        "low-q1": "low = q1 = 16384 with high < q3: the middle test low >= q1 is true",
-        "high-q3": "high = q3 = 49152 with q1 <= low < q2: the middle test high < q3 is false"}
+TIES = {
+    "high-q2": "high = q2 = 32768: the lower-half test high < q2 is false",
+    "low-q2": "low = q2 = 32768: the upper-half test low >= q2 is true",
+    "low-q1": "low = q1 = 16384 with high < q3: the middle test low >= q1 is true",
+    "high-q3": "high = q3 = 49152 with q1 <= low < q2: the middle test high < q3 is false",
+}
 UNIFORM_I = Uniform(3721)
 
 
@@ -386,7 +406,7 @@ def find_tie(tie: str, rng: random.Random) -> list[int]:
         # after the tie, symbols at one end of their interval: the coded point sits at the edge of the
         # tie symbol's interval, where a decoder one shift out of step rounds the boundary differently
         for edge in (None, 3720, 0):
-            cand = syms if edge is None else syms[:at[0] + 1] + [edge] * (len(syms) - at[0] - 1)
+            cand = syms if edge is None else syms[: at[0] + 1] + [edge] * (len(syms) - at[0] - 1)
             enc = Encoder()
             for s in cand:
                 enc.encode(UNIFORM_I, s, "")
@@ -405,17 +425,23 @@ def find_tie(tie: str, rng: random.Random) -> list[int]:
 
 def tie_stream(tie: str, syms: list[int]) -> tuple[Stream, list[dict]]:
     w = Stream()
-    w.comment(f"Renormalisation tie {tie} (§3.3): {TIES[tie]}.\n"
-              f"One intra plane: FAPs {', '.join(map(str, TIE_FAPS))} at fap_quant 1, default ranges -1860..1860: "
-              "3721 symbols each,\nindex k = value + 1860 (c[k] = 3721 - k: index 0, the value -1860, is the top of "
-              "the interval).")
+    w.comment(
+        f"Renormalisation tie {tie} (§3.3): {TIES[tie]}.\n"
+        f"One intra plane: FAPs {', '.join(map(str, TIE_FAPS))} at fap_quant 1, default ranges -1860..1860: "
+        "3721 symbols each,\nindex k = value + 1860 (c[k] = 3721 - k: index 0, the value -1860, is the top of "
+        "the interval)."
+    )
     w.hexbytes("000001BA", "face_object_start_code")
     intra_header(w, set(TIE_FAPS))
-    w.block([(UNIFORM_I, s, f"FAP {f} value {s - 1860}") for f, s in zip(TIE_FAPS, syms)],
-            f"FAP3..68 block: FAPs {', '.join(map(str, TIE_FAPS))}")
+    w.block(
+        [(UNIFORM_I, s, f"FAP {f} value {s - 1860}") for f, s in zip(TIE_FAPS, syms)],
+        f"FAP3..68 block: FAPs {', '.join(map(str, TIE_FAPS))}",
+    )
     ((_, k),) = [t for t in w.enc.ties if t[0] == tie][:1]
-    w.comment(f"The tie: at a renormalisation test after symbol {k + 1} (FAP {TIE_FAPS[k]}). A decoder that takes "
-              "it the other way\nshifts (or stops) where the encoder did not: it decodes other symbols.")
+    w.comment(
+        f"The tie: at a renormalisation test after symbol {k + 1} (FAP {TIE_FAPS[k]}). A decoder that takes "
+        "it the other way\nshifts (or stops) where the encoder did not: it decodes other symbols."
+    )
     w.stuff()
     w.hexbytes("000001B1", "visual_object_sequence_end_code")
     values = {f: (s - 1860) * FAPS[f][1] for f, s in zip(TIE_FAPS, syms)}
@@ -433,38 +459,65 @@ Q3_LAST = {3: -24, 4: 0, 5: 0, 10: -600}  # the tie is FAP 5's symbol; FAP 10's 
 
 def tie_q3_stream() -> tuple[Stream, list[dict]]:
     w = Stream()
-    w.comment(f"Renormalisation tie high-q3 (§3.3): {TIES['high-q3']}.\nPlane 0 (intra): FAPs 3, 4, 5, 10 at "
-              "fap_quant 1, value 0, new predicted ranges +-360, +-180, +-60, +-600.\n"
-              f"Planes 1..{Q3_TRAINING}: predicted, every difference 0: each predicted model's symbol 0 gets a "
-              f"frequency of {Q3_TRAINING + 1} (§3.2).\nPlane {Q3_TRAINING + 1}: differences "
-              + ", ".join(f"FAP {f} {d:+d}" for f, d in Q3_LAST.items()) + ": FAP 5's difference 0 (probability "
-              f"{Q3_TRAINING + 1}/{121 + Q3_TRAINING}) narrows the interval\nto one that ends exactly at q3 with its "
-              "low between q1 and q2. A decoder that takes the middle step there (high <= q3)\nis one shift "
-              "ahead with its interval doubled, and rounds FAP 10's boundary the other way.")
+    w.comment(
+        f"Renormalisation tie high-q3 (§3.3): {TIES['high-q3']}.\nPlane 0 (intra): FAPs 3, 4, 5, 10 at "
+        "fap_quant 1, value 0, new predicted ranges +-360, +-180, +-60, +-600.\n"
+        f"Planes 1..{Q3_TRAINING}: predicted, every difference 0: each predicted model's symbol 0 gets a "
+        f"frequency of {Q3_TRAINING + 1} (§3.2).\nPlane {Q3_TRAINING + 1}: differences "
+        + ", ".join(f"FAP {f} {d:+d}" for f, d in Q3_LAST.items())
+        + ": FAP 5's difference 0 (probability "
+        f"{Q3_TRAINING + 1}/{121 + Q3_TRAINING}) narrows the interval\nto one that ends exactly at q3 with its "
+        "low between q1 and q2. A decoder that takes the middle step there (high <= q3)\nis one shift "
+        "ahead with its interval doubled, and rounds FAP 10's boundary the other way."
+    )
     w.hexbytes("000001BA", "face_object_start_code")
     intra_header(w, set(Q3_FAPS), Q3_LISTS)
-    w.block([(Uniform(2 * FAPS[f][2] + 1), FAPS[f][2], f"FAP {f} value 0") for f in Q3_FAPS],
-            "plane 0: FAP3..68 block (intra: index = value + range)", trace=False)
+    w.block(
+        [(Uniform(2 * FAPS[f][2] + 1), FAPS[f][2], f"FAP {f} value 0") for f in Q3_FAPS],
+        "plane 0: FAP3..68 block (intra: index = value + range)",
+        trace=False,
+    )
     models = {f: [1] * (120 * Q3_LISTS[f] + 1) for f in Q3_FAPS}
     frames = [{"frame_number": 0, "time_ms": 0.0, "is_intra": True, "fap_quant": 1, "set": dict.fromkeys(Q3_FAPS, 0)}]
     for k in range(1, Q3_TRAINING + 1):
         since = len(w.lines)
         predicted_header(w, k)
-        w.block([(models[f], 60 * Q3_LISTS[f], "") for f in Q3_FAPS], f"plane {k}: FAP3..68 block, differences 0",
-                trace=False, adaptive=True)
+        w.block(
+            [(models[f], 60 * Q3_LISTS[f], "") for f in Q3_FAPS],
+            f"plane {k}: FAP3..68 block, differences 0",
+            trace=False,
+            adaptive=True,
+        )
         w.joined(since, f"plane {k}: is_intra 0, mask 01, skip 0; FAP3..68 block, every difference 0")
-        frames.append({"frame_number": k, "time_ms": 40.0 * k, "is_intra": False, "fap_quant": 1,
-                       "set": dict.fromkeys(Q3_FAPS, 0)})
+        frames.append(
+            {
+                "frame_number": k,
+                "time_ms": 40.0 * k,
+                "is_intra": False,
+                "fap_quant": 1,
+                "set": dict.fromkeys(Q3_FAPS, 0),
+            }
+        )
     k = Q3_TRAINING + 1
     predicted_header(w, k)
-    w.block([(models[f], 60 * Q3_LISTS[f] + d, f"FAP {f} difference {d:+d}") for f, d in Q3_LAST.items()],
-            f"plane {k}: FAP3..68 block", adaptive=True)
+    w.block(
+        [(models[f], 60 * Q3_LISTS[f] + d, f"FAP {f} difference {d:+d}") for f, d in Q3_LAST.items()],
+        f"plane {k}: FAP3..68 block",
+        adaptive=True,
+    )
     ((_, at),) = [t for t in w.enc.ties if t[0] == "high-q3"][:1]
     w.comment(f"The tie: at the renormalisation test after symbol {at + 1} (FAP {Q3_FAPS[at]}).")
     w.stuff()
     w.hexbytes("000001B1", "visual_object_sequence_end_code")
-    frames.append({"frame_number": k, "time_ms": 40.0 * k, "is_intra": False, "fap_quant": 1,
-                   "set": {f: d * FAPS[f][1] for f, d in Q3_LAST.items()}})
+    frames.append(
+        {
+            "frame_number": k,
+            "time_ms": 40.0 * k,
+            "is_intra": False,
+            "fap_quant": 1,
+            "set": {f: d * FAPS[f][1] for f, d in Q3_LAST.items()},
+        }
+    )
     return w, frames
 
 
@@ -498,11 +551,20 @@ class Plan:
 # (N, a, b) and the last plane's expression differences whose block ends with 22 - p zeros: found
 # by search (find_expression below; seeded, kept here so the vectors are remade without it)
 EXPRESSION_ENDS: dict[int, tuple[tuple[int, int, int], tuple[int, int, int, int]]] = {
-    2: ((216, 3, 8), (2, -6, 0, -1)), 3: ((216, 1, 8), (2, -6, 0, -1)), 4: ((216, 2, 8), (1, -6, 0, -1)),
-    5: ((216, 1, 8), (-2, -6, 0, -1)), 6: ((0, 1, 8), (-1, -2, 0, -8)), 7: ((100, 3, 8), (3, 8, -1, -4)),
-    8: ((20, 1, 8), (3, 3, -1, -4)), 9: ((40, 3, 8), (0, 8, -2, 1)), 10: ((0, 1, 8), (0, -8, -1, 2)),
-    11: ((0, 1, 8), (2, 0, -1, -3)), 12: ((0, 1, 8), (-3, 5, -1, 2)), 13: ((0, 1, 8), (-2, -2, 3, 8)),
-    14: ((0, 1, 8), (-3, -8, -1, 2))}
+    2: ((216, 3, 8), (2, -6, 0, -1)),
+    3: ((216, 1, 8), (2, -6, 0, -1)),
+    4: ((216, 2, 8), (1, -6, 0, -1)),
+    5: ((216, 1, 8), (-2, -6, 0, -1)),
+    6: ((0, 1, 8), (-1, -2, 0, -8)),
+    7: ((100, 3, 8), (3, 8, -1, -4)),
+    8: ((20, 1, 8), (3, 3, -1, -4)),
+    9: ((40, 3, 8), (0, 8, -2, 1)),
+    10: ((0, 1, 8), (0, -8, -1, 2)),
+    11: ((0, 1, 8), (2, 0, -1, -3)),
+    12: ((0, 1, 8), (-3, 5, -1, 2)),
+    13: ((0, 1, 8), (-2, -2, 3, 8)),
+    14: ((0, 1, 8), (-3, -8, -1, 2)),
+}
 
 
 def _p_tables(training: tuple[int, int, int]) -> tuple[list[list[int]], dict[int, list[int]]]:
@@ -544,25 +606,43 @@ def find_expression(p: int) -> tuple[tuple[int, int, int], tuple[int, int, int, 
 def lookahead_stream(pl: Plan) -> tuple[Stream, list[dict]]:
     n, a, b = pl.training
     w = Stream()
-    slot = "1 of the next field: the decoder removes it as a stuffing bit and must hand it back at the block end" \
-        if pl.rule == "rewind" else "0 of the next field: a stuffing violation inside the look-ahead, not an error (D7)"
-    w.comment(f"Block end with a stuffing position at look-ahead position {pl.position} ({pl.rule} rule, D7).\n"
-              f"Plane 0 (intra): FAP 2 (expression) and FAPs 3, 5 at fap_quant 1. Planes 1..{n}: predicted, "
-              f"expression differences\n+-{a}, +-{b}, +-{a}, +-{b} alternating (the values come back), FAPs 3 "
-              f"and 5 unchanged: they skew the predicted models (§3.2).\nPlane {n + 1} (predicted): its expression "
-              f"block ends with {ZERO_RUN - pl.position} zeros; init_face, expression_def and the low-level\nblock's "
-              f"first bits continue the run, whose 22nd zero is look-ahead bit {pl.position} of the expression "
-              f"block's decoder;\nthe bit after it is a {slot}.")
+    slot = (
+        "1 of the next field: the decoder removes it as a stuffing bit and must hand it back at the block end"
+        if pl.rule == "rewind"
+        else "0 of the next field: a stuffing violation inside the look-ahead, not an error (D7)"
+    )
+    w.comment(
+        f"Block end with a stuffing position at look-ahead position {pl.position} ({pl.rule} rule, D7).\n"
+        f"Plane 0 (intra): FAP 2 (expression) and FAPs 3, 5 at fap_quant 1. Planes 1..{n}: predicted, "
+        f"expression differences\n+-{a}, +-{b}, +-{a}, +-{b} alternating (the values come back), FAPs 3 "
+        f"and 5 unchanged: they skew the predicted models (§3.2).\nPlane {n + 1} (predicted): its expression "
+        f"block ends with {ZERO_RUN - pl.position} zeros; init_face, expression_def and the low-level\nblock's "
+        f"first bits continue the run, whose 22nd zero is look-ahead bit {pl.position} of the expression "
+        f"block's decoder;\nthe bit after it is a {slot}."
+    )
     w.hexbytes("000001BA", "face_object_start_code")
     intra_header(w, {2, 3, 5})
-    w.block([(Uniform(n), v, f"{name} {v}") for n, v, name in
-             zip((SEL_N, INT_N, SEL_N, INT_N), E0, HIGH2)], "plane 0: expression block (intra, index = value)")
+    w.block(
+        [(Uniform(n), v, f"{name} {v}") for n, v, name in zip((SEL_N, INT_N, SEL_N, INT_N), E0, HIGH2)],
+        "plane 0: expression block (intra, index = value)",
+    )
     w.put("0", "init_face 0")
     w.put("0", "expression_def 0")
-    w.block([(Uniform(2161), 1080, "FAP 3 value 0"), (UNIFORM_I, 1860, "FAP 5 value 0")],
-            "plane 0: FAP3..68 block (intra: index = value + range)")
-    frames = [{"frame_number": 0, "time_ms": 0.0, "is_intra": True, "fap_quant": 1, "fap2": "SET",
-               "set": {3: 0, 5: 0}, "high": dict(zip(HIGH2, (*E0, 0, 0)))}]
+    w.block(
+        [(Uniform(2161), 1080, "FAP 3 value 0"), (UNIFORM_I, 1860, "FAP 5 value 0")],
+        "plane 0: FAP3..68 block (intra: index = value + range)",
+    )
+    frames = [
+        {
+            "frame_number": 0,
+            "time_ms": 0.0,
+            "is_intra": True,
+            "fap_quant": 1,
+            "fap2": "SET",
+            "set": {3: 0, 5: 0},
+            "high": dict(zip(HIGH2, (*E0, 0, 0))),
+        }
+    ]
     expr = [[1] * (2 * h + 1) for h in (PSEL, PINT, PSEL, PINT)]
     low = {3: [1] * 721, 5: [1] * 1201}
     for k in range(1, n + 1):
@@ -570,47 +650,98 @@ def lookahead_stream(pl: Plan) -> tuple[Stream, list[dict]]:
         d = (sign * a, sign * b, sign * a, sign * b)
         since = len(w.lines)
         predicted_header(w, k)
-        w.block([(m, h + x, "") for m, h, x in zip(expr, (PSEL, PINT, PSEL, PINT), d)],
-                f"plane {k}: expression block, differences {', '.join(f'{x:+d}' for x in d)}", trace=False,
-                adaptive=True)
+        w.block(
+            [(m, h + x, "") for m, h, x in zip(expr, (PSEL, PINT, PSEL, PINT), d)],
+            f"plane {k}: expression block, differences {', '.join(f'{x:+d}' for x in d)}",
+            trace=False,
+            adaptive=True,
+        )
         w.put("00", "init_face 0, expression_def 0")
-        w.block([(low[3], 360, ""), (low[5], 600, "")], f"plane {k}: FAP3..68 block, differences 0, 0",
-                trace=False, adaptive=True)
-        w.joined(since, f"plane {k}: is_intra 0, mask 01, skip 0; expression block (differences "
-                 f"{', '.join(f'{x:+d}' for x in d)}); init_face 0, expression_def 0; FAP3..68 block (0, 0)")
+        w.block(
+            [(low[3], 360, ""), (low[5], 600, "")],
+            f"plane {k}: FAP3..68 block, differences 0, 0",
+            trace=False,
+            adaptive=True,
+        )
+        w.joined(
+            since,
+            f"plane {k}: is_intra 0, mask 01, skip 0; expression block (differences "
+            f"{', '.join(f'{x:+d}' for x in d)}); init_face 0, expression_def 0; FAP3..68 block (0, 0)",
+        )
         e = [E0[i] + (d[i] if k % 2 else 0) for i in range(4)]
-        frames.append({"frame_number": k, "time_ms": 40.0 * k, "is_intra": False, "fap_quant": 1, "fap2": "SET",
-                       "set": {3: 0, 5: 0}, "high": dict(zip(HIGH2, (*e, 0, 0)))})
+        frames.append(
+            {
+                "frame_number": k,
+                "time_ms": 40.0 * k,
+                "is_intra": False,
+                "fap_quant": 1,
+                "fap2": "SET",
+                "set": {3: 0, 5: 0},
+                "high": dict(zip(HIGH2, (*e, 0, 0))),
+            }
+        )
     k = n + 1
     predicted_header(w, k)
-    w.comment("the predicted models now: expression " + "; ".join(
-        f"{name} frequencies {_freq_text(m)}" for name, m in zip(("select1", "intensity1", "select2", "intensity2"),
-                                                                  expr)) + f"; FAP 3 difference 0: {low[3][360]}, "
-              f"FAP 5 difference 0: {low[5][600]} (others 1)")
-    ebits = w.block([(m, h + x, f"{name} difference {x:+d}") for m, h, x, name in
-                     zip(expr, (PSEL, PINT, PSEL, PINT), pl.e1, ("select1", "intensity1", "select2", "intensity2"))],
-                    f"plane {k}: expression block", adaptive=True)
+    w.comment(
+        "the predicted models now: expression "
+        + "; ".join(
+            f"{name} frequencies {_freq_text(m)}"
+            for name, m in zip(("select1", "intensity1", "select2", "intensity2"), expr)
+        )
+        + f"; FAP 3 difference 0: {low[3][360]}, "
+        f"FAP 5 difference 0: {low[5][600]} (others 1)"
+    )
+    ebits = w.block(
+        [
+            (m, h + x, f"{name} difference {x:+d}")
+            for m, h, x, name in zip(
+                expr, (PSEL, PINT, PSEL, PINT), pl.e1, ("select1", "intensity1", "select2", "intensity2")
+            )
+        ],
+        f"plane {k}: expression block",
+        adaptive=True,
+    )
     w.put(str(pl.raw[0]), f"init_face {pl.raw[0]}")
     w.put(str(pl.raw[1]), f"expression_def {pl.raw[1]}")
-    lbits = w.block([(low[f], FAPS[f][3] + pl.l1[f], f"FAP {f} difference {pl.l1[f]:+d}") for f in (3, 5)],
-                    f"plane {k}: FAP3..68 block", adaptive=True)
-    window = f"{pl.raw[0]}{pl.raw[1]}{lbits}"[:LOOKAHEAD + 1]
+    lbits = w.block(
+        [(low[f], FAPS[f][3] + pl.l1[f], f"FAP {f} difference {pl.l1[f]:+d}") for f in (3, 5)],
+        f"plane {k}: FAP3..68 block",
+        adaptive=True,
+    )
+    window = f"{pl.raw[0]}{pl.raw[1]}{lbits}"[: LOOKAHEAD + 1]
     how = ", removes it" if pl.rule == "rewind" else " (a violation it must not report)"
-    w.comment(f"Plane {k}'s expression block ends with {trailing_zeros(ebits)} zeros. Its decoder reads on into "
-              f"init_face, expression_def\nand the low-level block: {' '.join(window)}. The run of 22 zeros completes "
-              f"at look-ahead bit {pl.position};\nthe decoder reads the next bit ({window[pl.position]}) as the "
-              f"stuffing bit{how}; at the block end it hands back its 14 look-ahead\narithmetic bits and the "
-              "stuffing bit among them: init_face is read right after the block.")
+    w.comment(
+        f"Plane {k}'s expression block ends with {trailing_zeros(ebits)} zeros. Its decoder reads on into "
+        f"init_face, expression_def\nand the low-level block: {' '.join(window)}. The run of 22 zeros completes "
+        f"at look-ahead bit {pl.position};\nthe decoder reads the next bit ({window[pl.position]}) as the "
+        f"stuffing bit{how}; at the block end it hands back its 14 look-ahead\narithmetic bits and the "
+        "stuffing bit among them: init_face is read right after the block."
+    )
     w.stuff()
     w.hexbytes("000001B1", "visual_object_sequence_end_code")
     e = [E0[i] + pl.e1[i] for i in range(4)]
-    frames.append({"frame_number": k, "time_ms": 40.0 * k, "is_intra": False, "fap_quant": 1, "fap2": "SET",
-                   "set": low_values([3, 5], pl.l1), "high": dict(zip(HIGH2, (*e, *pl.raw)))})
+    frames.append(
+        {
+            "frame_number": k,
+            "time_ms": 40.0 * k,
+            "is_intra": False,
+            "fap_quant": 1,
+            "fap2": "SET",
+            "set": low_values([3, 5], pl.l1),
+            "high": dict(zip(HIGH2, (*e, *pl.raw))),
+        }
+    )
     return w, frames
 
 
-HIGH2 = ("expression_select1", "expression_intensity1", "expression_select2", "expression_intensity2", "init_face",
-         "expression_def")
+HIGH2 = (
+    "expression_select1",
+    "expression_intensity1",
+    "expression_select2",
+    "expression_intensity2",
+    "init_face",
+    "expression_def",
+)
 
 
 def _freq_text(m: list[int]) -> str:
@@ -625,15 +756,18 @@ def find_low(pl: Plan, rng: random.Random) -> Plan:
     want = "1" if pl.rule == "rewind" else "0"
     _, low = _p_tables(pl.training)
     for _ in range(400_000):
-        l1 = {3: rng.randint(250, 360), 5: rng.randint(400, 600)} if rng.random() < 0.8 else \
-            {3: rng.randint(-360, 360), 5: rng.randint(-600, 600)}
+        l1 = (
+            {3: rng.randint(250, 360), 5: rng.randint(400, 600)}
+            if rng.random() < 0.8
+            else {3: rng.randint(-360, 360), 5: rng.randint(-600, 600)}
+        )
         enc = Encoder()
         for f in (3, 5):
             enc.encode(low[f], FAPS[f][3] + l1[f], "")
         lbits = enc.flush().replace("S", "1")
         for raw in ((0, 0), (0, 1), (1, 0), (1, 1)):
             tail = f"{raw[0]}{raw[1]}{lbits}"
-            if tail[:pl.position] != "0" * pl.position or tail[pl.position] != want:
+            if tail[: pl.position] != "0" * pl.position or tail[pl.position] != want:
                 continue
             cand = Plan(pl.position, pl.rule, pl.training, pl.e1, raw, l1)
             w, _ = lookahead_stream(cand)
@@ -648,27 +782,50 @@ LOW_A = [5, 10, 11, 52]
 
 def low_end_stream(rule: str, syms: list[int], nxt: list[int]) -> tuple[Stream, list[dict]]:
     w = Stream()
-    follow = "next_start_code(): its '0' is the 22nd zero and its first '1' the bit after it, which the decoder " \
-        "removes\nas a stuffing bit and must hand back (rewind rule)" if rule == "rewind" else \
-        "plane 1's header: is_intra '0' is the 22nd zero and the mask's first bit '0' the bit after it: a\n" \
+    follow = (
+        "next_start_code(): its '0' is the 22nd zero and its first '1' the bit after it, which the decoder "
+        "removes\nas a stuffing bit and must hand back (rewind rule)"
+        if rule == "rewind"
+        else "plane 1's header: is_intra '0' is the 22nd zero and the mask's first bit '0' the bit after it: a\n"
         "stuffing violation inside the look-ahead, not an error (D7)"
-    w.comment(f"Block end with a stuffing position at look-ahead position 1 ({rule} rule, D7).\nPlane 0 (intra): FAPs "
-              f"{', '.join(map(str, LOW_A))} at fap_quant 1; its low-level block ends with 21 zeros and what follows "
-              f"is {follow}.")
+    )
+    w.comment(
+        f"Block end with a stuffing position at look-ahead position 1 ({rule} rule, D7).\nPlane 0 (intra): FAPs "
+        f"{', '.join(map(str, LOW_A))} at fap_quant 1; its low-level block ends with 21 zeros and what follows "
+        f"is {follow}."
+    )
     w.hexbytes("000001BA", "face_object_start_code")
     intra_header(w, set(LOW_A))
-    bits = w.block([(UNIFORM_I, s, f"FAP {f} value {s - 1860}") for f, s in zip(LOW_A, syms)],
-                   "plane 0: FAP3..68 block")
+    bits = w.block(
+        [(UNIFORM_I, s, f"FAP {f} value {s - 1860}") for f, s in zip(LOW_A, syms)], "plane 0: FAP3..68 block"
+    )
     w.comment(f"The block ends with {trailing_zeros(bits)} zeros.")
-    frames = [{"frame_number": 0, "time_ms": 0.0, "is_intra": True, "fap_quant": 1,
-               "set": {f: (s - 1860) * FAPS[f][1] for f, s in zip(LOW_A, syms)}}]
+    frames = [
+        {
+            "frame_number": 0,
+            "time_ms": 0.0,
+            "is_intra": True,
+            "fap_quant": 1,
+            "set": {f: (s - 1860) * FAPS[f][1] for f, s in zip(LOW_A, syms)},
+        }
+    ]
     if rule == "error":
         predicted_header(w, 1)
         models = {f: [1] * 1201 for f in LOW_A}
-        w.block([(models[f], d + 600, f"FAP {f} difference {d:+d}") for f, d in zip(LOW_A, nxt)],
-                "plane 1: FAP3..68 block (uniform predicted models, index = difference + 600)", adaptive=True)
-        frames.append({"frame_number": 1, "time_ms": 40.0, "is_intra": False, "fap_quant": 1,
-                       "set": {f: (s - 1860 + d) * FAPS[f][1] for f, s, d in zip(LOW_A, syms, nxt)}})
+        w.block(
+            [(models[f], d + 600, f"FAP {f} difference {d:+d}") for f, d in zip(LOW_A, nxt)],
+            "plane 1: FAP3..68 block (uniform predicted models, index = difference + 600)",
+            adaptive=True,
+        )
+        frames.append(
+            {
+                "frame_number": 1,
+                "time_ms": 40.0,
+                "is_intra": False,
+                "fap_quant": 1,
+                "set": {f: (s - 1860 + d) * FAPS[f][1] for f, s, d in zip(LOW_A, syms, nxt)},
+            }
+        )
     w.stuff()
     w.hexbytes("000001B1", "visual_object_sequence_end_code")
     return w, frames
@@ -693,7 +850,7 @@ def find_low_end(rule: str, rng: random.Random) -> tuple[list[int], list[int]]:
             syms = prefix + [last]
             nxt = [rng.randint(-600, 600) for _ in LOW_A]
             w, _ = low_end_stream(rule, syms, nxt)
-            if trailing_zeros("".join(w.bits[w.blocks[0].start:w.blocks[0].start + w.blocks[0].length])) != 21:
+            if trailing_zeros("".join(w.bits[w.blocks[0].start : w.blocks[0].start + w.blocks[0].length])) != 21:
                 continue
             if not emulations(w.data()) and w.check() == [(0, 1, 1 if rule == "rewind" else 0)]:
                 return syms, nxt
@@ -710,6 +867,7 @@ def _inline(fr: dict) -> str:
         if isinstance(v, dict):
             return "{" + ", ".join(f"{k} = {val(x)}" for k, x in v.items()) + "}"
         return str(v)
+
     return val({**fr, "set": dict(sorted(fr["set"].items())), "retained": {}})
 
 
@@ -768,8 +926,12 @@ def main() -> int:
                 pl = find_low(Plan(p, rule, training, e1), rng)
                 w, frames = lookahead_stream(pl)
                 print(f"position {p} {rule}: {pl}", flush=True)
-            write(f"c{i:02d}-coder-lookahead-{rule}-{p:02d}", w, frames,
-                  f"a stuffing position at look-ahead position {p} after a block end ({rule} rule, D7)")
+            write(
+                f"c{i:02d}-coder-lookahead-{rule}-{p:02d}",
+                w,
+                frames,
+                f"a stuffing position at look-ahead position {p} after a block end ({rule} rule, D7)",
+            )
     return 0
 
 

@@ -15,6 +15,7 @@ scenes under 100 KB it also keeps MP4Box's own BT dump (``dumps/<name>.gpac.bt``
 -bt``). FaceDefMesh.faceSceneGraphNode is dropped first (``scenes.bifs.interop_view``): MP4Box
 refuses it (D10). MANIFEST.json records every file, its source and the GPAC build.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,11 +49,11 @@ def boxes(data: bytes, start: int = 0, end: int | None = None):
     end = len(data) if end is None else end
     i = start
     while i + 8 <= end:
-        size = int.from_bytes(data[i:i + 4], "big")
-        kind = data[i + 4:i + 8].decode("latin-1")
+        size = int.from_bytes(data[i : i + 4], "big")
+        kind = data[i + 4 : i + 8].decode("latin-1")
         head = 8
         if size == 1:
-            size = int.from_bytes(data[i + 8:i + 16], "big")
+            size = int.from_bytes(data[i + 8 : i + 16], "big")
             head = 16
         elif size == 0:
             size = end - i
@@ -127,8 +128,9 @@ def main() -> int:
         with tempfile.TemporaryDirectory() as t:
             t = Path(t)
             (t / "in.bt").write_text(bt.write(view))
-            r = subprocess.run([a.mp4box, "-def", "-mp4", str(t / "in.bt"), "-out", str(t / "s.mp4")],
-                               capture_output=True, text=True)
+            r = subprocess.run(
+                [a.mp4box, "-def", "-mp4", str(t / "in.bt"), "-out", str(t / "s.mp4")], capture_output=True, text=True
+            )
             if r.returncode != 0:
                 print(f"{name}: MP4Box refused it: {r.stderr[-300:]}")
                 entries.append({"name": name, "source": str(src.relative_to(ROOT)), "refused": r.stderr[-300:]})
@@ -137,21 +139,32 @@ def main() -> int:
             au = (t / "s_track1_001.bifs").read_bytes()
             blob = bifs_config((t / "s.mp4").read_bytes()) + au
             (HERE / "streams" / f"{name}.gpac.bifs").write_bytes(blob)
-            entry = {"name": name, "source": str(src.relative_to(ROOT)), "mesh_references_removed": view != scene,
-                     "bifs": f"streams/{name}.gpac.bifs", "bifs_sha256": hashlib.sha256(blob).hexdigest()}
+            entry = {
+                "name": name,
+                "source": str(src.relative_to(ROOT)),
+                "mesh_references_removed": view != scene,
+                "bifs": f"streams/{name}.gpac.bifs",
+                "bifs_sha256": hashlib.sha256(blob).hexdigest(),
+            }
             if src.stat().st_size < DUMP_MAX:
-                subprocess.run([a.mp4box, "-bt", str(t / "s.mp4"), "-out", str(HERE / "dumps" / f"{name}.gpac.bt")],
-                               capture_output=True, check=True)
+                subprocess.run(
+                    [a.mp4box, "-bt", str(t / "s.mp4"), "-out", str(HERE / "dumps" / f"{name}.gpac.bt")],
+                    capture_output=True,
+                    check=True,
+                )
                 entry["dump"] = f"dumps/{name}.gpac.bt"
             if a.only:
                 entry["made"] = datetime.date.today().isoformat()
             entries.append(entry)
             print(f"{name}: {len(blob)} bytes")
-    doc = {"format": "fbaconf.gpac-interop/1", "gpac_commit": a.gpac_commit,
-           "mp4box_version": (version.stdout + version.stderr).strip().splitlines()[0],
-           "made": old["made"] if old else datetime.date.today().isoformat(),
-           "command": "MP4Box -def -mp4 S.bt -out S.mp4; MP4Box -raws 1",
-           "entries": entries}
+    doc = {
+        "format": "fbaconf.gpac-interop/1",
+        "gpac_commit": a.gpac_commit,
+        "mp4box_version": (version.stdout + version.stderr).strip().splitlines()[0],
+        "made": old["made"] if old else datetime.date.today().isoformat(),
+        "command": "MP4Box -def -mp4 S.bt -out S.mp4; MP4Box -raws 1",
+        "entries": entries,
+    }
     (HERE / "MANIFEST.json").write_text(json.dumps(doc, indent=1) + "\n")
     return 0
 
