@@ -15,7 +15,7 @@ was set before, 00 when nothing is coded, else 01.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from fractions import Fraction
 
 import numpy as np
@@ -27,12 +27,13 @@ from .arith import ArithEncoder, UniformModel, make_model, native_encoder
 from .bitio import FACE_OBJECT_PLANE_START_CODE, FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE, BitWriter
 from .emulation import find_emulations
 from .encode_native import write_payload_native
+from .encoder_options import CODING_MODES, PLANE_START_CODE_MODES, RANGE_MODES, EncodeResult, EncoderOptions  # noqa: F401 (re-exported)
+from .encoder_plan import MAX_EMULATION_FIXES, Plan, bound_code
 from .frames import FREE, HIGH_LEVEL_FIELDS, RETAINED, SET, FapFrames
 from .prepare import _check_input, _derive_group_types, resample
 from .syntax import (
     EXPRESSION_SELECT_MAX,
     FAPS_MASK,
-    INTENSITY_MAX,
     LIST_ORDER,
     MASK_ALL,
     MASK_INTERPOLATE,
@@ -44,195 +45,13 @@ from .syntax import (
     alphabet,
     frame_rate_code,
     intensity_bound,
-    intensity_step,
     low_level_step,
     quant_div,
-    quantise,
     skip_chunks,
 )
 from .tables import MAX_RANGE, MAX_RANGE_CODE, NUM_FAPS, RANGE_DELTA
 
-PLANE_START_CODE_MODES = ("none", "intra", "all")
-CODING_MODES = ("arithmetic", "dct")  # coding_type 0 and 1
-RANGE_MODES = ("auto", "persist")
-
-
-@dataclass
-class EncoderOptions:
-    fap_quant: int = 1  # 0 = no quantisation, 1..31 scale the default steps
-    intra_period: int = 0  # 0 = intra planes only where needed; N = at least every N planes
-    frame_rate: float | str | Fraction | None = None  # output rate; None = the input's
-    time_codes: bool = False  # write a time code in every intra plane
-    plane_start_codes: str = "intra"  # none | intra | all
-    ranges: str = "auto"  # auto: tight lists in every intra plane; persist: defaults, lists when needed
-    bounds: np.ndarray | None = None  # explicit int[68, 4] (i_max, i_min, p_max, p_min), fap_quant=1 units
-    partial_mask_type: int | None = None  # force 1 or 2 for partially coded groups
-    group_types: np.ndarray | None = None  # explicit int[n, 10] mask types (frames after resampling)
-    fap_quant_per_frame: np.ndarray | None = None  # int[n]; changes force an intra plane
-    gender: int = 0
-    coding: str = "arithmetic"  # arithmetic | dct (DCT: fap_quant is the scaling index 0..31, dct.py)
-    end_code: bool = True
-    coding_per_frame: np.ndarray | list | None = None  # per frame 'arithmetic'/'dct' (or 0/1); a change
-    # starts an intra plane in the other mode (overrides ``coding``)
-    start_codes_before: frozenset = frozenset()  # frame numbers whose plane gets a plane start code
-    intra_at: frozenset = frozenset()  # frame numbers coded as intra planes (frame-based mode)
-    full_intensity_alphabet: bool = False  # blend/intensity levels up to D5's alphabet end, even past
-    # 63 (64 at fap_quant 2): a value a decoder must output; off, the level is lowered to stay <= 63
-    widen_at: frozenset = frozenset()  # (frame number, n): that intra plane's range lists n codes wider
-    # (both set by encode() itself where needed to prevent start-code emulation, D9)
-
-    def validate(self) -> None:
-        if not 0 <= self.fap_quant <= 31:
-            raise EncodeError(f"fap_quant {self.fap_quant} outside 0..31", rule="option")
-        if self.intra_period < 0:
-            raise EncodeError("intra period must be >= 0", rule="option")
-        if self.plane_start_codes not in PLANE_START_CODE_MODES:
-            raise EncodeError(f"plane_start_codes must be one of {PLANE_START_CODE_MODES}", rule="option")
-        if self.ranges not in RANGE_MODES:
-            raise EncodeError(f"ranges must be one of {RANGE_MODES}", rule="option")
-        if self.partial_mask_type not in (None, MASK_RETAIN, MASK_INTERPOLATE):
-            raise EncodeError("partial_mask_type must be 1 or 2", rule="option")
-        if self.gender not in (0, 1):
-            raise EncodeError("gender must be 0 or 1", rule="option")
-        if self.coding not in CODING_MODES:
-            raise EncodeError("coding must be 'arithmetic' or 'dct'", rule="option")
-
-
-@dataclass
-class EncodeResult:
-    data: bytes
-    recon: FapFrames  # the encoder's own reconstruction (what a conformant decoder outputs)
-    intra_frames: list[int]
-    plane_offsets: list[int]
-    start_codes: list[int] = field(default_factory=list)  # byte offsets of the start codes written
-
-
 # ---------------------------------------------------------------------------- encoder
-
-
-class _Plan:
-    """Intra placement, closed-loop reconstruction and the symbols of every plane."""
-
-    def __init__(
-        self, frames: FapFrames, opts: EncoderOptions, quants: np.ndarray, types: np.ndarray, forced: set[int]
-    ) -> None:
-        n = len(frames)
-        coded = frames.status == SET
-        self.coded = coded
-        self.full_alphabet = opts.full_intensity_alphabet
-        self.intra = np.zeros(n, dtype=bool)
-        for k in range(n):
-            if k == 0 or k in forced:
-                self.intra[k] = True
-            elif (coded[k] != coded[k - 1]).any() or (types[k] != types[k - 1]).any() or quants[k] != quants[k - 1]:
-                self.intra[k] = True
-        if opts.intra_period > 0:
-            last = 0
-            for k in range(n):
-                if self.intra[k]:
-                    last = k
-                elif k - last >= opts.intra_period:
-                    self.intra[k] = True
-                    last = k
-        # closed loop
-        vals = frames.values.astype(np.int64)
-        high = frames.high.astype(np.int64)
-        self.sym = np.zeros((n, NUM_FAPS), dtype=np.int64)  # low-level symbol value Q (intra: level, P: delta)
-        self.hsym = np.zeros((n, len(HIGH_LEVEL_FIELDS)), dtype=np.int64)
-        self.recon = np.zeros((n, NUM_FAPS), dtype=np.int64)
-        self.rhigh = np.zeros((n, len(HIGH_LEVEL_FIELDS)), dtype=np.int64)
-        cur = np.zeros(NUM_FAPS, dtype=np.int64)
-        hcur = np.zeros(len(HIGH_LEVEL_FIELDS), dtype=np.int64)
-        steps_by_q: dict[int, np.ndarray] = {}
-        for k in range(n):
-            q = int(quants[k])
-            steps = steps_by_q.get(q)
-            if steps is None:
-                steps = steps_by_q[q] = np.array(
-                    [1, 1] + [low_level_step(f, q) for f in range(3, NUM_FAPS + 1)], dtype=np.int64
-                )
-            c = coded[k]
-            idx = np.nonzero(c[2:])[0] + 2
-            if self.intra[k]:
-                target = vals[k, idx]
-            else:
-                target = vals[k, idx] - cur[idx]
-            st = steps[idx]
-            h = st // 2
-            a = np.abs(target)
-            lvl = np.where(a <= h, 0, (a + h) // st) * np.sign(target)
-            self.sym[k, idx] = lvl
-            cur[idx] = (0 if self.intra[k] else cur[idx]) + lvl * st
-            istep = intensity_step(q)
-            if c[0]:
-                for j in (0, 1):
-                    self.hsym[k, j] = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
-                    hcur[j] = high[k, j]
-                self._intensity(k, 2, high, hcur, istep)
-                hcur[3] = high[k, 3]
-            if c[1]:
-                for j in (4, 6):
-                    self.hsym[k, j] = high[k, j] if self.intra[k] else high[k, j] - hcur[j]
-                    hcur[j] = high[k, j]
-                for j in (5, 7):
-                    self._intensity(k, j, high, hcur, istep)
-                hcur[8] = high[k, 8]
-                hcur[9] = high[k, 9]
-            self.recon[k] = cur
-            self.rhigh[k] = hcur
-        # needed bounds per segment, in fap_quant = 1 units: (i_max, i_min, p_max, p_min)
-        self.segments: list[tuple[int, int]] = []
-        starts = list(np.nonzero(self.intra)[0]) + [n]
-        for a, b in zip(starts[:-1], starts[1:]):
-            self.segments.append((int(a), int(b)))
-        self.need = {}
-        self.p_overflow: list[int] = []
-        self.levels = np.zeros((n, NUM_FAPS), dtype=np.int64)  # reconstructed value / step
-        for k in range(n):
-            self.levels[k] = self.recon[k] // steps_by_q[int(quants[k])]
-        for a, b in self.segments:
-            d = quant_div(int(quants[a]))
-            # the intra range covers every value of the segment, also those reached by prediction:
-            # a predicted value outside it is valid (D4's range rule) but warned (FAP-DECISION-008),
-            # and the encoder keeps its streams off that reading
-            lv = np.where(coded[a:b], self.levels[a:b], 0)
-            need = np.zeros((NUM_FAPS, 4), dtype=np.int64)
-            need[:, 0] = np.maximum(lv.max(axis=0), 0) * d
-            need[:, 1] = np.minimum(lv.min(axis=0), 0) * d
-            if b > a + 1:
-                ps = self.sym[a + 1 : b]
-                need[:, 2] = np.maximum(ps.max(axis=0), 0) * d
-                need[:, 3] = np.minimum(ps.min(axis=0), 0) * d
-                over = (np.abs(ps) * d > MAX_RANGE) & coded[a + 1 : b]
-                rows = np.nonzero(over.any(axis=1))[0]
-                if len(rows):
-                    self.p_overflow.append(a + 1 + int(rows[0]))
-            self.need[a] = need
-
-    def _intensity(self, k: int, j: int, high, hcur, istep: int) -> None:
-        """Quantise a blend/intensity closed-loop, keeping the reconstruction inside 0..63.
-
-        D5's alphabet allows floor((63 + floor(q/2)) / q) x q, which can exceed 63 (64 at
-        q = 2); a decoder must output it, but this encoder produces it only with
-        ``full_intensity_alphabet``: otherwise the level is lowered to the largest multiple of
-        q <= 63 instead (error < q there, else <= q/2)."""
-        base = 0 if self.intra[k] else int(hcur[j])
-        level = quantise(int(high[k, j]) - base, istep)
-        r = base + level * istep
-        if r > INTENSITY_MAX and not self.full_alphabet:
-            level = (INTENSITY_MAX - base) // istep
-        elif r < 0:
-            level = -(base // istep)
-        self.hsym[k, j] = level
-        hcur[j] = base + level * istep
-
-
-def _bound_code(v: int) -> int:
-    """Smallest 5-bit list value whose bound (x 60) covers magnitude v."""
-    return -(-abs(int(v)) // RANGE_DELTA)
-
-
-MAX_EMULATION_FIXES = 64
 
 
 def encode(frames: FapFrames, options: EncoderOptions | None = None) -> EncodeResult:
@@ -329,10 +148,10 @@ def _encode_once(frames: FapFrames, opts: EncoderOptions) -> EncodeResult:
     return _write(src, opts, code, quants, types, plan)
 
 
-def _plan_arithmetic(src: FapFrames, opts: EncoderOptions, quants, types) -> _Plan:
+def _plan_arithmetic(src: FapFrames, opts: EncoderOptions, quants, types) -> Plan:
     forced: set[int] = {k for k, f in enumerate(src.frame_number.tolist()) if f in opts.intra_at}
     while True:
-        plan = _Plan(src, opts, quants, types, forced)
+        plan = Plan(src, opts, quants, types, forced)
         if not plan.p_overflow:
             break
         forced.update(plan.p_overflow)
@@ -461,7 +280,7 @@ def _write(
     code: FrameRateCode,
     quants,
     types,
-    plan: _Plan,
+    plan: Plan,
     ctx: _StreamContext | None = None,
 ) -> EncodeResult:
     """Write the planes of the frame-based (arithmetic) mode. Without ``ctx`` the frames are a
@@ -678,7 +497,7 @@ def _choose_lists(
         return codes
     send_all = opts.ranges == "auto" or (prev_q is not None and prev_q != q)
     for li, name in enumerate(LIST_ORDER):
-        needed = [_bound_code(v) for v in need[:, li]]
+        needed = [bound_code(v) for v in need[:, li]]
         if send_all:
             if opts.ranges == "auto":
                 codes[name] = needed
@@ -703,7 +522,7 @@ def _choose_lists(
     return codes
 
 
-def _write_payload(w: BitWriter, plan: _Plan, k: int, intra: bool, q: int, c, bounds, p_models: dict) -> None:
+def _write_payload(w: BitWriter, plan: Plan, k: int, intra: bool, q: int, c, bounds, p_models: dict) -> None:
     hs = plan.hsym[k]
     src_high = plan.rhigh[k]
     ib = intensity_bound(q)

@@ -1,6 +1,6 @@
 """``fuzz_one_input``: the entry point for coverage-guided fuzzers (atheris, OSS-Fuzz).
 
-The same in-process checks as ``fbaconf fuzz --self`` (:class:`fbaconf.fuzz.targets.SelfTarget`):
+The same in-process checks as ``fbaconf fuzz --self`` (:class:`fbaconf.fuzz.selftarget.SelfTarget`):
 the first byte of the input selects the parser, the rest is its input —
 
 * 0-3: the reference decoder (typed errors only, sane FapFrames; every 4th call also runs
@@ -37,7 +37,7 @@ def _target():
     if _TARGET is None:
         from .choosers import RandomChooser
         from .inputs import gen_valid
-        from .targets import SelfTarget
+        from .selftarget import SelfTarget
 
         stream = gen_valid(RandomChooser(random.Random(0))).data
         _TARGET = SelfTarget(checker_every=4, scene_stream=stream)

@@ -259,7 +259,7 @@ def _self(args) -> int:
     from .corpus import default_seeds, short_prefixes
     from .engine import FuzzConfig, Fuzzer
     from .findings import replay
-    from .targets import SelfTarget
+    from .selftarget import SelfTarget
 
     kinds = ("stream", "stream", "stream", "scene", "bifs", "text")
     if args.target in ("scene", "text") and args.replay is None:

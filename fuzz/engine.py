@@ -24,7 +24,8 @@ from .minimise import minimise
 from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
-from .targets import ExecResult, FuzzSetupError, Run, SelfTarget, Verdict
+from .selftarget import SelfTarget
+from .targets import ExecResult, FuzzSetupError, Run, Verdict
 from .text import mutate_text, text_seeds
 
 

@@ -14,7 +14,8 @@ from fbaconf.harness.adapters import Job
 
 from .inputs import Entry
 from .minimise import MinimiseStats
-from .targets import DecoderTarget, FuzzSetupError, SelfTarget, Verdict
+from .selftarget import SelfTarget
+from .targets import DecoderTarget, FuzzSetupError, Verdict
 
 
 @dataclass

@@ -466,7 +466,7 @@ MUTANTS_LIST: list[Mutant] = [
     ),
     _m(
         "ind-syn-dct-stuffing-after-23-zeros",
-        f"{DCT}:StuffingReader.bit",
+        "fbaconf.bitstreams.dct_stuffing:StuffingReader.bit",
         "DCT payload stuffing expected after 23 zeros, not 22",
         "if self.run == STUFF_AFTER:",
         "if self.run > STUFF_AFTER:",
@@ -474,7 +474,7 @@ MUTANTS_LIST: list[Mutant] = [
     ),
     _m(
         "ind-syn-dct-stuffing-run-from-payload",
-        f"{DCT}:StuffingReader.__init__",
+        "fbaconf.bitstreams.dct_stuffing:StuffingReader.__init__",
         "the DCT zero run is counted from the payload start (header zeros before it ignored)",
         "self.run = run",
         "self.run = 0",

@@ -40,7 +40,8 @@ from fbaconf.fuzz.minimise import minimise
 from fbaconf.fuzz.model import stream_model
 from fbaconf.fuzz.mutators import FIELD_MUTATORS, m_skip_chain, m_zero_frame_rate, mutate_stream
 from fbaconf.fuzz.promote import REGRESSION_SUITE, promote
-from fbaconf.fuzz.targets import DecoderTarget, SelfTarget, stack_hash
+from fbaconf.fuzz.selftarget import SelfTarget
+from fbaconf.fuzz.targets import DecoderTarget, stack_hash
 from fbaconf.harness.adapters import load_manifest, resolve
 from fbaconf.harness.compare import compare_faps
 from fbaconf.harness.results import Outcome

@@ -15,8 +15,9 @@ from fbaconf.bitstreams.tables import fap_table
 from fbaconf.cli import main
 from fbaconf.errors import BitstreamError, FbaconfInputError
 from fbaconf.generators import models
-from fbaconf.profiles.checker import _load_scene, check_stream
+from fbaconf.profiles.checker import check_stream
 from fbaconf.profiles.sample_streams import make_stream
+from fbaconf.profiles.scenecheck import load_scene
 from fbaconf.scenes import bifs, bt
 from fbaconf.scenes.bifs import BifsEncodeError, BifsError, BifsWriter
 
@@ -564,7 +565,7 @@ def test_check_reads_bifs_scenes_like_bt(tmp_path):
     (tmp_path / "s.bt").write_text(bt.write(scene))
     (tmp_path / "s.bifs").write_bytes(bifs.encode(scene))
     a, b = [], []
-    sa, sb = _load_scene(str(tmp_path / "s.bt"), a), _load_scene(str(tmp_path / "s.bifs"), b)
+    sa, sb = load_scene(str(tmp_path / "s.bt"), a), load_scene(str(tmp_path / "s.bifs"), b)
     # the only diagnostic of either form: the D10 interop note on FaceDefMesh -> IndexedFaceSet
     assert [d.code for d in a] == [d.code for d in b] == ["FAP-SCENE-003"]
     assert sa.measures == sb.measures and sa.tools == sb.tools

@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 
 from fbaconf.fuzz.inputs import Entry
-from fbaconf.fuzz.targets import SelfTarget
+from fbaconf.fuzz.selftarget import SelfTarget
 
 
 def _target(work):
