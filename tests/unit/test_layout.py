@@ -298,6 +298,17 @@ def test_the_architecture_page_names_the_layers_as_they_are():
     assert f"layers — {flat} —" in " ".join(text.split()), flat
 
 
+def test_the_readmes_folder_table_is_the_tree():
+    """README's "Layout and import names" table lists every stage folder and nothing else."""
+    text = (ROOT / "README.md").read_text("utf-8")
+    table = text.split("## Layout and import names", 1)[1].split("\n\n", 2)[1]
+    listed = {f.strip(" `/") for row in table.splitlines()[2:] for f in row.split("|")[1].split(",")}
+    stages = {
+        name.split(".")[-1] if name != "fbaconf" else "fbaconf" for name in _package_dirs() if name.count(".") <= 1
+    }
+    assert listed - {"tests", "benchmarks", "examples"} == stages
+
+
 def test_no_module_over_the_size_limit():
     big = {
         str(p.relative_to(ROOT)): n
