@@ -1,4 +1,4 @@
-"""The platform matrix (issue 30): the same verdict on every supported Python and dependency set.
+"""The platform matrix: the same verdict on every supported Python and dependency set.
 
 ``nox -s matrix`` runs six cells -- Python 3.11, 3.12, 3.13 x {the oldest versions of the declared
 dependency ranges that install on that Python, the newest the package index serves} -- each in a

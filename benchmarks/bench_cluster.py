@@ -1,5 +1,5 @@
-"""Cases and fuzz shards on a local Dask cluster against the embedded pool, side by side
-(issue 19). On one machine a cluster only adds scheduling cost: the ratio says how much, so a
+"""Cases and fuzz shards on a local Dask cluster against the embedded pool, side by side.
+On one machine a cluster only adds scheduling cost: the ratio says how much, so a
 user knows what a cluster must win back by adding machines.
 
 * ``run``: the reference decoder over the simple-l1 suites, ``-j 2`` vs ``--cluster local:2``;

@@ -1,4 +1,4 @@
-"""The independent C decoder (examples/fbadec) against the reference, side by side (issue 20).
+"""The independent C decoder (examples/fbadec) against the reference, side by side.
 
 Builds fbadec from source into a temporary folder and measures, in one run:
 

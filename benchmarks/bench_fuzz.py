@@ -1,4 +1,4 @@
-"""Fuzzing throughput, measured side by side in one run (issue 19).
+"""Fuzzing throughput, measured side by side in one run.
 
 Builds the planted test decoder (``tests/fuzz_decoders/skipchain.c``) and measures, each for
 the same number of seconds on the same machine:

@@ -1,4 +1,4 @@
-"""Per-case cost of `fbaconf run` against a native decoder, measured side by side (issue 19):
+"""Per-case cost of `fbaconf run` against a native decoder, measured side by side:
 the independent C decoder (examples/fbadec, built into a temporary folder) on one
 conformance stream,
 

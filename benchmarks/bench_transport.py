@@ -7,7 +7,7 @@
 * ``persistent``: :class:`~fbaconf.isolation.persistent.PersistentDecoder` (``[commands] serve``);
 * ``bare persistent``: a loop writing the input to ``skipchain --serve`` and reading the answer.
 
-Prints inputs/s and the ratios of issue 19's goals (fork server >= 0.5 x bare spawn, persistent
+Prints inputs/s and the ratios of its goals (fork server >= 0.5 x bare spawn, persistent
 >= 10 x spawn). The planted decoder is built in its fixed form (no crash restarts).
 
     python benchmarks/bench_transport.py [--seconds S]

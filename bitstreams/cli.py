@@ -27,7 +27,7 @@ def _summary(frames: FapFrames, nbytes: int) -> dict:
 
 
 def cmd_encode(args) -> int:
-    if Path(args.input).suffix.lower() == ".bt":  # a BT scene -> binary BIFS (issue 9)
+    if Path(args.input).suffix.lower() == ".bt":  # a BT scene -> binary BIFS
         from fbaconf.scenes.bifs import cmd_encode_scene
 
         return cmd_encode_scene(args)
@@ -69,7 +69,7 @@ def cmd_decode(args) -> int:
     from .decoder import decode
 
     p = Path(args.input)
-    if p.suffix.lower() in (".bifs", ".bif"):  # a binary BIFS scene -> BT text and/or a bit trace (issue 9)
+    if p.suffix.lower() in (".bifs", ".bif"):  # a binary BIFS scene -> BT text and/or a bit trace
         from fbaconf.scenes.bifs import cmd_decode_scene
 
         return cmd_decode_scene(args)

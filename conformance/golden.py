@@ -42,7 +42,7 @@ from .suite import CaseKind, Suite, SuiteError, digest_problems, golden_root, lo
 MANIFEST = "MANIFEST.json"
 # Image goldens approximate the ideal (infinitely supersampled) image: 8 x 8 ordered samples per
 # pixel, whatever the case's scenario asks of a player (at least N x N samples, any pattern). Measured
-# (issue 21): against 8 x 8 goldens the spread of faithful renderers with 2 x 2 to 4 x 4 samples,
+#: against 8 x 8 goldens the spread of faithful renderers with 2 x 2 to 4 x 4 samples,
 # rotated grids and MSAA roughly halves compared with goldens made by one 2 x 2 sampler.
 GOLDEN_SUPERSAMPLE = 8
 FORMAT = "fbaconf.golden/1"

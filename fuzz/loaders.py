@@ -1,4 +1,4 @@
-"""Fuzzing the loaders of what users hand fbaconf (issue 29): decoder manifests (TOML), suite
+"""Fuzzing the loaders of what users hand fbaconf: decoder manifests (TOML), suite
 manifests (JSON) and certification packages (a folder: ``SHA256SUMS``, ``certificate.json``,
 ``report.json``, ``results.jsonl``...). Each must read its input or refuse it with a typed
 error (:class:`~fbaconf.errors.FbaconfInputError`); anything else escaping — a traceback — is

@@ -13,7 +13,7 @@ from fbaconf.bitstreams.synth import synthetic_sequence
 
 
 def sweep_content(groups: list[list[int]], scale: dict, rate: float = 25.0):
-    """FapFrames that show every FAP in turn (issue 33): frame 0 neutral (nothing sent), then one
+    """FapFrames that show every FAP in turn: frame 0 neutral (nothing sent), then one
     frame per group of ``groups``. A group's low-level FAPs (negative = the negative direction)
     take ``scale[fap]`` (else ``scale["default"]``) times their default intra range, in whole
     quantiser steps; every other low-level FAP is sent as 0 from the first low-level group on.

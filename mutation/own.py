@@ -276,7 +276,7 @@ MUTANTS_LIST = [
         'hl[9] = r.bit("init_face")\n        hl[8] = r.bit("expression_def")',
         pure_decoder=True,
     ),
-    # --- the blend/intensity alphabet across fap_quant changes and where D5's readings differ (issue 37)
+    # --- the blend/intensity alphabet across fap_quant changes and where D5's readings differ
     Mutant(
         "hl-alphabet-first-quant",
         f"{D}.payload",
@@ -307,7 +307,7 @@ MUTANTS_LIST = [
         "if False:",
         pure_decoder=True,
     ),
-    # --- a marker bit of one new min/max list read but not checked (issue 37)
+    # --- a marker bit of one new min/max list read but not checked
     *[
         Mutant(
             f"list-marker-unchecked-{name.replace('_', '-')}",
@@ -319,7 +319,7 @@ MUTANTS_LIST = [
         )
         for name in syntax.LIST_ORDER
     ],
-    # --- the range rule (D4): a predicted value outside the range the intra alphabet codes (issue 37)
+    # --- the range rule (D4): a predicted value outside the range the intra alphabet codes
     Mutant(
         "pred-clamped-to-intra-range",
         f"{D}.payload",
@@ -520,7 +520,7 @@ MUTANTS_LIST = [
         "return Fapu(**{n: vals[n] for n in FAPU_NAMES})",
         'return Fapu(**{n: vals["ENS" if n == "MNS" else n] for n in FAPU_NAMES})',
     ),
-    # --- decoder state across planes and faces (issue 15)
+    # --- decoder state across planes and faces
     Mutant(
         "lists-reset-at-intra",
         f"{D}.intra_header",
@@ -556,7 +556,7 @@ MUTANTS_LIST = [
         "render-shifted-camera", "fbaconf.rendering.raster:project", "image centre one pixel off", patch=_camera_shift
     ),
 ]
-# --- the look-ahead at a block end, position by position (D7; the coder-lookahead-* cases, issue 33): a
+# --- the look-ahead at a block end, position by position (D7; the coder-lookahead-* cases): a
 # decoder that mishandles one window position p only (a bit-mask or index slip in its window bookkeeping)
 _FINISH = "fbaconf.bitstreams.arith:ArithDecoder.finish"
 LOOKAHEAD = arith.LOOKAHEAD

@@ -165,7 +165,7 @@ def load_scene(scene, out: list[Diagnostic]) -> SceneSummary | None:
             )
             return None
         try:
-            parsed = bifs.load_scene(scene)  # binary BIFS (issue 9) or BT text, by extension
+            parsed = bifs.load_scene(scene)  # binary BIFS or BT text, by extension
         except OSError as e:
             out.append(diag(R.SCENE_INVALID, f"scene {scene} cannot be read: {e.strerror or e}"))
             return None

@@ -13,7 +13,7 @@ mid-run loses nothing: Dask reruns the tasks it held on another worker. Why Dask
 well-kept Python engine for exactly this (task futures, ``as_completed``, lost-worker
 recovery, a local cluster and a remote scheduler behind one API), so fbaconf writes none of it.
 
-Security (issue 29). Anyone who can talk to a Dask scheduler or worker can run code on the
+Security. Anyone who can talk to a Dask scheduler or worker can run code on the
 workers, so every cluster is mutual TLS (``distributed.security.Security``): each end proves
 itself with a certificate signed by the cluster's own authority.
 

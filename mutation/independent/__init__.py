@@ -1,5 +1,5 @@
 """Independent mutants: faulty decoders written from ``../shared/spec/fap-bitstream.md`` alone,
-by people who had not read the suite's cases (issue 15), to measure the suites honestly.
+by people who had not read the suite's cases, to measure the suites honestly.
 
 One module per area; each defines ``MUTANTS_LIST`` (``mutation.core.Mutant`` with
 ``family="independent"`` and the rule it breaks). ``mutation/data/mutants-independent.md``

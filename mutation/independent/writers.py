@@ -38,7 +38,7 @@ MUTANTS_LIST: list[Mutant] = [
         "return str(int(r)) if r.is_integer() else repr(r)",
         "return str(int(r))",
     ),
-    # killed since issue 28: the header rate is held to 0.02 % too, and 0.4995 (0.5 x 1000/1001)
+    # killed since: the header rate is held to 0.02 % too, and 0.4995 (0.5 x 1000/1001)
     # written as 0.50 loses the 1000/1001 factor (rate-offset-sixteenths)
     _src(
         "ind-wr-rate-2dp",

@@ -1,4 +1,4 @@
-"""Hostile decoders (issue 16): one decoder per attack, each row asserting the attack is
+"""Hostile decoders: one decoder per attack, each row asserting the attack is
 contained — and that an honest decoder still passes under the same sandbox.
 
 The sandbox rows need bubblewrap (``.ci/run`` installs it). Without it they fail in CI

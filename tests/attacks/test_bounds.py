@@ -1,4 +1,4 @@
-"""The lab, not the manifest, sets the bounds (issue 41, items 5 and 7): limits up to the lab's
+"""The lab, not the manifest, sets the bounds (items 5 and 7): limits up to the lab's
 ceilings and never "none", 0 or unbounded; ``[env]`` carries data, never a runtime's start-up
 hook; a decoder cannot take a bundled adapter's name; ``run`` names which limits hold and how.
 Every hostile manifest here is written from the issue's description."""

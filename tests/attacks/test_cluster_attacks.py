@@ -1,4 +1,4 @@
-"""A stranger on the Dask port (issue 29): every cluster fbaconf starts or joins is mutual TLS,
+"""A stranger on the Dask port: every cluster fbaconf starts or joins is mutual TLS,
 listens on loopback only, uses task keys no one can guess, and reads what workers send back as
 plain data. Before: any client of the tcp:// scheduler ran code on the workers, could patch
 run_case so a decoder exiting 3 everywhere reported PASS, or pre-submit fbaconf's predictable
@@ -217,7 +217,7 @@ def test_shard_and_minimisation_reports_are_checked_field_by_field():
 # ------------------------------------------------------------------ a process of the lab's user
 
 ATTACKER = r'''
-"""A process of the lab's user that the run did not start (issue 41): it holds a copy of
+"""A process of the lab's user that the run did not start: it holds a copy of
 everything the run wrote to disk and tries every way into the run's cluster — the files, /proc
 of the harness and of the workers, the HTTP ports — and, with any key it finds, joins and
 patches run_case in the workers so every case passes. Prints what it got, as JSON."""

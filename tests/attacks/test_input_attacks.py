@@ -1,4 +1,4 @@
-"""Inputs a user hands the harness (issue 29): a suite manifest, a file to check, a scene to
+"""Inputs a user hands the harness: a suite manifest, a file to check, a scene to
 animate. Each bad one is one clear error naming the file and the rule — never a traceback, a
 hang or a MemoryError."""
 

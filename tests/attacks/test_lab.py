@@ -1,4 +1,4 @@
-"""The lab, not the vendor, sets isolation (issue 29): no manifest key widens a decoder's view,
+"""The lab, not the vendor, sets isolation: no manifest key widens a decoder's view,
 ``python =`` runs only bundled code under certify, a signing key never reaches a decoder or a
 package, certify says (or refuses) when it cannot isolate — and no manifest gives a traceback."""
 

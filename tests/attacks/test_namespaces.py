@@ -1,4 +1,4 @@
-"""Namespaces are refused inside the sandbox (issue 41, item 6): a decoder that nests user and
+"""Namespaces are refused inside the sandbox (item 6): a decoder that nests user and
 mount namespaces takes the host user's per-user count — under a lowered limit it took them
 all, a root process outside could not ``unshare -U`` and a concurrent case's sandbox could not
 start. The seccomp filter (isolation/seccomp.py) refuses ``unshare``/``clone`` with a namespace

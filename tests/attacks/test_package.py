@@ -1,4 +1,4 @@
-"""Hostile edits of a certification package (issue 28): every byte is covered, the verdict is
+"""Hostile edits of a certification package: every byte is covered, the verdict is
 re-derived, the signature covers the digest list, each file is read once.
 
 Uses the session's packages (tests/conftest.py: ``certify --decoder reference-inprocess

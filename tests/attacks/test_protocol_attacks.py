@@ -1,4 +1,4 @@
-"""Hostile decoders against the fuzzer's fast paths (issue 29): the persistent protocol and the
+"""Hostile decoders against the fuzzer's fast paths: the persistent protocol and the
 fork server's reply channel. Each attack must become a finding of the input that made it —
 no hang, no harness traceback, no ending moved onto another input — and the inputs around it
 must be judged as usual.

@@ -1,4 +1,4 @@
-"""Resource accounting against honest and hostile decoders (issue 29): memory judged from the
+"""Resource accounting against honest and hostile decoders: memory judged from the
 kernel's OOM events (never from page cache reaching the limit), the output limit enforced
 while the decoder writes, trees of any depth counted and removed, no inotify instances taken
 from the host's user, ``memory_kind = "rss"`` sampling the decoder's tree (not the launcher).

@@ -1,4 +1,4 @@
-"""Set-up failures recognised by behaviour, not by wording (issue 37, item 4): a decoder that
+"""Set-up failures recognised by behaviour, not by wording (item 4): a decoder that
 cannot run as set up fails every case the same way, and each read as "a reject: a valid stream
 was rejected". The canary (harness/preflight.py, isolation/setup.py) runs the decoder on the
 claim's simplest valid stream before the cases; after them, identical endings with no decoding are one set-up error

@@ -1,4 +1,4 @@
-"""What the sandbox shows a decoder (issue 28, docs/harness.md "What a decoder sees"): one
+"""What the sandbox shows a decoder (docs/harness.md "What a decoder sees"): one
 hostile decoder per way of looking — a sibling file, its folder, ``..``, /proc (its parent's
 cwd, every process's command line, environment and descriptors), a copy-anything crawl — and
 each must find nothing derived from the goldens or the reference outputs, nothing of the run
@@ -114,7 +114,7 @@ def test_a_textured_case_stages_its_texture_and_its_scene_forms_only_as_accepted
 
 
 def test_the_sibling_copier_passes_no_case(tmp_path):
-    """The ten-line shell "decoder" of issue 28: `cp "${1%.fba}.fap" "$2"`."""
+    """The ten-line shell "decoder" of `cp "${1%.fba}.fap" "$2"`."""
     needs_sandbox()
     m = manifest(tmp_path, "sibling", ["/bin/sh", "-c", 'cp "${1%.fba}.fap" "$2"', "sh", "{input}", "{faps_out}"])
     rs = run(tmp_path, m, WITH_SIBLING)

@@ -1,4 +1,4 @@
-"""What a manifest's command names cannot show (issue 41, item 1): a `{python} FILE` command
+"""What a manifest's command names cannot show (item 1): a `{python} FILE` command
 showed FILE's folder, so a never-decoding program that names its checkout's ``.git/config``,
 another checkout's ``setup.py``, a file of a wheel build (``build/lib*/fbaconf/``) or of an
 installed fbaconf's data saw every golden and passed 165 of 165 cases, signed. Now every file a
@@ -231,7 +231,7 @@ def test_a_folder_inside_a_golden_tree_of_another_version_is_refused(tmp_path):
 
 
 def test_a_jar_or_model_the_command_names_elsewhere_is_shown(tmp_path):
-    """Issue 37: a jar given as an argument outside the program's and the manifest's folders was
+    """a jar given as an argument outside the program's and the manifest's folders was
     invisible ("Unable to access jarfile", a Fail per case). Its folder is shown, checked."""
     needs_sandbox()
     models = tmp_path / "models"

@@ -109,7 +109,7 @@ def k_cases():
 @pytest.fixture(scope="module")
 def repo(tmp_path_factory) -> Path:
     r = make_repo(tmp_path_factory.mktemp("gate"))
-    (r / "ci" / "baseline.txt").write_text("# acme\nsimple-l1-core/arith-q1-all-faps,Fail,faps:3  # issue 12\n")
+    (r / "ci" / "baseline.txt").write_text("# acme\nsimple-l1-core/arith-q1-all-faps,Fail,faps:3  # ticket ACME-12\n")
     return r
 
 

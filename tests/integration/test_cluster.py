@@ -1,4 +1,4 @@
-"""Cases as Dask tasks (issue 19): the same verdicts as the local pool, and a worker lost
+"""Cases as Dask tasks: the same verdicts as the local pool, and a worker lost
 mid-run loses no case."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The second, independent decoder of the face-object stream (examples/fbadec, issue 20).
+"""The second, independent decoder of the face-object stream (examples/fbadec).
 
 Written in C11 by a helper whose brief was the spec notes, the seeds and the DCT mode's
 specification only (examples/fbadec/NOTES.md says what it read and what it did not). Built

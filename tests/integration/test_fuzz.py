@@ -1,4 +1,4 @@
-"""The fuzzer (issue 8): syntax model, generators and mutators, minimiser, classification, and
+"""The fuzzer: syntax model, generators and mutators, minimiser, classification, and
 acceptance: three planted-bug decoders (an out-of-bounds write on a large skip chain in C, a
 hang on a zero frame rate, an allocation from an unchecked time code) are each found,
 classified and minimised from the conformance seed corpus; our own parsers give no finding;

@@ -1,4 +1,4 @@
-"""A finding belongs to the input that caused it, in every mode (issue 31): a decoder that
+"""A finding belongs to the input that caused it, in every mode: a decoder that
 crashes on one input among many queued to it — through ``[commands] serve`` (the persistent
 protocol, framed per input), the fork server and a fresh sandbox per input — gives the same
 finding, naming that input; the finding replays, and is minimised."""

@@ -1,5 +1,5 @@
 """``fbaconf fuzz export``: seeds, dictionary and OSS-Fuzz snippet for the fuzzers vendors
-run (issue 19), checked by a real libFuzzer build where clang has one."""
+run, checked by a real libFuzzer build where clang has one."""
 
 from __future__ import annotations
 

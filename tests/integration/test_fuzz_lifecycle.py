@@ -1,5 +1,5 @@
 """Every fork server and persistent decoder a fuzz run starts is stopped when the run ends, in
-this process too (issue 30): the processes are counted on the machine, by the test's own
+this process too: the processes are counted on the machine, by the test's own
 folder in their command lines (the server's copy under the work folder, the decoder's path),
 after a run, after a replay, after a target used on its own, and after a cluster campaign
 (tests/integration/test_cluster.py counts those)."""

@@ -1,4 +1,4 @@
-"""A Go decoder under the examples' limits (issue 31): Go reserves hundreds of megabytes of
+"""A Go decoder under the examples' limits: Go reserves hundreds of megabytes of
 address space at start, so an address-space limit of 256 MB kills it before it reads a byte
 ("fatal error: failed to reserve page summary memory"). The default ``memory_kind = "tree"``
 limits what the process tree uses (a cgroup limit where cgroups are writable): the decoder

@@ -1,4 +1,4 @@
-"""BIFS and BT that GPAC's MP4Box reads and writes (issue 18, decision D10).
+"""BIFS and BT that GPAC's MP4Box reads and writes (decision D10).
 
 The expected values come from GPAC, not from fbaconf: ``tests/data/gpac/`` holds binary BIFS
 and BT dumps MP4Box wrote (from commit ``gpac_commit`` of its MANIFEST.json, built outside the

@@ -1,4 +1,4 @@
-"""A JVM decoder (issue 37, item 4): a tiny Java program compiled here with javac (skipped
+"""A JVM decoder (item 4): a tiny Java program compiled here with javac (skipped
 cleanly where there is no JDK). Under ``memory_kind = "address-space"`` and 2048 MB the JVM
 cannot start — "Could not allocate compressed class space", printed on **stdout** — and every
 case read "java exited with code 1, a reject: a valid stream was rejected". A jar given as an

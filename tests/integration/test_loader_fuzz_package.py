@@ -1,4 +1,4 @@
-"""The loader fuzzer's package target (fuzz/loaders.py, issue 29) on the session's certified
+"""The loader fuzzer's package target (fuzz/loaders.py) on the session's certified
 package: a few seconds with a fixed seed find no traceback in package verification."""
 
 from __future__ import annotations

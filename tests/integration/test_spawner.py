@@ -1,4 +1,4 @@
-"""The fuzzer's fast paths (issue 19): one sandbox per worker with a fork server, and the
+"""The fuzzer's fast paths: one sandbox per worker with a fork server, and the
 persistent decoder protocol. Each must judge an input exactly as a fresh sandbox would, keep
 inputs apart (files, processes, stderr), and survive a decoder that dies or hangs."""
 

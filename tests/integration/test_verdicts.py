@@ -1,4 +1,4 @@
-"""A verdict only a real decoder can earn (issue 14).
+"""A verdict only a real decoder can earn.
 
 Lazy and broken decoders, written here as tiny programs, must not certify; every process
 ending on the error suite gets the outcome the harness guide's table gives it."""
@@ -133,7 +133,7 @@ def test_a_crash_report_is_named_in_the_result(tmp_path):
 
 
 def test_no_such_file_on_stderr_is_the_decoders_ending_not_a_set_up_failure(tmp_path):
-    """Set-up failures are the harness's knowledge (issue 29): a decoder that prints "No such
+    """Set-up failures are the harness's knowledge: a decoder that prints "No such
     file or directory" and exits 2 rejected the stream; on a valid stream that is a Fail."""
     body = "sys.stderr.write('dec: /nonexistent/in.fba: No such file or directory\\n'); sys.exit(2)"
     m = pydec(tmp_path, "lost", body)

@@ -1,4 +1,4 @@
-"""The installed wheel is complete (issues 17, 30): every file the project ships under its
+"""The installed wheel is complete: every file the project ships under its
 packages is in it, and every verb that reads the package's data runs from a non-editable install,
 from ``/``.
 

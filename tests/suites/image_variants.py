@@ -1,5 +1,5 @@
 """Renderers-under-test built from the reference rasteriser: faithful ones with other samplers,
-and wrong ones, each a realistic player bug (issue 21's wrong-renderer matrix).
+and wrong ones, each a realistic player bug (the wrong-renderer matrix).
 
 Faithful renderers differ from the goldens (8 x 8 ordered samples) only in how they sample a
 pixel: ordered grids of 2 x 2 to 4 x 4 samples, a rotated grid of 4 (RGSS, the usual 4x MSAA
@@ -19,7 +19,7 @@ sRGB applied twice), culling, the shading mode.
 ``python tests/suites/image_variants.py`` prints the matrix of verdicts and metrics over every image
 case of the built suites (the measurement behind harness/data/tolerances.toml [images]).
 
-Dropped FAPs (issue 33): ``drop-fap-N`` renders geometry animated without FAP N — its effective
+Dropped FAPs: ``drop-fap-N`` renders geometry animated without FAP N — its effective
 value held at 0 after FIT, left/right fill and visemes/expressions (FAP 1/2: the visemes or
 expressions ignored) — so the vertices a player reports may be right while its picture is not.
 ``python tests/suites/image_variants.py --drop`` lists, per image case, the FAPs that move its

@@ -1,4 +1,4 @@
-"""Every suite scene's reference rests on well-conditioned systems (issue 30): the condition
+"""Every suite scene's reference rests on well-conditioned systems: the condition
 number of each linear system the reference solves to compile a suite scene (calibration's warp
 and texture map, animation/rbf.py) is under the documented bound; the worst is printed."""
 

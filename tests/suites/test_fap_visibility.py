@@ -1,4 +1,4 @@
-"""Every FAP visible in the images (issue 33): a player whose vertices are right but whose picture
+"""Every FAP visible in the images: a player whose vertices are right but whose picture
 ignores one FAP fails an image case, and no scenario colour sits on a rounding tie, so a faithful
 float pipeline gets no QualityWarning.
 

@@ -1,4 +1,4 @@
-"""The image stage against renderers it has never seen (issue 21): every faithful renderer —
+"""The image stage against renderers it has never seen: every faithful renderer —
 whatever its sampler — passes every image case without a QualityWarning, and every wrong
 renderer (a realistic player bug each) fails at least one case, so it cannot certify.
 

@@ -35,7 +35,7 @@ def test_snippet_count_sees_a_missing_and_a_repeated_snippet():
 
 
 def test_independent_set_is_large_named_and_tagged():
-    """Issue 15: 100+ mutants written from the spec notes alone, each naming the rule it breaks."""
+    """100+ mutants written from the spec notes alone, each naming the rule it breaks."""
     ind = [m for m in own.MUTANTS_LIST if m.family == "independent"]
     assert len(ind) >= 100
     assert len(set(m.name for m in own.MUTANTS_LIST)) == len(own.MUTANTS_LIST)

@@ -58,8 +58,8 @@ def test_write_records_every_required_case_that_did_not_pass(tmp_path):
 
 HAND = """\
 # acme's known problems
-s/wrong-fap,Fail   # issue 12: accepts any Fail
-s/no-multi,NotSupported   # multi-face output later (issue 7)
+s/wrong-fap,Fail   # accepts any Fail
+s/no-multi,NotSupported   # multi-face output later
 s/hang,Flake   # slow runners
 s/segv,Crash,crash:SIGBUS   # was a bus error
 s/passes,Fail,faps:2   # fixed since
@@ -76,8 +76,8 @@ def test_write_keeps_hand_written_lines_comments_and_flakes(tmp_path):
         f.read_text()
         == """\
 # acme's known problems
-s/wrong-fap,Fail   # issue 12: accepts any Fail
-s/no-multi,NotSupported   # multi-face output later (issue 7)
+s/wrong-fap,Fail   # accepts any Fail
+s/no-multi,NotSupported   # multi-face output later
 s/hang,Flake   # slow runners
 s/segv,Crash,crash:SIGSEGV  # was a bus error
 other/not-run,Crash   # a case this run did not run

@@ -1,4 +1,4 @@
-"""Binary BIFS (issue 9): tables, round trips, typed errors, robustness, CLI and checker."""
+"""Binary BIFS: tables, round trips, typed errors, robustness, CLI and checker."""
 
 from __future__ import annotations
 

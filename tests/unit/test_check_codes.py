@@ -590,7 +590,7 @@ def test_registry_codes_are_well_formed():
     load_profiles()  # data file valid
 
 
-# ---------------------------------------------------------------------------- what depends on D5 (issue 37)
+# ---------------------------------------------------------------------------- what depends on D5
 # Hand computation of the two readings of the blend/intensity alphabet top, 0..floor((63 + floor(q/2))/q)
 # (D5) and 0..ceil(63/q), for q = 1..31: 63/q = 6.3 (q 10): 6 vs 7; 5.25 (12): 5 vs 6; 4.2 (15): 4 vs 5;
 # 3.32 (19) and 3.15 (20): 3 vs 4; 2.42 .. 2.03 (26..31): 2 vs 3. Everywhere else 63/q is whole or its

@@ -484,7 +484,7 @@ def test_identical_images_pass(rendered, tmp_path):
 
 
 def test_one_pixel_changed_hugely_is_no_verdict(rendered, tmp_path):
-    """No verdict from a single pixel (issue 21): it is counted and reported, not failed."""
+    """No verdict from a single pixel: it is counted and reported, not failed."""
     px = _read8(rendered[1])
     ys, xs = np.nonzero((px == px[0, 0]).all(axis=2))  # a background pixel
     x, y = int(xs[len(xs) // 2]), int(ys[len(ys) // 2])

@@ -1,4 +1,4 @@
-"""D9: the encoder never emulates a start code; the scan finds what it must (issue 18)."""
+"""D9: the encoder never emulates a start code; the scan finds what it must."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``fbaconf fuzz --promote`` says what to do next (issue 31): build the regression suite with
+"""``fbaconf fuzz --promote`` says what to do next: build the regression suite with
 its goldens, run the decoder on it, commit the files — each named as a user types it."""
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """``fuzz --self``'s ``slow`` class counts the parsers' CPU time, not wall time: on a loaded
-machine a 0.2 s parse waiting 7 s for a core is no finding (issue 29's fresh ``--self`` run
+machine a 0.2 s parse waiting 7 s for a core is no finding (a fresh ``--self`` run
 reported two such inputs; replayed alone they took 0.03 s and 0.23 s of CPU)."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Float goldens and their rounding steps (issue 30): the margin of a value to its rounding
+"""Float goldens and their rounding steps: the margin of a value to its rounding
 boundary, and golden verify's fallback to a stated tolerance where regeneration on another
 platform is not byte for byte."""
 

@@ -1,5 +1,5 @@
-"""`fbaconf run` and `certify` say in one line whether decoders are isolated on this machine
-(issue 30): bubblewrap present, missing, or switched off; an in-process adapter says so too."""
+"""`fbaconf run` and `certify` say in one line whether decoders are isolated on this machine —
+bubblewrap present, missing, or switched off; an in-process adapter says so too."""
 
 from __future__ import annotations
 

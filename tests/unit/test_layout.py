@@ -1,4 +1,4 @@
-"""The layout rules of the code base (issue 13), checked on the source tree:
+"""The layout rules of the code base, checked on the source tree:
 
 * no import cycle between modules, and none between stages once the command-line glue
   (``*.cli`` modules, which compose stages by design) is left out;
@@ -82,7 +82,7 @@ def test_the_wheel_installs_every_package_and_its_data():
         for f in d.iterdir():
             if f.is_file() and f.suffix not in (".py", ".pyc", ".so", ".o"):
                 assert f.name in data, (pkg, f.name)
-    # the folders the last wheel forgot (issue 30)
+    # the folders the last wheel forgot
     assert "data/text/comments-crlf.fap" in kw["package_data"]["fbaconf.conformance"]
     assert "fbaconf.mutation.independent" in kw["packages"]
 
@@ -307,6 +307,22 @@ def test_the_readmes_folder_table_is_the_tree():
         name.split(".")[-1] if name != "fbaconf" else "fbaconf" for name in _package_dirs() if name.count(".") <= 1
     }
     assert listed - {"tests", "benchmarks", "examples"} == stages
+
+
+_ISSUE = re.compile(r"\b[Ii]ssues? ?#?\d+")
+
+
+def test_no_code_names_an_issue_number():
+    """Comments and docstrings say why, not which issue: a newcomer cannot open the tracker."""
+    skip = {".git", ".venv", "build", ".nox", "docs", "node_modules"}
+    named = [
+        f"{p.relative_to(ROOT)}:{i}"
+        for p in ROOT.rglob("*")
+        if p.suffix in (".py", ".c", ".h", ".toml", ".sh") and p.is_file() and not skip & set(p.relative_to(ROOT).parts)
+        for i, line in enumerate(p.read_text("utf-8", "replace").splitlines(), 1)
+        if _ISSUE.search(line)
+    ]
+    assert named == []
 
 
 def test_no_module_over_the_size_limit():

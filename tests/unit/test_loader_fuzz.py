@@ -1,4 +1,4 @@
-"""The loader fuzzer (fuzz/loaders.py, issue 29): a few seconds of each target with a fixed seed
+"""The loader fuzzer (fuzz/loaders.py): a few seconds of each target with a fixed seed
 finds no traceback in the manifest and suite loaders, and a loader that raises anything but a
 typed error is reported (the package target, which needs a certified package, is in
 tests/integration/test_loader_fuzz_package.py). The 10-minute campaign is a documented command

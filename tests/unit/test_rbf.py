@@ -1,4 +1,4 @@
-"""Calibration's linear systems are well posed (issue 30): coincident and near-coincident points
+"""Calibration's linear systems are well posed: coincident and near-coincident points
 are merged, every system's condition number is checked against a documented bound, and a scene
 above it is refused by the reference, reported by the checker (FAP-SCENE-004) and refused by the
 suite builder -- instead of the result depending on how a LAPACK build meets a singular matrix."""

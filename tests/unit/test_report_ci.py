@@ -1,4 +1,4 @@
-"""Reports as a CI log and a vendor read them (issue 31): the crash line is the report's first
+"""Reports as a CI log and a vendor read them: the crash line is the report's first
 line, one bug is one group whatever the addresses, pids and temporary paths, what fails the run
 against its baseline comes first and by name, and the ``N new, N known, N fixed, N flaky`` line
 is in every format. The crash texts are written the way the runtimes print them (an ASan report,

@@ -170,7 +170,7 @@ def test_mutated_text_only_typed_errors(i, j, insert):
 
 
 def test_reads_booleans_as_mp4box_writes_them():
-    """GPAC's MP4Box dumps SFBool as lowercase true/false (issue 18); both spellings read the same."""
+    """GPAC's MP4Box dumps SFBool as lowercase true/false; both spellings read the same."""
     upper = bt.parse("Face { fap FAP { viseme Viseme { viseme_def TRUE } } }")
     lower = bt.parse("Face { fap FAP { viseme Viseme { viseme_def true } } }")
     assert upper == lower

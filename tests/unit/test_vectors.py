@@ -147,7 +147,7 @@ KILLED = [
 ]
 
 
-# The coder corner vectors (tests/vectors/make_coder_corners.py, issue 33): each kills the mutant of the
+# The coder corner vectors (tests/vectors/make_coder_corners.py): each kills the mutant of the
 # decoder rule it was made for — a tie taken the other way, a look-ahead position mishandled.
 TIE_MUTANTS = {
     "high-q2": "ind-cod-renorm-high-le-q2",

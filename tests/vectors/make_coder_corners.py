@@ -1,4 +1,4 @@
-"""Make the arithmetic-coder corner vectors (issue 33): streams that reach each renormalisation tie
+"""Make the arithmetic-coder corner vectors: streams that reach each renormalisation tie
 and every position of the 14-bit look-ahead window at a block end, for both D7 rules, written field
 by field from the spec notes (../shared/spec/fap-bitstream.md §1.2–§1.4, §3, D3–D7, D9) —
 independently of fbaconf: this script imports nothing from it. Its coder is the procedure of §3.2
@@ -48,7 +48,7 @@ TOP, Q1, Q2, Q3 = 65535, 16384, 32768, 49152
 MAX_FREQUENCY = 16383
 ZERO_RUN = 22
 LOOKAHEAD = 14
-PROVENANCE = "made by tests/vectors/make_coder_corners.py (issue 33): fields by hand, blocks by §3.3"
+PROVENANCE = "made by tests/vectors/make_coder_corners.py: fields by hand, blocks by §3.3"
 
 # spec notes §2: FAP number -> (name, QP, default intra range, default predicted range); D4 rounds
 # ranges to multiples of 60, which these already are

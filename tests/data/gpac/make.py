@@ -1,4 +1,4 @@
-"""Make the GPAC interop evidence of issue 18: binary BIFS written by GPAC's MP4Box from every
+"""Make the GPAC interop evidence of binary BIFS written by GPAC's MP4Box from every
 shipped scene and from hand-written scenes, committed as test data (tests/integration/test_gpac_interop.py).
 
     python tests/data/gpac/make.py /path/to/MP4Box [--gpac-commit SHA] [--only NAME ...]
