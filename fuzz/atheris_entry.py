@@ -25,6 +25,8 @@ from __future__ import annotations
 import random
 import sys
 
+from .inputs import InputKind
+
 _TARGET = None
 
 
@@ -61,9 +63,9 @@ def fuzz_one_input(data: bytes) -> None:
             raise FuzzFinding(f"{v.cls} ({v.signature}): {v.message}")
         return
     elif sel == 5:
-        e = Entry(body, kind="scene")
+        e = Entry(body, kind=InputKind.SCENE)
     elif sel == 6:
-        e = Entry(body, kind="bifs")
+        e = Entry(body, kind=InputKind.BIFS)
     else:
         rng = random.Random(body)
         base = gen_valid(RandomChooser(rng))

@@ -35,7 +35,7 @@ from fbaconf.harness.cluster import ClusterError, from_data, task_key
 from .corpus import default_seeds
 from .engine import FuzzConfig, Fuzzer
 from .findings import Finding, write_finding
-from .inputs import Entry
+from .inputs import Entry, InputKind
 from .minimise import MinimiseStats, minimise
 from .targets import DecoderTarget, Verdict
 
@@ -46,7 +46,7 @@ MAX_MERGED = 2000
 @dataclass
 class ShardSpec:
     manifest: str
-    kind: str = "stream"
+    kind: InputKind = InputKind.STREAM
     timeout_s: float | None = None
     expected_exit: tuple[int, ...] | None = None
     oracle: bool = True
@@ -190,7 +190,7 @@ def shard_report(text) -> dict:
     return r
 
 
-def minimise_task(spec: ShardSpec, data: bytes, kind: str, key: str, seconds: float, tests: int) -> str:
+def minimise_task(spec: ShardSpec, data: bytes, kind: InputKind, key: str, seconds: float, tests: int) -> str:
     """Minimise one finding in a worker: the smallest input with the same class and signature
     (JSON text, read by :func:`minimise_report`)."""
     work = Path(tempfile.mkdtemp(prefix="fbaconf-min-"))

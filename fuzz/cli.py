@@ -23,6 +23,8 @@ from pathlib import Path
 
 from fbaconf.isolation.bounds import add_ceiling_options, ceilings_from
 
+from .inputs import InputKind
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -66,7 +68,8 @@ def register(sub) -> None:
     p.add_argument("-o", "--output", type=Path, help="run folder (default fbaconf-fuzz/<decoder|self>)")
     p.add_argument(
         "--target",
-        choices=("stream", "scene", "text"),
+        type=InputKind,
+        choices=(InputKind.STREAM, InputKind.SCENE, InputKind.TEXT),
         default=None,
         help="--decoder: fuzz the binary stream (default), the BT scene input (a fixed valid stream) "
         "or the .fap text (default for a player, a decoder that reads only .fap text)",
@@ -189,7 +192,7 @@ def _campaign(args, expected: set[int] | None) -> int:
     if args.replay is not None:
         print("fbaconf fuzz: error: --replay runs one input here; drop --cluster", file=sys.stderr)
         return 2
-    kind = args.target or ("text" if "fba" not in adapter.inputs and "fap" in adapter.inputs else "stream")
+    kind = args.target or _default_kind(adapter)
     spec = ShardSpec(
         manifest,
         kind=kind,
@@ -261,8 +264,9 @@ def _self(args) -> int:
     from .findings import replay
     from .selftarget import SelfTarget
 
-    kinds = ("stream", "stream", "stream", "scene", "bifs", "text")
-    if args.target in ("scene", "text") and args.replay is None:
+    S = InputKind
+    kinds = (S.STREAM, S.STREAM, S.STREAM, S.SCENE, S.BIFS, S.TEXT)
+    if args.target in (S.SCENE, S.TEXT) and args.replay is None:
         kinds = (args.target,)
     seeds = default_seeds() + _extra_seeds(args.seeds)
     short = short_prefixes(seeds)
@@ -296,9 +300,14 @@ def _self(args) -> int:
     return _finish(fz, out, args)
 
 
-def _kind_of(path: Path, target: str) -> str:
-    suf = path.suffix.lower()
-    return {".bt": "scene", ".bifs": "bifs", ".fap": "text"}.get(suf, "scene" if target == "scene" else "stream")
+def _default_kind(adapter) -> InputKind:
+    """A player (reads only .fap text) is fuzzed through its text; everything else through the stream."""
+    return InputKind.TEXT if "fba" not in adapter.inputs and "fap" in adapter.inputs else InputKind.STREAM
+
+
+def _kind_of(path: Path, target: InputKind | None) -> InputKind:
+    by_suffix = {".bt": InputKind.SCENE, ".bifs": InputKind.BIFS, ".fap": InputKind.TEXT}
+    return by_suffix.get(path.suffix.lower(), InputKind.SCENE if target == InputKind.SCENE else InputKind.STREAM)
 
 
 def _print_replay(v, args) -> int:
@@ -333,14 +342,14 @@ def _decoder(args, expected: set[int]) -> int:
         args.output = Path("fbaconf-fuzz") / adapter.name
     out: Path = args.output.resolve()
     if args.target is None:
-        args.target = "text" if "fba" not in adapter.inputs and "fap" in adapter.inputs else "stream"
+        args.target = _default_kind(adapter)
     out.mkdir(parents=True, exist_ok=True)
     work = Path(tempfile.mkdtemp(prefix="fuzz-work-", dir=out))
     target = None
     try:
         seeds = default_seeds() + _extra_seeds(args.seeds)
         scene_stream = None
-        if args.target == "scene":
+        if args.target == InputKind.SCENE:
             scene_stream = next((s.data for s in seeds if s.origin.startswith("seed:simple-l1-core")), seeds[0].data)
         target = DecoderTarget(
             adapter,

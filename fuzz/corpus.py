@@ -9,11 +9,11 @@ from fbaconf.bitstreams.bitedit import end_stream
 from fbaconf.conformance.suite import suites_root
 
 from .choosers import RandomChooser
-from .inputs import Entry, gen_valid
+from .inputs import Entry, InputKind, gen_valid
 from .scenes import gen_scene
 
 
-def suite_files(suffix: str, kind: str, root: Path | None = None, max_bytes: int | None = None) -> list[Entry]:
+def suite_files(suffix: str, kind: InputKind, root: Path | None = None, max_bytes: int | None = None) -> list[Entry]:
     """The built suites' ``*/*.<suffix>`` files (up to ``max_bytes`` each) as seeds of ``kind``;
     empty when no suites are built."""
     root = Path(root) if root else suites_root()
@@ -27,13 +27,13 @@ def suite_files(suffix: str, kind: str, root: Path | None = None, max_bytes: int
 
 def conformance_seeds(root: Path | None = None) -> list[Entry]:
     """The conformance suites' streams (``*.fba``) as seed corpus; empty when no suites are built."""
-    return suite_files("fba", "stream", root)
+    return suite_files("fba", InputKind.STREAM, root)
 
 
 def scene_seeds(root: Path | None = None, max_bytes: int = 20_000) -> list[Entry]:
     """The suites' small BT scenes (the Face family among them: FDP feature points, textures, FIT
     graphs, a FaceDefTables grid) plus generated ones."""
-    out = suite_files("bt", "scene", root, max_bytes)
+    out = suite_files("bt", InputKind.SCENE, root, max_bytes)
     rng = RandomChooser(random.Random(7))
     out.extend(gen_scene(rng) for _ in range(4))
     return out

@@ -19,7 +19,7 @@ from fbaconf.scenes import bifs, bt
 from .choosers import RandomChooser
 from .corpus import scene_seeds
 from .findings import Finding, write_finding
-from .inputs import Entry, gen_valid
+from .inputs import Entry, InputKind, gen_valid
 from .minimise import minimise
 from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
@@ -112,8 +112,8 @@ class FuzzConfig:
     seconds: float = 60.0
     jobs: int = 1
     out_dir: Path | None = None
-    kind: str = "stream"
-    kinds: tuple[str, ...] | None = None
+    kind: InputKind = InputKind.STREAM
+    kinds: tuple[InputKind, ...] | None = None
     progress: bool | None = None
     max_execs: int | None = None
     max_corpus: int = 400
@@ -157,7 +157,7 @@ class Fuzzer:
             c.max_execs,
         )
         max_corpus, coverage_every, minimise_findings = c.max_corpus, c.coverage_every, c.minimise_findings
-        if not seeds and kind == "stream" and "stream" in (kinds or (kind,)):
+        if not seeds and kind == InputKind.STREAM and InputKind.STREAM in (kinds or (kind,)):
             raise FuzzSetupError("no seed streams (build the suites: fbaconf suites build)")
         self.target = target
         self.seed = int(seed)
@@ -165,25 +165,25 @@ class Fuzzer:
         self.jobs = max(1, int(jobs))
         self.out_dir = Path(out_dir) if out_dir else None
         self.kinds = kinds or (kind,)
-        self.corpus: dict[str, list[Entry]] = {
-            "stream": list(seeds),
-            "scene": list(scene_seeds_ or []),
-            "bifs": [],
-            "text": [],
+        self.corpus: dict[InputKind, list[Entry]] = {
+            InputKind.STREAM: list(seeds),
+            InputKind.SCENE: list(scene_seeds_ or []),
+            InputKind.BIFS: [],
+            InputKind.TEXT: [],
         }
-        if "text" in self.kinds:
-            self.corpus["text"] = text_seeds()
-            if not self.corpus["text"]:
+        if InputKind.TEXT in self.kinds:
+            self.corpus[InputKind.TEXT] = text_seeds()
+            if not self.corpus[InputKind.TEXT]:
                 raise FuzzSetupError("no .fap seeds (build the suites: fbaconf suites build)")
-        if "scene" in self.kinds and not self.corpus["scene"]:
-            self.corpus["scene"] = scene_seeds()
-        if "bifs" in self.kinds:
-            self.corpus["bifs"] = _bifs_seeds(self.corpus["scene"])
+        if InputKind.SCENE in self.kinds and not self.corpus[InputKind.SCENE]:
+            self.corpus[InputKind.SCENE] = scene_seeds()
+        if InputKind.BIFS in self.kinds:
+            self.corpus[InputKind.BIFS] = _bifs_seeds(self.corpus[InputKind.SCENE])
         self.fresh_valid_share = fresh_valid_share
         self.prefer_short = prefer_short
         self.run_seeds_first = run_seeds_first
         ch = RandomChooser(random.Random(self.seed))
-        self.valid_pool = [gen_valid(ch) for _ in range(valid_pool)] if "stream" in self.kinds else []
+        self.valid_pool = [gen_valid(ch) for _ in range(valid_pool)] if InputKind.STREAM in self.kinds else []
         self.progress = Progress(progress)
         self.minimise_seconds = minimise_seconds
         self.minimise_tests = minimise_tests
@@ -201,7 +201,7 @@ class Fuzzer:
             universe=tuple(
                 u
                 for k in self.kinds
-                for u in (STREAM_FEATURES if k == "stream" else SCENE_FEATURES if k == "scene" else ())
+                for u in (STREAM_FEATURES if k == InputKind.STREAM else SCENE_FEATURES if k == InputKind.SCENE else ())
             )
         )
         self.decoder_info = decoder_info or {}
@@ -218,9 +218,9 @@ class Fuzzer:
         e.corpus_size, e.index = n, index
         return e
 
-    def _make_input(self, index: int, kind: str, corpus: list[Entry]) -> Entry:
+    def _make_input(self, index: int, kind: InputKind, corpus: list[Entry]) -> Entry:
         rng = random.Random(self.seed * 1_000_003 + index)
-        if kind == "stream":
+        if kind == InputKind.STREAM:
             n_seed = len(corpus)
             if index < n_seed and index < self.run_seeds_first:  # run the seeds themselves first
                 e = corpus[index]
@@ -240,19 +240,19 @@ class Fuzzer:
                     e = e if len(e.data) <= len(e2.data) else e2
             data, how = mutate_stream(rng, e, corpus)
             return Entry(data, origin=f"mutate:{how}<-{e.origin}")
-        if kind == "scene":
+        if kind == InputKind.SCENE:
             if rng.random() < 0.1 or not corpus:
                 return gen_scene(RandomChooser(rng))
             e = corpus[rng.randrange(len(corpus))]
             data, how = mutate_scene(rng, e, corpus)
-            return Entry(data, kind="scene", origin=f"mutate:{how}<-{e.origin}")
-        if kind == "text":
+            return Entry(data, kind=InputKind.SCENE, origin=f"mutate:{how}<-{e.origin}")
+        if kind == InputKind.TEXT:
             e = corpus[rng.randrange(len(corpus))]
             data, how = mutate_text(rng, e, corpus)
-            return Entry(data, kind="text", origin=f"mutate:{how}<-{e.origin}")
-        e = corpus[rng.randrange(len(corpus))] if corpus else Entry(b"", kind="bifs")
+            return Entry(data, kind=InputKind.TEXT, origin=f"mutate:{how}<-{e.origin}")
+        e = corpus[rng.randrange(len(corpus))] if corpus else Entry(b"", kind=InputKind.BIFS)
         name = rng.choice(list(BYTE_MUTATORS))
-        return Entry(BYTE_MUTATORS[name](rng, e.data, corpus), kind="bifs", origin=f"mutate:{name}<-{e.origin}")
+        return Entry(BYTE_MUTATORS[name](rng, e.data, corpus), kind=InputKind.BIFS, origin=f"mutate:{name}<-{e.origin}")
 
     # ---------------------------------------------------------------- loop
     def run(self) -> Stats:
@@ -329,13 +329,15 @@ class Fuzzer:
             not feats
             and not isinstance(self.target, SelfTarget)
             and (
-                index % self.coverage_every == 0 or inp.model is not None or (inp.kind == "stream" and parsed(inp.data))
+                index % self.coverage_every == 0
+                or inp.model is not None
+                or (inp.kind == InputKind.STREAM and parsed(inp.data))
             )
         )  # the oracle's parse: free
-        if measure and inp.kind == "stream":
+        if measure and inp.kind == InputKind.STREAM:
             # coverage of the syntax model by what we sent the decoder
             feats = inp.model.features if inp.model is not None else features_of(inp.data)
-        elif measure and inp.kind == "scene":
+        elif measure and inp.kind == InputKind.SCENE:
             feats = _scene_feats_of(inp)
         if measure:
             st.measured += 1
@@ -393,7 +395,7 @@ class Fuzzer:
             return ok
 
         bounds = None
-        if kind == "stream":
+        if kind == InputKind.STREAM:
             try:
                 bounds = f.original.get_model().boundaries()
             except Exception:  # noqa: BLE001
@@ -457,7 +459,9 @@ def _bifs_seeds(scenes: list[Entry]) -> list[Entry]:
     out = []
     for e in scenes:
         try:
-            out.append(Entry(bifs.encode(bt.parse(e.data.decode("utf-8"))), kind="bifs", origin=f"bifs({e.origin})"))
+            out.append(
+                Entry(bifs.encode(bt.parse(e.data.decode("utf-8"))), kind=InputKind.BIFS, origin=f"bifs({e.origin})")
+            )
         except Exception:  # noqa: BLE001, S112 - scenes the BIFS encoder does not cover
             continue
     return out

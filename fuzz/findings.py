@@ -12,7 +12,7 @@ from pathlib import Path
 from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 from fbaconf.harness.adapters import Job
 
-from .inputs import Entry
+from .inputs import Entry, InputKind
 from .minimise import MinimiseStats
 from .selftarget import SelfTarget
 from .targets import DecoderTarget, FuzzSetupError, Verdict
@@ -35,7 +35,7 @@ class Finding:
 def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzzer that found it
     d = Path(out_dir) / "findings" / f.id
     d.mkdir(parents=True, exist_ok=True)
-    ext = {"scene": "bt", "bifs": "bifs", "text": "fap"}.get(f.original.kind, "fba")
+    ext = {InputKind.SCENE: "bt", InputKind.BIFS: "bifs", InputKind.TEXT: "fap"}.get(f.original.kind, "fba")
     atomic_write_bytes(d / f"original.{ext}", f.original.data)
     minimal = f.minimal if f.minimal is not None else f.original.data
     atomic_write_bytes(d / f"minimal.{ext}", minimal)
@@ -46,7 +46,7 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
         if isinstance(target, SelfTarget)
         else ["--decoder", str(info.get("manifest") or info.get("name", "?"))]
     )
-    if f.original.kind != "stream":
+    if f.original.kind != InputKind.STREAM:
         replay += ["--target", f.original.kind]
     replay += ["--replay", str((d / f"minimal.{ext}").resolve())]
     command = None
@@ -60,7 +60,7 @@ def write_finding(out_dir: Path, f: Finding, fz) -> Path:  # fz: the engine.Fuzz
             "images_dir": f"{wd}/images",
             "faps_out_dir": f"{wd}/faces",
         }
-        if f.original.kind == "scene":
+        if f.original.kind == InputKind.SCENE:
             values.update(
                 scene=values["input"],
                 scene_bt=values["input"],
@@ -156,7 +156,7 @@ def load_findings(fuzz_dir: Path) -> list[tuple[Path, dict]]:
     return out
 
 
-def replay(target, data: bytes, kind: str = "stream") -> Verdict | None:
+def replay(target, data: bytes, kind: InputKind = InputKind.STREAM) -> Verdict | None:
     """The verdict of ``target`` on ``data``, on a process of its own (``alone``: through
     ``serve``, a fresh process whose exit is awaited). A replay is a run of its own: the fork
     server or persistent decoder it starts is stopped when it ends (``target.close``)."""

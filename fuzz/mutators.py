@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 from fbaconf.bitstreams.bitedit import bit_range, insert_bits, join_bits, remove_bits, set_bits, truncate_bits
 
-from .inputs import Entry
+from .inputs import Entry, InputKind
 from .model import DICTIONARY, Field
 
 
@@ -160,7 +160,7 @@ def m_truncate_plane(rng, e: Entry, corpus) -> bytes | None:
 def m_splice(rng, e: Entry, corpus) -> bytes | None:
     """The first planes of this stream followed by planes of another (state from the wrong stream)."""
     other = _pick(rng, corpus)
-    if other is None or other.kind != "stream":
+    if other is None or other.kind != InputKind.STREAM:
         return None
     a, b = e.get_model(), other.get_model()
     ca = _pick(rng, [p.end_offset for p in a.planes] or [a.nbits])

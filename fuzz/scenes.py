@@ -8,7 +8,7 @@ import re
 from fbaconf.scenes.bt import node_specs
 
 from .choosers import Chooser
-from .inputs import Entry
+from .inputs import Entry, InputKind
 from .mutators import BYTE_MUTATORS, _pick
 
 _BT_TOKEN = re.compile(r'"(?:[^"\\]|\\.)*"|#[^\n]*|[\[\]{}]|[^\s\[\]{}"#,]+|\s+|.', re.S)
@@ -140,7 +140,7 @@ def gen_scene(ch: Chooser) -> Entry:
     if top not in node_specs():
         top = "Face"
     text = "\n".join(_bt_node(ch, top, 0, []) for _ in range(ch.int(1, 2))) + "\n"
-    return Entry(text.encode("utf-8"), kind="scene", origin="generate:scene")
+    return Entry(text.encode("utf-8"), kind=InputKind.SCENE, origin="generate:scene")
 
 
 def mutate_scene(rng: random.Random, e: Entry, corpus: list[Entry]) -> tuple[bytes, str]:

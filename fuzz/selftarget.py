@@ -20,7 +20,7 @@ from fbaconf.harness.compare import compare_faps
 from fbaconf.profiles import checker
 from fbaconf.scenes import bifs, bt
 
-from .inputs import Entry
+from .inputs import Entry, InputKind
 from .model import stream_features
 from .scenes import scene_features
 from .targets import ExecResult, Verdict, stack_hash
@@ -40,7 +40,7 @@ class SelfTarget:
         self.slow_s = slow_s
         self.count = 0
         self.scene_stream = scene_stream
-        self.kind = "stream"
+        self.kind = InputKind.STREAM
 
     def ext(self) -> str:
         return "fba"

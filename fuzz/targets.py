@@ -23,7 +23,7 @@ from fbaconf.isolation.sandbox import Limits
 from fbaconf.profiles.checker import check_stream
 from fbaconf.safefs import empty_dir, remove_tree
 
-from .inputs import Entry
+from .inputs import Entry, InputKind
 from .model import reference_parse
 
 
@@ -114,7 +114,7 @@ class DecoderTarget:
         adapter,
         work_root: Path,
         *,
-        kind: str = "stream",
+        kind: InputKind = InputKind.STREAM,
         timeout_s: float | None = None,
         expected_exit: Iterable[int] | None = None,
         oracle: bool = True,
@@ -139,7 +139,7 @@ class DecoderTarget:
             if expected_exit is not None
             else frozenset(getattr(adapter, "reject_exit_codes", (1, 2)))
         )
-        self.oracle = oracle and kind in ("stream", "text") and "faps" in adapter.outputs
+        self.oracle = oracle and kind in (InputKind.STREAM, InputKind.TEXT) and "faps" in adapter.outputs
         self.is_command = isinstance(adapter, CommandAdapter)
         self.scene_stream = scene_stream
         # Command decoders run through one fork server per worker thread (isolation/forkclient.py):
@@ -148,7 +148,7 @@ class DecoderTarget:
         # A manifest with [commands] serve gets its inputs through the persistent protocol
         # (isolation/persistent.py) unless told otherwise.
         self.persistent = persistent and self.is_command and "serve" in adapter.commands
-        if self.persistent and kind == "scene":
+        if self.persistent and kind == InputKind.SCENE:
             raise FuzzSetupError(
                 "the persistent protocol carries streams and .fap text, not scenes: fuzz scenes with --spawn"
             )
@@ -162,13 +162,13 @@ class DecoderTarget:
         self._late: list[tuple[Entry, Verdict]] = []  # take_late
         self._clean: bytes | None = None  # the shortest input answered cleanly (settled's follower)
         self._probed = False
-        if kind == "stream" and "fba" not in adapter.inputs:
+        if kind == InputKind.STREAM and "fba" not in adapter.inputs:
             raise FuzzSetupError(
                 f"decoder {adapter.name} does not accept binary streams (inputs: {', '.join(adapter.inputs)})"
             )
-        if kind == "text" and "fap" not in adapter.inputs:
+        if kind == InputKind.TEXT and "fap" not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} accepts no .fap text (inputs: {', '.join(adapter.inputs)})")
-        if kind == "scene" and "scene" not in adapter.inputs:
+        if kind == InputKind.SCENE and InputKind.SCENE.value not in adapter.inputs:
             raise FuzzSetupError(f"decoder {adapter.name} accepts no BT scene (inputs: {', '.join(adapter.inputs)})")
 
     @property
@@ -176,7 +176,7 @@ class DecoderTarget:
         return self.adapter.name
 
     def ext(self) -> str:
-        return "bt" if self.kind == "scene" else "fba"
+        return "bt" if self.kind == InputKind.SCENE else "fba"
 
     # ---------------------------------------------------------------- job
     def _job(self, data: bytes, workdir: Path):
@@ -190,13 +190,13 @@ class DecoderTarget:
                 remove_tree(p)
         outd.mkdir()
         values: dict[str, str] = {}
-        if self.kind == "scene":
+        if self.kind == InputKind.SCENE:
             sp = ind / "input.bt"
             sp.write_bytes(data)
             fp = ind / "stream.fba"
             fp.write_bytes(self.scene_stream or b"")
             values.update(scene=str(sp), scene_bt=str(sp), fba=str(fp), input=str(fp))
-        elif self.kind == "text":
+        elif self.kind == InputKind.TEXT:
             fp = ind / "input.fap"
             fp.write_bytes(data)
             values.update(fap=str(fp), input=str(fp))
@@ -229,7 +229,7 @@ class DecoderTarget:
                 w.slots.append(
                     _Slot(
                         job,
-                        Path(job.values["input"] if self.kind != "scene" else job.values["scene"]),
+                        Path(job.values["input"] if self.kind != InputKind.SCENE else job.values["scene"]),
                         [str(d), str(d / "out"), str(d / "out" / "images"), str(d / "out" / "faces"), str(d / "tmp")],
                     )
                 )
@@ -485,7 +485,7 @@ class DecoderTarget:
     def _oracle(self, inp: Entry, job, rc: int, detail: dict) -> Verdict | None:
         if rc == 69:
             return None
-        if rc == 0 and self.kind == "stream":
+        if rc == 0 and self.kind == InputKind.STREAM:
             rule = reference_rejection(inp)
             if rule is not None:  # as in the run's error cases: decoding garbage silently is a defect
                 return Verdict(
@@ -499,11 +499,11 @@ class DecoderTarget:
             return None
         # the reference's frames first; whether the stream's reading is decision-free (a second,
         # slower parse by the checker) is asked only when there is a finding to report
-        expected = reference_text(inp) if self.kind == "text" else reference_frames(inp)
+        expected = reference_text(inp) if self.kind == InputKind.TEXT else reference_frames(inp)
         if expected is None:
             return None
         v = self._output_verdict(expected, job, rc, detail)
-        if v is not None and self.kind == "stream" and not decision_free(inp):
+        if v is not None and self.kind == InputKind.STREAM and not decision_free(inp):
             return None
         return v
 
@@ -519,7 +519,10 @@ class DecoderTarget:
         except cmp.OutputError as e:
             return Verdict("wrong-output", "unreadable-output", f"unreadable FAP output: {e}", detail)
         r = cmp.compare_faps(
-            expected, got, text_output=path.suffix.lower() == ".fap" or self.kind == "text", player=self.kind == "text"
+            expected,
+            got,
+            text_output=path.suffix.lower() == ".fap" or self.kind == InputKind.TEXT,
+            player=self.kind == InputKind.TEXT,
         )
         if r.outcome.ok:
             return None

@@ -9,13 +9,13 @@ import random
 from pathlib import Path
 
 from .corpus import suite_files
-from .inputs import Entry
+from .inputs import Entry, InputKind
 from .mutators import BYTE_MUTATORS
 
 
 def text_seeds(root: Path | None = None, max_bytes: int = 20000) -> list[Entry]:
     """The suites' sparse ``.fap`` files (up to ``max_bytes`` each)."""
-    return suite_files("fap", "text", root, max_bytes)
+    return suite_files("fap", InputKind.TEXT, root, max_bytes)
 
 
 _NUMBERS = ("0", "-1", "1.5", "2147483648", "-2147483649", "1e9", "007", "+3", "", "nan", "99999999999999999999")
