@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -18,7 +19,7 @@ def _umask() -> int:
 
 
 @contextmanager
-def atomic_path(path, suffix: str = ".part"):
+def atomic_path(path: str | os.PathLike[str], suffix: str = ".part") -> Iterator[str]:
     """Yield a temporary path beside ``path``; on success it is moved into place with the
     usual file mode (mkstemp makes 0600), on any error it is removed."""
     path = Path(path)
@@ -37,10 +38,10 @@ def atomic_path(path, suffix: str = ".part"):
         raise
 
 
-def atomic_write_bytes(path, data: bytes) -> None:
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(data)
 
 
-def atomic_write_text(path, text: str) -> None:
+def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))

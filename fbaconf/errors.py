@@ -11,6 +11,8 @@ These are the root error types of every stage; stage-specific errors (``renderin
 
 from __future__ import annotations
 
+from typing import Any
+
 
 def join_location(*parts: str | tuple[str, object]) -> str:
     """Comma-separated location: a str part as it is, a (label, value) part as 'label value'
@@ -44,7 +46,7 @@ class FbaconfInputError(Exception):
         prefix = f"{self.file}: " if self.file else ""
         return f"{prefix}{where}{': ' if where else ''}{self.message} [rule {self.rule}]"
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {"type": type(self).__name__, "rule": self.rule, "message": self.message, "file": self.file}
 
 
@@ -63,7 +65,7 @@ class BitstreamError(FbaconfInputError):
         frame: int | None = None,
         fap: int | None = None,
         file: str | None = None,
-        partial=None,
+        partial: Any = None,  # the decoder's FapFrames; the core imports no stage
     ) -> None:
         super().__init__(message, rule=rule, file=file)
         self.bit_offset = int(bit_offset)
@@ -84,7 +86,7 @@ class BitstreamError(FbaconfInputError):
             ("FAP", self.fap),
         )
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         d = super().to_dict()
         d.update(
             bit_offset=self.bit_offset, byte_offset=self.byte_offset, plane=self.plane, frame=self.frame, fap=self.fap
@@ -109,7 +111,7 @@ class TextFormatError(FbaconfInputError):
         loc = f"{self.line}:{self.column}"
         return f"{loc} ({self.node_path})" if self.node_path else loc
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         d = super().to_dict()
         d.update(line=self.line, column=self.column, node_path=self.node_path)
         return d
@@ -138,7 +140,7 @@ class EncodeError(FbaconfInputError):
     def location(self) -> str:
         return join_location(("frame", self.frame), ("FAP", self.fap), ("value", self.value))
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         d = super().to_dict()
         d.update(frame=self.frame, fap=self.fap, value=self.value)
         return d
@@ -156,7 +158,7 @@ class SceneError(FbaconfInputError):
     def location(self) -> str:
         return self.node_path or ""
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         d = super().to_dict()
         d.update(node_path=self.node_path)
         return d

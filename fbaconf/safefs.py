@@ -17,7 +17,9 @@ import errno
 import os
 import re
 import stat
+from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 from fbaconf.errors import FbaconfInputError
 
@@ -101,6 +103,16 @@ def _scan(fd: int, remove: bool, sizes: list[int]) -> list[str]:
     return subdirs
 
 
+@dataclass
+class _Frame:
+    """One level of the walk: the folder's name in its parent, the (device, inode) of that
+    parent (checked on the way back up) and the subdirectories still to visit."""
+
+    name: str
+    parent: tuple[int, int]
+    left: list[str]
+
+
 def _walk(parent_fd: int, name: str, *, remove: bool, stop_at: int | None, sizes: list[int] | None = None) -> int:
     """Walk the folder ``name`` in ``parent_fd`` depth first with one descriptor open: down by
     name, back up by ``..`` (checked against the device and inode recorded on the way down, so
@@ -110,16 +122,15 @@ def _walk(parent_fd: int, name: str, *, remove: bool, stop_at: int | None, sizes
     sizes = [0] if sizes is None else sizes
     top = os.fstat(parent_fd)
     fd = _open_dir(parent_fd, name)
-    # one frame per level: [name in its parent, (dev, ino) of its parent, subdirectories left]
-    frames = [[name, (top.st_dev, top.st_ino), _scan(fd, remove, sizes)]]
+    frames = [_Frame(name, (top.st_dev, top.st_ino), _scan(fd, remove, sizes))]
     again: dict[int, int] = {}
     try:
         while frames:
             if stop_at is not None and sizes[0] > stop_at:
                 return sizes[0]
             frame = frames[-1]
-            if frame[2]:
-                sub = frame[2].pop()
+            if frame.left:
+                sub = frame.left.pop()
                 here = os.fstat(fd)
                 try:
                     child = _open_dir(fd, sub)
@@ -131,31 +142,31 @@ def _walk(parent_fd: int, name: str, *, remove: bool, stop_at: int | None, sizes
                     continue
                 os.close(fd)
                 fd = child
-                frames.append([sub, (here.st_dev, here.st_ino), _scan(fd, remove, sizes)])
+                frames.append(_Frame(sub, (here.st_dev, here.st_ino), _scan(fd, remove, sizes)))
                 continue
             frames.pop()
             if frames:
                 up = os.open("..", _DIR_FLAGS, dir_fd=fd)
                 st = os.fstat(up)
-                if (st.st_dev, st.st_ino) != frame[1]:
+                if (st.st_dev, st.st_ino) != frame.parent:
                     os.close(up)
-                    raise TreeChangedError(f"{frame[0]!r} moved while its tree was walked")
+                    raise TreeChangedError(f"{frame.name!r} moved while its tree was walked")
             else:
                 up = parent_fd
             os.close(fd)
             fd = up
             if remove:
                 try:
-                    os.rmdir(frame[0], dir_fd=up)
+                    os.rmdir(frame.name, dir_fd=up)
                 except PermissionError:
                     _chmod_dir(up)
-                    os.rmdir(frame[0], dir_fd=up)
+                    os.rmdir(frame.name, dir_fd=up)
                 except OSError as e:  # something appeared in it meanwhile: once more
                     if e.errno != errno.ENOTEMPTY or again.get(id(frame), 0) > 2:
                         raise
                     again[id(frame)] = again.get(id(frame), 0) + 1
-                    fd = _open_dir(up, frame[0])
-                    frame[2] = _scan(fd, remove, sizes)
+                    fd = _open_dir(up, frame.name)
+                    frame.left = _scan(fd, remove, sizes)
                     frames.append(frame)
     finally:
         if fd != parent_fd:
@@ -208,7 +219,7 @@ def _chmod_dir(fd: int) -> None:
         pass
 
 
-def open_regular(path: Path | str, max_bytes: int):
+def open_regular(path: Path | str, max_bytes: int) -> BinaryIO:
     """A binary file object for ``path`` if it is a regular file of at most ``max_bytes``;
     :class:`UnsafeFileError` otherwise (naming what it is)."""
     try:
@@ -242,7 +253,7 @@ def open_regular(path: Path | str, max_bytes: int):
 def read_regular(path: Path | str, max_bytes: int) -> bytes:
     """The bytes of a regular file of at most ``max_bytes`` (see :func:`open_regular`)."""
     with open_regular(path, max_bytes) as f:
-        data = f.read(max_bytes + 1)
+        data: bytes = f.read(max_bytes + 1)
     if len(data) > max_bytes:
         raise UnsafeFileError(f"grew past the {max_bytes} byte limit while being read", file=str(path))
     return data
