@@ -14,7 +14,6 @@ import os
 import socket
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -22,61 +21,18 @@ import pytest
 
 import fbaconf
 from fbaconf.certification import certify
-from fbaconf.conformance.suite import Suite, SuiteError, golden_root, load_suites
+from fbaconf.conformance.suite import Suite, SuiteError, golden_root
 from fbaconf.fuzz.promote import promote
 from fbaconf.harness import adapters
 from fbaconf.harness.results import Outcome, ResultLog
 from fbaconf.harness.runner import run_cases
-from fbaconf.isolation import cgroups, sandbox
+
+from lib.cases import cases
+from lib.manifests import decoder
+from lib.sandbox import needs_cgroups, needs_sandbox
 
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
 VALID = ["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/dct-q4"]
-
-
-def needs_sandbox():
-    if sandbox.isolation() == "none":
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
-        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
-
-
-def needs_cgroups():
-    if not cgroups.cgroup_bases():
-        if os.environ.get("CI") and os.geteuid() == 0:
-            pytest.fail("no writable cgroups in CI (running as root)")
-        pytest.skip("no writable cgroup hierarchy here (not root?): no whole-tree limits")
-
-
-def cases(ids):
-    out = []
-    for full in ids:
-        suite, cid = full.split("/")
-        (s,) = load_suites(names=[suite])
-        out.append(next(c for c in s.cases if c.id == cid))
-    return out
-
-
-def decoder(tmp_path: Path, name: str, body: str, *, limits: str = "timeout_s = 20\n", faps_format="npz") -> Path:
-    """A decoder written in Python, run as {python} SCRIPT {input} {faps_out}; ``body`` sees
-    IN, OUT (paths) and may call honest() to decode with the reference."""
-    script = tmp_path / f"{name}.py"
-    script.write_text(
-        textwrap.dedent("""\
-        import os, sys, signal, subprocess, time
-        IN, OUT = sys.argv[1], sys.argv[2]
-        def honest():
-            from fbaconf.reference.pipeline import reference_outputs
-            reference_outputs(IN, faps_out=OUT)
-        """)
-        + textwrap.dedent(body)
-    )
-    m = tmp_path / f"{name}.toml"
-    m.write_text(
-        f'name = "{name}"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-        f'faps_format = "{faps_format}"\n[commands]\ndecode = ["{{python}}", "{script}", "{{input}}", '
-        f'"{{faps_out}}"]\n[limits]\n{limits}'
-    )
-    return m
 
 
 def run(tmp_path: Path, m: Path, ids=VALID, **kw):

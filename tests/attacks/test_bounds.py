@@ -5,7 +5,6 @@ Every hostile manifest here is written from the issue's description."""
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import textwrap
@@ -19,15 +18,10 @@ from fbaconf.isolation.bounds import limits_in_force
 from fbaconf.isolation.environ import env_problem
 from fbaconf.isolation.report import report
 
+from lib.sandbox import needs_sandbox
+
 BASE = 'name = "acme"\nclaims = ["predictable@2"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "npz"\n'
 COMMANDS = '[commands]\ndecode = ["/bin/true", "{input}", "{faps_out}"]\n'
-
-
-def needs_sandbox():
-    if sandbox.isolation() == "none":
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
-        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
 
 
 def write(tmp_path: Path, text: str, name="acme.toml") -> Path:

@@ -21,15 +21,10 @@ from fbaconf.harness.selection import select_cases
 from fbaconf.isolation import cgroups, sandbox
 from fbaconf.isolation.report import report
 
+from lib.sandbox import needs_sandbox
+
 BASE = 'name = "x"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n'
 COMMANDS = '[commands]\ndecode = ["/bin/true", "{input}", "{faps_out}"]\n'
-
-
-def needs_sandbox():
-    if sandbox.isolation() == "none":
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
-        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
 
 
 def write(tmp_path: Path, text: str | bytes, name="m.toml") -> Path:

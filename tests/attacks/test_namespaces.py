@@ -14,8 +14,6 @@ import threading
 import time
 from pathlib import Path
 
-import pytest
-
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness import adapters
 from fbaconf.harness.results import Outcome
@@ -23,13 +21,7 @@ from fbaconf.harness.runner import run_cases
 from fbaconf.isolation import sandbox, seccomp
 from fbaconf.isolation.sandbox import Limits
 
-
-def needs_sandbox():
-    if sandbox.isolation() == "none" or not seccomp.supported():
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap (with the seccomp filter) is not available in CI")
-        pytest.skip("bubblewrap (bwrap) is not installed, or the filter does not know this architecture")
-
+from lib.sandbox import needs_seccomp_sandbox
 
 PROBE = """
 import ctypes, errno, os, subprocess, threading
@@ -70,7 +62,7 @@ def _run_script(tmp_path: Path, name: str, body: str, limits=None):
 
 
 def test_every_way_to_a_new_namespace_is_refused_and_threads_and_children_still_work(tmp_path):
-    needs_sandbox()
+    needs_seccomp_sandbox()
     res = _run_script(tmp_path, "probe", PROBE)
     assert res.returncode == 0, res.stderr_tail
     got = dict(line.rsplit(" ", 1) for line in res.stdout_tail.strip().splitlines())
@@ -117,7 +109,7 @@ def _flood(tmp_path: Path, name: str, n: int, out: dict) -> None:
 def test_a_namespace_flood_takes_nothing_and_a_concurrent_case_runs(tmp_path):
     """The flooder forks 200 children, each nesting a user and a mount namespace and holding it;
     while it holds, a case of the reference decoder runs in its own sandbox and passes."""
-    needs_sandbox()
+    needs_seccomp_sandbox()
     got: dict = {}
     t = threading.Thread(target=_flood, args=(tmp_path, "flood", 200, got))
     t.start()
@@ -146,7 +138,7 @@ def test_a_namespace_flood_takes_nothing_and_a_concurrent_case_runs(tmp_path):
 def test_without_the_filter_the_same_flood_would_take_namespaces(tmp_path, monkeypatch):
     """The control: the flood above is real — without the seccomp filter the same decoder (20
     children here) holds a namespace per child — so the filter is what stops it."""
-    needs_sandbox()
+    needs_seccomp_sandbox()
     monkeypatch.setattr(seccomp, "supported", lambda: False)
     got: dict = {}
     _flood(tmp_path, "flood", 20, got)

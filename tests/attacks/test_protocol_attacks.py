@@ -21,6 +21,9 @@ from fbaconf.harness import adapters
 from fbaconf.harness.speed import measure as speed
 from fbaconf.isolation import forkserver_build, sandbox
 
+from lib.manifests import python_decoder
+from lib.sandbox import needs_sandbox
+
 STREAM = b"\x00\x00\x01\xba" + bytes(40)
 
 # the persistent protocol, version 2: "<id> <size> <path>\n" + bytes in, "<id> <code>\n" out
@@ -39,26 +42,14 @@ def answer(rid, code):
 def _manifest(
     tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 3", equivalent: bool = False
 ) -> Path:
-    prog = tmp_path / "dec.py"
-    prog.write_text("import os, signal, sys, time\n" + body)
-    lines = [
-        'name = "t"',
-        'claims = ["simple@1"]',
-        'inputs = ["fba"]',
-        'outputs = ["faps"]',
-        'faps_format = "fap"',
-        f"serve_equivalent = {str(equivalent).lower()}",
-        "[commands]",
-        f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]',
-    ]
-    if serve is not None:
-        srv = tmp_path / "serve.py"
-        srv.write_text(SERVE + serve)
-        lines.append(f'serve = ["{{python}}", "{srv}"]')
-    lines += ["[limits]", limits]
-    m = tmp_path / "t.toml"
-    m.write_text("\n".join(lines) + "\n")
-    return m
+    return python_decoder(
+        tmp_path,
+        "t",
+        body,
+        serve_body=None if serve is None else SERVE + serve,
+        limits=limits,
+        serve_equivalent=equivalent,
+    )
 
 
 def _target(tmp_path: Path, m: Path, **kw) -> DecoderTarget:
@@ -213,8 +204,7 @@ sys.exit(69)
 def test_the_fork_servers_channel_is_out_of_a_sandboxed_decoders_reach(tmp_path, server):
     """In the sandbox the server is non-dumpable: /proc/<ppid>/fd/1 does not open, and the
     decoder's real ending (SIGSEGV) stays with its own input."""
-    if sandbox.isolation() == "none":
-        pytest.skip("bubblewrap is not installed: no sandbox here")
+    needs_sandbox()
     t = _target(tmp_path, _manifest(tmp_path, FORGE))
     assert t.fork_server and not t.persistent
     try:

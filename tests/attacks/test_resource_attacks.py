@@ -13,9 +13,6 @@ import textwrap
 import time
 from pathlib import Path
 
-import pytest
-from test_attacks import decoder  # tests/attacks: the Python decoder with honest()
-
 import fbaconf
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness import adapters
@@ -25,22 +22,11 @@ from fbaconf.isolation import cgroups, endings, sandbox
 from fbaconf.isolation.report import report
 from fbaconf.isolation.sandbox import Limits
 
+from lib.manifests import decoder
+from lib.sandbox import needs_memory_cgroup, needs_sandbox
+
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
 VALID = "simple-l1-core/dct-q4"
-
-
-def needs_sandbox():
-    if sandbox.isolation() == "none":
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
-        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
-
-
-def needs_cgroups():
-    if "memory" not in cgroups.controllers():
-        if os.environ.get("CI") and os.geteuid() == 0:
-            pytest.fail("no writable memory cgroup in CI (running as root)")
-        pytest.skip("no writable memory cgroup here (not root?): no whole-tree memory limit")
 
 
 def run_one(tmp_path: Path, m: Path):
@@ -61,7 +47,7 @@ def test_an_honest_decoder_with_400_mb_of_scratch_files_passes(tmp_path):
     """Before: page cache reaching the 256 MB cgroup limit counted as OOM (memory.failcnt), so
     this decoder (38 MB resident, exit 0) read "Crash: exceeded 256 MB"."""
     needs_sandbox()
-    needs_cgroups()
+    needs_memory_cgroup()
     body = """
         chunk = bytes(range(256)) * 4096  # 1 MB
         for k in range(4):  # 4 x 100 MB written, read back and removed: 400 MB through the page cache

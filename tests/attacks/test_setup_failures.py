@@ -9,12 +9,9 @@ known words."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
-
-import pytest
 
 from fbaconf.conformance.provisional import rests_on
 from fbaconf.conformance.suite import CaseKind, load_suites
@@ -24,12 +21,7 @@ from fbaconf.harness.runner import run_cases
 from fbaconf.harness.selection import select_cases
 from fbaconf.isolation import endings, sandbox, setup
 
-
-def needs_sandbox():
-    if sandbox.isolation() == "none":
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
-        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
+from lib.sandbox import needs_sandbox
 
 
 def decoder(tmp_path: Path, name: str, body: str, claim="simple@1") -> Path:

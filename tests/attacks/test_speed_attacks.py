@@ -23,6 +23,8 @@ from fbaconf.harness.speed import measure as speed
 from fbaconf.harness.sysinfo import MachineSample
 from fbaconf.harness.verdict import speed_verdict
 
+from lib.manifests import program, write_manifest
+
 CLAIM = "simple@2"  # decode 240 fps, render 30 fps per face: the hostile decoders below are honest at 25 fps
 # (measured on two short lengths, once: a 25 fps reading comes out between about 20 and 35 fps)
 
@@ -115,33 +117,27 @@ def _manifest(
     *,
     serve: str | None = None,
     extra: str = "",
-    serve_args: str = "",
+    serve_args: tuple[str, ...] = (),
     images: bool = False,
 ) -> Path:
-    dec = tmp_path / "dec.py"
     main = "\nimport sys\nhonest(sys.argv[1], sys.argv[2])\n"  # a body that only defines honest() runs it
-    dec.write_text(textwrap.dedent(decode_body) + ("" if "sys.argv" in decode_body else main))
-    outputs = '["faps", "images"]' if images else '["faps"]'
-    argv = f'"{{python}}", "{dec}", "{{input}}", "{{faps_out}}", "{{frames}}"' + (
-        ', "{images_dir}", "{scenario}"' if images else ""
+    body = textwrap.dedent(decode_body) + ("" if "sys.argv" in decode_body else main)
+    dec = program(tmp_path / "dec.py", body, prelude="")
+    argv = ["{python}", str(dec), "{input}", "{faps_out}", "{frames}"] + (
+        ["{images_dir}", "{scenario}"] if images else []
     )
-    lines = [
-        'name = "speedy"',
-        f'claims = ["{CLAIM}"]',
-        'inputs = ["fba"]',
-        f"outputs = {outputs}",
-        'faps_format = "fap"',
-        extra,
-        "[commands]",
-        f"decode = [{argv}]",
-    ]
+    srv = None
     if serve is not None:
-        (tmp_path / "serve.py").write_text(textwrap.dedent(serve))
-        lines.append(f'serve = ["{{python}}", "{tmp_path / "serve.py"}"{serve_args}]')
-    lines += ["[limits]", "timeout_s = 60"]
-    m = tmp_path / "speedy.toml"
-    m.write_text("\n".join(lines) + "\n")
-    return m
+        srv = ["{python}", str(program(tmp_path / "serve.py", serve, prelude="")), *serve_args]
+    return write_manifest(
+        tmp_path / "speedy.toml",
+        argv,
+        claims=[CLAIM],
+        outputs=["faps", "images"] if images else ["faps"],
+        serve=srv,
+        extra=extra,
+        limits="timeout_s = 60",
+    )
 
 
 def _decode_result(m: Path, lengths=(4, 24), repeats: int = 1, **kw):
@@ -258,7 +254,7 @@ def test_a_serve_answering_repeats_from_a_cache_never_hits(tmp_path, monkeypatch
             tmp_path / "control",
             HONEST.replace("25.0", "100.0"),
             serve=CACHE,
-            serve_args=', "100"',
+            serve_args=("100",),
             extra="serve_equivalent = true",
         )
         r = _decode_result(m, lengths, repeats=3)
@@ -268,7 +264,7 @@ def test_a_serve_answering_repeats_from_a_cache_never_hits(tmp_path, monkeypatch
         tmp_path / "real",
         HONEST.replace("25.0", "100.0"),
         serve=CACHE,
-        serve_args=', "100"',
+        serve_args=("100",),
         extra="serve_equivalent = true",
     )
     r = _decode_result(m, lengths, repeats=3)

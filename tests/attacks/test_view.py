@@ -10,7 +10,6 @@ The sandboxed rows need bubblewrap (as in test_attacks.py: fail in CI, skip else
 from __future__ import annotations
 
 import json
-import os
 import sys
 import textwrap
 from pathlib import Path
@@ -27,40 +26,28 @@ from fbaconf.harness.runner import run_cases
 from fbaconf.isolation import sandbox
 from fbaconf.isolation.staging import auxiliary_files, staged_inputs
 
+from lib.cases import cases
+from lib.manifests import write_manifest
+from lib.sandbox import needs_sandbox
+
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
 # binary cases with a .fap sibling in their suite folder, one with skips, one with a texture
 WITH_SIBLING = ["simple-l1-core/arith-q8-visemes-expressions", "simple-l1-core/skips-14-15", "simple-l1-core/dct-q4"]
 TEXTURED = "predictable-l1-stress/grid-limits-l1"
 
 
-def needs_sandbox():
-    if sandbox.isolation() == "none":
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
-        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
-
-
-def cases(ids):
-    by_suite = {s.name: s for s in load_suites()}
-    out = []
-    for full in ids:
-        suite, cid = full.split("/")
-        out.append(next(c for c in by_suite[suite].cases if c.id == cid))
-    return out
-
-
 def manifest(
     tmp_path: Path, name: str, decode: list, *, inputs=("fba",), outputs=("faps",), fmt="fap", claim="predictable@2"
 ) -> Path:
-    d = tmp_path / name
-    d.mkdir(exist_ok=True)
-    m = d / f"{name}.toml"
-    m.write_text(
-        f'name = "{name}"\nclaims = ["{claim}"]\ninputs = {json.dumps(list(inputs))}\n'
-        f'outputs = {json.dumps(list(outputs))}\nfaps_format = "{fmt}"\n'
-        f"[commands]\ndecode = {json.dumps(decode)}\n[limits]\ntimeout_s = 30\n"
+    return write_manifest(
+        tmp_path / name / f"{name}.toml",
+        decode,
+        claims=[claim],
+        inputs=inputs,
+        outputs=outputs,
+        faps_format=fmt,
+        limits="timeout_s = 30",
     )
-    return m
 
 
 def python_decoder(tmp_path: Path, name: str, body: str, **kw) -> Path:

@@ -32,6 +32,8 @@ from fbaconf.harness.adapters import ViewError
 from fbaconf.harness.preflight import preflight
 from fbaconf.isolation import sandbox, view
 
+from lib.sandbox import needs_sandbox
+
 ROOT = Path(fbaconf.__file__).resolve().parents[1]
 CASE = ("simple-l1-core", "dct-q4")
 
@@ -59,13 +61,6 @@ for root, dirs, files in os.walk(here):  # a checkout, a build, an installed pac
         sys.exit(0)
 sys.exit(3)
 """
-
-
-def needs_sandbox():
-    if sandbox.isolation() == "none":
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
-        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
 
 
 def the_case():

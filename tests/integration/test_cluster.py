@@ -12,13 +12,14 @@ import threading
 from pathlib import Path
 
 import pytest
-from test_fuzz_lifecycle import alive  # tests/integration: the fork-server count
 
 from fbaconf.conformance.suite import load_suites
 from fbaconf.fuzz.campaign import ShardSpec, run_campaign
 from fbaconf.harness import adapters, cluster
 from fbaconf.harness.results import ResultLog
 from fbaconf.harness.runner import run_cases
+
+from lib.procs import alive
 
 # Dask (distributed) is the optional extra fbaconf[cluster]; the test extras install it, so a
 # missing Dask fails these tests (harness.cluster names the extra) rather than skipping them.

@@ -14,6 +14,8 @@ from fbaconf.fuzz.inputs import Entry
 from fbaconf.fuzz.targets import PIPELINE_DEPTH, DecoderTarget
 from fbaconf.harness import adapters
 
+from lib.manifests import python_decoder
+
 # the decoder crashes on any input holding BOOM; it rejects everything else (exit/answer 2)
 DECODE = """import os, signal, sys
 data = open(sys.argv[1], 'rb').read()
@@ -40,15 +42,7 @@ N = 5  # the crashing input's place in the queue
 
 
 def _manifest(tmp_path: Path) -> Path:
-    (tmp_path / "dec.py").write_text(DECODE)
-    (tmp_path / "serve.py").write_text(SERVE)
-    m = tmp_path / "boom.toml"
-    m.write_text(
-        'name = "boom"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n'
-        f'[commands]\ndecode = ["{{python}}", "{tmp_path / "dec.py"}", "{{input}}", "{{faps_out}}"]\n'
-        f'serve = ["{{python}}", "{tmp_path / "serve.py"}"]\n[limits]\ntimeout_s = 5\n'
-    )
-    return m
+    return python_decoder(tmp_path, "boom", DECODE, serve_body=SERVE, prelude="", limits="timeout_s = 5")
 
 
 def _seeds() -> list[Entry]:

@@ -25,6 +25,8 @@ from fbaconf.harness.compare.ladder import outcome_for
 from fbaconf.harness.results import Outcome
 from fbaconf.isolation import cgroups, endings, sandbox
 
+from lib.sandbox import needs_sandbox
+
 GODEC = """package main
 
 import (
@@ -121,8 +123,7 @@ def test_under_an_address_space_limit_the_runtime_is_named_with_the_fix(godec, t
 
 
 def test_a_run_under_an_address_space_limit_is_one_set_up_error_naming_gos_words_and_the_fix(godec, tmp_path):
-    if sandbox.isolation() == "none":
-        pytest.skip("bubblewrap (bwrap) is not installed: the canary's retry would run unisolated")
+    needs_sandbox()  # the canary's retry would run unisolated
     m = godec / "godec-as-run.toml"
     m.write_text(
         (godec / "godec.toml").read_text().replace("memory_mb = 256", 'memory_mb = 256\nmemory_kind = "address-space"')

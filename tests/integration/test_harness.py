@@ -28,16 +28,11 @@ from fbaconf.harness.runner import run_cases
 from fbaconf.harness.selection import capability, claim_covers
 from fbaconf.isolation import endings, sandbox
 
+from lib.cases import case
+
 
 def all_cases():
     return [c for s in load_suites() for c in s.cases]
-
-
-def case(full_id: str):
-    for c in all_cases():
-        if c.full_id == full_id:
-            return c
-    raise KeyError(full_id)
 
 
 SIMPLE = "simple-l1-core/arith-q8-visemes-expressions"

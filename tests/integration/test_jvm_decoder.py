@@ -11,7 +11,6 @@ shown folder) is one set-up error naming the JVM's words and the fix. Never a Fa
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
 import subprocess
@@ -20,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from fbaconf.isolation import sandbox
+from lib.manifests import write_manifest
+from lib.sandbox import needs_sandbox
 
 DEC = """import java.nio.file.*;
 public class Dec {
@@ -38,10 +38,7 @@ def jars(tmp_path_factory) -> Path:
     javac, jar = shutil.which("javac"), shutil.which("jar")
     if javac is None or jar is None or shutil.which("java") is None:
         pytest.skip("no JDK (javac, jar, java) here")
-    if sandbox.isolation() == "none":
-        if os.environ.get("CI"):
-            pytest.fail("bubblewrap is not available in CI: decoders would run unisolated")
-        pytest.skip("bubblewrap (bwrap) is not installed: decoders run unisolated on this machine")
+    needs_sandbox()
     d = tmp_path_factory.mktemp("jvm")
     (d / "src").mkdir()
     (d / "src" / "Dec.java").write_text(DEC)
@@ -67,13 +64,8 @@ def jars(tmp_path_factory) -> Path:
 
 
 def manifest(d: Path, name: str, jar: str, limits: str) -> Path:
-    m = d / "vendor" / f"{name}.toml"
-    m.write_text(
-        f'name = "acme-java"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\n'
-        f'faps_format = "fap"\n[commands]\ndecode = ["java", "-jar", "{jar}", "{{input}}", "{{faps_out}}"]\n'
-        f"[limits]\ntimeout_s = 60\n{limits}"
-    )
-    return m
+    decode = ["java", "-jar", jar, "{input}", "{faps_out}"]
+    return write_manifest(d / "vendor" / f"{name}.toml", decode, name="acme-java", limits=f"timeout_s = 60\n{limits}")
 
 
 def fbaconf(*args) -> subprocess.CompletedProcess:

@@ -27,6 +27,8 @@ from fbaconf.harness import adapters
 from fbaconf.harness.results import Outcome
 from fbaconf.harness.runner import run_cases
 
+from lib.cases import cases
+
 ALTVLC = """
 from collections import defaultdict
 from fbaconf.bitstreams import dct
@@ -99,11 +101,6 @@ def decoder(tmp_path: Path, name: str, patch: str, *, fmt: str, extra: str = "")
         ''')
     )
     return m
-
-
-def cases(*ids):
-    by = {c.full_id: c for s in load_suites() for c in s.cases}
-    return [by[i] for i in ids]
 
 
 def by_id(results):
@@ -309,19 +306,19 @@ def test_frames_numbered_without_the_skips_fail_even_on_a_provisional_case(tmp_p
         "simple-l1-core/arith-q1-all-faps",
     ]
     rs = by_id(
-        run_cases(adapters.resolve(m), cases(*ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
+        run_cases(adapters.resolve(m), cases(ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
     )
     for cid in ids[:3]:
         assert rs[cid].outcome == Outcome.FAIL and "frame number" in rs[cid].message, (cid, rs[cid].message)
     assert rs[ids[3]].outcome == Outcome.PASS  # no skips: nothing to number differently
-    assert rests_on(cases(ids[2])[0]) == ["D8"] and rs[ids[2]].reading is None
+    assert rests_on(cases([ids[2]])[0]) == ["D8"] and rs[ids[2]].reading is None
 
 
 def test_a_header_rate_without_its_1000_1001_fails_on_the_sixteenths_rate(tmp_path):
     m = decoder(tmp_path, "ntsc", NTSC, fmt="fap")
     ids = ["simple-l1-core/rate-offset-sixteenths", "simple-l1-core/arith-ntsc-rate", "simple-l1-core/rate-half-hz"]
     rs = by_id(
-        run_cases(adapters.resolve(m), cases(*ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
+        run_cases(adapters.resolve(m), cases(ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
     )
     assert rs[ids[0]].outcome == Outcome.FAIL and "header frame rate: expected 0.4995 Hz" in rs[ids[0]].message
     assert rs[ids[1]].outcome == Outcome.FAIL  # 29.97 written as 30
@@ -338,7 +335,7 @@ def test_a_fap_decoder_passes_and_its_timing_is_said_not_verified(tmp_path):
         "simple-l1-core/rate-offset-sixteenths",
         "simple-l1-core/time-backwards",
     ]
-    rs = run_cases(a, cases(*ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
+    rs = run_cases(a, cases(ids), claim="simple@1", out_dir=tmp_path / "run", jobs=2, progress=False)
     assert [r.outcome for r in rs] == [Outcome.PASS] * len(ids), [r.message for r in rs]
 
     class Record:

@@ -20,29 +20,13 @@ from fbaconf.isolation import endings, forkclient, forkserver_build, sandbox
 from fbaconf.isolation.forkclient import ForkServer
 from fbaconf.isolation.sandbox import Limits, default_view
 
+from lib.manifests import python_decoder
+
 STREAM = b"\x00\x00\x01\xba" + bytes(40)
 
 
 def _manifest(tmp_path: Path, body: str, *, serve: str | None = None, limits: str = "timeout_s = 5") -> Path:
-    prog = tmp_path / "dec.py"
-    prog.write_text("import os, signal, sys, time\n" + body)
-    lines = [
-        'name = "t"',
-        'claims = ["simple@1"]',
-        'inputs = ["fba"]',
-        'outputs = ["faps"]',
-        'faps_format = "fap"',
-        "[commands]",
-        f'decode = ["{{python}}", "{prog}", "{{input}}", "{{faps_out}}"]',
-    ]
-    if serve is not None:
-        srv = tmp_path / "serve.py"
-        srv.write_text("import os, signal, sys, time\n" + serve)
-        lines.append(f'serve = ["{{python}}", "{srv}"]')
-    lines += ["[limits]", limits]
-    m = tmp_path / "t.toml"
-    m.write_text("\n".join(lines) + "\n")
-    return m
+    return python_decoder(tmp_path, "t", body, serve_body=serve, limits=limits)
 
 
 def _target(tmp_path: Path, m: Path, **kw) -> DecoderTarget:

@@ -38,6 +38,8 @@ from fbaconf.harness.speed.content import BLOCK_FRAMES, Content
 from fbaconf.harness.sysinfo import MachineSample
 from fbaconf.harness.verdict import speed_verdict
 
+from lib.manifests import write_manifest
+
 # A decoder whose cost is known: sleeps STARTUP, then PER_FRAME x frames (the frame count comes
 # from the {frames} placeholder, so counting frames costs nothing), then writes its output —
 # the reference decoding (the speed check compares a sample of frames with it).
@@ -115,17 +117,14 @@ def _manifest(
 ) -> Path:
     script = tmp_path / "timed_decoder.py"
     script.write_text(DECODER)
-    m = tmp_path / f"{name}.toml"
-    args = ", ".join(
-        f'"{a}"'
-        for a in ["{python}", str(script), str(startup), str(per_frame), "{input}", "{frames}", "{faps_out}"]
-        + ([extra] if extra else [])
+    argv = ["{python}", str(script), str(startup), str(per_frame), "{input}", "{frames}", "{faps_out}"]
+    return write_manifest(
+        tmp_path / f"{name}.toml",
+        argv + ([extra] if extra else []),
+        claims=claims,
+        faps_format=None,
+        limits="timeout_s = 30",
     )
-    m.write_text(
-        f'name = "{name}"\nclaims = {json.dumps(list(claims))}\ninputs = ["fba"]\noutputs = ["faps"]\n'
-        f"[commands]\ndecode = [{args}]\n[limits]\ntimeout_s = 30\n"
-    )
-    return m
 
 
 def test_accuracy_known_startup_and_per_frame(tmp_path, monkeypatch):

@@ -23,28 +23,16 @@ from fbaconf.harness.runner import run_cases
 from fbaconf.harness.selection import select_cases
 from fbaconf.harness.session import RunOptions, execute
 
+from lib.cases import case
+from lib.manifests import write_manifest
+
 ERROR_CASE = "simple-l1-error/truncated"
 VALID_CASE = "simple-l1-core/arith-q8-visemes-expressions"
 
 
-def case(full_id: str):
-    suite, cid = full_id.split("/")
-    (s,) = load_suites(names=[suite])
-    return next(c for c in s.cases if c.id == cid)
-
-
 def manifest(tmp_path: Path, name: str, decode: list, *, inputs=("fba",), tools=None, extra: str = "") -> Path:
-    argv = ", ".join(f'"{a}"' for a in decode)
-    tools_line = f"tools = {list(tools)!r}\n".replace("'", '"') if tools is not None else ""
-    p = tmp_path / f"{name}.toml"
-    p.write_text(
-        f'name = "{name}"\nclaims = ["simple@1"]\ninputs = {list(inputs)!r}\n'.replace("'", '"')
-        + tools_line
-        + 'outputs = ["faps"]\nfaps_format = "fap"\n'
-        + extra
-        + f"[commands]\ndecode = [{argv}]\n[limits]\ntimeout_s = 20\n"
-    )
-    return p
+    top = {"tools": list(tools)} if tools is not None else {}
+    return write_manifest(tmp_path / f"{name}.toml", decode, inputs=inputs, extra=extra, **top)
 
 
 def script(tmp_path: Path, name: str, body: str) -> Path:

@@ -16,80 +16,14 @@ from fbaconf.bitstreams.syntax import frame_rate_code, quantise
 from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.errors import BitstreamError, EncodeError
 
+from lib.codec import sequences
+
 GROUPS = tables.groups()
 QP = tables.quant_steps()
 
 
 def step_of(fap: int, q: int) -> int:
     return int(QP[fap - 1]) * q if q else 1
-
-
-@st.composite
-def sequences(draw):
-    """Random FAP sequences with explicit group mask types, segment by segment."""
-    n_seg = draw(st.integers(1, 4))
-    quant_mode = draw(st.sampled_from(["fixed", "per-segment"]))
-    q_fixed = draw(st.integers(0, 31))
-    rows = []
-    for _ in range(n_seg):
-        seg_len = draw(st.integers(1, 8))
-        q = q_fixed if quant_mode == "fixed" else draw(st.integers(0, 31))
-        types = []
-        coded = np.zeros(68, dtype=bool)
-        for g in GROUPS:
-            kind = draw(st.sampled_from(["none", "all", "partial"]))
-            if kind == "all":
-                coded[g.first_fap - 1 : g.last_fap] = True
-                types.append(3)
-            elif kind == "none":
-                types.append(draw(st.sampled_from([0, 1, 2])))
-            else:
-                bits = draw(st.lists(st.booleans(), min_size=g.size, max_size=g.size))
-                coded[g.first_fap - 1 : g.last_fap] = bits
-                types.append(draw(st.sampled_from([1, 2])))
-        for _ in range(seg_len):
-            rows.append((q, tuple(types), coded.copy()))
-    n = len(rows)
-    frames = FapFrames.empty(n)
-    gaps = draw(st.lists(st.sampled_from([1, 1, 1, 2, 3, 16, 31, 200]), min_size=n, max_size=n))
-    frames.frame_number[:] = np.cumsum(gaps) - gaps[0] + draw(st.sampled_from([0, 0, 1, 5]))
-    quants = np.array([r[0] for r in rows])
-    types = np.array([r[1] for r in rows])
-    value_draw = st.integers(-1200, 1200)
-    for k, (q, _, coded) in enumerate(rows):
-        frames.status[k] = np.where(coded, SET, FREE)
-        for f in np.nonzero(coded[2:])[0] + 3:
-            # codable: |value| <= 1860 x QP (1860 when lossless); stay inside it
-            unit = int(QP[f - 1]) if q else 1
-            frames.values[k, f - 1] = draw(value_draw) * unit // draw(st.integers(1, 4))
-        if coded[0]:
-            frames.high[k, 0:4] = [
-                draw(st.integers(0, 14)),
-                draw(st.integers(0, 14)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 1)),
-            ]
-        if coded[1]:
-            frames.high[k, 4:10] = [
-                draw(st.integers(0, 6)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 6)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 1)),
-                draw(st.integers(0, 1)),
-            ]
-    rate = draw(st.sampled_from([25.0, 30.0, 30000 / 1001, 10.0, 12.5, 0.5, 60.0]))
-    frames.frame_rate = rate
-    opts = EncoderOptions(
-        fap_quant_per_frame=quants,
-        group_types=types,
-        intra_period=draw(st.sampled_from([0, 0, 1, 3])),
-        time_codes=draw(st.booleans()),
-        plane_start_codes=draw(st.sampled_from(["none", "intra", "all"])),
-        ranges=draw(st.sampled_from(["auto", "persist"])),
-        gender=draw(st.integers(0, 1)),
-    )
-    return frames, opts, types
 
 
 def expected_status(frames: FapFrames, types: np.ndarray) -> np.ndarray:

@@ -10,7 +10,6 @@ from importlib import resources
 import numpy as np
 import pytest
 from hypothesis import given, settings
-from test_codec import sequences  # the codec's own random sequences
 
 from fbaconf.bitstreams import readings, syntax, tables
 from fbaconf.bitstreams.decoder import decode
@@ -21,11 +20,8 @@ from fbaconf.errors import FbaconfInputError
 from fbaconf.profiles.checker import check_stream
 from fbaconf.rules import CODES
 
-
-def case(full_id: str):
-    suite, cid = full_id.split("/")
-    (s,) = load_suites(names=[suite])
-    return next(c for c in s.cases if c.id == cid)
+from lib.cases import case
+from lib.codec import sequences
 
 
 def decoded(data: bytes):
