@@ -420,3 +420,18 @@ def test_no_reference_to_a_missing_file(doc: Path):
         and not any((d / m).exists() for d in (ROOT, ROOT / "docs", doc.parent))
     }
     assert sorted(missing) == []
+
+
+def test_no_test_module_imports_another():
+    """Shared helpers live in tests/lib; a test module importing a sibling drags its fixtures and
+    module-level work along and breaks when either moves."""
+    offenders = []
+    for p in sorted((ROOT / "tests").rglob("test_*.py")):
+        for node in ast.walk(ast.parse(p.read_text(), str(p))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            offenders += [f"{p.relative_to(ROOT)}: import {n}" for n in names if n.split(".")[0].startswith("test_")]
+    assert offenders == [], "\n".join(offenders)
