@@ -53,7 +53,14 @@ def _cpu_model() -> str:
                 return out
         except (OSError, subprocess.SubprocessError):
             pass
-    return platform.processor() or platform.machine() or "unknown"
+    return platform.machine() or "unknown"  # not platform.processor(): it starts `uname -p`
+
+
+def _platform_name() -> str:
+    """``platform.platform()``'s words (system-release-machine-libc) without the `uname -p` child
+    process it starts: writing a report starts no program."""
+    libc = "".join(platform.libc_ver())
+    return "-".join(p for p in (platform.system(), platform.release(), platform.machine(), libc) if p)
 
 
 def _usable_cpus() -> int | None:
@@ -83,7 +90,7 @@ def system_info(extra: dict | None = None) -> dict:
         "machine": platform.machine(),
         "os": platform.system(),
         "kernel": platform.release(),
-        "platform": platform.platform(),
+        "platform": _platform_name(),
         "python_version": platform.python_version(),
         "python_implementation": platform.python_implementation(),
         "versions": {d: _version(d) for d in DISTRIBUTIONS},

@@ -22,8 +22,8 @@ from dataclasses import dataclass, fields
 
 from fbaconf.errors import FbaconfInputError
 
-from . import cgroups, seccomp
-from .sandbox import MAX_MEMORY_MB, MAX_OUTPUT_MB, MAX_PROCESSES, MAX_TIMEOUT_S, Limits, isolation
+from . import cgroups, sandbox, seccomp
+from .sandbox import MAX_MEMORY_MB, MAX_OUTPUT_MB, MAX_PROCESSES, MAX_TIMEOUT_S, Limits
 
 # memory_kind values a manifest may give: each one a limit ("none" is not)
 MANIFEST_MEMORY_KINDS = ("tree", "address-space", "rss")
@@ -102,7 +102,7 @@ def _num(v) -> str:
 def in_force(limits: Limits) -> list[str]:
     """One line per limit: what holds a decoder run under ``limits`` here, and how."""
     ctl = cgroups.controllers()
-    sandboxed = isolation() == "bwrap"
+    sandboxed = sandbox.isolation() == "bwrap"  # read through the module, as every caller does
     tree = "memory" in ctl
     mb = limits.memory_mb
     if limits.memory_kind == "tree" and tree:

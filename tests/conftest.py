@@ -4,7 +4,10 @@ and the fixtures several tiers share (one certified package per session).
 Tiers, by folder (each test is marked with its folder's name, so ``-m unit`` works too):
 
 * ``tests/unit/`` — one module or one verb in-process: the fast tier of the developer loop
-  (``python -m pytest tests/unit -n auto``, under 3 minutes on 2 cores);
+  (``python -m pytest tests/unit -n auto``, under 3 minutes on 2 cores). Kept fast by rule, not by
+  a clock: a unit test starts no process (no decoder, no forked mutant, no CLI in a child) — the
+  guard below fails one that does — unless it is marked ``spawns`` with the reason its subject is
+  a process of its own;
 * ``tests/integration/`` — decoders run through the harness, the sandbox, the fuzzer, the
   cluster, the installed wheel;
 * ``tests/suites/`` — the suites' own checks: rebuilt byte for byte, coverage, mutants, the
@@ -28,7 +31,8 @@ from hypothesis import HealthCheck, settings
 from fbaconf.certification import certify
 from fbaconf.certification.package import load_key, seal
 
-# ci: deterministic (derandomised) so a CI run is reproducible; dev: random exploration.
+# ci: deterministic (derandomised) so a CI run is reproducible; dev: random exploration;
+# HYPOTHESIS_PROFILE picks one (stress: 2,000 examples each).
 settings.register_profile(
     "ci",
     derandomize=True,
@@ -37,6 +41,8 @@ settings.register_profile(
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
 settings.register_profile("dev", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# fast: the developer's loop (README: the fast tier); each property meets 20 examples, not 100
+settings.register_profile("fast", max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile(
     "stress", max_examples=2000, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large]
 )
@@ -54,6 +60,26 @@ def pytest_xdist_auto_num_workers(config):
     (that one with other work running beside it; 2026-11-28, this machine)."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return cores + 2
+
+
+def _refuse_processes(monkeypatch: pytest.MonkeyPatch, nodeid: str) -> None:
+    def refuse(*_a, **_k):
+        pytest.fail(
+            f"{nodeid}: a unit test runs in-process (it started a process); move it to the tier its "
+            "subject belongs to, or mark it @pytest.mark.spawns(reason) when the process is the subject",
+            pytrace=False,
+        )
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", refuse)
+    for name in ("fork", "forkpty", "posix_spawn", "posix_spawnp"):
+        if hasattr(os, name):
+            monkeypatch.setattr(os, name, refuse)
+
+
+@pytest.fixture(autouse=True)
+def _unit_tier_in_process(request, monkeypatch):
+    if request.node.get_closest_marker("unit") and not request.node.get_closest_marker("spawns"):
+        _refuse_processes(monkeypatch, request.node.nodeid)
 
 
 def pytest_collection_modifyitems(config, items):

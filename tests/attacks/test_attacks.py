@@ -28,6 +28,7 @@ from fbaconf.harness.results import Outcome, ResultLog
 from fbaconf.harness.runner import run_cases
 
 from lib.cases import cases
+from lib.hangs import HANG_S
 from lib.manifests import decoder
 from lib.sandbox import needs_cgroups, needs_sandbox
 
@@ -158,9 +159,9 @@ def test_a_fork_bomb_is_capped_and_cleaned_up(tmp_path):
         print("forked", n, file=sys.stderr)
         sys.exit(0 if n < 300 else 9)
         """
-    t0 = time.perf_counter()
     rs = run(tmp_path, decoder(tmp_path, "bomb", body, limits="timeout_s = 20\nprocesses = 32\n"), ids=VALID[:1])
-    assert time.perf_counter() - t0 < 15
+    # the run ends with the bomb's own exit: its sleeping children are not waited for
+    assert rs[0].outcome != Outcome.TIMEOUT, rs[0].message
     assert "forked" in rs[0].stderr_tail and int(rs[0].stderr_tail.split("forked")[1].split()[0]) < 32
     time.sleep(0.2)
     assert _procs_with("bomb.py") == []
@@ -247,9 +248,7 @@ def test_outputs_that_are_not_regular_files_are_not_read(tmp_path, kind):
         "zero": "os.symlink('/dev/zero', OUT)",
         "passwd": "os.symlink('/etc/passwd', OUT)",
     }[kind]
-    t0 = time.perf_counter()
     rs = run(tmp_path, decoder(tmp_path, kind, make + "\n", faps_format="fap"), ids=VALID[:1])
-    assert time.perf_counter() - t0 < 20
     assert rs[0].outcome == Outcome.FAIL and "regular file" in rs[0].message, rs[0].message
 
 
@@ -368,14 +367,14 @@ def test_interruption_kills_running_decoders_and_resume_is_exact(tmp_path):
     ]
     p = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     log = out / "results.jsonl"
-    deadline = time.time() + 60
-    while time.time() < deadline and not (log.exists() and log.read_text().count("\n") >= 1):
+    deadline = time.monotonic() + HANG_S
+    while time.monotonic() < deadline and not (log.exists() and log.read_text().count("\n") >= 1):
         time.sleep(0.1)
     time.sleep(0.5)
-    t0 = time.time()
     p.send_signal(__import__("signal").SIGINT)
-    p.communicate(timeout=30)
-    assert time.time() - t0 < 5 and p.returncode == 130
+    p.communicate(timeout=HANG_S)
+    # stopped at once: the case under way when the signal came is not finished (not in the log)
+    assert p.returncode == 130
     report = json.loads((out / "report.json").read_text())
     assert report["exit_code"] == 130
     done = [json.loads(x)["case_id"] for x in log.read_text().splitlines()]

@@ -8,12 +8,13 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 from fbaconf.conformance.suite import Suite, SuiteError
+
+from lib.hangs import finishes
 
 BASE = {
     "format": "fbaconf.suite/1",
@@ -71,10 +72,8 @@ def test_a_malformed_suite_stops_a_run_with_its_error_not_a_traceback(tmp_path):
 def test_a_suite_manifest_that_is_a_fifo_is_refused_without_blocking(tmp_path):
     (tmp_path / "s").mkdir()
     os.mkfifo(tmp_path / "s" / "suite.json")
-    t0 = time.perf_counter()
     with pytest.raises(SuiteError, match="FIFO"):
-        Suite.load(tmp_path / "s")
-    assert time.perf_counter() - t0 < 5
+        finishes(lambda: Suite.load(tmp_path / "s"), "loading a suite whose manifest is a FIFO")
 
 
 def test_check_refuses_a_fifo_before_opening_it(tmp_path):

@@ -21,6 +21,7 @@ from fbaconf.harness import adapters
 from fbaconf.harness.speed import measure as speed
 from fbaconf.isolation import forkserver_build, sandbox
 
+from lib.hangs import finishes
 from lib.manifests import python_decoder
 from lib.sandbox import needs_sandbox
 
@@ -76,11 +77,9 @@ def test_a_ten_megabyte_answer_is_its_inputs_protocol_error_not_a_deadlock(tmp_p
     t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)", serve=serve))
     assert t.persistent
     try:
-        t0 = time.perf_counter()
         got = _queue(t, [b"", b"FLOOD", b"", b""])
         assert [_key(v) for v in got] == [None, "unexpected-exit:protocol-error", None, None]
         assert "at most 4096" in got[1].message
-        assert time.perf_counter() - t0 < 15
     finally:
         t.close()
 
@@ -127,10 +126,8 @@ while True:
 """
     t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)", serve=serve))
     try:
-        t0 = time.perf_counter()
         got = _queue(t, [b""] * 8)
         assert {_key(v) for v in got} == {"unexpected-exit:protocol-error"}  # every process does it
-        assert time.perf_counter() - t0 < 30
     finally:
         t.close()
 
@@ -148,11 +145,9 @@ while True:
 """
     t = _target(tmp_path, _manifest(tmp_path, "sys.exit(69)", serve=serve, limits="timeout_s = 1"))
     try:
-        t0 = time.perf_counter()
         runs = [t.start(Entry(STREAM)), t.start(Entry(STREAM + bytes(4 << 20)))]
-        got = [r.result().verdict for r in runs]
+        got = finishes(lambda: [r.result().verdict for r in runs], "judging a decoder that stopped reading")
         assert [_key(v) for v in got] == ["hang:timeout", None]
-        assert time.perf_counter() - t0 < 10
     finally:
         t.close()
 
@@ -166,10 +161,8 @@ def test_the_speed_phase_through_a_flooding_serve_fails_fast(tmp_path):
     sys.stdout.buffer.write(b'%d 0 ' % rid + b'x' * (10 << 20) + b'\\n'); sys.stdout.flush()
 """
     a = adapters.resolve(_manifest(tmp_path, "sys.exit(69)", serve=serve, equivalent=True))
-    t0 = time.perf_counter()
     (r,) = [x for x in speed.measure_claim(a, "simple@1", lengths=[2, 4], repeats=1) if x.operation == "decode"]
     assert not r.passed and "protocol" in r.message, r.message
-    assert time.perf_counter() - t0 < 60
 
 
 # ------------------------------------------------------------------ the fork server's channel

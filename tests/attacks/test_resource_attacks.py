@@ -10,7 +10,6 @@ import os
 import resource
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import fbaconf
@@ -84,13 +83,11 @@ def test_a_disk_flood_is_stopped_at_the_output_limit_while_it_writes(tmp_path):
         """)
     )
     lim = Limits(timeout_s=60, memory_mb=512, output_mb=256)
-    t0 = time.perf_counter()
     res = sandbox.run([os.path.realpath(sys.executable), str(flood)], work, lim)
     ending = endings.classify(res, lim)
     assert ending.kind == "output-limit", ending.message
     assert "wrote it all" not in res.stdout_tail
     assert 256 << 20 < res.output_bytes < 400 << 20, res.output_bytes  # stopped at the limit (+ one interval)
-    assert time.perf_counter() - t0 < 60
 
 
 def test_a_6000_level_tree_with_338_mb_below_a_3000_level_chain_is_counted_and_removed(tmp_path):
@@ -160,7 +157,9 @@ def test_rss_is_sampled_over_the_decoders_tree_not_the_launcher(tmp_path, monkey
     res = sandbox.run([os.path.realpath(sys.executable), str(hog)], tmp_path / "case", lim)
     ending = endings.classify(res, lim)
     assert ending.kind == "memory" and "resident-set" in ending.message, ending.message
-    assert res.elapsed_s < 8 and "ran free" not in res.stdout_tail
+    # the tree died while the child held its memory: the parent, which prints once the child
+    # ends, never printed (a kill of the child alone, or none, would let it)
+    assert "ran free" not in res.stdout_tail
     # the message names what was sampled (over 150 MB), not the launcher's own small peak
     assert res.rss_sampled_mb > 150 and f"sampled at {res.rss_sampled_mb:.0f} MB" in ending.message, ending.message
 

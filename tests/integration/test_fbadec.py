@@ -194,7 +194,7 @@ def test_hand_vectors(fbadec, tmp_path):
     worked out by hand from the spec notes, and rejects the invalid ones."""
 
     d, _ = fbadec
-    vec = runpy.run_path(str(Path(__file__).parents[1] / "unit" / "test_vectors.py"))
+    vec = runpy.run_path(str(Path(__file__).parents[1] / "lib" / "vectors.py"))
 
     def run(data: bytes):
         fin, out = tmp_path / "v.fba", tmp_path / "v.npz"

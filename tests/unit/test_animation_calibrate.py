@@ -1,9 +1,7 @@
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
+from fbaconf import cli
 from fbaconf.animation import engine, rbf
 from fbaconf.animation.calibrate import calibrate
 from fbaconf.animation.faceparams import fapu_from_feature_points, fp_index
@@ -94,51 +92,26 @@ def test_calibration_through_scene_and_errors(base):
         calibrate(base, np.full((84, 3), np.nan))
 
 
-def test_cli_animate(tmp_path):
+def test_cli_animate(tmp_path, capsys):
     fr = FapFrames.empty(3)
     fr.values[1, 2], fr.status[1, 2] = 300, SET
     fr.save_npz(tmp_path / "f.npz")
     out = tmp_path / "out.npz"
-    r = subprocess.run(
-        [sys.executable, "-m", "fbaconf", "animate", "--faps", str(tmp_path / "f.npz"), "-o", str(out), "--json"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert r.returncode == 0, r.stderr
+    assert cli.main(["animate", "--faps", str(tmp_path / "f.npz"), "-o", str(out), "--json"]) == 0
     st = load_npz(out)
     assert st.vertices.shape[0] == 3 and "fap_values" in st.extras
     ref = engine.animate(fr)
     assert np.array_equal(st.vertices, ref.vertices)
     write_fap_file(tmp_path / "f.fap", fr)
-    r = subprocess.run(
-        [sys.executable, "-m", "fbaconf", "animate", "--faps", str(tmp_path / "f.fap"), "-o", str(tmp_path / "o3.npz")],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert r.returncode == 0, r.stderr
+    assert cli.main(["animate", "--faps", str(tmp_path / "f.fap"), "-o", str(tmp_path / "o3.npz")]) == 0
     np.testing.assert_allclose(load_npz(tmp_path / "o3.npz").vertices[1], ref.vertices[1])
     bad = tmp_path / "bad.bt"
     bad.write_text("Face { fdp FDP { faceDefTables [ FaceDefTables { fapID x } ] } }")
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "fbaconf",
-            "animate",
-            "--scene",
-            str(bad),
-            "--faps",
-            str(tmp_path / "f.npz"),
-            "-o",
-            str(tmp_path / "o2.npz"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert r.returncode == 2 and "1:" in r.stderr and "fapID" in r.stderr
+    capsys.readouterr()
+    argv = ["animate", "--scene", str(bad), "--faps", str(tmp_path / "f.npz"), "-o", str(tmp_path / "o2.npz")]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "1:" in err and "fapID" in err
     assert not (tmp_path / "o2.npz").exists()
 
 

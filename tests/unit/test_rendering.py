@@ -365,6 +365,7 @@ def test_render_twice_is_bit_identical_and_one_pixel_camera_change_is_not(tmp_pa
     np.testing.assert_allclose(i2[:, :-1], i1[:, 1:], atol=1e-12)
 
 
+@pytest.mark.spawns("the claim is about a second process: it renders the same bits")
 def test_bit_identical_across_processes(tmp_path):
     script = textwrap.dedent(f"""
         import sys, numpy as np

@@ -578,6 +578,7 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 @pytest.mark.skipif(not CHROMIUM, reason="chromium not installed")
+@pytest.mark.spawns("the report as a real browser shows it")
 def test_html_in_headless_chromium(tmp_path):
     out = tmp_path / "report"
     page = write_html(make_record(tmp_path / "elsewhere", inside=None), out)
