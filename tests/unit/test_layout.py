@@ -435,3 +435,59 @@ def test_no_test_module_imports_another():
                 names = [node.module]
             offenders += [f"{p.relative_to(ROOT)}: import {n}" for n in names if n.split(".")[0].startswith("test_")]
     assert offenders == [], "\n".join(offenders)
+
+
+def _where_things_live() -> list[tuple[str, list[str], list[str]]]:
+    """(concern, paths, names) per row of docs/architecture.md's "Where things live" table."""
+    text = (ROOT / "docs" / "architecture.md").read_text("utf-8")
+    table = text.split("## Where things live", 1)[1].split("\n## ", 1)[0]
+    rows = []
+    for line in table.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) != 3 or cells[0] in ("concern", "---") or set(cells[0]) <= {"-"}:
+            continue
+        paths = re.findall(r"`([\w./*-]+(?:/|\.py|\.toml|\.json|\.c|\.csv))`", cells[1])
+        paths += [f"{p}.py" for p in re.findall(r"`([\w./-]+\.py)`/`\.(py)`", cells[1])]
+        names = re.findall(r"`([A-Za-z_][\w.]*)`", cells[2])
+        rows.append((cells[0], paths, names))
+    return rows
+
+
+def _defined(py: Path) -> set[str]:
+    out: set[str] = set()
+    tree = ast.parse(py.read_text("utf-8"))
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            out.add(node.name)
+            if isinstance(node, ast.ClassDef):
+                out |= {
+                    f"{node.name}.{n.name}" for n in node.body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))
+                }
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            out |= {t.id for t in targets if isinstance(t, ast.Name)}
+    return out
+
+
+def test_the_architecture_table_names_paths_and_names_that_exist():
+    """Every path in docs/architecture.md's "Where things live" exists, every name in a row is
+    defined in one of that row's modules, and every stage has a row."""
+    rows = _where_things_live()
+    assert len(rows) > 20
+    problems = []
+    for concern, paths, names in rows:
+        modules: list[Path] = []
+        for p in paths:
+            found = sorted(ROOT.glob(p)) if "*" in p else [ROOT / p]
+            if not found or not all(f.exists() for f in found):
+                problems.append(f"{concern}: no {p}")
+            for f in found:
+                modules += sorted(f.rglob("*.py")) if f.is_dir() else [f] if f.suffix == ".py" else []
+        defined = set().union(*(_defined(m) for m in modules if m.exists())) if modules else set()
+        problems += [f"{concern}: {n} is defined in none of {paths}" for n in names if modules and n not in defined]
+    stages = {p.split("/")[0] for _, paths, _ in rows for p in paths}
+    for layer in LAYERS:
+        for stage in (layer,) if isinstance(layer, str) else layer:
+            if stage not in stages:
+                problems.append(f"the stage {stage}/ has no row")
+    assert problems == [], "\n".join(problems)
