@@ -381,6 +381,22 @@ def test_junit_counts_names_messages(tmp_path):
     assert float(cases["basic/q8-smile"].time) == pytest.approx(0.2)
 
 
+def test_junit_an_inconclusive_speed_is_skipped_not_failed(tmp_path):
+    """A rate missed on a busy machine is the lab's, not the decoder's: a CI gate reading JUnit
+    must not fail the decoder for it (certify exits 4, "inconclusive", for the same result)."""
+    rec = make_record()
+    busy = SpeedResult(
+        "decode", "simple@1", 0.1, 0.05, 10.0, 25.0, False, "seed", verdict="inconclusive", reason="load 7.9 on 2 CPUs"
+    )
+    rec.speed = [busy]
+    xml = JUnitXml.fromfile(str(write_junit(rec, tmp_path / "junit.xml")))
+    speed = _suites(xml)["speed"]
+    assert (speed.tests, speed.failures, speed.errors, speed.skipped) == (1, 0, 0, 1)
+    (sk,) = next(iter(speed)).result
+    assert isinstance(sk, Skipped) and "inconclusive" in sk.message and "busy" in sk.message
+    assert "load 7.9 on 2 CPUs" in sk.text
+
+
 # ----------------------------------------------------------------------------- HTML
 
 
