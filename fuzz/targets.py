@@ -423,7 +423,7 @@ class DecoderTarget:
 
     def _judge(self, inp: Entry, job, res) -> Verdict | None:
         """The finding (or None) for one finished decoder process."""
-        ending = endings.classify(res, self.limits, self.reject_exit_codes)
+        ending = endings.classify(res, self.limits, self.reject_exit_codes, name=self.adapter.name)
         if ending.kind == "setup":  # the harness's own knowledge (endings.py), never the decoder's words
             raise FuzzSetupError(f"cannot run the decoder: {ending.message}")
         detail = {

@@ -50,7 +50,9 @@ def probe(argv, workdir, limits, *, name: str, what: str, file: str, **run) -> N
         return
     fixes = []
     if "as-limit" in res.notes:
-        again = endings.classify(sandbox.run(argv, workdir, replace(limits, memory_kind="rss"), **run), limits, codes)
+        again = endings.classify(
+            sandbox.run(argv, workdir, replace(limits, memory_kind="rss"), **run), limits, codes, name=name
+        )
         if again.kind in _FINE:
             fixes.append(
                 f"it decodes the same stream without the address-space limit: the runtime cannot start "

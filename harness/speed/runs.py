@@ -402,7 +402,7 @@ class _Runner:
     def _judge(self, res, n: int, argv) -> None:
         """A run that did not decode (exit code, crash, timeout...) fails the measurement."""
         a = self.adapter
-        verdict = outcome_for(endings.classify(res, a.limits, a.reject_exit_codes))
+        verdict = outcome_for(endings.classify(res, a.limits, a.reject_exit_codes, name=a.name))
         if verdict is not None:
             raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
 

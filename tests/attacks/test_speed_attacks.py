@@ -389,3 +389,11 @@ def test_a_decoder_cannot_make_itself_inconclusive(tmp_path, monkeypatch):
     assert r.verdict == "fail" and r.rate_fps < 240, r.message
     assert r.cpu_s is not None and r.cpu_s > 0.3 * r.wall_s, r.message  # its spinning threads were counted as its own
     assert r.stall_s is not None and r.stall_s > 0, r.message  # and it did wait for a CPU
+
+
+def test_a_decoder_failing_in_the_speed_phase_is_named_by_its_manifest(tmp_path):
+    """The message names the decoder ("speedy exited with code 3"), as a case's does — not the
+    runtime that ran it (python3)."""
+    r = _decode_result(_manifest(tmp_path, "import sys\nsys.exit(3)\n"))
+    assert not r.passed and r.verdict == "fail"
+    assert "speedy exited with code 3" in r.message, r.message
