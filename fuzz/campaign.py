@@ -31,6 +31,7 @@ from types import SimpleNamespace
 
 from fbaconf.harness.adapters import resolve
 from fbaconf.harness.cluster import ClusterError, from_data, task_key
+from fbaconf.isolation.bounds import DEFAULT_CEILINGS, Ceilings
 
 from .corpus import default_seeds
 from .engine import FuzzConfig, Fuzzer
@@ -52,11 +53,13 @@ class ShardSpec:
     oracle: bool = True
     coverage_every: int = 8
     spawn: bool = False
+    # the lab's ceilings (--max-timeout-s...): every worker reads the manifest under the same ones
+    ceilings: Ceilings = DEFAULT_CEILINGS
 
 
 def _target(spec: ShardSpec, work: Path):
     return DecoderTarget(
-        resolve(spec.manifest),
+        resolve(spec.manifest, ceilings=spec.ceilings),
         work,
         kind=spec.kind,
         timeout_s=spec.timeout_s,

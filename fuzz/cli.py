@@ -187,7 +187,8 @@ def _campaign(args, expected: set[int] | None) -> int:
 
     from .campaign import ShardSpec, run_campaign
 
-    adapter = resolve(args.decoder, ceilings=ceilings_from(args))  # a bad manifest fails here, not in every worker
+    ceilings = ceilings_from(args)
+    adapter = resolve(args.decoder, ceilings=ceilings)  # a bad manifest fails here, not in every worker
     manifest = str(Path(args.decoder).resolve()) if Path(args.decoder).is_file() else args.decoder
     if args.replay is not None:
         print("fbaconf fuzz: error: --replay runs one input here; drop --cluster", file=sys.stderr)
@@ -201,6 +202,7 @@ def _campaign(args, expected: set[int] | None) -> int:
         oracle=not args.no_oracle,
         coverage_every=args.coverage_every,
         spawn=args.spawn,
+        ceilings=ceilings,
     )
     out = (args.output or Path("fbaconf-fuzz") / adapter.name).resolve()
     out.mkdir(parents=True, exist_ok=True)

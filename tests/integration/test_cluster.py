@@ -14,11 +14,15 @@ from pathlib import Path
 import pytest
 
 from fbaconf.conformance.suite import load_suites
+from fbaconf.errors import FbaconfInputError
+from fbaconf.fuzz import campaign
 from fbaconf.fuzz.campaign import ShardSpec, run_campaign
 from fbaconf.harness import adapters, cluster
 from fbaconf.harness.results import ResultLog
 from fbaconf.harness.runner import run_cases
+from fbaconf.isolation.bounds import Ceilings
 
+from lib.manifests import python_decoder
 from lib.procs import alive
 
 # Dask (distributed) is the optional extra fbaconf[cluster]; the test extras install it, so a
@@ -179,3 +183,17 @@ def test_fuzz_campaign_finds_the_planted_crash_once_and_survives_a_lost_worker(t
     assert len(list((tmp_path / "out" / "findings").iterdir())) == len(findings)
     assert servers[0] >= 1  # the shards' servers were counted while they ran
     assert alive(str(tmp_path), grace_s=5.0) == []
+
+
+def test_a_fuzz_campaigns_workers_read_the_manifest_under_the_labs_ceilings(tmp_path):
+    """A manifest asking for more than the default ceilings, allowed by the lab's --max-timeout-s,
+    is read the same way in every worker (before, a worker re-read it under the defaults and
+    refused it)."""
+    m = python_decoder(tmp_path, "slowpoke", "sys.exit(0)\n", limits="timeout_s = 700")
+    with pytest.raises(FbaconfInputError, match="700"):
+        campaign._target(ShardSpec(str(m)), tmp_path / "default")
+    t = campaign._target(ShardSpec(str(m), ceilings=Ceilings(timeout_s=800)), tmp_path / "raised")
+    try:
+        assert t.adapter.limits.timeout_s == 700
+    finally:
+        t.close()
