@@ -17,6 +17,7 @@ writable cgroups never reads as if memory were limited for the tree.
 
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass, fields
 
@@ -24,6 +25,7 @@ from fbaconf.errors import FbaconfInputError
 
 from . import cgroups, sandbox, seccomp
 from .sandbox import MAX_MEMORY_MB, MAX_OUTPUT_MB, MAX_PROCESSES, MAX_TIMEOUT_S, Limits
+from .subject import Decoder
 
 # memory_kind values a manifest may give: each one a limit ("none" is not)
 MANIFEST_MEMORY_KINDS = ("tree", "address-space", "rss")
@@ -83,11 +85,11 @@ def problems(limits: Limits, ceilings: Ceilings = DEFAULT_CEILINGS) -> list[str]
     return out
 
 
-def limits_in_force(adapter) -> list[str]:
+def limits_in_force(adapter: Decoder) -> list[str]:
     """What holds ``adapter``'s decoder on this machine, one line per limit and how it is
     enforced (:func:`in_force`; an in-process adapter: what it runs without): what ``run``
     prints and a certificate's statement records."""
-    if getattr(adapter, "kind", None) != "command":
+    if adapter.kind != "command":
         return [
             f"in-process: {adapter.name} runs inside fbaconf's own process: the timeout "
             f"({adapter.limits.timeout_s:g} s) is checked after each call; no memory, output or process limit"
@@ -95,7 +97,7 @@ def limits_in_force(adapter) -> list[str]:
     return in_force(adapter.limits)
 
 
-def _num(v) -> str:
+def _num(v: float) -> str:
     return str(v) if isinstance(v, int) else f"{v:g}"
 
 
@@ -148,7 +150,7 @@ class CeilingError(FbaconfInputError):
     rule = "usage"
 
 
-def add_ceiling_options(parser) -> None:
+def add_ceiling_options(parser: argparse.ArgumentParser) -> None:
     """The lab's flags that raise the ceilings (``run``, ``certify``, ``bench``, ``fuzz``)."""
     for key, flag in FLAGS.items():
         dflt = getattr(DEFAULT_CEILINGS, key)
@@ -161,7 +163,7 @@ def add_ceiling_options(parser) -> None:
         )
 
 
-def ceilings_from(args) -> Ceilings:
+def ceilings_from(args: argparse.Namespace) -> Ceilings:
     """The ceilings the lab gave on the command line (:func:`add_ceiling_options`)."""
     try:
         return Ceilings(**{key: getattr(args, flag.lstrip("-").replace("-", "_")) for key, flag in FLAGS.items()})

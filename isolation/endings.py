@@ -35,9 +35,15 @@ from __future__ import annotations
 
 import hashlib
 import re
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .process import ProcResult
+    from .sandbox import Limits
 
 EXIT_NOT_SUPPORTED = 69
 DEFAULT_REJECT_EXIT_CODES = frozenset({1, 2})
@@ -77,7 +83,7 @@ class CrashReport:
 _HEX = re.compile(r"0x[0-9a-fA-F]+")
 
 
-def _h(items) -> str:
+def _h(items: Iterable[str]) -> str:
     return hashlib.sha256("\n".join(items).encode()).hexdigest()[:10]
 
 
@@ -176,7 +182,7 @@ def _last_line(text: str) -> str:
     return f"; stderr: {lines[-1][:300]}" if lines else ""
 
 
-def _setup(res, cmd: str, err: str) -> Ending | None:
+def _setup(res: ProcResult, cmd: str, err: str) -> Ending | None:
     """The set-up failure the harness knows of (its notes), or None."""
     if "harness-start-failed" in res.notes:
         return Ending(EndingKind.SETUP, f"harness could not start the launcher: {err.strip()[:300]}")
@@ -192,7 +198,7 @@ def _setup(res, cmd: str, err: str) -> Ending | None:
     return None
 
 
-def _reservation(res, limits, cmd: str, err: str) -> Ending | None:
+def _reservation(res: ProcResult, limits: Limits, cmd: str, err: str) -> Ending | None:
     """A runtime that died reserving address space under the address-space rlimit: a set-up
     problem of the limits, named with the runtime's own line and the fix."""
     m = _RESERVE.search(err) if "as-limit" in res.notes and res.returncode != 0 else None
@@ -209,7 +215,13 @@ def _reservation(res, limits, cmd: str, err: str) -> Ending | None:
     )
 
 
-def classify(res, limits, reject_exit_codes=DEFAULT_REJECT_EXIT_CODES, *, name: str | None = None) -> Ending:
+def classify(
+    res: ProcResult,
+    limits: Limits,
+    reject_exit_codes: Collection[int] = DEFAULT_REJECT_EXIT_CODES,
+    *,
+    name: str | None = None,
+) -> Ending:
     """One :class:`Ending` for a finished :class:`~fbaconf.isolation.sandbox.ProcResult`; its
     message names the decoder ``name`` (the manifest's) — "acme-java exited with code 1", not
     the runtime that ran it — or, without one, the program."""

@@ -37,12 +37,14 @@ import struct
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 from . import forkserver_build, sandbox
-from .cgroups import OOM_FILES, oom_events
-from .process import Finish, result
-from .sandbox import Limits, ProcResult, View
+from .cgroups import OOM_FILES, Cgroups, oom_events
+from .process import Finish, ProcResult, result
+from .sandbox import Limits, View
 from .watch import Watch
 
 SERVER_SCRIPT = Path(__file__).with_name("forkserver.py")
@@ -75,17 +77,18 @@ class ForkServer:
         self.view = view
         self.limits = limits
         self.env = env
-        self.proc: subprocess.Popen | None = None
-        self.cg = None
+        self.proc: subprocess.Popen[bytes] | None = None
+        self.cg: Cgroups | None = None
+        self.ready = False
         self.starts = 0
-        self._reqs: dict[tuple, tuple[bytes, Path]] = {}  # request bytes and workdir by request
+        self._reqs: dict[tuple[object, ...], tuple[bytes, Path]] = {}  # request bytes and workdir by request
         self._events: list[tuple[str, int]] | None = None
         self._answers = 0
         self._rbuf = b""
         self._last_done = 0.0
         self.sum_outputs_every = sum_outputs_every
         self.slots = slots  # stdout/stderr file pairs: an input's are read while the next one runs
-        self._files: list[tuple] = []
+        self._files: list[tuple[IO[bytes], IO[bytes]]] = []
         self._queue: collections.deque[Pending] = collections.deque()
         # The server in C when it can be built (isolation/forkserver_build.py), else the Python one.
         self.native = forkserver_build.forkserver_binary()
@@ -157,7 +160,7 @@ class ForkServer:
     def __enter__(self) -> ForkServer:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
 
     # ---------------------------------------------------------------- one input
@@ -204,9 +207,9 @@ class ForkServer:
         key = (tuple(argv), os.fspath(workdir), tuple(sorted(env.items())) if env else (), limits, slot, as_bytes)
         cached = self._reqs.get(key)  # a fuzzing worker sends the same requests every time
         if cached is None:
-            wd = os.path.realpath(workdir)
-            os.makedirs(os.path.join(wd, "tmp"), exist_ok=True)
-            env_ = sandbox.decoder_env(Path(wd), {**(self.env or {}), **(env or {})})
+            real = os.path.realpath(workdir)
+            os.makedirs(os.path.join(real, "tmp"), exist_ok=True)
+            env_ = sandbox.decoder_env(Path(real), {**(self.env or {}), **(env or {})})
             fields = [
                 slot,
                 as_bytes,
@@ -214,7 +217,7 @@ class ForkServer:
                 int(max(1, limits.timeout_s * 2 + 1)),
                 repr(float(limits.timeout_s)),
                 repr(float(limits.memory_mb if limits.memory_kind == "rss" else 0)),
-                wd,
+                real,
                 len(argv),
                 *argv,
                 len(env_),
@@ -225,7 +228,7 @@ class ForkServer:
             data = b"".join(os.fsencode(str(f)) + b"\0" for f in fields)
             if len(self._reqs) > 64:
                 self._reqs.clear()
-            cached = self._reqs[key] = (data, Path(wd))
+            cached = self._reqs[key] = (data, Path(real))
         body, wd = cached
         try:
             os.mkdir(wd / "tmp")  # the decoder's TMPDIR, if a caller emptied the folder
@@ -245,11 +248,13 @@ class ForkServer:
         kernel's counters (:func:`~.cgroups.oom_events`), read through descriptors kept open."""
         if self._events is None:
             self._events = []
-            for kind, d in self.cg.dirs:
+            for kind, d in self.cg.dirs if self.cg is not None else ():
                 for name in (OOM_FILES.get(kind), "pids.events"):
+                    if name is None:  # a controller with no OOM counter
+                        continue
                     try:
                         self._events.append((kind if name != "pids.events" else "pids", os.open(d / name, os.O_RDONLY)))
-                    except (OSError, TypeError):
+                    except OSError:
                         pass
         oom = pids = False
         for kind, fd in self._events:
@@ -266,21 +271,27 @@ class ForkServer:
     def _send(self, p: Pending) -> bool:
         p.nonce = secrets.token_hex(12)
         data = p.nonce.encode() + b"\0" + p.body
+        stdin = self.proc.stdin if self.proc is not None else None
+        if stdin is None:
+            return False
         try:
-            self.proc.stdin.write(struct.pack(">I", len(data)) + data)
-            self.proc.stdin.flush()
+            stdin.write(struct.pack(">I", len(data)) + data)
+            stdin.flush()
             return True
         except (BrokenPipeError, OSError):
             return False
 
-    def _receive(self, deadline: float, nonce: str, watch: Watch | None = None) -> dict | str | None:
+    def _receive(self, deadline: float, nonce: str, watch: Watch | None = None) -> Reply | str | None:
         """The reply to the request sent with ``nonce`` (the server answers in order; bytes past
         it stay for the next); None when the server died or hung; "output" when the watched
         folder passed the output limit; a sentence starting "protocol-error" when what the
         channel holds is not that reply. The server's first message is its hello (``ready``):
         a server that dies before it never started; one that dies after it was ended by what it
         was running."""
-        fd = self.proc.stdout.fileno()
+        stdout = self.proc.stdout if self.proc is not None else None
+        if stdout is None:
+            return None
+        fd = stdout.fileno()
         need = 4
         while True:
             while len(self._rbuf) < need:
@@ -313,23 +324,38 @@ class ForkServer:
             return _parse_reply(reply, nonce)
 
 
-def _parse_reply(reply: bytes, nonce: str) -> dict | str:
+@dataclass(frozen=True)
+class Reply:
+    """The server's report of one decoder process: its wait status, CPU times, peak memory,
+    time, whether the server's timeout or sampled memory limit ended it, and exec's errno."""
+
+    status: int
+    utime: float
+    stime: float
+    maxrss_kb: int
+    elapsed: float
+    timed_out: bool
+    mem_hit: bool
+    exec_errno: int
+
+
+def _parse_reply(reply: bytes, nonce: str) -> Reply | str:
     """A reply's fields, or the sentence saying why it is not the reply to ``nonce``."""
     f = reply.split()
     if len(f) != 9 or f[0] != nonce.encode():
         what = "a reply for another request (a forged reply)" if len(f) == 9 else f"garbled bytes {reply[:40]!r}"
         return FORGED.format(what=what)
     try:
-        return {
-            "status": int(f[1]),
-            "utime": float(f[2]),
-            "stime": float(f[3]),
-            "maxrss_kb": int(f[4]),
-            "elapsed": float(f[5]),
-            "timed_out": f[6] == b"1",
-            "mem_hit": f[7] == b"1",
-            "exec_errno": int(f[8]),
-        }
+        return Reply(
+            status=int(f[1]),
+            utime=float(f[2]),
+            stime=float(f[3]),
+            maxrss_kb=int(f[4]),
+            elapsed=float(f[5]),
+            timed_out=f[6] == b"1",
+            mem_hit=f[7] == b"1",
+            exec_errno=int(f[8]),
+        )
     except ValueError:
         return FORGED.format(what=f"garbled bytes {reply[:40]!r}")
 
@@ -344,7 +370,15 @@ def _tail_fd(fd: int) -> str:
 class Pending:
     """One input sent to a :class:`ForkServer`."""
 
-    def __init__(self, server: ForkServer, argv, workdir: Path, limits: Limits, measure_dirs, slot: int) -> None:
+    def __init__(
+        self,
+        server: ForkServer,
+        argv: list[str],
+        workdir: Path,
+        limits: Limits,
+        measure_dirs: list[Path] | None,
+        slot: int,
+    ) -> None:
         self.server, self.argv, self.workdir, self.limits = server, argv, workdir, limits
         self.measure_dirs, self.slot = measure_dirs, slot
         self.t0 = 0.0
@@ -352,10 +386,14 @@ class Pending:
         self.nonce = ""
         self.as_limit = False
         self.sent = False
-        self.files = None
-        self.reply: dict | None = None
+        self.files: tuple[IO[bytes], IO[bytes]] | None = None
+        self.reply: Reply | str | None = None
         self.res: ProcResult | None = None
         self._waited = False
+        self.elapsed = 0.0
+        self.oom = self.pids_hit = False
+        self.out_tail: str | None = None
+        self.err_tail: str | None = None
 
     def wait(self) -> None:
         """Until the decoder has ended (its reply is in); the server is free after this."""
@@ -421,8 +459,12 @@ class Pending:
             return
         self.oom, self.pids_hit = srv._cgroup_events()
         if self.oom or self.pids_hit:  # the cgroup's counters are per server: start afresh after a hit
-            self.out_tail, self.err_tail = (_tail_fd(f.fileno()) for f in self.files)
+            self._read_tails()
             self._close_server()
+
+    def _read_tails(self) -> None:
+        if self.files is not None:
+            self.out_tail, self.err_tail = (_tail_fd(f.fileno()) for f in self.files)
 
     def _close_server(self) -> None:
         """Stop the server; inputs queued behind this one are sent again to the next one."""
@@ -437,26 +479,33 @@ class Pending:
         if self.res is not None:
             return self.res
         srv, reply = self.server, self.reply
-        if not hasattr(self, "err_tail"):
-            self.out_tail, self.err_tail = (_tail_fd(f.fileno()) for f in self.files)
+        if not isinstance(reply, Reply):  # wait() sets a result for every other reply
+            raise RuntimeError("an input without its reply or result")
+        if self.err_tail is None:
+            self._read_tails()
         srv._answers += 1
         # Each file is capped by RLIMIT_FSIZE; the folder's total is summed after a decode
         # (exit 0) and every n-th input otherwise — fuzzing inputs take ~1 ms each.
         dirs = self.measure_dirs or [self.workdir]
-        if srv.sum_outputs_every > 1 and reply["status"] != 0 and srv._answers % srv.sum_outputs_every:
+        if srv.sum_outputs_every > 1 and reply.status != 0 and srv._answers % srv.sum_outputs_every:
             dirs = []
-        notes = (["exec-failed"] if reply["exec_errno"] else []) + (["as-limit"] if self.as_limit else [])
+        notes = (["exec-failed"] if reply.exec_errno else []) + (["as-limit"] if self.as_limit else [])
         fin = Finish(
-            reply["status"],
-            (reply["utime"], reply["stime"], reply["maxrss_kb"]),
-            reply["elapsed"],
-            timed_out=reply["timed_out"],
-            mem_hit=reply["mem_hit"],
+            reply.status,
+            (reply.utime, reply.stime, reply.maxrss_kb),
+            reply.elapsed,
+            timed_out=reply.timed_out,
+            mem_hit=reply.mem_hit,
             oom=self.oom,
             pids_hit=self.pids_hit,
             notes=tuple(notes),
         )
         self.res = result(
-            self.argv, self.limits, fin, stdout_tail=self.out_tail, stderr_tail=self.err_tail, measure_dirs=dirs
+            self.argv,
+            self.limits,
+            fin,
+            stdout_tail=self.out_tail or "",
+            stderr_tail=self.err_tail or "",
+            measure_dirs=dirs,
         )
         return self.res

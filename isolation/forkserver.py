@@ -35,6 +35,8 @@ sandbox's processes alone): after each input every process but the sandbox's ini
 server itself is killed — a decoder that forked away or left its session dies with its input.
 """
 
+from __future__ import annotations
+
 import ctypes
 import os
 import resource
@@ -48,7 +50,7 @@ SLOTS = [(3, 4)]  # (stdout, stderr) descriptor pairs, from --fds OUT ERR [OUT E
 NOFILE = 1024  # descriptors per decoder process (isolation/seccomp.py)
 
 
-def _read_exact(n):
+def _read_exact(n: int) -> bytes | None:
     buf = b""
     while len(buf) < n:
         chunk = os.read(0, n - len(buf))
@@ -58,7 +60,7 @@ def _read_exact(n):
     return buf
 
 
-def _send(nonce, reply):
+def _send(nonce: str, reply: Reply) -> None:
     data = (
         f"{nonce} {reply['status']:d} {reply['utime']:.6f} {reply['stime']:.6f} {reply['maxrss_kb']:d} "
         f"{reply['elapsed']:.6f} {reply['timed_out']:d} {reply['mem_hit']:d} "
@@ -69,7 +71,7 @@ def _send(nonce, reply):
         data = data[os.write(1, data) :]
 
 
-def _set(which, value):
+def _set(which: int, value: int) -> None:
     if value > 0:
         _soft, hard = resource.getrlimit(which)
         if hard != resource.RLIM_INFINITY:
@@ -77,7 +79,7 @@ def _set(which, value):
         resource.setrlimit(which, (value, value if hard == resource.RLIM_INFINITY else hard))
 
 
-def _find(prog, env):
+def _find(prog: str, env: dict[str, str]) -> str:
     if "/" in prog:
         return prog
     for d in env.get("PATH", "/usr/bin:/bin").split(":"):
@@ -87,10 +89,10 @@ def _find(prog, env):
     return prog
 
 
-def _child(req, out_fd, err_fd, status_fd):
+def _child(req: Request, out_fd: int, err_fd: int, status_fd: int) -> None:
     """In the forked child: own session, limits, descriptors, folder; then exec (its error, if
     any, on ``status_fd``, which closes at the exec)."""
-    argv = req["argv"]
+    argv = req.argv
     try:
         os.setsid()
         null = os.open("/dev/null", os.O_RDONLY)
@@ -102,13 +104,13 @@ def _child(req, out_fd, err_fd, status_fd):
         os.closerange(4, 1 << 16)
         for s in (signal.SIGPIPE, signal.SIGINT, signal.SIGTERM):
             signal.signal(s, signal.SIG_DFL)
-        _set(resource.RLIMIT_AS, req["as"])
-        _set(resource.RLIMIT_FSIZE, req["fsize"])
-        _set(resource.RLIMIT_CPU, req["cpu"])
+        _set(resource.RLIMIT_AS, req.as_bytes)
+        _set(resource.RLIMIT_FSIZE, req.fsize)
+        _set(resource.RLIMIT_CPU, req.cpu)
         _set(resource.RLIMIT_NOFILE, NOFILE)
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
-        os.chdir(req["cwd"])
-        os.execve(_find(argv[0], req["env"]), argv, req["env"])
+        os.chdir(req.cwd)
+        os.execve(_find(argv[0], req.env), argv, req.env)
     except OSError as e:
         os.write(3, str(e.errno or 8).encode())
         os.write(2, f"fbaconf-limit: cannot execute {argv[0]!r}: {e.strerror}\n".encode())
@@ -119,7 +121,7 @@ def _child(req, out_fd, err_fd, status_fd):
         os._exit(127)
 
 
-def _rss_one(pid):
+def _rss_one(pid: int) -> float:
     try:
         with open(f"/proc/{pid}/statm", "rb") as f:
             return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
@@ -127,7 +129,7 @@ def _rss_one(pid):
         return 0.0
 
 
-def _rss_mb(pid, reap):
+def _rss_mb(pid: int, reap: bool) -> float:
     """The decoder's resident memory: its whole tree inside the sandbox's PID namespace (every
     process but its init and this server), else its own."""
     if not reap:
@@ -136,7 +138,7 @@ def _rss_mb(pid, reap):
     return sum(_rss_one(int(n)) for n in os.listdir("/proc") if n.isdigit() and int(n) not in (1, me))
 
 
-def _reap_namespace():
+def _reap_namespace() -> None:
     keep = {1, os.getpid(), os.getppid()}
     for _ in range(50):
         others = [int(n) for n in os.listdir("/proc") if n.isdigit() and int(n) not in keep]
@@ -154,23 +156,24 @@ SPAWN_MIN_AS = 256 << 20  # below this address-space limit the server forks (it 
 _LIMITS = (resource.RLIMIT_AS, resource.RLIMIT_FSIZE, resource.RLIMIT_CPU, resource.RLIMIT_NOFILE)
 
 
-_applied = {"limits": None, "cwd": None}
+# what the server last set for itself before a posix_spawn: the children's rlimits, its folder
+_applied: dict[str, object] = {"limits": None, "cwd": None}
 
 
-def _spawn(req, out_fd, err_fd):
+def _spawn(req: Request, out_fd: int, err_fd: int) -> int:
     """posix_spawn (vfork + exec: ~0.1 ms, against ~0.5 ms for forking this process) with the
     child's limits as the server's own soft limits (set once per set of limits: the server
     itself stays far below them, ignores SIGXCPU and writes no file) and the child's signal
     dispositions reset. Returns the pid, or the exec error (an errno, negated) after writing it."""
-    argv, env = req["argv"], req["env"]
-    limits = (req["as"], req["fsize"], req["cpu"], NOFILE)
+    argv, env = req.argv, req.env
+    limits = (req.as_bytes, req.fsize, req.cpu, NOFILE)
     if _applied["limits"] != limits:
         for which, value in zip(_LIMITS, limits):
             _set_soft(which, value)
         _applied["limits"] = limits
-    if _applied["cwd"] != req["cwd"]:
-        os.chdir(req["cwd"])
-        _applied["cwd"] = req["cwd"]
+    if _applied["cwd"] != req.cwd:
+        os.chdir(req.cwd)
+        _applied["cwd"] = req.cwd
     try:
         return os.posix_spawn(
             _find(argv[0], env),
@@ -189,7 +192,7 @@ def _spawn(req, out_fd, err_fd):
         return -(e.errno or 8)
 
 
-def _set_soft(which, value):
+def _set_soft(which: int, value: int) -> None:
     """The soft limit only (the hard one stays, so a later request can raise it again);
     0 = no limit."""
     _soft, hard = resource.getrlimit(which)
@@ -200,26 +203,49 @@ def _set_soft(which, value):
     resource.setrlimit(which, (value, hard))
 
 
-def _request(body):
-    """The request's fields (see the protocol above) as a dict."""
+class Request:
+    """One request's fields (see the protocol above)."""
+
+    def __init__(  # noqa: PLR0913 - the protocol's fields
+        self,
+        slot: int,
+        as_bytes: int,
+        fsize: int,
+        cpu: int,
+        timeout: float,
+        rss_mb: float,
+        cwd: str,
+        argv: list[str],
+        env: dict[str, str],
+    ) -> None:
+        self.slot, self.as_bytes, self.fsize, self.cpu = slot, as_bytes, fsize, cpu
+        self.timeout, self.rss_mb, self.cwd, self.argv, self.env = timeout, rss_mb, cwd, argv, env
+
+
+# the reply's fields (see the protocol above): numbers, the flags as 0 or 1
+Reply = dict[str, float]
+
+
+def _request(body: bytes) -> Request:
+    """The request's fields (see the protocol above)."""
     f = body.split(b"\0")[1:-1]  # (the nonce is the first field)
     argc = int(f[7])
     envc = int(f[8 + argc])
     env = dict(e.decode("utf-8", "surrogateescape").partition("=")[::2] for e in f[9 + argc : 9 + argc + envc])
-    return {
-        "slot": int(f[0]),
-        "as": int(f[1]),
-        "fsize": int(f[2]),
-        "cpu": int(f[3]),
-        "timeout": float(f[4]),
-        "rss_mb": float(f[5]),
-        "cwd": f[6].decode("utf-8", "surrogateescape"),
-        "argv": [a.decode("utf-8", "surrogateescape") for a in f[8 : 8 + argc]],
-        "env": env,
-    }
+    return Request(
+        slot=int(f[0]),
+        as_bytes=int(f[1]),
+        fsize=int(f[2]),
+        cpu=int(f[3]),
+        timeout=float(f[4]),
+        rss_mb=float(f[5]),
+        cwd=f[6].decode("utf-8", "surrogateescape"),
+        argv=[a.decode("utf-8", "surrogateescape") for a in f[8 : 8 + argc]],
+        env=env,
+    )
 
 
-def _fork(req, out_fd, err_fd):
+def _fork(req: Request, out_fd: int, err_fd: int) -> int:
     """Fork and exec in the child; the pid, or the exec error (an errno, negated)."""
     r, w = os.pipe()
     pid = os.fork()
@@ -239,13 +265,13 @@ def _fork(req, out_fd, err_fd):
     return -int(why) if why.isdigit() else -8
 
 
-def serve(req, reap):
-    out_fd, err_fd = SLOTS[int(req.get("slot", 0))]
+def serve(req: Request, reap: bool) -> Reply:
+    out_fd, err_fd = SLOTS[req.slot]
     for fd in (out_fd, err_fd):
         os.ftruncate(fd, 0)
         os.lseek(fd, 0, os.SEEK_SET)
     t0 = time.monotonic()
-    if 0 < req["as"] < SPAWN_MIN_AS:
+    if 0 < req.as_bytes < SPAWN_MIN_AS:
         pid = _fork(req, out_fd, err_fd)
     else:
         pid = _spawn(req, out_fd, err_fd)
@@ -264,8 +290,8 @@ def serve(req, reap):
         pfd = os.pidfd_open(pid)
     except (AttributeError, OSError):
         pfd = None
-    deadline = t0 + float(req["timeout"])
-    rss_mb = float(req.get("rss_mb") or 0)
+    deadline = t0 + req.timeout
+    rss_mb = req.rss_mb
     timed_out = mem_hit = False
     while True:
         wpid, status, ru = os.wait4(pid, os.WNOHANG)
@@ -308,7 +334,7 @@ def serve(req, reap):
     }
 
 
-def main():
+def main() -> None:
     args = sys.argv[1:]
     reap = "--reap-namespace" in args
     if "--fds" in args:

@@ -18,7 +18,7 @@ import sys
 NOFILE = 1024  # descriptors per process: isolation/seccomp.py's NOFILE (kept free of imports here)
 
 
-def _set(which, value):
+def _set(which: int, value: int) -> None:
     if value > 0:
         soft, hard = resource.getrlimit(which)
         if hard != resource.RLIM_INFINITY:
@@ -26,7 +26,7 @@ def _set(which, value):
         resource.setrlimit(which, (value, value if hard == resource.RLIM_INFINITY else hard))
 
 
-def main():
+def main() -> None:
     a = sys.argv
     if len(a) < 6 or "--" not in a[4:]:
         sys.stderr.write("fbaconf-limit: usage: AS FSIZE CPU [--cgroup DIR]... -- argv...\n")

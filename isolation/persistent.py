@@ -78,9 +78,12 @@ from . import preflight, sandbox
 from .cgroups import Cgroups
 from .endings import crash_report
 from .forkclient import ForkServerError
-from .process import Finish, exit_reported, kill_group, launch_server, result, stopping
-from .sandbox import Limits, ProcResult, View
-from .serve import CHUNK, MAX_ANSWER, PROTOCOL, Answer, Server  # noqa: F401 (the protocol's constants, re-exported)
+from .process import Finish, ProcResult, exit_reported, kill_group, launch_server, result, stopping
+from .sandbox import Limits, View
+from .serve import CHUNK as CHUNK  # the protocol's constants, re-exported
+from .serve import MAX_ANSWER as MAX_ANSWER
+from .serve import PROTOCOL as PROTOCOL
+from .serve import Answer, Server
 from .watch import Watch
 
 FLAKY = "not-reproduced-alone"  # the note on an ending no input reproduces alone
@@ -102,7 +105,11 @@ def abnormal(res: ProcResult) -> bool:
     )
 
 
-def ending_key(res: ProcResult) -> tuple:
+# signal, timed out, memory, output, protocol error, exit code before an answer, crash report kind and signature
+EndingKey = tuple[str | None, bool, bool, bool, bool, int | None, str | None, str | None]
+
+
+def ending_key(res: ProcResult) -> EndingKey:
     """What kind of ending ``res`` is (signal, limit, exit code, crash report): an ending of a
     kind already confirmed as the input-in-flight's is not confirmed again (module doc)."""
     rep = crash_report(res.stderr_tail)
@@ -141,7 +148,7 @@ class PersistentDecoder:
         self.alone_runs = 0  # processes started for one input each (alone)
         self._answers = 0
         self.unclaimed: list[tuple[Answer, ProcResult]] = []  # late endings of inputs given out, no on_late
-        self._owned: set[tuple] = set()  # ending kinds confirmed as the input-in-flight's (ending_key)
+        self._owned: set[EndingKey] = set()  # ending kinds confirmed as the input-in-flight's (ending_key)
 
     # ---------------------------------------------------------------- processes
     def _launch(self, *, alone: bool = False) -> Server:
@@ -152,7 +159,8 @@ class PersistentDecoder:
         why = preflight.exec_problem(self.argv, env)
         if why is not None:
             raise ForkServerError(f"cannot start the persistent decoder: {why}")
-        inner, fds, status_r = list(self.argv), [], None
+        inner, status_r = list(self.argv), None
+        fds: list[int] = []
         if sandbox.isolation() == "bwrap":
             head, status_r = sandbox.sandbox_argv(self.view, self.workdir, fds)
             inner = head + inner
@@ -184,26 +192,30 @@ class PersistentDecoder:
         finally:
             for fd in fds:
                 os.close(fd)
-        for f in (proc.stdin, proc.stdout):
+        srv = Server(proc, cg, err, status_r, as_bytes > 0)
+        for f in (srv.stdin, srv.stdout):
             os.set_blocking(f.fileno(), False)
-        return Server(proc, cg, err, status_r, as_bytes > 0)
+        return srv
 
-    def _take_spare(self, which: str = "_spare") -> Server | None:
-        spare = getattr(self, which)
-        setattr(self, which, None)
+    def _take_spare(self, *, alone: bool = False) -> Server | None:
+        if alone:
+            spare, self._alone_spare = self._alone_spare, None
+        else:
+            spare, self._spare = self._spare, None
         if spare is not None and spare.exit_status() is not None:  # it died waiting
             spare.stop()
             spare = None
         return spare
 
-    def _start(self) -> None:
+    def _start(self) -> Server:
         """The process for the next inputs: the spare if one is ready, else a new one. After a
         first restart a spare is kept starting in the background, so a decoder that crashes
         often does not wait for a sandbox to start before each next input."""
-        self.server = self._take_spare() or self._launch()
+        srv = self.server = self._take_spare() or self._launch()
         self.starts += 1
         if self.starts > 1:
             self._spare = self._launch()
+        return srv
 
     def _drop(self) -> None:
         """Stop the process in use (it ended or broke the protocol); the spare stays."""
@@ -254,14 +266,15 @@ class PersistentDecoder:
             srv = self.server
             if srv is not None and srv.exit_status() is not None:  # it ended after its last answer
                 self._ended_between(srv)
-            if self.server is None:
+            srv = self.server
+            if srv is None:
                 try:
-                    self._start()
+                    srv = self._start()
                 except ForkServerError as e:
                     a.res = ProcResult(self.argv, None, stderr_tail=str(e), notes=["exec-failed"], detail=str(e))
                     continue
             self._inflight = a
-            self.server.send(a, self.limits)  # how it went is read by _complete
+            srv.send(a, self.limits)  # how it went is read by _complete
 
     def _ended_between(self, srv: Server) -> None:
         """The process ended after answering its last input, nothing sent since: an exit is let
@@ -270,12 +283,14 @@ class PersistentDecoder:
         last = srv.last
         res = self._ended(last, srv, None, answered=True) if last is not None else None
         self._drop()
-        if res is not None and abnormal(res):
+        if last is not None and res is not None and abnormal(res):
             self._whose(res, None, last)
 
     def _complete(self, a: Answer) -> None:
         """Read ``a``'s answer (``a`` is in flight) and judge it; then the next input goes out."""
         srv = self.server
+        if srv is None:  # an input is in flight only on a running process
+            raise RuntimeError("an input in flight without its process")
         prev = srv.last  # the input this process answered before ``a``, if any
         watch = Watch(
             self.limits, [self.workdir], pid=srv.proc.pid, procs=srv.cg.procs if srv.cg.dirs else None, t0=a.t0
@@ -291,7 +306,7 @@ class PersistentDecoder:
             res = self._ended(a, srv, None if got == "eof" else got)
             self._drop()
         else:  # a protocol error: of this input, or of the previous one (module doc)
-            whose, why = got
+            whose, why = got if isinstance(got, tuple) else ("this", f"ended unexpectedly ({got})")
             if whose == "previous" and prev is not None and not prev.consumed:
                 prev.res = self._broken(prev, srv, why)
                 self._drop()
@@ -318,6 +333,8 @@ class PersistentDecoder:
         """``a`` ran again as the first input of a fresh process after an ending it may not own
         (``a.suspect``): an ending now is its own; a clean answer sends the question on to the
         input answered before it (module doc)."""
+        if a.suspect is None:  # only an input run again to confirm an ending comes here
+            raise RuntimeError("confirming an ending no input is suspected of")
         (first, prev), a.suspect = a.suspect, None
         a.res = res  # its own ending or result, whether the first ending was its own or not
         if not abnormal(res):
@@ -382,7 +399,7 @@ class PersistentDecoder:
         inputs in turn: one started ahead for runs alone, the next one starting while this one
         runs — a decoder that crashes often, or a minimisation, does not wait for a sandbox.)"""
         try:
-            srv = self._take_spare("_alone_spare") or self._launch(alone=True)
+            srv = self._take_spare(alone=True) or self._launch(alone=True)
         except ForkServerError as e:
             return ProcResult(self.argv, None, stderr_tail=str(e), notes=["exec-failed"], detail=str(e))
         try:

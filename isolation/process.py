@@ -9,6 +9,7 @@ the fork server's client and the persistent protocol share.
 from __future__ import annotations
 
 import os
+import resource
 import shutil
 import signal
 import stat
@@ -18,11 +19,15 @@ import tempfile
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO, TYPE_CHECKING
 
 from fbaconf.safefs import tree_size
 
 from .cgroups import Cgroups
 from .seccomp import NOFILE
+
+if TYPE_CHECKING:
+    from .sandbox import Limits
 
 LIMIT_LAUNCHER = Path(__file__).with_name("launcher.py")
 _SIGNALS = {int(s) for s in signal.Signals}
@@ -57,7 +62,7 @@ class Finish:
     harness (or the kernel, for the cgroup's) enforced."""
 
     status: int
-    rusage: object = None
+    rusage: resource.struct_rusage | tuple[float, float, int] | None = None
     elapsed: float = 0.0
     timed_out: bool = False
     mem_hit: bool = False  # resident-set limit (sampled)
@@ -81,7 +86,7 @@ _MEMORY_TEXT = (
 
 
 def result(
-    argv: list[str], limits, fin: Finish, *, stdout_tail: str, stderr_tail: str, measure_dirs: list[Path]
+    argv: list[str], limits: Limits, fin: Finish, *, stdout_tail: str, stderr_tail: str, measure_dirs: list[Path]
 ) -> ProcResult:
     """The :class:`ProcResult` of one finished decoder process: signal names, the limit that
     ended it, the output it left — shared by the one-shot launcher, the fork server and the
@@ -215,7 +220,7 @@ def launch_argv(as_bytes: int, fsize: int, cpu: int, cgroups: list[Path], inner:
     return argv, False
 
 
-def release(proc, cgroups: list[Path]) -> str | None:
+def release(proc: subprocess.Popen[bytes], cgroups: list[Path]) -> str | None:
     """Move the held launcher into ``cgroups`` and let it go; the reason when it cannot be."""
     try:
         for d in cgroups:
@@ -226,8 +231,9 @@ def release(proc, cgroups: list[Path]) -> str | None:
         proc.wait()
         return f"fbaconf-limit: cannot join cgroup {d}: {e.strerror}"
     try:
-        proc.stdin.write(b"go\n")
-        proc.stdin.close()
+        if proc.stdin is not None:
+            proc.stdin.write(b"go\n")
+            proc.stdin.close()
     except OSError:
         pass  # the shell died: its ending is the result
     return None
@@ -235,16 +241,16 @@ def release(proc, cgroups: list[Path]) -> str | None:
 
 def launch_server(  # noqa: PLR0913 - what starts a server, as sandbox.run takes it
     inner: list[str],
-    limits,
+    limits: Limits,
     *,
     cwd: Path,
     env: dict[str, str],
-    stderr=None,
+    stderr: int | IO[bytes] | None = None,
     pass_fds: tuple[int, ...] = (),
     as_bytes: int = 0,
     fsize: int = 0,
     cg: Cgroups | None = None,
-) -> tuple[subprocess.Popen, Cgroups]:
+) -> tuple[subprocess.Popen[bytes], Cgroups]:
     """Start a long-lived process (a fork server, a persistent decoder) through the limit
     launcher, in its own cgroups (``cg``, or new ones for ``limits``) and session, with
     stdin/stdout as pipes; registered so :func:`stop_all` kills it. ``as_bytes``/``fsize``:
@@ -283,13 +289,14 @@ def launch_server(  # noqa: PLR0913 - what starts a server, as sandbox.run takes
     return proc, cg
 
 
-def stop_server(proc: subprocess.Popen | None, cg: Cgroups | None, *, grace_s: float = 0.0) -> None:
+def stop_server(proc: subprocess.Popen[bytes] | None, cg: Cgroups | None, *, grace_s: float = 0.0) -> None:
     """Stop what :func:`launch_server` started: close its stdin (a well-behaved server exits;
     ``grace_s`` to let it), kill its process group, reap it, close its pipes and cgroups."""
     if proc is not None:
         _RUNNING.discard(proc.pid)
         try:
-            proc.stdin.close()
+            if proc.stdin is not None:
+                proc.stdin.close()
         except OSError:
             pass
         if grace_s:
@@ -303,7 +310,8 @@ def stop_server(proc: subprocess.Popen | None, cg: Cgroups | None, *, grace_s: f
         except subprocess.TimeoutExpired:
             pass
         try:
-            proc.stdout.close()
+            if proc.stdout is not None:
+                proc.stdout.close()
         except OSError:
             pass
     if cg is not None:

@@ -12,6 +12,7 @@ import os
 from dataclasses import dataclass
 
 from . import bounds, cgroups, sandbox, seccomp
+from .subject import Decoder
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ class IsolationReport:
         return "bubblewrap sandbox (own PID, network, IPC namespaces; the view of docs/harness.md) and cgroups"
 
 
-def report(adapter=None) -> IsolationReport:
+def report(adapter: Decoder | None = None) -> IsolationReport:
     """The machine's isolation, and ``adapter``'s limits in force (a command decoder) or that it
     runs in-process."""
     bw = sandbox.isolation() == "bwrap"
@@ -87,7 +88,7 @@ def report(adapter=None) -> IsolationReport:
             "the seccomp filter (an architecture it does not know): a decoder can take the host user's "
             "inotify instances"
         )
-    in_process = adapter is not None and getattr(adapter, "kind", None) != "command"
+    in_process = adapter is not None and adapter.kind != "command"
     return IsolationReport(
         bw,
         os.environ.get("FBACONF_SANDBOX") == "none",
@@ -95,6 +96,6 @@ def report(adapter=None) -> IsolationReport:
         bw and seccomp.supported(),
         tuple(missing),
         in_process,
-        getattr(adapter, "name", ""),
+        adapter.name if adapter is not None else "",
         tuple(bounds.limits_in_force(adapter)) if adapter is not None else (),
     )

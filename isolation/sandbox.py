@@ -57,12 +57,14 @@ import importlib.util
 import math
 import os
 import pkgutil
+import resource
 import select
 import shutil
 import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,26 +72,64 @@ import fbaconf
 
 from . import preflight, seccomp
 from .cgroups import Cgroups
-from .process import (  # noqa: F401 (the names callers import from here)
-    _RUNNING,
-    _STOP,
-    LIMIT_LAUNCHER,
-    TAIL_BYTES,
-    Finish,
-    ProcResult,
-    exit_reported,
-    kill_group,
-    launch_argv,
-    launch_server,
-    pidfd,
-    read_tail,
-    release,
-    reset_stop,
-    result,
-    stop_all,
-    stop_server,
-    stopping,
-    tempfile_dir,
+
+# the names callers import from here, re-exported (`X as X`)
+from .process import (
+    _RUNNING as _RUNNING,
+)
+from .process import (
+    _STOP as _STOP,
+)
+from .process import (
+    LIMIT_LAUNCHER as LIMIT_LAUNCHER,
+)
+from .process import (
+    TAIL_BYTES as TAIL_BYTES,
+)
+from .process import (
+    Finish as Finish,
+)
+from .process import (
+    ProcResult as ProcResult,
+)
+from .process import (
+    exit_reported as exit_reported,
+)
+from .process import (
+    kill_group as kill_group,
+)
+from .process import (
+    launch_argv as launch_argv,
+)
+from .process import (
+    launch_server as launch_server,
+)
+from .process import (
+    pidfd as pidfd,
+)
+from .process import (
+    read_tail as read_tail,
+)
+from .process import (
+    release as release,
+)
+from .process import (
+    reset_stop as reset_stop,
+)
+from .process import (
+    result as result,
+)
+from .process import (
+    stop_all as stop_all,
+)
+from .process import (
+    stop_server as stop_server,
+)
+from .process import (
+    stopping as stopping,
+)
+from .process import (
+    tempfile_dir as tempfile_dir,
 )
 from .watch import Watch
 
@@ -229,7 +269,7 @@ def keep_secret(path: Path) -> None:
 _NEVER_SHOWN = ("/proc", "/sys", "/dev", "/run")
 
 
-def view_problem(path: Path, hidden=()) -> str | None:
+def view_problem(path: Path, hidden: Iterable[Path | str] = ()) -> str | None:
     """Why a folder must not be shown to a decoder read-only, or None: the whole file system,
     a top-level folder other than the system ones (``/tmp``, ``/home``, ``/root``: every user's
     and every run's files), anything under /proc, /sys, /dev or /run (the host's processes), a
@@ -468,7 +508,9 @@ def keep_file(src: Path, dst: Path) -> None:
             os.close(fd)
 
 
-def _wait(proc, t0: float, limits: Limits, watch: Watch):
+def _wait(
+    proc: subprocess.Popen[bytes], t0: float, limits: Limits, watch: Watch
+) -> tuple[int, resource.struct_rusage | None, str | None]:
     """Wait for the decoder to end, its deadline, a limit the :class:`~.watch.Watch` sees passed
     (output, sampled resident memory) or a stop: blocked on a pidfd where the kernel has them
     (no polling delay added to a fast decoder's run), else polled with a backoff up to 10 ms.

@@ -34,6 +34,7 @@ import errno
 import os
 import platform
 import struct
+from typing import TypedDict
 
 NOFILE = 1024  # descriptors per decoder process (RLIMIT_NOFILE)
 
@@ -48,7 +49,17 @@ _NR, _ARCH, _ARG0 = 0, 4, 16  # offsets in struct seccomp_data (arg0's low word:
 
 
 # calling convention -> the call numbers the filter judges there
-_CALLS = {
+class _Calls(TypedDict):
+    """An architecture's numbers of the system calls the filter decides on."""
+
+    inotify: tuple[int, ...]
+    clone: int
+    unshare: int
+    setns: int
+    clone3: int
+
+
+_CALLS: dict[int, _Calls] = {
     0xC000003E: {"inotify": (253, 294, 300), "clone": 56, "unshare": 272, "setns": 308, "clone3": 435},  # x86-64
     0x40000003: {"inotify": (291, 332, 338), "clone": 120, "unshare": 310, "setns": 346, "clone3": 435},  # i386
     0xC00000B7: {"inotify": (26, 262), "clone": 220, "unshare": 97, "setns": 268, "clone3": 435},  # AArch64
@@ -60,8 +71,14 @@ def supported() -> bool:
     return platform.machine() in ("x86_64", "amd64", "aarch64", "arm64")
 
 
-def _instructions() -> list[tuple]:
-    ins: list[tuple] = [(_LD_W_ABS, 0, 0, _ARCH)]
+# one BPF instruction (code, jump-if-true and jump-if-false: a label name, or 0 or None for the next),
+# or a label naming the next instruction
+_Ins = tuple[int, str | int | None, str | int | None, int]
+_Label = tuple[str, str]
+
+
+def _instructions() -> list[_Ins | _Label]:
+    ins: list[_Ins | _Label] = [(_LD_W_ABS, 0, 0, _ARCH)]
     for i, arch in enumerate(_CALLS):
         ins.append((_JEQ, f"arch{i}", None, arch))
     ins.append((_RET, 0, 0, _ALLOW))
@@ -94,9 +111,10 @@ def _instructions() -> list[tuple]:
 
 def program() -> bytes:
     """The filter as ``struct sock_filter`` records (what ``--seccomp FD`` reads)."""
-    labels, code = {}, []
+    labels: dict[str, int] = {}
+    code: list[_Ins] = []
     for item in _instructions():
-        if item[0] == "label":
+        if len(item) == 2:
             labels[item[1]] = len(code)
         else:
             code.append(item)

@@ -9,15 +9,21 @@ import select
 import subprocess
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
-from .process import stop_server, tail_from
-from .sandbox import Limits, ProcResult
+from .cgroups import Cgroups
+from .process import ProcResult, stop_server, tail_from
+from .sandbox import Limits
 from .watch import Watch
 
 PROTOCOL = 2
 MAX_ANSWER = 4096  # bytes of one answer line
 CHUNK = 1 << 16
+
+# How an input ended while the harness waited on it: "answered", "eof", "timeout", "memory",
+# "output", or (whose, why) for a broken protocol — whose: "this" input's doing or the
+# "previous" one's
+End = str | tuple[str, str]
 
 if TYPE_CHECKING:
     from .persistent import PersistentDecoder
@@ -27,8 +33,13 @@ class Server:
     """One running ``serve`` process: its pipes (non-blocking), cgroups, stderr file, the
     bubblewrap status descriptor, what it has sent back so far and the input it answered last."""
 
-    def __init__(self, proc: subprocess.Popen, cg, err, status_r: int | None, as_limit: bool) -> None:
+    def __init__(
+        self, proc: subprocess.Popen[bytes], cg: Cgroups, err: IO[bytes], status_r: int | None, as_limit: bool
+    ) -> None:
+        if proc.stdin is None or proc.stdout is None:
+            raise ValueError("a serve process is started with its stdin and stdout as pipes")
         self.proc, self.cg, self.err, self.status_r, self.as_limit = proc, cg, err, status_r, as_limit
+        self.stdin, self.stdout = proc.stdin, proc.stdout
         self.buf = b""
         self.last: Answer | None = None
         self.err_mark: int | None = None  # the end of its stderr when its last answer was read
@@ -70,7 +81,7 @@ class Server:
         a.err_start = self.err_mark if self.err_mark is not None else os.fstat(self.err.fileno()).st_size
         a.t0 = time.perf_counter()
         data = memoryview(f"{a.id} {len(a.data)} {a.out_path}\n".encode() + a.data)
-        wfd, rfd = self.proc.stdin.fileno(), self.proc.stdout.fileno()
+        wfd, rfd = self.stdin.fileno(), self.stdout.fileno()
         deadline = a.t0 + limits.timeout_s
         if not self._take(rfd, a, wait=False):
             return
@@ -115,11 +126,11 @@ class Server:
             return False
         return True
 
-    def read_answer(self, a: Answer, deadline: float, watch: Watch):
+    def read_answer(self, a: Answer, deadline: float, watch: Watch) -> End:
         """Wait for ``a``'s answer: "answered" (``a.line`` set), "eof", "timeout", "memory",
         "output", or (whose, why) when the decoder broke the protocol — whose: "this" input's
         doing or the "previous" one's (module doc)."""
-        rfd = self.proc.stdout.fileno()
+        rfd = self.stdout.fileno()
         if a.pending_end is not None:
             return a.pending_end
         if a.early:
@@ -138,7 +149,7 @@ class Server:
                     return hit
                 continue
             if not self._take(rfd, a):
-                return a.pending_end
+                return a.pending_end or "eof"  # _take set it
         line, _, rest = self.buf.partition(b"\n")
         self.buf = b""
         head = line.split(b" ", 2)
@@ -158,15 +169,15 @@ class Server:
         a.line = line
         return "answered"
 
-    def finish(self, a: Answer, deadline: float, watch: Watch):
+    def finish(self, a: Answer, deadline: float, watch: Watch) -> End:
         """After the answer of the process's only input (:meth:`PersistentDecoder.alone`): close
         its stdin and wait for it to end — "eof" when it did (closed its output), a limit's
         name, or ("this", why) when it wrote more."""
         try:
-            self.proc.stdin.close()
+            self.stdin.close()
         except OSError:
             pass
-        rfd = self.proc.stdout.fileno()
+        rfd = self.stdout.fileno()
         while True:
             now = time.perf_counter()
             if now >= deadline:
@@ -177,7 +188,7 @@ class Server:
                     return hit
                 continue
             if not self._take(rfd, a):
-                return a.pending_end
+                return a.pending_end or "eof"  # _take set it
             if self.buf:
                 return ("this", f"wrote {self.buf[:60]!r} after its answer to request {a.id}, its only request")
 
@@ -203,7 +214,7 @@ class Answer:
         self.err_start = 0
         self.line = b""
         self.early = False  # bytes came before its request was written in full
-        self.pending_end = None  # how it ended while its input was written
+        self.pending_end: End | None = None  # how it ended while its input was written
 
     def wait(self) -> None:
         dec = self.dec
@@ -235,4 +246,6 @@ class Answer:
             while nxt.res is None and nxt.suspect is not None and nxt.suspect[1] is self and dec._inflight is nxt:
                 dec._complete(nxt)  # its ending is being confirmed: it may be this input's
         self.consumed = True
+        if self.res is None:  # wait() returns only once it is set
+            raise RuntimeError("an input's result was read before it ended")
         return self.res

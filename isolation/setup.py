@@ -23,11 +23,15 @@ stdout and stderr, the limits in force and the likely fix (:func:`report`):
 from __future__ import annotations
 
 import re
+from collections.abc import Collection, Iterable
 from dataclasses import replace
+from pathlib import Path
 
 from fbaconf.errors import FbaconfInputError
 
 from . import bounds, endings, sandbox
+from .sandbox import Limits, View
+from .subject import Ended
 
 HEAD_LINES, TAIL_LINES = 5, 10  # of stdout and stderr in a set-up error: a runtime's first words and its last
 _FINE = (endings.EndingKind.DECODED, endings.EndingKind.NOT_SUPPORTED)
@@ -39,19 +43,30 @@ class SetupError(FbaconfInputError):
     rule = "decoder-setup"
 
 
-def probe(argv, workdir, limits, *, name: str, what: str, file: str, **run) -> None:
+def probe(  # noqa: PLR0913 - what sandbox.run takes, and what names the run in the error
+    argv: list[str],
+    workdir: Path,
+    limits: Limits,
+    *,
+    name: str,
+    what: str,
+    file: str,
+    env: dict[str, str] | None = None,
+    view: View | None = None,
+    reject_exit_codes: Collection[int] = endings.DEFAULT_REJECT_EXIT_CODES,
+) -> None:
     """Run ``argv`` once as a case runs (``run``: :func:`~.sandbox.run`'s ``env``, ``view``, and
     ``reject_exit_codes``); raise :class:`SetupError` (naming ``what`` was run) unless it decodes
     or answers "not supported"."""
-    codes = run.pop("reject_exit_codes", endings.DEFAULT_REJECT_EXIT_CODES)
-    res = sandbox.run(argv, workdir, limits, **run)
+    codes = reject_exit_codes
+    res = sandbox.run(argv, workdir, limits, env=env, view=view)
     ending = endings.classify(res, limits, codes, name=name)
     if ending.kind in _FINE:
         return
     fixes = []
     if "as-limit" in res.notes:
         again = endings.classify(
-            sandbox.run(argv, workdir, replace(limits, memory_kind="rss"), **run), limits, codes, name=name
+            sandbox.run(argv, workdir, replace(limits, memory_kind="rss"), env=env, view=view), limits, codes, name=name
         )
         if again.kind in _FINE:
             fixes.append(
@@ -66,7 +81,7 @@ def probe(argv, workdir, limits, *, name: str, what: str, file: str, **run) -> N
     )
 
 
-def report(name: str, limits, what: str, stdout: str, stderr: str, fixes: list[str]) -> str:
+def report(name: str, limits: Limits, what: str, stdout: str, stderr: str, fixes: list[str]) -> str:
     """The set-up error's text: what happened, the program's own words, the limits, the fix."""
     if not fixes:
         fixes = [
@@ -95,14 +110,14 @@ _WORKDIR = re.compile(r"/[^\s'\"]*/case-[A-Za-z0-9_]+")
 _KILLED = ("Timeout", "Crash", "Error")  # outcomes that are the ending itself
 
 
-def _key(r) -> tuple:
+def _key(r: Ended) -> tuple[str, int | None, str | None, str | None, str]:
     """How one case's process ended, its own file names normalised (a case result's fields)."""
     text = _WORKDIR.sub("<case>", r.stderr_tail or "").replace(r.case_id.split("/", 1)[-1], "<input>")
     how = r.outcome.value if r.outcome.value in _KILLED else "exited"
     return how, r.exit_code, r.signal, r.crash_kind, text.strip()
 
 
-def identical(name: str, limits, results, valid: set[str]) -> str | None:
+def identical(name: str, limits: Limits, results: Iterable[Ended], valid: set[str]) -> str | None:
     """The set-up error's text when every result that ran the decoder ended the same way and
     none decoded (module doc), else None. ``valid``: the ids of the valid-stream cases."""
     ran = [r for r in results if r.outcome.value != "NotSupported"]

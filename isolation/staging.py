@@ -6,13 +6,19 @@ from __future__ import annotations
 
 import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from fbaconf.conformance.suite import Case
+
+    from .subject import Decoder
 
 # Suffixes of the forms a case's expected results come in (or could be mistaken for): an
 # auxiliary file with one of them is never staged, whatever a suite lists.
 _NEVER_AUXILIARY = frozenset({".fap", ".fba", ".npz", ".bt", ".bifs", ".json"})
 
 
-def staged_inputs(adapter, case) -> dict[str, Path]:
+def staged_inputs(adapter: Decoder, case: Case) -> dict[str, Path]:
     """What a decoder's case folder holds (placeholder -> the suite file copied there): exactly
     the input forms ``adapter.inputs`` accepts — the ``.fba`` when it accepts ``fba`` (never the
     case's ``.fap``: that text is the reference decoding, i.e. the expected output); the
@@ -37,7 +43,7 @@ def staged_inputs(adapter, case) -> dict[str, Path]:
     return out
 
 
-def auxiliary_files(case) -> list[Path]:
+def auxiliary_files(case: Case) -> list[Path]:
     """The files a case lists beside its inputs (a texture its scene names by a relative URL):
     never one of the case's input or golden forms."""
     if case.suite_dir is None:
@@ -51,7 +57,7 @@ def auxiliary_files(case) -> list[Path]:
     ]
 
 
-def stage(adapter, case, workdir: Path) -> tuple[dict[str, str], list[str]]:
+def stage(adapter: Decoder, case: Case, workdir: Path) -> tuple[dict[str, str], list[str]]:
     """Make ``workdir``: ``in/`` with copies of :func:`staged_inputs` and :func:`auxiliary_files`
     and of each face stream, ``out/`` (with ``images/`` and ``faces/``) for what the decoder
     writes. Returns (placeholder -> path, the face streams' paths)."""

@@ -31,6 +31,7 @@ import functools
 import hashlib
 import os
 import threading
+from collections.abc import Iterable
 from pathlib import Path
 
 from fbaconf.conformance.suite import golden_root, suites_root
@@ -98,11 +99,11 @@ def _marker(d: Path) -> str | None:
     return None
 
 
-_CACHE: dict[tuple, str | None] = {}
+_CACHE: dict[tuple[Path, tuple[Path, ...]], str | None] = {}
 _LOCK = threading.Lock()
 
 
-def folder_problem(folder: Path, hidden=()) -> str | None:
+def folder_problem(folder: Path, hidden: Iterable[Path | str] = ()) -> str | None:
     """Why ``folder`` must not be shown to a decoder, judged by content (see the module doc),
     or None; the folders in ``hidden`` (emptied in the sandbox) are not walked. Cached."""
     folder = Path(os.path.abspath(folder))
@@ -189,7 +190,7 @@ def named_paths(args: list[str]) -> list[Path]:
     return [Path(p) for p in out]
 
 
-def _under(p: Path, roots) -> bool:
+def _under(p: Path, roots: Iterable[Path | str]) -> bool:
     return any(p == r or r in p.parents for r in map(Path, roots))
 
 
@@ -213,7 +214,9 @@ def command_folders(
     return out
 
 
-def checked(shown: list[tuple[Path, str]], hidden=(), trusted=()) -> tuple[list[Path], tuple | None]:
+def checked(
+    shown: list[tuple[Path, str]], hidden: Iterable[Path | str] = (), trusted: Iterable[Path | str] = ()
+) -> tuple[list[Path], tuple[Path, str, str] | None]:
     """The folders of ``shown`` a view may hold (the system folders every sandbox shows left
     out), and the first that it may not: (folder, why it is shown, why not), or None. Each is
     judged by place (:func:`~.sandbox.view_problem`) and, unless ``trusted`` (the bundled

@@ -21,8 +21,12 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from fbaconf.safefs import tree_size
+
+if TYPE_CHECKING:
+    from .sandbox import Limits
 
 FIRST_S = 0.02  # the first output measurement, after the start
 RSS_EVERY_S = 0.01
@@ -69,7 +73,7 @@ class Watch:
 
     def __init__(
         self,
-        limits,
+        limits: Limits,
         dirs: list[Path],
         *,
         pid: int | None = None,
