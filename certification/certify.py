@@ -27,20 +27,22 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from fbaconf._atomic import atomic_write_text
 from fbaconf.conformance import official
 from fbaconf.conformance.coverage_table import points_of
 from fbaconf.conformance.golden import MANIFEST
-from fbaconf.conformance.suite import golden_root, load_suites
+from fbaconf.conformance.suite import Case, golden_root, load_suites
 from fbaconf.errors import FbaconfInputError
 from fbaconf.harness import reports
-from fbaconf.harness.adapters import CommandAdapter, resolve
+from fbaconf.harness.adapters import Adapter, CommandAdapter, resolve
 from fbaconf.harness.preflight import preflight
+from fbaconf.harness.results import RunRecord
 from fbaconf.harness.selection import claim_covers, select_cases
 from fbaconf.harness.session import RunOptions, execute, write_reports
 from fbaconf.harness.usage import UsageError, lab_folders, resolve_claim
-from fbaconf.harness.verdict import describe
+from fbaconf.harness.verdict import ClaimVerdict, describe
 from fbaconf.isolation import sandbox
 from fbaconf.isolation.bounds import DEFAULT_CEILINGS, Ceilings, limits_in_force
 from fbaconf.isolation.report import report
@@ -99,7 +101,7 @@ class CertifyOptions:
     ceilings: Ceilings = DEFAULT_CEILINGS  # the most a manifest's [limits] may ask for (--max-*)
 
 
-def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions | None = None, **kw) -> int:
+def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions | None = None, **kw: Any) -> int:
     """Certify ``decoder`` for ``claim`` into the package folder ``out`` (``kw``: fields of
     :class:`CertifyOptions`). Returns the exit code (0 pass, 1 fail, 2 set-up, 3 speed)."""
     o = options or CertifyOptions(**kw)
@@ -211,7 +213,7 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
     return record.exit_code
 
 
-def timing_note(record, adapter) -> dict:
+def timing_note(record: RunRecord, adapter: Adapter) -> dict[str, Any]:
     """What the FAP stage could not say about timing: for ``.fap`` output, the cases whose plane
     times (time codes, rate changes) the text cannot carry."""
     if adapter.faps_format != "fap" or "faps" not in adapter.outputs:
@@ -224,7 +226,7 @@ def timing_note(record, adapter) -> dict:
     return {"verified": False, "cases_not_verified": cases}
 
 
-def claim_basis(record, cases, claim: str) -> dict:
+def claim_basis(record: RunRecord, cases: list[Case], claim: str) -> dict[str, Any]:
     """What a verdict rests on: the tools the claim needs, the coverage points exercised by the
     cases that passed (of those the claim's cases exercise), and the required cases the decoder
     could not take."""
@@ -246,7 +248,7 @@ def claim_basis(record, cases, claim: str) -> dict:
     }
 
 
-def _statement(record, cv, speed: bool, basis: dict) -> str:
+def _statement(record: RunRecord, cv: ClaimVerdict, speed: bool, basis: dict[str, Any]) -> str:
     c = record.counts()
     lines = [
         f"# fbaconf certification: {record.decoder['name']} — {record.claim}",
@@ -313,7 +315,7 @@ def _statement(record, cv, speed: bool, basis: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _timing_lines(timing: dict) -> list[str]:
+def _timing_lines(timing: dict[str, Any]) -> list[str]:
     if timing.get("verified", True):
         return []
     cases = timing.get("cases_not_verified") or []
@@ -333,7 +335,7 @@ def _timing_lines(timing: dict) -> list[str]:
     return out
 
 
-def _provisional_lines(record, cv) -> list[str]:
+def _provisional_lines(record: RunRecord, cv: ClaimVerdict) -> list[str]:
     declared = list(record.decoder.get("readings") or [])
     out = [
         "",

@@ -11,6 +11,7 @@ SUITES); 1 otherwise. A certificate made ``--allow-unisolated`` verifies with UN
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -20,10 +21,10 @@ from fbaconf.harness.usage import UsageError
 from fbaconf.isolation.bounds import ceilings_from
 
 from . import certify
-from .package import NOT_CHECKED, SIGNED, UNSIGNED, verify
+from .package import Signature, verify
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     c = sub.add_parser(
         "certify",
         help="certify a decoder for a claim (or verify a certificate, make a key)",
@@ -70,7 +71,7 @@ def register(sub) -> None:
     c.set_defaults(func=cmd_certify)
 
 
-def cmd_certify(args) -> int:
+def cmd_certify(args: argparse.Namespace) -> int:
     if args.action == "keygen":
         if not args.output:
             raise UsageError("certify keygen needs -o DIR")
@@ -97,7 +98,7 @@ def cmd_certify(args) -> int:
     return certify.certify(args.decoder, args.claim, args.output.resolve(), options)
 
 
-def _verify(args) -> int:
+def _verify(args: argparse.Namespace) -> int:
     """``certify verify``: one line on stdout (problems before it on stderr); exit 0 only when
     the digests and the verdict hold and the signature was checked — or the package is
     unsigned (the line says anyone could have written it), or --unsigned-ok."""
@@ -121,14 +122,14 @@ def _verify(args) -> int:
             f"--unofficial-ok accepts them) — {what}: {verdict}"
         )
         return 1
-    if v.state == SIGNED:
-        print(f"certify verify: OK ({SIGNED} with {args.pubkey}) — {what}: {verdict}")
+    if v.state == Signature.SIGNED:
+        print(f"certify verify: OK ({Signature.SIGNED} with {args.pubkey}) — {what}: {verdict}")
         return 0
-    if v.state == UNSIGNED:
-        print(f"certify verify: OK ({UNSIGNED}) — {what}: {verdict}")
+    if v.state == Signature.UNSIGNED:
+        print(f"certify verify: OK ({Signature.UNSIGNED}) — {what}: {verdict}")
         return 0
-    if v.state == NOT_CHECKED and args.unsigned_ok:
-        print(f"certify verify: OK ({NOT_CHECKED}; accepted by --unsigned-ok) — {what}: {verdict}")
+    if v.state == Signature.NOT_CHECKED and args.unsigned_ok:
+        print(f"certify verify: OK ({Signature.NOT_CHECKED}; accepted by --unsigned-ok) — {what}: {verdict}")
         return 0
     print(
         f"certify verify: NOT VERIFIED ({v.state}: give --pubkey, or --unsigned-ok to accept the digests "

@@ -25,9 +25,11 @@ import json
 import os
 import re
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
-from types import SimpleNamespace
+from typing import Any, Literal, overload
 
 from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import serialization
@@ -53,10 +55,17 @@ MAX_PACKAGE_BYTES = 1 << 30
 MAX_PACKAGE_FILES = 20_000
 MAX_JSON_DEPTH = 64
 QUOTE_CHARS = 80
-UNSIGNED = "unsigned: anyone could have written this"
-NOT_CHECKED = "signed, but the signature was not checked"
-INVALID = "signature INVALID"
-SIGNED = "signed, signature checked"
+
+
+class Signature(StrEnum):
+    """What a package's signature vouches for, in the words ``certify verify`` prints."""
+
+    UNSIGNED = "unsigned: anyone could have written this"
+    NOT_CHECKED = "signed, but the signature was not checked"
+    INVALID = "signature INVALID"
+    SIGNED = "signed, signature checked"
+
+
 _SUMS_LINE = re.compile(r"([0-9a-f]{64})  (\S(?:.*\S)?)")
 
 
@@ -84,7 +93,11 @@ def keygen(out_dir: Path) -> tuple[Path, Path]:
     return key_path, pub_path
 
 
-def load_key(path: Path, private: bool):
+@overload
+def load_key(path: Path, private: Literal[True]) -> Ed25519PrivateKey: ...
+@overload
+def load_key(path: Path, private: Literal[False]) -> Ed25519PublicKey: ...
+def load_key(path: Path, private: bool) -> Ed25519PrivateKey | Ed25519PublicKey:
     """An Ed25519 key read (once) from a PEM file; :class:`SignatureError` for anything else.
     ``certify --key`` reads its key with this before any decoder starts."""
     try:
@@ -97,14 +110,13 @@ def load_key(path: Path, private: bool):
     except (FbaconfInputError, ValueError, TypeError) as e:
         why = e.message if isinstance(e, FbaconfInputError) else str(e)[:QUOTE_CHARS]
         raise SignatureError(f"not a PEM {'private' if private else 'public'} key: {why}", file=str(path)) from None
-    want = Ed25519PrivateKey if private else Ed25519PublicKey
-    if not isinstance(key, want):
+    if not isinstance(key, Ed25519PrivateKey if private else Ed25519PublicKey):
         raise SignatureError("not an Ed25519 key (make one with `fbaconf certify keygen`)", file=str(path))
     return key
 
 
 # ------------------------------------------------------------------ writing
-def seal(pkg: Path, key=None) -> bytes:
+def seal(pkg: Path, key: Ed25519PrivateKey | None = None) -> bytes:
     """Write ``SHA256SUMS`` over every file of ``pkg`` (``certificate.json`` included) and,
     given a loaded private ``key``, ``SIGNATURE`` over those bytes. Returns the digest list."""
     pkg = Path(pkg)
@@ -123,7 +135,11 @@ def seal(pkg: Path, key=None) -> bytes:
 
 # ------------------------------------------------------------------ the verdict, from the results
 def derive_verdict(
-    results: list[dict], *, strict: bool, speed: list[dict] | None, declared: list[str] | tuple[str, ...] = ()
+    results: list[dict[str, Any]],
+    *,
+    strict: bool,
+    speed: list[dict[str, Any]] | None,
+    declared: list[str] | tuple[str, ...] = (),
 ) -> ClaimVerdict:
     """A claim's verdict from its required cases' result lines, the speed results (None: not
     measured) and the decoder's declared other readings (:mod:`fbaconf.harness.verdict`): the
@@ -131,7 +147,7 @@ def derive_verdict(
     return claim_verdict(results, strict=strict, speed=speed, declared=declared)
 
 
-def counts(results: list[dict]) -> dict[str, int]:
+def counts(results: list[dict[str, Any]]) -> dict[str, int]:
     out: dict[str, int] = {}
     for r in results:
         out[str(r.get("outcome"))] = out.get(str(r.get("outcome")), 0) + 1
@@ -142,8 +158,8 @@ def counts(results: list[dict]) -> dict[str, int]:
 @dataclass
 class Verification:
     problems: list[str] = field(default_factory=list)
-    state: str = UNSIGNED  # UNSIGNED, NOT_CHECKED, INVALID or SIGNED
-    certificate: dict = field(default_factory=dict)
+    state: Signature = Signature.UNSIGNED
+    certificate: dict[str, Any] = field(default_factory=dict)  # JSON, read from the package
     # what of the package's suites and goldens is not this fbaconf's (conformance/official.py)
     unofficial: list[str] = field(default_factory=list)
 
@@ -154,15 +170,15 @@ class Verification:
 
     @property
     def authentic(self) -> bool:
-        return self.state == SIGNED
+        return self.state == Signature.SIGNED
 
 
-def _quote(text) -> str:
+def _quote(text: object) -> str:
     s = repr(text)
     return s if len(s) <= QUOTE_CHARS else s[:QUOTE_CHARS] + "…"
 
 
-def _json(data: bytes, what: str):
+def _json(data: bytes, what: str) -> Any:  # JSON: its callers check its shape
     """Parsed JSON (at most MAX_JSON_DEPTH deep); FbaconfInputError naming ``what`` otherwise."""
     try:
         value = json.loads(data.decode("utf-8"))
@@ -175,7 +191,7 @@ def _json(data: bytes, what: str):
     return value
 
 
-def _depth(value) -> int:
+def _depth(value: object) -> int:
     """How deep ``value``'s containers nest (0 for a scalar), counted a level at a time and
     stopped one level past MAX_JSON_DEPTH; only containers are visited."""
     level, deepest = ([value] if isinstance(value, (dict, list)) else []), 0
@@ -218,7 +234,8 @@ def verify(pkg: Path, pubkey: Path | None = None) -> Verification:
         return v
     if not v.problems:  # re-derived from files whose digests hold (a changed file is named already)
         _check_verdict(files, cert, v.problems)
-        suites = cert.get("suites") if isinstance(cert.get("suites"), list) else []
+        named = cert.get("suites")
+        suites = [s for s in named if isinstance(s, dict)] if isinstance(named, list) else []
         v.unofficial = official.differences(suites, files.get("golden-MANIFEST.json"))
     return v
 
@@ -267,33 +284,33 @@ def _read_listed(pkg: Path, sums: bytes, problems: list[str]) -> tuple[dict[str,
 def _check_signature(pkg: Path, sums: bytes, pubkey: Path | None, v: Verification) -> None:
     sig_path = pkg / SIGNATURE
     if not os.path.lexists(sig_path):
-        v.state = UNSIGNED
+        v.state = Signature.UNSIGNED
         if pubkey is not None:
             v.problems.append(f"{SIGNATURE}: missing — the package is unsigned, so --pubkey cannot vouch for it")
         return
     try:
         sig_text = read_regular(sig_path, 4096)
     except FbaconfInputError as e:
-        v.state = INVALID
+        v.state = Signature.INVALID
         v.problems.append(f"{SIGNATURE}: {e.message}")
         return
     if pubkey is None:
-        v.state = NOT_CHECKED
+        v.state = Signature.NOT_CHECKED
         return
     key = load_key(Path(pubkey), private=False)
     try:
         key.verify(base64.b64decode(sig_text.strip(), validate=True), sums)
     except (InvalidSignature, ValueError):
-        v.state = INVALID
+        v.state = Signature.INVALID
         v.problems.append(
             f"{SIGNATURE}: does not verify {SUMS} with {pubkey}: the package was changed after "
             f"signing, or signed with another key"
         )
         return
-    v.state = SIGNED
+    v.state = Signature.SIGNED
 
 
-def _check_verdict(files: dict[str, bytes], cert: dict, problems: list[str]) -> None:
+def _check_verdict(files: dict[str, bytes], cert: dict[str, Any], problems: list[str]) -> None:
     """Re-derive the verdict from results.jsonl, report.json and the claim rules."""
     claim = cert.get("claim")
     try:
@@ -355,7 +372,7 @@ def _check_verdict(files: dict[str, bytes], cert: dict, problems: list[str]) -> 
             problems.append(f"{name}: does not state the verdict the results give ({verdict})")
 
 
-def _declared_readings(files: dict[str, bytes], report: dict, problems: list[str]) -> list[str]:
+def _declared_readings(files: dict[str, bytes], report: dict[str, Any], problems: list[str]) -> list[str]:
     """The other readings the decoder declared (report.json), each a listed one and each the
     packaged manifest's when the package holds it."""
     declared = (report.get("decoder") or {}).get("readings") or []
@@ -376,7 +393,7 @@ def _declared_readings(files: dict[str, bytes], report: dict, problems: list[str
     return declared
 
 
-def _check_cases(by_id: dict[str, dict], required: dict[str, Case], problems: list[str]) -> None:
+def _check_cases(by_id: dict[str, dict[str, Any]], required: dict[str, Case], problems: list[str]) -> None:
     """What a result says of its case (kind, tools) must be the packaged suite's: the verdict
     sets a tool's cases aside by them."""
     for cid in sorted(set(by_id) & set(required)):
@@ -388,7 +405,14 @@ def _check_cases(by_id: dict[str, dict], required: dict[str, Case], problems: li
             )
 
 
-def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) -> dict[str, Case] | None:
+@dataclass(frozen=True)
+class _NotAPlayer:
+    """What the claim rules ask of a certified decoder: it decodes the binary stream."""
+
+    is_player: bool = False
+
+
+def _required_cases(files: dict[str, bytes], cert: dict[str, Any], problems: list[str]) -> dict[str, Case] | None:
     """The cases the certificate's claim requires, by id, from the packaged suite manifests
     (each must be one the certificate names, by digest)."""
     claim = cert.get("claim")
@@ -397,7 +421,7 @@ def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) ->
         problems.append(f"{CERTIFICATE}: claim or suites missing")
         return None
     out: dict[str, Case] = {}
-    decoder = SimpleNamespace(is_player=False)  # certify refuses players
+    decoder = _NotAPlayer()  # certify refuses players
     for s in named:
         name = s.get("name") if isinstance(s, dict) else None
         rel = f"suites/{name}.json"
@@ -421,7 +445,7 @@ def _required_cases(files: dict[str, bytes], cert: dict, problems: list[str]) ->
     return out
 
 
-def _check_rests_on(by_id: dict[str, dict], files: dict[str, bytes], problems: list[str]) -> None:
+def _check_rests_on(by_id: dict[str, dict[str, Any]], files: dict[str, bytes], problems: list[str]) -> None:
     """What a case rests on must be what this fbaconf derives from the same suite's goldens and
     tools (when the installed suite is the packaged one, by digest): the verdict sets cases aside
     and names provisional differences by it."""
@@ -443,7 +467,7 @@ def _check_rests_on(by_id: dict[str, dict], files: dict[str, bytes], problems: l
             )
 
 
-def _walk_files(root: Path):
+def _walk_files(root: Path) -> Iterator[Path]:
     """Every non-directory entry below ``root`` (links included, never followed)."""
     stack = [root]
     while stack:

@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import fnmatch
+from typing import Protocol
 
 from fbaconf.conformance.suite import Case, CaseKind
 from fbaconf.profiles.model import Claim, load_profiles
@@ -29,7 +30,14 @@ def claim_covers(claimed: str, case_claim: str) -> bool:
 INFORMATIVE_GROUPS = ("text",)  # player cases (.fap text): no MPEG-4 profile claim requires them
 
 
-def required_for(claim: str | None, case: Case, adapter: Adapter) -> bool:
+class MaybePlayer(Protocol):
+    """All the claim rules ask of a decoder: whether it reads only the .fap text."""
+
+    @property
+    def is_player(self) -> bool: ...
+
+
+def required_for(claim: str | None, case: Case, adapter: MaybePlayer) -> bool:
     """Whether a claim requires ``case`` of ``adapter``: the case's profile and level are
     covered, and — unless the program is a player (it reads only .fap text) — it is not a
     player case (an MPEG-4 profile claim is about the binary stream; docs/harness.md).

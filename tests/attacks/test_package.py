@@ -215,7 +215,7 @@ def test_a_signed_package_edited_and_resealed_fails_with_the_key(signed_package)
     package.seal(pkg)
     (pkg / package.SIGNATURE).write_bytes(sig)  # the old signature kept
     v = verify(pkg, pub)
-    assert v.state == package.INVALID and any(p.startswith("SIGNATURE:") for p in v.problems)
+    assert v.state == package.Signature.INVALID and any(p.startswith("SIGNATURE:") for p in v.problems)
     (pkg / package.SIGNATURE).unlink()  # or dropped: then --pubkey says it is unsigned
     v = verify(pkg, pub)
     assert any(p.startswith("SIGNATURE: missing") for p in v.problems)
