@@ -20,9 +20,7 @@ from bisect import bisect_left
 
 import numpy as np
 
-from . import readings
-from . import syntax as _syntax
-from . import tables as _tables
+from . import readings, syntax as _syntax, tables as _tables
 from .bitio import BitReader, BitWriter
 
 TOP = 65535

@@ -16,8 +16,7 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 
-from fbaconf.bitstreams import arith
-from fbaconf.bitstreams import decoder as dec
+from fbaconf.bitstreams import arith, decoder as dec
 from fbaconf.bitstreams.arith import Q1, Q2, Q3, ArithDecoder
 from fbaconf.errors import BitstreamError
 from fbaconf.profiles.checker import ARITH_BLOCKS, lookahead_stuffing

@@ -22,8 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fbaconf.bitstreams import decoder as dec
-from fbaconf.bitstreams import tables
+from fbaconf.bitstreams import decoder as dec, tables
 from fbaconf.bitstreams.arith import MAX_FREQUENCY, ZERO_RUN_LIMIT
 from fbaconf.bitstreams.faptext import read_fap_file, read_fap_text
 from fbaconf.bitstreams.frames import FREE, RETAINED, SET

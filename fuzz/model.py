@@ -7,8 +7,7 @@ import collections
 import threading
 from dataclasses import dataclass
 
-from fbaconf.bitstreams import decoder as dec
-from fbaconf.bitstreams import tables
+from fbaconf.bitstreams import decoder as dec, tables
 from fbaconf.bitstreams.bitio import BitReader
 from fbaconf.errors import BitstreamError
 

@@ -19,6 +19,7 @@ from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.endings import crash_report
 from fbaconf.isolation.forkclient import ForkServer
 from fbaconf.isolation.persistent import FLAKY, PersistentDecoder
+from fbaconf.isolation.process import Note
 from fbaconf.isolation.sandbox import Limits
 from fbaconf.profiles.checker import check_stream
 from fbaconf.safefs import empty_dir, remove_tree
@@ -460,9 +461,9 @@ class DecoderTarget:
             rc, notes = detail.get("exit_code"), detail.get("notes", ())
             sig = (
                 "fork-server-killed"
-                if "supervisor-lost" in notes
+                if Note.SUPERVISOR_LOST in notes
                 else "protocol-error"
-                if "protocol-error" in notes
+                if Note.PROTOCOL_ERROR in notes
                 else f"exit-{rc}"
             )
             return Verdict("unexpected-exit", sig, ending.message, detail)

@@ -110,8 +110,7 @@ def lab_options(p) -> None:
 def cmd_run(args) -> int:
     from fbaconf.conformance.suite import load_suites
 
-    from . import baseline as bl
-    from . import reports
+    from . import baseline as bl, reports
     from .adapters import resolve
     from .preflight import preflight
     from .selection import select_cases

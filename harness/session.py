@@ -15,8 +15,7 @@ from pathlib import Path
 from fbaconf.conformance import provisional
 from fbaconf.isolation import sandbox, setup
 
-from . import baseline as bl
-from . import reports
+from . import baseline as bl, reports
 from .results import RunRecord
 from .runner import run_cases
 from .speed.measure import measure_claim

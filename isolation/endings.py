@@ -41,6 +41,8 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .process import Note
+
 if TYPE_CHECKING:
     from .process import ProcResult
     from .sandbox import Limits
@@ -184,11 +186,11 @@ def _last_line(text: str) -> str:
 
 def _setup(res: ProcResult, cmd: str, err: str) -> Ending | None:
     """The set-up failure the harness knows of (its notes), or None."""
-    if "harness-start-failed" in res.notes:
+    if Note.HARNESS_START_FAILED in res.notes:
         return Ending(EndingKind.SETUP, f"harness could not start the launcher: {err.strip()[:300]}")
-    if "exec-failed" in res.notes:
+    if Note.EXEC_FAILED in res.notes:
         return Ending(EndingKind.SETUP, (res.detail or err).strip()[:300] or f"cannot execute {cmd}")
-    if "sandbox-failed" in res.notes:  # bubblewrap never ran the program: its stderr is bubblewrap's own
+    if Note.SANDBOX_FAILED in res.notes:  # bubblewrap never ran the program: its stderr is bubblewrap's own
         m = _BWRAP.search(err)
         what = m.group(1) if m else (_last_line(err)[len("; stderr: ") :] or "no message")
         if what.startswith("execvp "):
@@ -201,7 +203,7 @@ def _setup(res: ProcResult, cmd: str, err: str) -> Ending | None:
 def _reservation(res: ProcResult, limits: Limits, cmd: str, err: str) -> Ending | None:
     """A runtime that died reserving address space under the address-space rlimit: a set-up
     problem of the limits, named with the runtime's own line and the fix."""
-    m = _RESERVE.search(err) if "as-limit" in res.notes and res.returncode != 0 else None
+    m = _RESERVE.search(err) if Note.AS_LIMIT in res.notes and res.returncode != 0 else None
     if m is None:
         return None
     line = next((ln.strip() for ln in err.splitlines() if m.group(0) in ln), m.group(0))[:200]
@@ -232,13 +234,13 @@ def classify(
     if known is not None:
         return known
     if res.timed_out:
-        why = "CPU-time limit" if "cpu-limit" in res.notes else f"timeout of {limits.timeout_s:g} s"
+        why = "CPU-time limit" if Note.CPU_LIMIT in res.notes else f"timeout of {limits.timeout_s:g} s"
         return Ending(EndingKind.TIMEOUT, f"{cmd} did not finish within the {why} (killed after {res.elapsed_s:.2f} s)")
-    if res.memory_limit_hit and (rc != 0 or "tree-memory-limit" in res.notes):
+    if res.memory_limit_hit and (rc != 0 or Note.TREE_MEMORY_LIMIT in res.notes):
         how = f"killed by {res.signal}" if res.signal else f"exit code {rc}"
         kind = (
             "whole-process-tree"
-            if "tree-memory-limit" in res.notes
+            if Note.TREE_MEMORY_LIMIT in res.notes
             else "resident-set"
             if limits.memory_kind == "rss"
             else "address-space"
@@ -251,14 +253,14 @@ def classify(
         return Ending(
             EndingKind.MEMORY, f"{cmd} exceeded the {limits.memory_mb} MB {kind} memory limit ({how}; {peak})"
         )
-    if "supervisor-lost" in res.notes:
+    if Note.SUPERVISOR_LOST in res.notes:
         return Ending(
             EndingKind.UNEXPECTED,
             f"the fork server running {cmd} died during this input (the decoder "
             f"killed its parent process, or a process-tree limit did): its ending is unknown — "
             f"a decoder must not signal processes it did not start{_last_line(err)}",
         )
-    if "protocol-error" in res.notes:
+    if Note.PROTOCOL_ERROR in res.notes:
         return Ending(EndingKind.UNEXPECTED, f"{cmd}: {res.detail or 'protocol error'}{_last_line(err)}")
     if res.output_limit_hit:
         return Ending(

@@ -43,7 +43,7 @@ from typing import IO
 
 from . import forkserver_build, sandbox
 from .cgroups import OOM_FILES, Cgroups, oom_events
-from .process import Finish, ProcResult, result
+from .process import Finish, Note, ProcResult, result
 from .sandbox import Limits, View
 from .watch import Watch
 
@@ -196,7 +196,7 @@ class ForkServer:
         limits = limits or self.limits
         if sandbox.stopping():
             p = Pending(self, argv, Path(workdir), limits, measure_dirs, slot)
-            p.res = ProcResult(argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
+            p.res = ProcResult(argv, None, stderr_tail="harness stopping", notes=[Note.HARNESS_START_FAILED])
             return p
         if self._queue and self._queue[-1].slot == slot:
             raise RuntimeError(f"slot {slot} is still in use by the previous input")
@@ -415,7 +415,7 @@ class Pending:
                 p.files = srv._files[p.slot]
             if not self.sent:
                 self.res = ProcResult(
-                    self.argv, None, stderr_tail="cannot start the fork server", notes=["harness-start-failed"]
+                    self.argv, None, stderr_tail="cannot start the fork server", notes=[Note.HARNESS_START_FAILED]
                 )
                 return
         begun = max(self.t0, srv._last_done)
@@ -434,7 +434,7 @@ class Pending:
                 stderr_tail=err,
                 output_limit_hit=out,
                 output_bytes=watch.bytes,
-                notes=[] if out else ["protocol-error"],
+                notes=[] if out else [Note.PROTOCOL_ERROR],
                 detail="" if out else self.reply,
             )
             return
@@ -444,8 +444,8 @@ class Pending:
             oom, pids = srv._cgroup_events() if srv.cg is not None else (False, False)
             # a server that said hello and died under this input was ended by it (a decoder that
             # killed its parent, a tree memory or process limit): the input's ending, not set-up
-            notes = [] if timed_out else ["supervisor-lost"] if srv.ready else ["harness-start-failed"]
-            notes += ["tree-memory-limit"] * oom + ["process-limit"] * pids
+            notes = [] if timed_out else [Note.SUPERVISOR_LOST] if srv.ready else [Note.HARNESS_START_FAILED]
+            notes += [Note.TREE_MEMORY_LIMIT] * oom + [Note.PROCESS_LIMIT] * pids
             self._close_server()
             self.res = ProcResult(
                 self.argv,
@@ -489,7 +489,7 @@ class Pending:
         dirs = self.measure_dirs or [self.workdir]
         if srv.sum_outputs_every > 1 and reply.status != 0 and srv._answers % srv.sum_outputs_every:
             dirs = []
-        notes = (["exec-failed"] if reply.exec_errno else []) + (["as-limit"] if self.as_limit else [])
+        notes = ([Note.EXEC_FAILED] if reply.exec_errno else []) + ([Note.AS_LIMIT] if self.as_limit else [])
         fin = Finish(
             reply.status,
             (reply.utime, reply.stime, reply.maxrss_kb),

@@ -78,16 +78,19 @@ from . import preflight, sandbox
 from .cgroups import Cgroups
 from .endings import crash_report
 from .forkclient import ForkServerError
-from .process import Finish, ProcResult, exit_reported, kill_group, launch_server, result, stopping
+from .process import Finish, Note, ProcResult, exit_reported, kill_group, launch_server, result, stopping
 from .sandbox import Limits, View
-from .serve import CHUNK as CHUNK  # the protocol's constants, re-exported
-from .serve import MAX_ANSWER as MAX_ANSWER
-from .serve import PROTOCOL as PROTOCOL
-from .serve import Answer, Server
+from .serve import (
+    CHUNK as CHUNK,  # the protocol's constants, re-exported
+    MAX_ANSWER as MAX_ANSWER,
+    PROTOCOL as PROTOCOL,
+    Answer,
+    Server,
+)
 from .watch import Watch
 
-FLAKY = "not-reproduced-alone"  # the note on an ending no input reproduces alone
-NO_ANSWER = "no-answer"  # the note on an ending before the input's answer (the process ended or was stopped)
+FLAKY = Note.NOT_REPRODUCED_ALONE
+NO_ANSWER = Note.NO_ANSWER
 
 
 def abnormal(res: ProcResult) -> bool:
@@ -96,7 +99,7 @@ def abnormal(res: ProcResult) -> bool:
     protocol — an answered code, whatever it is, is none."""
     return (
         NO_ANSWER in res.notes
-        or "protocol-error" in res.notes
+        or Note.PROTOCOL_ERROR in res.notes
         or res.signal is not None
         or res.timed_out
         or res.memory_limit_hit
@@ -118,7 +121,7 @@ def ending_key(res: ProcResult) -> EndingKey:
         res.timed_out,
         res.memory_limit_hit,
         res.output_limit_hit,
-        "protocol-error" in res.notes,
+        Note.PROTOCOL_ERROR in res.notes,
         res.returncode if NO_ANSWER in res.notes else None,
         rep.kind if rep else None,
         rep.signature if rep else None,
@@ -242,7 +245,7 @@ class PersistentDecoder:
         answer. The :class:`Answer` waits for it."""
         a = Answer(self, data, out_path)
         if stopping():
-            a.res = ProcResult(self.argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"])
+            a.res = ProcResult(self.argv, None, stderr_tail="harness stopping", notes=[Note.HARNESS_START_FAILED])
             return a
         self._pending.append(a)
         if self._inflight is None:
@@ -271,7 +274,7 @@ class PersistentDecoder:
                 try:
                     srv = self._start()
                 except ForkServerError as e:
-                    a.res = ProcResult(self.argv, None, stderr_tail=str(e), notes=["exec-failed"], detail=str(e))
+                    a.res = ProcResult(self.argv, None, stderr_tail=str(e), notes=[Note.EXEC_FAILED], detail=str(e))
                     continue
             self._inflight = a
             srv.send(a, self.limits)  # how it went is read by _complete
@@ -350,7 +353,7 @@ class PersistentDecoder:
         file it under the input that ends so alone (module doc)."""
         if a is not None:
             own = self.alone(a.data, a.out_path)
-            if "exec-failed" in own.notes:  # no process to confirm it with: the input in flight's, as ever
+            if Note.EXEC_FAILED in own.notes:  # no process to confirm it with: the input in flight's, as ever
                 a.res = res
                 return
             a.res = own  # its own ending, on a process of its own
@@ -373,7 +376,7 @@ class PersistentDecoder:
         """Run ``prev`` (the input a process answered before an ending) alone; whether it ended
         so there — its ending is then filed under it."""
         before = self.alone(prev.data, prev.out_path)
-        if not abnormal(before) or "exec-failed" in before.notes:
+        if not abnormal(before) or Note.EXEC_FAILED in before.notes:
             return False
         before.detail = (before.detail + " " if before.detail else "") + (
             "(it answered before it had finished: the ending came while the next input was in flight, "
@@ -401,7 +404,7 @@ class PersistentDecoder:
         try:
             srv = self._take_spare(alone=True) or self._launch(alone=True)
         except ForkServerError as e:
-            return ProcResult(self.argv, None, stderr_tail=str(e), notes=["exec-failed"], detail=str(e))
+            return ProcResult(self.argv, None, stderr_tail=str(e), notes=[Note.EXEC_FAILED], detail=str(e))
         try:
             self._alone_spare = self._launch(alone=True)
         except ForkServerError:
@@ -447,7 +450,7 @@ class PersistentDecoder:
             None,
             elapsed_s=a.elapsed,
             stderr_tail=srv.err_since(a.err_start),
-            notes=["protocol-error"],
+            notes=[Note.PROTOCOL_ERROR],
             detail=f"broke the persistent protocol (version {PROTOCOL}, docs/fuzzing.md): {why}",
         )
 
@@ -470,9 +473,9 @@ class PersistentDecoder:
         except ChildProcessError:
             status, ru = 0, None
         p.returncode = os.waitstatus_to_exitcode(status)  # reaped here, not by Popen
-        notes = ["as-limit"] if srv.as_limit else []
+        notes = [Note.AS_LIMIT] if srv.as_limit else []
         if srv.status_r is not None and hit is None and not exit_reported(srv.take_status()) and not stopping():
-            notes.append("sandbox-failed")
+            notes.append(Note.SANDBOX_FAILED)
         fin = Finish(
             status,
             ru,
@@ -497,6 +500,6 @@ class PersistentDecoder:
             res.notes.append(NO_ANSWER)
         if res.returncode == 0 and hit is None and not answered:  # it exited cleanly in the middle of an input
             res.returncode = None
-            res.notes.append("protocol-error")
+            res.notes.append(Note.PROTOCOL_ERROR)
             res.detail = f"broke the persistent protocol (version {PROTOCOL}): exited without answering request {a.id}"
         return res

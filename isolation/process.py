@@ -18,6 +18,7 @@ import sys
 import tempfile
 import threading
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
@@ -32,6 +33,23 @@ if TYPE_CHECKING:
 LIMIT_LAUNCHER = Path(__file__).with_name("launcher.py")
 _SIGNALS = {int(s) for s in signal.Signals}
 TAIL_BYTES = 4000
+
+
+class Note(StrEnum):
+    """What the harness knows of a decoder process's ending beyond its status: the one
+    classifier (:mod:`.endings`) reads these, never the decoder's own words."""
+
+    HARNESS_START_FAILED = "harness-start-failed"  # the harness could not start it (or is stopping)
+    SANDBOX_FAILED = "sandbox-failed"  # bubblewrap never ran the program
+    EXEC_FAILED = "exec-failed"  # the program could not be executed
+    AS_LIMIT = "as-limit"  # it ran under an address-space limit
+    CPU_LIMIT = "cpu-limit"  # its CPU-time limit ended it
+    TREE_MEMORY_LIMIT = "tree-memory-limit"  # the cgroup's memory limit killed a process of its tree
+    PROCESS_LIMIT = "process-limit"  # its tree hit the cgroup's process limit
+    SUPERVISOR_LOST = "supervisor-lost"  # the fork server died under it
+    PROTOCOL_ERROR = "protocol-error"  # it broke the fork-server or persistent protocol
+    NOT_REPRODUCED_ALONE = "not-reproduced-alone"  # a persistent ending no input reproduces alone
+    NO_ANSWER = "no-answer"  # a persistent process ended (or was stopped) before the input's answer
 
 
 @dataclass
@@ -49,9 +67,8 @@ class ProcResult:
     output_limit_hit: bool = False
     memory_limit_hit: bool = False
     output_bytes: int = 0
-    # what the harness knows of the ending: "exec-failed", "sandbox-failed", "harness-start-failed",
-    # "protocol-error", "tree-memory-limit", "process-limit", "cpu-limit", "as-limit", "supervisor-lost"...
-    notes: list[str] = field(default_factory=list)
+    # what the harness knows of the ending (Note)
+    notes: list[Note] = field(default_factory=list)
     detail: str = ""  # the harness's own words on what it saw (a protocol error, a forged reply)
 
 
@@ -71,7 +88,7 @@ class Finish:
     pids_hit: bool = False
     rss_sampled_mb: float = 0.0  # the watch's largest sample of the tree's resident set
     bwrap_status: bool = False  # the status is bubblewrap's (a signal N reads as exit 128 + N)
-    notes: tuple[str, ...] = ()
+    notes: tuple[Note, ...] = ()
 
 
 _MEMORY_TEXT = (
@@ -113,9 +130,9 @@ def result(
         notes=list(fin.notes),
     )
     if fin.pids_hit:
-        res.notes.append("process-limit")
+        res.notes.append(Note.PROCESS_LIMIT)
     if fin.oom:
-        res.notes.append("tree-memory-limit")  # a process of the tree was killed at the cgroup memory limit
+        res.notes.append(Note.TREE_MEMORY_LIMIT)  # a process of the tree was killed at the cgroup memory limit
     if rc < 0 and not killed:
         try:
             res.signal = signal.Signals(-rc).name
@@ -125,8 +142,8 @@ def result(
             res.output_limit_hit = True
         if res.signal == "SIGXCPU":
             res.timed_out = True
-            res.notes.append("cpu-limit")
-    if "as-limit" in res.notes and not res.timed_out and any(s in res.stderr_tail.lower() for s in _MEMORY_TEXT):
+            res.notes.append(Note.CPU_LIMIT)
+    if Note.AS_LIMIT in res.notes and not res.timed_out and any(s in res.stderr_tail.lower() for s in _MEMORY_TEXT):
         res.memory_limit_hit = True
     total = sum(tree_size(d, stop_at=limits.output_mb * 2**20 * 4) for d in measure_dirs)
     res.output_bytes = total

@@ -76,59 +76,24 @@ from .cgroups import Cgroups
 # the names callers import from here, re-exported (`X as X`)
 from .process import (
     _RUNNING as _RUNNING,
-)
-from .process import (
     _STOP as _STOP,
-)
-from .process import (
     LIMIT_LAUNCHER as LIMIT_LAUNCHER,
-)
-from .process import (
     TAIL_BYTES as TAIL_BYTES,
-)
-from .process import (
     Finish as Finish,
-)
-from .process import (
+    Note as Note,
     ProcResult as ProcResult,
-)
-from .process import (
     exit_reported as exit_reported,
-)
-from .process import (
     kill_group as kill_group,
-)
-from .process import (
     launch_argv as launch_argv,
-)
-from .process import (
     launch_server as launch_server,
-)
-from .process import (
     pidfd as pidfd,
-)
-from .process import (
     read_tail as read_tail,
-)
-from .process import (
     release as release,
-)
-from .process import (
     reset_stop as reset_stop,
-)
-from .process import (
     result as result,
-)
-from .process import (
     stop_all as stop_all,
-)
-from .process import (
     stop_server as stop_server,
-)
-from .process import (
     stopping as stopping,
-)
-from .process import (
     tempfile_dir as tempfile_dir,
 )
 from .watch import Watch
@@ -407,7 +372,7 @@ def run(
     base_env = decoder_env(workdir, env)
     why = preflight.exec_problem(argv, base_env)
     if why is not None:  # known before the start: nothing runs
-        return ProcResult(argv, None, stderr_tail=why, notes=["exec-failed"])
+        return ProcResult(argv, None, stderr_tail=why, notes=[Note.EXEC_FAILED])
     measure = measure_dirs or [workdir]
     cg = Cgroups(processes=limits.processes, memory_mb=limits.memory_mb if limits.memory_kind != "none" else 0)
     as_bytes = as_bytes_for(limits, cg)
@@ -439,14 +404,14 @@ def run(
                 )
             except OSError as e:  # the launcher itself could not start: a harness problem
                 cg.close()
-                return ProcResult(argv, None, stderr_tail=f"cannot start: {e}", notes=["harness-start-failed"])
+                return ProcResult(argv, None, stderr_tail=f"cannot start: {e}", notes=[Note.HARNESS_START_FAILED])
             finally:
                 for fd in fds:
                     os.close(fd)
             why = release(proc, cg_dirs) if held else None
             if why is not None:
                 cg.close()
-                return ProcResult(argv, None, stderr_tail=why, notes=["harness-start-failed"])
+                return ProcResult(argv, None, stderr_tail=why, notes=[Note.HARNESS_START_FAILED])
             _RUNNING.add(proc.pid)
             try:
                 watch = Watch(limits, measure, pid=proc.pid, procs=cg.procs if cg.dirs else None, t0=t0)
@@ -456,10 +421,10 @@ def run(
                 kill_group(proc.pid)  # leftover children of the decoder
                 oom, pids_hit = cg.oom_killed(), cg.pids_exhausted()
                 cg.close()
-        notes = ["as-limit"] if as_bytes else []
+        notes = [Note.AS_LIMIT] if as_bytes else []
         ran, status_r = exit_reported(status_r), None
         if not ran and hit is None and not oom and not stopping():
-            notes.append("sandbox-failed")  # bubblewrap never saw the program run: its set-up or exec failed
+            notes.append(Note.SANDBOX_FAILED)  # bubblewrap never saw the program run: its set-up or exec failed
         fin = Finish(
             status,
             rusage,

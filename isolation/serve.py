@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import IO, TYPE_CHECKING
 
 from .cgroups import Cgroups
-from .process import ProcResult, stop_server, tail_from
+from .process import Note, ProcResult, stop_server, tail_from
 from .sandbox import Limits
 from .watch import Watch
 
@@ -224,7 +224,7 @@ class Answer:
                 if dec._inflight is None:  # not queued (a stop), or ended at its dispatch
                     if self.res is None:
                         self.res = ProcResult(
-                            dec.argv, None, stderr_tail="harness stopping", notes=["harness-start-failed"]
+                            dec.argv, None, stderr_tail="harness stopping", notes=[Note.HARNESS_START_FAILED]
                         )
                     return
             dec._complete(dec._inflight)

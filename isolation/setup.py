@@ -30,6 +30,7 @@ from pathlib import Path
 from fbaconf.errors import FbaconfInputError
 
 from . import bounds, endings, sandbox
+from .process import Note
 from .sandbox import Limits, View
 from .subject import Ended
 
@@ -64,7 +65,7 @@ def probe(  # noqa: PLR0913 - what sandbox.run takes, and what names the run in 
     if ending.kind in _FINE:
         return
     fixes = []
-    if "as-limit" in res.notes:
+    if Note.AS_LIMIT in res.notes:
         again = endings.classify(
             sandbox.run(argv, workdir, replace(limits, memory_kind="rss"), env=env, view=view), limits, codes, name=name
         )

@@ -16,8 +16,7 @@ from fbaconf.animation import engine
 from fbaconf.bitstreams import arith, decoder, syntax, tables
 from fbaconf.mutation.core import Mutant, apply_mutant
 from fbaconf.mutation.independent import MUTANTS_LIST as INDEPENDENT
-from fbaconf.reference import decoder as refdecoder
-from fbaconf.reference import pipeline
+from fbaconf.reference import decoder as refdecoder, pipeline
 from fbaconf.rendering import raster, render
 
 # ------------------------------------------------------------------ custom patches

@@ -22,8 +22,7 @@ from typing import Any
 import numpy as np
 
 from fbaconf import rules as R
-from fbaconf.bitstreams import decoder as dec
-from fbaconf.bitstreams import tables
+from fbaconf.bitstreams import decoder as dec, tables
 from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, VISUAL_OBJECT_SEQUENCE_END_CODE
 from fbaconf.bitstreams.emulation import find_emulations
 from fbaconf.bitstreams.syntax import (

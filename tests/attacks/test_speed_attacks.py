@@ -17,9 +17,7 @@ from pathlib import Path
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.faptext import write_fap
 from fbaconf.harness.adapters import load_manifest
-from fbaconf.harness.speed import content as speed_content
-from fbaconf.harness.speed import load as speed_load
-from fbaconf.harness.speed import measure as speed
+from fbaconf.harness.speed import content as speed_content, load as speed_load, measure as speed
 from fbaconf.harness.sysinfo import MachineSample
 from fbaconf.harness.verdict import speed_verdict
 

@@ -20,8 +20,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from fbaconf.bitstreams import bitedit
 from fbaconf.bitstreams.decoder import decode

@@ -20,8 +20,7 @@ import pytest
 
 from fbaconf.certification.certify import verify_package
 from fbaconf.conformance.suite import load_suites
-from fbaconf.harness import adapters, baseline
-from fbaconf.harness import adapters as ad
+from fbaconf.harness import adapters, adapters as ad, baseline
 from fbaconf.harness.compare.ladder import outcome_for
 from fbaconf.harness.results import Outcome, ResultLog
 from fbaconf.harness.runner import run_cases

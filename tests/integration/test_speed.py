@@ -32,8 +32,7 @@ from fbaconf.harness import sysinfo
 from fbaconf.harness.adapters import PythonAdapter, load_manifest
 from fbaconf.harness.reports import html_report, report_json, terminal_summary
 from fbaconf.harness.results import RunRecord
-from fbaconf.harness.speed import load as speed_load
-from fbaconf.harness.speed import measure as speed
+from fbaconf.harness.speed import load as speed_load, measure as speed
 from fbaconf.harness.speed.content import BLOCK_FRAMES, Content
 from fbaconf.harness.sysinfo import MachineSample
 from fbaconf.harness.verdict import speed_verdict

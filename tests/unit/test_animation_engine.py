@@ -1,7 +1,6 @@
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from fbaconf.animation import engine
 from fbaconf.animation.bundled import default_head_feature_vertices, default_head_scene

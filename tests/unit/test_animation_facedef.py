@@ -1,7 +1,6 @@
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from fbaconf.animation.facedef import MeshTable, TransformTable, interval_weights, transform_fields
 from fbaconf.animation.faceparams import FEATURE_POINTS, fapu_from_feature_points, fp_index

@@ -18,8 +18,7 @@ import pytest
 
 from fbaconf import rules as R
 from fbaconf.animation.faceparams import fp_index
-from fbaconf.bitstreams import arith
-from fbaconf.bitstreams import decoder as decmod
+from fbaconf.bitstreams import arith, decoder as decmod
 from fbaconf.bitstreams.bitedit import end_stream, flip_bit, get_bits, remove_bits, set_bits, splice, truncate_bits
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
@@ -28,8 +27,7 @@ from fbaconf.bitstreams.syntax import d5_alphabet_differs, intensity_bound, inte
 from fbaconf.cli import main
 from fbaconf.errors import BitstreamError
 from fbaconf.generators.recipes import pred_beyond_intra_range
-from fbaconf.profiles import checker
-from fbaconf.profiles import diagnostics as D
+from fbaconf.profiles import checker, diagnostics as D
 from fbaconf.profiles.checker import SceneSummary, analyse, check_stream, lookahead_stuffing
 from fbaconf.profiles.model import load_profiles, parse_profiles
 from fbaconf.profiles.sample_streams import (

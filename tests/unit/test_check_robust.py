@@ -9,8 +9,7 @@ from importlib import resources
 
 import jsonschema
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from fbaconf import rules as R
 from fbaconf.bitstreams.bitedit import flip_bit, splice, truncate_bits

@@ -10,8 +10,7 @@ from pathlib import Path
 
 import jsonschema
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from fbaconf import rules as R
 from fbaconf.bitstreams.faptext import check_fap_text, read_fap_text

@@ -8,8 +8,7 @@ import random
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from fbaconf.bitstreams import dct, tables
 from fbaconf.bitstreams.bitio import FACE_OBJECT_START_CODE, BitReader, BitWriter

@@ -14,8 +14,7 @@ import random
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from fbaconf.bitstreams import arith, decoder, tables
 from fbaconf.bitstreams.arith import PURE_PYTHON_ENV, ArithDecoder, ArithEncoder, FastModel, make_model

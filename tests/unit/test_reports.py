@@ -18,10 +18,8 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-from junitparser import Error as JError
-from junitparser import Failure, JUnitXml, Skipped
+from hypothesis import HealthCheck, given, settings, strategies as st
+from junitparser import Error as JError, Failure, JUnitXml, Skipped
 
 from fbaconf.harness import reports
 from fbaconf.harness.reports import read_json, terminal_summary, write_html, write_json, write_junit
