@@ -27,34 +27,37 @@ import sys
 import time
 import tomllib
 import traceback
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import bounds, view
 from fbaconf.isolation.endings import DEFAULT_REJECT_EXIT_CODES, Ending, EndingKind, crash_report
-from fbaconf.isolation.sandbox import Limits, default_view, python_view
+from fbaconf.isolation.sandbox import Limits, View, default_view, python_view
 from fbaconf.profiles.model import Claim
 from fbaconf.safefs import read_regular
 
-from .manifest import (  # noqa: F401 (the vocabulary callers import from here too)
-    COMMANDS,
-    FAPS_FORMATS,
-    INPUT_KINDS,
-    LIMIT_KEYS,
-    MANIFEST_KEYS,
-    MAX_MANIFEST_BYTES,
-    MAX_MANIFEST_DEPTH,
-    OUTPUT_KINDS,
-    OUTPUT_PLACEHOLDER,
-    PLACEHOLDER_PATTERN,
-    PLACEHOLDERS,
-    QUOTE_CHARS,
-    SERVE_PLACEHOLDERS,
-    ManifestError,
-    check_manifest,
-    nesting_depth,
-    quote,
+# the vocabulary callers import from here too, re-exported (`X as X`)
+from .manifest import (
+    COMMANDS as COMMANDS,
+    FAPS_FORMATS as FAPS_FORMATS,
+    INPUT_KINDS as INPUT_KINDS,
+    LIMIT_KEYS as LIMIT_KEYS,
+    MANIFEST_KEYS as MANIFEST_KEYS,
+    MAX_MANIFEST_BYTES as MAX_MANIFEST_BYTES,
+    MAX_MANIFEST_DEPTH as MAX_MANIFEST_DEPTH,
+    OUTPUT_KINDS as OUTPUT_KINDS,
+    OUTPUT_PLACEHOLDER as OUTPUT_PLACEHOLDER,
+    PLACEHOLDER_PATTERN as PLACEHOLDER_PATTERN,
+    PLACEHOLDERS as PLACEHOLDERS,
+    QUOTE_CHARS as QUOTE_CHARS,
+    SERVE_PLACEHOLDERS as SERVE_PLACEHOLDERS,
+    ManifestError as ManifestError,
+    check_manifest as check_manifest,
+    nesting_depth as nesting_depth,
+    quote as quote,
 )
 
 BUNDLED_DIR = Path(__file__).resolve().parent / "adapters"
@@ -81,6 +84,13 @@ class Job:
     def path(self, name: str) -> Path | None:
         v = self.values.get(name)
         return Path(v) if v is not None else None
+
+    def need(self, name: str) -> Path:
+        """The path of placeholder ``name``; KeyError when the job has none (as for an argv)."""
+        p = self.path(name)
+        if p is None:
+            raise KeyError(name)
+        return p
 
 
 class Adapter:
@@ -111,7 +121,7 @@ class Adapter:
     def digest(self) -> str:
         return hashlib.sha256(self.manifest_text.encode("utf-8")).hexdigest()
 
-    def describe(self) -> dict:
+    def describe(self) -> dict[str, Any]:
         return {
             "name": self.name,
             "kind": self.kind,
@@ -224,7 +234,7 @@ class CommandAdapter(Adapter):
     kind = "command"
 
     def __init__(
-        self, data: dict, path: Path | None, text: str, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS
+        self, data: dict[str, Any], path: Path | None, text: str, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS
     ) -> None:
         self.manifest_path = path
         self.manifest_text = text
@@ -248,7 +258,7 @@ class CommandAdapter(Adapter):
     def argv(self, command: str, job: Job) -> list[str]:
         return expand(self.commands[command], job, self.manifest_path)
 
-    def sandbox_view(self, argv: list[str], workdir: Path, hidden=()):
+    def sandbox_view(self, argv: list[str], workdir: Path, hidden: Sequence[Path | str] = ()) -> View:
         """What this decoder sees in the sandbox (docs/harness.md, "What a decoder sees"): the
         folder of its program and of every other file its command names, its manifest's folder,
         the lab's ``--sandbox-ro`` folders — read-only, each judged by place and by content
@@ -287,12 +297,13 @@ class CommandAdapter(Adapter):
         if "{python}" in first:
             first = first.replace("{python}", sys.executable)
         if "/" not in first:
-            return shutil.which(first)
+            found: str | None = shutil.which(first)
+            return found
         p = Path(first)
         return str(p.resolve()) if p.is_file() else None
 
 
-def _limits(d: dict, path, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> Limits:
+def _limits(d: dict[str, Any], path: Path | None, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) -> Limits:
     """The manifest's [limits], each a real limit within the lab's ``ceilings`` (isolation/bounds.py)."""
     if not isinstance(d, dict):
         raise ManifestError("[limits] must be a table", rule="manifest-limits", file=str(path))
@@ -312,7 +323,7 @@ def _limits(d: dict, path, ceilings: bounds.Ceilings = bounds.DEFAULT_CEILINGS) 
     return lim
 
 
-def expand(template: list, job: Job, manifest_path: Path | None) -> list[str]:
+def expand(template: list[str | list[str]], job: Job, manifest_path: Path | None) -> list[str]:
     """Fill an argv template (see module doc). Raises KeyError(name) for a missing placeholder
     outside an optional group."""
     values = dict(job.values)
@@ -394,7 +405,7 @@ def load_manifest(
     return CommandAdapter(data, path, text, ceilings)
 
 
-def _python_adapter(data: dict, path: Path | None, text: str, ceilings: bounds.Ceilings) -> Adapter:
+def _python_adapter(data: dict[str, Any], path: Path | None, text: str, ceilings: bounds.Ceilings) -> Adapter:
     target = data["python"]
     mod_name, _, cls_name = target.partition(":")
     try:

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import difflib
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -137,10 +138,10 @@ def read_lines(path: Path) -> list[Line]:
 
 def load(path: Path) -> dict[str, Entry]:
     """The entries of a baseline file by case id (checked: :func:`read_lines`)."""
-    return {ln.case: ln.entry for ln in read_lines(path) if ln.case is not None}
+    return {ln.case: ln.entry for ln in read_lines(path) if ln.case is not None and ln.entry is not None}
 
 
-def load_flakes(path: Path) -> list[re.Pattern]:
+def load_flakes(path: Path) -> list[re.Pattern[str]]:
     """A flakes file: one regular expression per line matched against case ids (``#`` comments)."""
     out = []
     for n, raw in enumerate(_read_text(path).splitlines(), 1):
@@ -154,7 +155,7 @@ def load_flakes(path: Path) -> list[re.Pattern]:
     return out
 
 
-def _items(xs) -> str:
+def _items(xs: Iterable[object]) -> str:
     xs = list(xs)
     return ",".join(str(x) for x in xs[:_MAX_ITEMS]) + ("+" if len(xs) > _MAX_ITEMS else "")
 
@@ -218,7 +219,7 @@ class Summary:
 
 
 def classify(
-    results: list[CaseResult], baseline: dict[str, Entry] | None = None, flakes: list[re.Pattern] | None = None
+    results: list[CaseResult], baseline: dict[str, Entry] | None = None, flakes: list[re.Pattern[str]] | None = None
 ) -> Summary:
     """Annotate ``results`` (``r.baseline``) and sort the required ones into a :class:`Summary`.
     A result already marked ``flake`` (by a passing retry) stays one. With a baseline or a flakes
@@ -259,7 +260,12 @@ def classify(
     return s
 
 
-def apply(results: list[CaseResult], baseline: dict[str, Entry], flakes=None, allow_fixed: bool = False):
+def apply(
+    results: list[CaseResult],
+    baseline: dict[str, Entry],
+    flakes: list[re.Pattern[str]] | None = None,
+    allow_fixed: bool = False,
+) -> list[CaseResult]:
     """Annotate ``results``; returns what fails the run (new failures, and fixed cases unless
     ``allow_fixed``)."""
     return classify(results, baseline, flakes).failing(allow_fixed)
@@ -306,10 +312,13 @@ def write(results: list[CaseResult], path: Path) -> WriteReport:
     rep = WriteReport(path)
     out: list[str] = []
     for ln in old:
-        r = ran.get(ln.case) if ln.case is not None else None
-        if r is None or ln.entry.outcome == FLAKE:  # comments, Flake lines, cases not run: as written
+        if ln.case is None or ln.entry is None:  # comments and blank lines: as written
             out.append(ln.raw)
-            rep.kept += ln.case is not None
+            continue
+        r = ran.get(ln.case)
+        if r is None or ln.entry.outcome == FLAKE:  # Flake lines, cases not run: as written
+            out.append(ln.raw)
+            rep.kept += 1
             want.pop(ln.case, None)
         elif ln.case in want:
             w = want.pop(ln.case)

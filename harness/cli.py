@@ -9,13 +9,14 @@ measured); 1 some required case fails (a new failure, when ``--baseline`` is giv
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
 from fbaconf.isolation.bounds import add_ceiling_options, ceilings_from
 
 
-def register(sub) -> None:
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     r = sub.add_parser(
         "run",
         help="run conformance suites against a decoder",
@@ -69,7 +70,7 @@ def register(sub) -> None:
     _register_bench(sub)
 
 
-def _common(p) -> None:
+def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--decoder", required=True, help="decoder manifest .toml or bundled adapter name")
     p.add_argument("--claim", help="profile@level under test (default: the decoder's highest claim)")
     p.add_argument("-j", "--jobs", type=int, default=None, help="parallel cases (default: CPU cores)")
@@ -83,7 +84,7 @@ def _common(p) -> None:
     lab_options(p)
 
 
-def lab_options(p) -> None:
+def lab_options(p: argparse.ArgumentParser) -> None:
     """What the lab, not the decoder's manifest, decides: the sandbox's extra read-only folders,
     the ceilings of the decoder's limits and whether provisional differences fail the claim."""
     p.add_argument(
@@ -107,7 +108,7 @@ def lab_options(p) -> None:
 # ------------------------------------------------------------------ run
 
 
-def cmd_run(args) -> int:
+def cmd_run(args: argparse.Namespace) -> int:
     from fbaconf.conformance.suite import load_suites
 
     from . import baseline as bl, reports
@@ -177,7 +178,7 @@ def cmd_run(args) -> int:
 # ------------------------------------------------------------------ bench
 
 
-def _register_bench(sub) -> None:
+def _register_bench(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "bench",
         help="measure decode/render speed against the level minimums",
@@ -209,7 +210,7 @@ def _register_bench(sub) -> None:
     p.set_defaults(func=cmd_bench)
 
 
-def cmd_bench(args) -> int:
+def cmd_bench(args: argparse.Namespace) -> int:
     from .speed import bench
 
     return bench.run(args)

@@ -24,7 +24,7 @@ from fbaconf.bitstreams.fapio import save_faps
 from fbaconf.bitstreams.frames import FREE
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="dummydec")
     ap.add_argument("--mode", default="ok")
     ap.add_argument("--frame", type=int, default=3)

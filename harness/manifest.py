@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import difflib
 import re
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from fbaconf.bitstreams import readings
 from fbaconf.errors import FbaconfInputError
@@ -46,7 +48,7 @@ class ManifestError(FbaconfInputError):
     """A decoder manifest is malformed (names file, key and rule)."""
 
 
-def check_manifest(data: dict, path: Path | None) -> None:
+def check_manifest(data: dict[str, Any], path: Path | None) -> None:
     """Every rule of a manifest's schema (docs/harness.md); raises :class:`ManifestError` naming
     the file and the rule broken."""
     where = str(path) if path else "<manifest>"
@@ -60,7 +62,11 @@ def check_manifest(data: dict, path: Path | None) -> None:
         _check_commands(data, bad)
 
 
-def _check_keys(data: dict, bad) -> None:
+# how a check names a broken rule: the error to raise (file and length handled)
+_Bad = Callable[[str, str], ManifestError]
+
+
+def _check_keys(data: dict[str, Any], bad: _Bad) -> None:
     """Required keys present, no unknown or [sandbox] key, each value of its type."""
     for key in ("name", "claims", "inputs", "outputs"):
         if key not in data:
@@ -97,7 +103,7 @@ def _check_keys(data: dict, bad) -> None:
         raise bad("tools must be a list of tool names (strings)", "manifest-tools")
 
 
-def _check_values(data: dict, bad) -> None:
+def _check_values(data: dict[str, Any], bad: _Bad) -> None:
     """The values: limits, env, python target, exit codes, name, claims, forms, tools."""
     for key in data.get("limits", {}) if isinstance(data.get("limits"), dict) else ():
         if key not in LIMIT_KEYS:
@@ -159,7 +165,7 @@ def _check_values(data: dict, bad) -> None:
         )
 
 
-def _check_commands(data: dict, bad) -> None:
+def _check_commands(data: dict[str, Any], bad: _Bad) -> None:
     """[commands]: decode given, known commands, argv lists of strings, known placeholders (the
     persistent ``serve`` only its own), every output's placeholder named by decode."""
     cmds = data.get("commands")
@@ -184,7 +190,7 @@ def _check_commands(data: dict, bad) -> None:
             raise bad(f"outputs lists {out!r} but [commands] decode never names {ph}", "manifest-outputs")
 
 
-def _check_placeholders(cname: str, s: str, bad) -> None:
+def _check_placeholders(cname: str, s: str, bad: _Bad) -> None:
     for n in PLACEHOLDER_PATTERN.findall(s):
         if cname == "serve" and n not in SERVE_PLACEHOLDERS:
             usable = ", ".join("{" + p + "}" for p in SERVE_PLACEHOLDERS)
@@ -240,15 +246,16 @@ MAX_MANIFEST_DEPTH = 6  # a table of commands of argv lists of optional groups: 
 QUOTE_CHARS = 80
 
 
-def quote(value) -> str:
+def quote(value: object) -> str:
     """A value of the manifest as an error message quotes it: repr, at most QUOTE_CHARS."""
     text = repr(value)
     return text if len(text) <= QUOTE_CHARS else text[:QUOTE_CHARS] + "…"
 
 
-def nesting_depth(value, limit: int) -> int:
+def nesting_depth(value: object, limit: int) -> int:
     """Nesting depth of parsed TOML (tables and arrays), counting no deeper than ``limit`` + 1."""
-    stack, deepest = [(value, 1)], 0
+    stack: list[tuple[object, int]] = [(value, 1)]
+    deepest = 0
     while stack:
         v, d = stack.pop()
         if isinstance(v, (dict, list)):
@@ -259,12 +266,12 @@ def nesting_depth(value, limit: int) -> int:
     return deepest
 
 
-def _did_you_mean(word: str, choices) -> str:
+def _did_you_mean(word: str, choices: Sequence[str]) -> str:
     close = difflib.get_close_matches(word, choices, n=1)
     return f" (did you mean {close[0]!r}?)" if close else f" (known: {', '.join(choices)})"
 
 
-def _flatten(argv):
+def _flatten(argv: Iterable[object]) -> Iterator[object]:
     for x in argv:
         if isinstance(x, list):
             yield from x

@@ -13,17 +13,18 @@ import time
 from pathlib import Path
 
 from fbaconf.conformance.provisional import rests_on
-from fbaconf.conformance.suite import CaseKind, load_suites
+from fbaconf.conformance.suite import Case, CaseKind, load_suites
 from fbaconf.isolation import setup
 from fbaconf.isolation.report import report
 
-from .adapters import PLACEHOLDERS, CommandAdapter, Job
+from .adapters import Adapter, CommandAdapter, Job
+from .manifest import PLACEHOLDERS
 from .runner import hidden_from_decoders, prepare_job
 from .selection import capability, required_for, select_cases
 from .usage import UsageError
 
 
-def preflight(adapter, claim: str | None = None) -> float | None:
+def preflight(adapter: Adapter, claim: str | None = None) -> float | None:
     """Before any case: one line saying whether decoders are isolated here and by which limits;
     a command decoder's program must exist and be executable, and every folder its commands
     would show must pass the view's checks (ViewError, exit 2). With ``claim``: the canary
@@ -56,7 +57,7 @@ def preflight(adapter, claim: str | None = None) -> float | None:
     return canary(adapter, claim) if claim is not None else None
 
 
-def canary_case(adapter, claim: str):
+def canary_case(adapter: Adapter, claim: str) -> Case | None:
     """The claim's simplest valid stream for ``adapter``: the smallest required ``decode`` case
     it can take (by the size of the stream it is given) that rests on no provisional decision (a
     decoder may follow another reading there, and then rejects it rightly), or None."""
@@ -70,7 +71,7 @@ def canary_case(adapter, claim: str):
     return best[1] if best else None
 
 
-def canary(adapter, claim: str) -> float | None:
+def canary(adapter: CommandAdapter, claim: str) -> float | None:
     """Run the decoder on :func:`canary_case` exactly as a case runs (:func:`fbaconf.isolation.setup.probe`:
     SetupError when it does not decode); the seconds it took, or None when there was none to run
     (an in-process adapter, no case it can take, a command the case cannot fill)."""

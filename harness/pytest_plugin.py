@@ -39,28 +39,33 @@ import fnmatch
 import inspect
 import tempfile
 import warnings
+from collections.abc import Generator, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
 from fbaconf.conformance.provisional import open_decisions
-from fbaconf.conformance.suite import load_suites
+from fbaconf.conformance.suite import Case, load_suites
 from fbaconf.errors import FbaconfInputError
 
 from . import baseline as bl
 from .adapters import resolve
 from .preflight import preflight
 from .reports.common import clean_text, format_difference, reproduce_line
-from .results import Outcome
+from .results import CaseResult, Outcome
 from .runner import RunContext, run_case
 from .selection import required_for
 from .usage import check_suites, resolve_claim
+
+if TYPE_CHECKING:
+    from _pytest._code.code import TerminalRepr, TracebackStyle
 
 PREFIX = "fbaconf::"
 _PROPERTY = "fbaconf"  # user property of each item: new, known, fixed, flaky, provisional, pass
 
 
-def pytest_addoption(parser) -> None:
+def pytest_addoption(parser: pytest.Parser) -> None:
     g = parser.getgroup("fbaconf", "fbaconf conformance cases")
     g.addoption("--fbaconf-decoder", default=None, help="decoder manifest .toml or bundled adapter name")
     g.addoption("--fbaconf-claim", default=None, help="profile@level under test")
@@ -100,7 +105,7 @@ class FbaconfCaseFailure(Exception):
 class _State:
     """The session's decoder, claim, suites and baseline, all checked in ``pytest_configure``."""
 
-    def __init__(self, config) -> None:
+    def __init__(self, config: pytest.Config) -> None:
         self.adapter = resolve(config.getoption("fbaconf_decoder"))
         self.claim = resolve_claim(config.getoption("fbaconf_claim"), self.adapter)
         names = config.getoption("fbaconf_suite") or []
@@ -127,13 +132,13 @@ class _State:
 
 
 class FbaconfItem(pytest.Item):
-    def __init__(self, *, case, state, **kw) -> None:
+    def __init__(self, *, case: Case, state: _State, **kw: Any) -> None:
         super().__init__(**kw)
         self.case = case
         self.state = state
         self.add_marker(pytest.mark.fbaconf)
 
-    def _run(self):
+    def _run(self) -> CaseResult:
         st = self.state
         work = st.out / "work"
         work.mkdir(parents=True, exist_ok=True)
@@ -169,7 +174,7 @@ class FbaconfItem(pytest.Item):
         summary = bl.classify([r], st.baseline, st.flakes)
         self._judge(r, summary)
 
-    def _judge(self, r, summary) -> None:
+    def _judge(self, r: CaseResult, summary: bl.Summary) -> None:
         st = self.state
         if summary.flaky:
             self.user_properties.append((_PROPERTY, "flaky"))
@@ -178,7 +183,7 @@ class FbaconfItem(pytest.Item):
                 return
             pytest.xfail(f"flaky (listed as a flake): {r.outcome.value}: {clean_text(r.message)}")
         if summary.known:
-            entry = st.baseline[r.case_id]
+            entry = (st.baseline or {})[r.case_id]
             self.user_properties.append((_PROPERTY, "known"))
             pytest.xfail(
                 f"known failure (baseline: {r.case_id},{entry.text()}): {r.outcome.value}: {clean_text(r.message)}"
@@ -187,7 +192,7 @@ class FbaconfItem(pytest.Item):
             self.user_properties.append((_PROPERTY, "fixed"))
             if st.allow_fixed:
                 return
-            entry = st.baseline[r.case_id]
+            entry = (st.baseline or {})[r.case_id]
             raise FbaconfCaseFailure(
                 r,
                 f"fixed: {r.case_id} passes now, but {st.baseline_path} lists it as "
@@ -200,7 +205,9 @@ class FbaconfItem(pytest.Item):
         if r.outcome == Outcome.QUALITY_WARNING:
             warnings.warn(FbaconfCaseWarning(f"{r.case_id}: {clean_text(r.message)}"), stacklevel=1)
 
-    def repr_failure(self, excinfo, style=None):
+    def repr_failure(
+        self, excinfo: pytest.ExceptionInfo[BaseException], style: TracebackStyle | None = None
+    ) -> str | TerminalRepr:
         if isinstance(excinfo.value, FbaconfCaseFailure):
             r, headline = excinfo.value.args
             if headline:
@@ -216,19 +223,19 @@ class FbaconfItem(pytest.Item):
             return clean_text("\n".join(lines))
         return super().repr_failure(excinfo, style=style)
 
-    def reportinfo(self):
+    def reportinfo(self) -> tuple[Path, int | None, str]:
         return self.path, None, f"{PREFIX}{self.case.full_id}"
 
 
 class FbaconfCollector(pytest.Collector):
     """The node ``fbaconf``: its children are the conformance cases."""
 
-    def __init__(self, *, state, selected, **kw) -> None:
+    def __init__(self, *, state: _State, selected: list[str], **kw: Any) -> None:
         super().__init__(**kw)
         self.state = state
         self.selected = selected
 
-    def collect(self):
+    def collect(self) -> Iterator[FbaconfItem]:
         for s in self.state.suites:
             for c in s.cases:
                 if self.selected and not any(fnmatch.fnmatchcase(c.full_id, g) for g in self.selected):
@@ -239,12 +246,12 @@ class FbaconfCollector(pytest.Collector):
 # ------------------------------------------------------------------ confining collection
 
 
-def _selected(config) -> list[str]:
+def _selected(config: pytest.Config) -> list[str]:
     return list(getattr(config.option, "fbaconf_selected", None) or [])
 
 
 @pytest.hookimpl(tryfirst=True)
-def pytest_load_initial_conftests(early_config, parser, args) -> None:
+def pytest_load_initial_conftests(early_config: pytest.Config, parser: pytest.Parser, args: list[str]) -> None:
     """Node ids pasted back (``fbaconf::suite/case``) select cases; they are no paths. Taken out of
     the arguments before pytest looks for conftest files under them — with fbaconf checked out
     at ``./fbaconf`` it would load fbaconf's own ``tests/conftest.py`` — and the rootdir and ini
@@ -263,7 +270,7 @@ def pytest_load_initial_conftests(early_config, parser, args) -> None:
     _reroot(early_config, ns.file_or_dir)
 
 
-def _reroot(config, paths: list[str]) -> None:
+def _reroot(config: pytest.Config, paths: list[str]) -> None:
     """pytest chose the rootdir and ini file from the arguments before this plugin could take the
     node ids out: with a folder named ``fbaconf`` here, from that folder (fbaconf's own
     pyproject.toml). Decide them again from the remaining arguments (pytest's own function);
@@ -295,7 +302,7 @@ def _reroot(config, paths: list[str]) -> None:
         return
 
 
-def pytest_configure(config) -> None:
+def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "fbaconf: a conformance case run through the fbaconf harness")
     if not config.getoption("fbaconf_decoder"):
         return
@@ -308,19 +315,19 @@ def pytest_configure(config) -> None:
 _STATE = pytest.StashKey[_State]()
 
 
-def _confined(config) -> bool:
+def _confined(config: pytest.Config) -> bool:
     """Collect the conformance cases only: no path was named (the default arguments, testpaths or
     the current folder would collect whatever tests lie around, fbaconf's own included)."""
     return bool(config.getoption("fbaconf_decoder")) and config.args_source != pytest.Config.ArgsSource.ARGS
 
 
-def pytest_ignore_collect(collection_path, config):
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
     if _confined(config):
         return True
     return None
 
 
-def pytest_report_header(config) -> list[str] | None:
+def pytest_report_header(config: pytest.Config) -> list[str] | None:
     st = config.stash.get(_STATE, None)
     if st is None:
         return None
@@ -331,7 +338,7 @@ def pytest_report_header(config) -> list[str] | None:
 
 
 @pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(session, config, items) -> None:
+def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config, items: list[pytest.Item]) -> None:
     """Add the cases (before ``--lf``/``--ff`` and ``-k`` look at the items)."""
     st = config.stash.get(_STATE, None)
     if st is None:
@@ -347,11 +354,15 @@ def pytest_collection_modifyitems(session, config, items) -> None:
     added = list(node.collect())
     items.extend(added)
     # Count them as collected (the terminal's "collected N items").
-    config.hook.pytest_collectreport(report=pytest.CollectReport(node.nodeid, "passed", None, added))
+    config.hook.pytest_collectreport(
+        report=pytest.CollectReport(node.nodeid, "passed", None, list[pytest.Item | pytest.Collector](added))
+    )
 
 
 @pytest.hookimpl(wrapper=True, tryfirst=True)
-def pytest_terminal_summary(terminalreporter, exitstatus, config):
+def pytest_terminal_summary(
+    terminalreporter: pytest.TerminalReporter, exitstatus: int, config: pytest.Config
+) -> Generator[None, object, object]:
     """``fbaconf: N new, N known, N fixed, N flaky`` and the new and fixed cases by name, before
     pytest's own failure sections."""
     if config.stash.get(_STATE, None) is not None:
@@ -359,7 +370,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     return (yield)
 
 
-def _seen(tr) -> dict[str, str]:
+def _seen(tr: pytest.TerminalReporter) -> dict[str, str]:
     """Each item's class against the baseline (new, known, fixed, flaky, provisional, pass), from its reports."""
     return {
         rep.nodeid: v
@@ -376,7 +387,7 @@ def _line(seen: dict[str, str]) -> str:
     return line + (f" ({count['provisional']} provisional difference(s): xfail)" if count["provisional"] else "")
 
 
-def _baseline_summary(tr) -> None:
+def _baseline_summary(tr: pytest.TerminalReporter) -> None:
     seen = _seen(tr)
     if not seen:
         return
@@ -388,7 +399,7 @@ def _baseline_summary(tr) -> None:
 
 
 @pytest.hookimpl(tryfirst=True)
-def pytest_sessionfinish(session) -> None:
+def pytest_sessionfinish(session: pytest.Session) -> None:
     """With ``--junitxml``, the line is the JUnit file's ``baseline`` property, as in ``fbaconf run``'s."""
     config = session.config
     tr = config.pluginmanager.get_plugin("terminalreporter")

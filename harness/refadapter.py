@@ -16,14 +16,14 @@ class ReferenceAdapter(PythonAdapter):
 
     def run(self, job: Job) -> None:
         if job.faces:
-            multi_outputs([Path(f) for f in job.faces], job.path("faps_out_dir"), self.faps_format)
+            multi_outputs([Path(f) for f in job.faces], job.need("faps_out_dir"), self.faps_format)
             return
 
-        def want(out: str, ph: str):
+        def want(out: str, ph: str) -> Path | None:
             return job.path(ph) if out in self.outputs and ph not in job.unwanted else None
 
         reference_outputs(
-            job.path("input"),
+            job.need("input"),
             scene=job.path("scene"),
             scenario=job.path("scenario"),
             faps_out=want("faps", "faps_out"),

@@ -77,13 +77,13 @@ class StageResult:
     series: dict[str, list[float]] = field(default_factory=dict)
     artefacts: dict[str, str] = field(default_factory=dict)
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         d = asdict(self)
         d["outcome"] = self.outcome.value
         return d
 
     @classmethod
-    def from_json(cls, d: dict) -> StageResult:
+    def from_json(cls, d: dict[str, Any]) -> StageResult:
         d = dict(d)
         d["outcome"] = Outcome(d["outcome"])
         return cls(**d)
@@ -115,20 +115,20 @@ class CaseResult:
     other_reading: str | None = None  # an undeclared other reading the decoder's result equals (a hint, no excuse)
 
     @property
-    def first_difference(self) -> dict | None:
+    def first_difference(self) -> dict[str, Any] | None:
         for s in self.stages:
             if s.first_difference:
                 return s.first_difference
         return None
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         d = asdict(self)
         d["outcome"] = self.outcome.value
         d["stages"] = [s.to_json() for s in self.stages]
         return d
 
     @classmethod
-    def from_json(cls, d: dict) -> CaseResult:
+    def from_json(cls, d: dict[str, Any]) -> CaseResult:
         d = dict(d)
         d["outcome"] = Outcome(d["outcome"])
         d["stages"] = [StageResult.from_json(s) for s in d.get("stages", [])]
@@ -148,7 +148,7 @@ class SpeedResult:
     required_fps: float
     passed: bool  # True only for verdict "pass"
     provenance: str  # provenance of the level minimum (seed / iso-via-implementation / provisional)
-    samples: list[dict] = field(default_factory=list)  # {"frames": n, "seconds": t, "cpu_s", ...} per run
+    samples: list[dict[str, Any]] = field(default_factory=list)  # {"frames": n, "seconds": t, "cpu_s", ...} per run
     fit_r2: float = 0.0
     message: str = ""
     verdict: str = ""  # "pass" | "fail" | "inconclusive" (the rate missed on a busy machine); default: by passed
@@ -167,11 +167,11 @@ class SpeedResult:
         if not self.verdict:  # a result made (or written) before verdicts: by whether it passed
             self.verdict = "pass" if self.passed else "fail"
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
-    def from_json(cls, d: dict) -> SpeedResult:
+    def from_json(cls, d: dict[str, Any]) -> SpeedResult:
         return cls(**d)
 
 
@@ -179,10 +179,10 @@ class SpeedResult:
 class RunRecord:
     """Everything a report needs: who ran what, on what, and the verdicts."""
 
-    decoder: dict  # {"name", "manifest_sha256", "kind", "claims", "inputs", "outputs"}
+    decoder: dict[str, Any]  # {"name", "manifest_sha256", "kind", "claims", "inputs", "outputs"}
     claim: str | None
-    suites: list[dict]  # [{"name", "version", "sha256", "cases"}]
-    system: dict
+    suites: list[dict[str, Any]]  # [{"name", "version", "sha256", "cases"}]
+    system: dict[str, Any]
     results: list[CaseResult] = field(default_factory=list)
     speed: list[SpeedResult] = field(default_factory=list)
     started: str = ""
@@ -194,9 +194,11 @@ class RunRecord:
     exit_code: int = 0
     # required cases judged by a declared other reading ({"case_id", "rests_on", "reading"}); they fail the
     # claim only under --strict (harness/verdict.py)
-    provisional_differences: list[dict] = field(default_factory=list)
+    provisional_differences: list[dict[str, Any]] = field(default_factory=list)
     strict: bool = False
-    verdict: dict = field(default_factory=dict)  # the claim's verdict: words, tools and decisions (verdict.py)
+    verdict: dict[str, Any] = field(
+        default_factory=dict
+    )  # the claim's verdict: words, tools and decisions (verdict.py)
 
     def counts(self, results: Iterable[CaseResult] | None = None) -> dict[str, int]:
         c = {o.value: 0 for o in OUTCOME_ORDER}
@@ -204,7 +206,7 @@ class RunRecord:
             c[r.outcome.value] += 1
         return c
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         return {
             "format": "fbaconf.run/1",
             "decoder": self.decoder,
@@ -227,7 +229,7 @@ class RunRecord:
         }
 
     @classmethod
-    def from_json(cls, d: dict) -> RunRecord:
+    def from_json(cls, d: dict[str, Any]) -> RunRecord:
         return cls(
             decoder=d["decoder"],
             claim=d.get("claim"),

@@ -28,17 +28,19 @@ from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from fbaconf.bitstreams import readings
 from fbaconf.conformance.golden import REJECT, reading_goldens
 from fbaconf.conformance.provisional import readings_for, rests_on
 from fbaconf.conformance.suite import Case, CaseKind, golden_root, suites_root
 from fbaconf.isolation import endings, sandbox
+from fbaconf.isolation.endings import Ending
 from fbaconf.isolation.staging import stage
 from fbaconf.safefs import remove_tree
 
 from . import cluster as cl
-from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job
+from .adapters import OUTPUT_PLACEHOLDER, Adapter, CommandAdapter, Job, PythonAdapter
 from .compare.base import worst
 from .compare.ladder import compare_outputs, outcome_for
 from .results import CaseResult, Outcome, ResultLog
@@ -77,7 +79,7 @@ def _remove_quietly(path: Path) -> None:
 def run_case(ctx: RunContext, case: Case) -> CaseResult:
     t0 = time.perf_counter()
     required = required_for(ctx.claim, case, ctx.adapter)
-    base = dict(
+    base: dict[str, Any] = dict(
         case_id=case.full_id,
         suite=case.suite,
         claim=case.claim,
@@ -107,7 +109,7 @@ def run_case(ctx: RunContext, case: Case) -> CaseResult:
     return result
 
 
-def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
+def _execute(ctx: RunContext, case: Case, job: Job, base: dict[str, Any]) -> CaseResult:
     a = ctx.adapter
     argv = None
     if isinstance(a, CommandAdapter):
@@ -126,16 +128,18 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
             argv, job.workdir, a.limits, env=a.env, view=view, keep_io=job.workdir if ctx.keep_workdirs else None
         )
         ending = endings.classify(res, a.limits, a.reject_exit_codes, name=a.name)
-        proc = dict(
+        proc: dict[str, Any] = dict(
             command=argv,
             exit_code=res.returncode,
             signal=res.signal,
             stderr_tail=endings.kept_stderr(res.stderr_tail, ending),
         )
-    else:
+    elif isinstance(a, PythonAdapter):
         ex = a.execute(job)
         ending = ex.ending
         proc = dict(command=None, exit_code=ex.exit_code, signal=None, stderr_tail=ex.stderr_tail)
+    else:
+        raise TypeError(f"an adapter neither a command nor in-process: {type(a).__name__}")
     proc["ending"] = ending.kind.value
     if ending.report is not None:
         proc["crash_kind"] = ending.report.kind
@@ -149,7 +153,9 @@ def _execute(ctx: RunContext, case: Case, job: Job, base: dict) -> CaseResult:
     return result
 
 
-def _judge(ctx: RunContext, case: Case, job: Job, ending, fields: dict, reading_dir: Path | None = None) -> CaseResult:
+def _judge(
+    ctx: RunContext, case: Case, job: Job, ending: Ending, fields: dict[str, Any], reading_dir: Path | None = None
+) -> CaseResult:
     """The case's result from the decoder's ending and outputs: against the case's goldens, or
     against what another reading gives (``reading_dir``: its outputs, or reject.json)."""
     if reading_dir is None:
@@ -181,7 +187,7 @@ def _judge(ctx: RunContext, case: Case, job: Job, ending, fields: dict, reading_
 
 
 def _judge_by_declared(
-    ctx: RunContext, case: Case, job: Job, ending, fields: dict, declared: dict[str, Path]
+    ctx: RunContext, case: Case, job: Job, ending: Ending, fields: dict[str, Any], declared: dict[str, Path]
 ) -> CaseResult:
     """A case that a reading the decoder declared changes: judged by what that reading gives (the
     first declared one that the result equals; a decoder follows one reading)."""
@@ -205,7 +211,9 @@ def _judge_by_declared(
     return first
 
 
-def _hint_other_reading(ctx: RunContext, case: Case, job: Job, ending, fields: dict, result: CaseResult) -> None:
+def _hint_other_reading(
+    ctx: RunContext, case: Case, job: Job, ending: Ending, fields: dict[str, Any], result: CaseResult
+) -> None:
     """A failing result that equals what another (undeclared) reading gives says so: the vendor
     learns which reading the decoder follows and how to declare it; it stays a failure."""
     for rid, rdir in reading_goldens(case, ctx.golden).items():
@@ -330,16 +338,16 @@ def run_cases(  # noqa: PLR0913 - keyword options of a run
             cl.run_on_cluster(cli, run_case, ctx, todo, record, sandbox.stopping)
     elif jobs <= 1:
         for c in todo:
-            r = one(c)
-            if r is not None:
-                results[c.full_id] = r
+            got = one(c)
+            if got is not None:
+                results[c.full_id] = got
     else:
         with ThreadPoolExecutor(max_workers=jobs) as ex:
             futs = {ex.submit(one, c): c for c in todo}
             for f in as_completed(futs):
-                r = f.result()
-                if r is not None:
-                    results[futs[f].full_id] = r
+                got = f.result()
+                if got is not None:
+                    results[futs[f].full_id] = got
     if not keep_workdirs:
         _remove_quietly(work_root)
     return [results[c.full_id] for c in cases if c.full_id in results]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import fnmatch
 from typing import Protocol
 
-from fbaconf.conformance.suite import Case, CaseKind
+from fbaconf.conformance.suite import Case, CaseKind, Suite
 from fbaconf.profiles.model import Claim, load_profiles
 
 from .adapters import Adapter
@@ -80,7 +80,12 @@ def capability(adapter: Adapter, case: Case) -> str | None:
 
 
 def select_cases(
-    suites, claim: str | None, suite_names: list[str], case_globs: list[str], only_required: bool, adapter: Adapter
+    suites: list[Suite],
+    claim: str | None,
+    suite_names: list[str],
+    case_globs: list[str],
+    only_required: bool,
+    adapter: Adapter,
 ) -> list[Case]:
     """The cases of ``suites`` named by ``suite_names``/``case_globs`` (all when empty); with
     ``only_required``, just those the claim requires of ``adapter``."""

@@ -9,14 +9,19 @@ import signal
 import threading
 import time
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 from fbaconf.conformance import provisional
+from fbaconf.conformance.suite import Case, Suite
 from fbaconf.isolation import sandbox, setup
 
 from . import baseline as bl, reports
-from .results import RunRecord
+from .adapters import Adapter
+from .results import CaseResult, RunRecord
 from .runner import run_cases
 from .speed.measure import measure_claim
 from .sysinfo import system_info
@@ -46,7 +51,14 @@ class RunOptions:
     strict: bool = False  # provisional differences fail the claim (conformance/provisional.py)
 
 
-def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptions | None = None):
+def execute(
+    adapter: Adapter,
+    claim: str,
+    cases: list[Case],
+    suites: list[Suite],
+    out_dir: Path,
+    options: RunOptions | None = None,
+) -> RunRecord:
     """Run cases (+ speed); returns the RunRecord with its exit code set.
 
     Exit code: 1 when a required case fails or could not be taken (a claim means all of it),
@@ -105,7 +117,15 @@ def execute(adapter, claim: str, cases, suites, out_dir: Path, options: RunOptio
     return record
 
 
-def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) -> None:
+def _retry(
+    adapter: Adapter,
+    cases: list[Case],
+    results: list[CaseResult],
+    claim: str,
+    out_dir: Path,
+    jobs: int | None,
+    retries: int,
+) -> None:
     """Re-run each failing required case up to ``retries`` times; one that passes on a re-run
     is a flake (its first result is kept, annotated ``flake``)."""
     by_id = {c.full_id: c for c in cases}
@@ -130,7 +150,13 @@ def _retry(adapter, cases, results, claim, out_dir: Path, jobs, retries: int) ->
 
 
 def write_reports(
-    record, out_dir: Path, *, json_path=None, junit_path=None, html_dir=None, heading: str = "fbaconf run"
+    record: RunRecord,
+    out_dir: Path,
+    *,
+    json_path: Path | None = None,
+    junit_path: Path | None = None,
+    html_dir: Path | None = None,
+    heading: str = "fbaconf run",
 ) -> dict[str, Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {
@@ -144,7 +170,7 @@ def write_reports(
     return paths
 
 
-def missing_summary(results) -> list[str]:
+def missing_summary(results: Iterable[CaseResult]) -> list[str]:
     """What the decoder could not take among the required cases, grouped by reason
     (tools, inputs, outputs, claims): one line per reason with its count."""
     reasons = Counter(r.message for r in results if r.required and r.outcome.value == "NotSupported")
@@ -162,11 +188,11 @@ class interruptible:
 
     def __enter__(self) -> _Stop:
         self.stop = _Stop()
-        self.old = {}
+        self.old: dict[int, Any] = {}  # the handlers before (signal.getsignal's kinds)
         sandbox.reset_stop()
         if threading.current_thread() is threading.main_thread():
 
-            def handler(signum, _frame):
+            def handler(signum: int, _frame: FrameType | None) -> None:
                 self.stop.signum = signum
                 sandbox.stop_all()
 
@@ -174,13 +200,21 @@ class interruptible:
                 self.old[sig] = signal.signal(sig, handler)
         return self.stop
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         for sig, h in self.old.items():
             signal.signal(sig, h)
         sandbox.reset_stop()
 
 
-def _record(adapter, claim, suites, cases, results, started, t0):
+def _record(
+    adapter: Adapter,
+    claim: str,
+    suites: list[Suite],
+    cases: list[Case],
+    results: list[CaseResult],
+    started: str,
+    t0: float,
+) -> RunRecord:
     """The RunRecord of a session: decoder, claim, the suites that ran, system, results."""
     ran = {c.suite for c in cases}
     return RunRecord(
@@ -207,7 +241,16 @@ def _record(adapter, claim, suites, cases, results, started, t0):
     )
 
 
-def _interrupted_record(adapter, claim, suites, cases, results, started, t0, signum):
+def _interrupted_record(
+    adapter: Adapter,
+    claim: str,
+    suites: list[Suite],
+    cases: list[Case],
+    results: list[CaseResult],
+    started: str,
+    t0: float,
+    signum: int,
+) -> RunRecord:
     record = _record(adapter, claim, suites, cases, results, started, t0)
     record.missing = [
         f"interrupted by signal {signum}: {len(cases) - len(results)} case(s) not run (--resume continues)"

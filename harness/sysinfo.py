@@ -25,6 +25,7 @@ import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
+from typing import Any
 
 # Distributions whose versions can change a verdict (numerics, image I/O, colour maths).
 DISTRIBUTIONS = ("fbaconf", "numpy", "OpenImageIO", "colour-science")
@@ -77,13 +78,13 @@ def _version(dist: str) -> str | None:
         return None
 
 
-def system_info(extra: dict | None = None) -> dict:
+def system_info(extra: dict[str, Any] | None = None) -> dict[str, Any]:
     """A JSON-ready description of this machine and software, with a UTC timestamp.
 
     ``extra`` entries (e.g. ``{"jobs": 4}``) are added last and may override keys.
     A library that is not installed has the version ``None``.
     """
-    info: dict = {
+    info: dict[str, Any] = {
         "cpu_model": _cpu_model(),
         "cpu_count": os.cpu_count(),
         "cpu_usable": _usable_cpus(),
@@ -213,7 +214,7 @@ class TreeWatch:
         self._thread.start()
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self._stop.set()
         self._thread.join()
 

@@ -6,12 +6,14 @@ from __future__ import annotations
 import difflib
 import os
 from pathlib import Path
+from typing import TextIO
 
+from fbaconf.conformance.suite import Suite
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import sandbox, view
 from fbaconf.profiles.model import Claim
 
-from .adapters import highest_claim
+from .adapters import Adapter, highest_claim
 
 
 class UsageError(FbaconfInputError):
@@ -20,12 +22,12 @@ class UsageError(FbaconfInputError):
     rule = "usage"
 
 
-def use_color(stream) -> bool:
+def use_color(stream: TextIO) -> bool:
     """Colour only on a terminal and never when NO_COLOR is set (https://no-color.org)."""
     return stream.isatty() and not os.environ.get("NO_COLOR")
 
 
-def resolve_claim(text: str | None, adapter) -> str:
+def resolve_claim(text: str | None, adapter: Adapter) -> str:
     try:
         return str(Claim.parse(text or highest_claim(adapter)))
     except ValueError as e:
@@ -47,7 +49,7 @@ def lab_folders(paths: list[Path]) -> list[Path]:
     return out
 
 
-def check_suites(suites, names: list[str]) -> None:
+def check_suites(suites: list[Suite], names: list[str]) -> None:
     """Unknown ``--suite`` names are a usage error, with the nearest name."""
     known = [s.name for s in suites]
     for n in names:

@@ -31,6 +31,7 @@ reading) / ``declined`` / ``unverified`` / ``fails``.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 from fbaconf.bitstreams import readings
 from fbaconf.conformance.provisional import open_decisions
@@ -67,13 +68,13 @@ class DecisionState:
 class ClaimVerdict:
     verdict: str
     exit_code: int
-    differences: list[dict]  # [{"case_id", "rests_on", "reading"}], by case id
+    differences: list[dict[str, Any]]  # [{"case_id", "rests_on", "reading"}], by case id
     unverified: list[str]  # tools set aside
     set_aside: set[str]  # the case ids of those tools
     tools: dict[str, ToolState]
     decisions: dict[str, DecisionState]
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         return {
             "verdict": self.verdict,
             "exit_code": self.exit_code,
@@ -84,16 +85,16 @@ class ClaimVerdict:
         }
 
 
-def _ok(r: dict) -> bool:
+def _ok(r: dict[str, Any]) -> bool:
     return r.get("outcome") in OK
 
 
-def _declined(r: dict) -> bool:
+def _declined(r: dict[str, Any]) -> bool:
     """Not taken (NotSupported), or a valid stream rejected with a reject exit code."""
     return r.get("outcome") == "NotSupported" or (r.get("outcome") == "Fail" and r.get("ending") == "reject")
 
 
-def tool_state(tool: str, cases: list[dict]) -> ToolState:
+def tool_state(tool: str, cases: list[dict[str, Any]]) -> ToolState:
     """How the decoder fared on the required cases whose streams use ``tool`` (module doc)."""
     opened = set(open_decisions())
     provisional = bool(cases) and all(opened & set(r.get("rests_on") or ()) for r in cases)
@@ -128,7 +129,7 @@ def tool_state(tool: str, cases: list[dict]) -> ToolState:
 
 
 def decision_state(
-    decision: str, cases: list[dict], set_aside: set[str], tools: dict[str, ToolState], declared: list[str]
+    decision: str, cases: list[dict[str, Any]], set_aside: set[str], tools: dict[str, ToolState], declared: list[str]
 ) -> DecisionState:
     mine = [r for r in declared if readings.get(r).decision == decision]
     passed = sum(_ok(r) for r in cases)
@@ -146,7 +147,7 @@ def decision_state(
     return DecisionState(decision, state, len(cases), passed, mine)
 
 
-def verdict_of(s: dict) -> str:
+def verdict_of(s: dict[str, Any]) -> str:
     """ "pass" | "fail" | "inconclusive" of one speed result's JSON. Only a result that says it
     passed passes; one without a verdict (written before verdicts) is "pass" or "fail" by
     ``passed``; anything else that did not pass is a fail."""
@@ -158,7 +159,7 @@ def verdict_of(s: dict) -> str:
     return "fail"
 
 
-def speed_verdict(speed: list[dict] | None) -> tuple[str, int] | None:
+def speed_verdict(speed: list[dict[str, Any]] | None) -> tuple[str, int] | None:
     """The claim's speed verdict from its speed results (``SpeedResult.to_json()``; None: not
     measured): None when nothing blocks the pass; ``("SPEED FAIL", 3)`` when any operation
     failed; ``("SPEED INCONCLUSIVE", 4)`` when none failed and one was inconclusive."""
@@ -173,12 +174,16 @@ def speed_verdict(speed: list[dict] | None) -> tuple[str, int] | None:
 
 
 def claim_verdict(
-    results: list[dict], *, strict: bool, speed: list[dict] | None, declared: list[str] | tuple[str, ...] = ()
+    results: list[dict[str, Any]],
+    *,
+    strict: bool,
+    speed: list[dict[str, Any]] | None,
+    declared: list[str] | tuple[str, ...] = (),
 ) -> ClaimVerdict:
     """The claim's verdict from its result lines (JSON form; only the required ones count) and the
     speed results (None: not measured); ``declared``: the decoder's declared other readings."""
     required = [r for r in results if r.get("required")]
-    by_tool: dict[str, list[dict]] = {}
+    by_tool: dict[str, list[dict[str, Any]]] = {}
     for r in required:
         for t in r.get("tools") or ():
             by_tool.setdefault(t, []).append(r)
@@ -235,7 +240,7 @@ _TOOL_WORDS = {
 }
 
 
-def describe(verdict: dict) -> list[str]:
+def describe(verdict: dict[str, Any]) -> list[str]:
     """What a claim's verdict (:meth:`ClaimVerdict.to_json`) says per tool and per decision, one
     line each: the statement, the terminal summary and the HTML report print these."""
     out = []

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -23,14 +24,14 @@ from fbaconf._atomic import atomic_path
 from .errors import ImageIOError, TextureError
 
 
-def openimageio():
+def openimageio() -> Any:  # a module without type information
     """The OpenImageIO module (imported on first use)."""
     import OpenImageIO  # noqa: PLC0415 (image I/O loads on first use)
 
     return OpenImageIO
 
 
-def colour_science():
+def colour_science() -> Any:  # a module without type information
     """The colour-science module (imported on first use, its import warnings silenced)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

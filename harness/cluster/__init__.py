@@ -50,10 +50,19 @@ import secrets
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from fbaconf.errors import FbaconfInputError
 
 from ..results import CaseResult
+
+if TYPE_CHECKING:
+    from distributed import Client
+    from distributed.security import Security
+
+    from fbaconf.conformance.suite import Case
+
+    from ..runner import RunContext
 from .tls import make_certificates
 
 MAX_DEPTH = 32
@@ -84,11 +93,11 @@ def parse(spec: str) -> tuple[str, str | int]:
 # ------------------------------------------------------------------ certificates
 
 
-def lab_security():
+def lab_security() -> Security:
     """The lab's certificates for a remote scheduler (module doc), or ClusterError."""
     from distributed.security import Security  # noqa: PLC0415 (the cluster extra)
 
-    env = {k: os.environ.get(f"FBACONF_CLUSTER_{k.upper()}") for k in ("ca", "cert", "key")}
+    env = {k: os.environ.get(f"FBACONF_CLUSTER_{k.upper()}") or "" for k in ("ca", "cert", "key")}
     if all(env.values()):
         for k, v in env.items():
             if not Path(v).is_file():
@@ -97,7 +106,7 @@ def lab_security():
             tls_ca_file=env["ca"], tls_client_cert=env["cert"], tls_client_key=env["key"], require_encryption=True
         )
     sec = Security(require_encryption=True)  # dask's configuration (distributed.comm.tls.*)
-    if sec.tls_ca_file and sec.tls_client_cert:
+    if getattr(sec, "tls_ca_file", None) and getattr(sec, "tls_client_cert", None):  # set from its config
         return sec
     raise ClusterError(
         "a remote Dask scheduler is reached only over TLS with the lab's certificates: set "
@@ -111,7 +120,7 @@ def lab_security():
 
 
 @contextmanager
-def client(spec: str) -> Iterator:
+def client(spec: str) -> Iterator[Client]:
     """A connected ``distributed.Client`` for ``spec`` (closed, and a local cluster shut down,
     after)."""
     kind, arg = parse(spec)
@@ -127,8 +136,8 @@ def client(spec: str) -> Iterator:
             )
         from .local import local_cluster  # noqa: PLC0415 (Dask: optional, the cluster extra)
 
-        with local_cluster(int(arg), make_certificates) as (cluster, sec):
-            c = Client(cluster, security=sec, deserializers=RESULT_DESERIALIZERS)
+        with local_cluster(int(arg), make_certificates) as (cluster, run_sec):
+            c = Client(cluster, security=run_sec, deserializers=RESULT_DESERIALIZERS)
             try:
                 yield c
             finally:
@@ -153,7 +162,7 @@ def task_key(kind: str) -> str:
 # ------------------------------------------------------------------ results as data
 
 
-def plain(obj, what: str = "result", *, _depth: int = 0, _count: list | None = None):
+def plain(obj: object, what: str = "result", *, _depth: int = 0, _count: list[int] | None = None) -> Any:
     """``obj`` if it is plain data — dicts with string keys, lists (tuples read as lists),
     strings, bytes, whole and real numbers, booleans, None — within bounds of depth, size and
     text; ClusterError otherwise. What a worker sends back is checked with it before use."""
@@ -176,12 +185,12 @@ def plain(obj, what: str = "result", *, _depth: int = 0, _count: list | None = N
     raise ClusterError(f"a {what} from the cluster is not plain data ({type(obj).__name__})")
 
 
-def as_data(obj) -> str:
+def as_data(obj: object) -> str:
     """What a task sends back: JSON text (plain data by construction, msgpack-serialized)."""
     return json.dumps(obj)
 
 
-def from_data(text, what: str) -> dict:
+def from_data(text: object, what: str) -> dict[str, Any]:
     """A task's JSON text, parsed and checked (:func:`plain`) — ClusterError for anything else."""
     if not isinstance(text, str) or len(text) > MAX_TEXT:
         raise ClusterError(f"a {what} from the cluster is not the JSON text a task sends")
@@ -195,7 +204,7 @@ def from_data(text, what: str) -> dict:
     return got
 
 
-def _case_task(run_case: Callable, ctx, case) -> str:
+def _case_task(run_case: Callable[[RunContext, Case], CaseResult], ctx: RunContext, case: Case) -> str:
     """In a worker: one case, its result as plain data (an exception as such, never raised:
     an exception object would travel pickled)."""
     try:
@@ -204,7 +213,14 @@ def _case_task(run_case: Callable, ctx, case) -> str:
         return as_data({"error": f"{type(e).__name__}: {str(e)[:2000]}", "case": getattr(case, "full_id", "?")})
 
 
-def run_on_cluster(c, run_case: Callable, ctx, cases, on_result: Callable, stopping: Callable[[], bool]) -> None:
+def run_on_cluster(
+    c: Client,
+    run_case: Callable[[RunContext, Case], CaseResult],
+    ctx: RunContext,
+    cases: list[Case],
+    on_result: Callable[[CaseResult], None],
+    stopping: Callable[[], bool],
+) -> None:
     """Submit ``run_case(ctx, case)`` for every case as a task and hand each result to
     ``on_result`` as it arrives. Tasks of a lost worker are rerun by Dask; a task that raises
     is retried twice."""

@@ -16,8 +16,10 @@ talk to the cluster").
 
 from __future__ import annotations
 
+import ssl
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any, NoReturn
 
 import dask
 from distributed import Nanny, Scheduler, SpecCluster, Worker
@@ -52,30 +54,33 @@ class RunSecurity(Security):
         )
         self._chain = certs.cert + certs.key
 
-    def _get_tls_context(self, tls, purpose):
+    def _get_tls_context(self, tls: dict[str, Any], purpose: ssl.Purpose) -> ssl.SSLContext | None:
+        context: ssl.SSLContext | None
         if tls.get("cert") != _IN_MEMORY:
-            return super()._get_tls_context(tls, purpose)
+            context = super()._get_tls_context(tls, purpose)
+            return context
         with memory_file(self._chain) as path:  # Dask's own checks and settings, the chain from memory
-            return super()._get_tls_context({**tls, "cert": path, "key": None}, purpose)
+            context = super()._get_tls_context({**tls, "cert": path, "key": None}, purpose)
+            return context
 
-    def __reduce__(self):
+    def __reduce__(self) -> NoReturn:
         raise TypeError("the run's TLS key is not pickled: its workers are forked from the harness")
 
     def __copy__(self) -> RunSecurity:
         return self
 
-    def __deepcopy__(self, memo) -> RunSecurity:
+    def __deepcopy__(self, memo: dict[int, object]) -> RunSecurity:
         return self
 
 
 class RunScheduler(Scheduler):
-    def start_http_server(self, *args, **kwargs) -> None:
+    def start_http_server(self, *args: Any, **kwargs: Any) -> None:
         super().start_http_server(*args, **kwargs)
         self.http_server.stop()  # no HTTP endpoint (module doc)
 
 
 class RunWorker(Worker):
-    def start_http_server(self, *args, **kwargs) -> None:
+    def start_http_server(self, *args: Any, **kwargs: Any) -> None:
         super().start_http_server(*args, **kwargs)
         self.http_server.stop()  # no HTTP endpoint (module doc)
 

@@ -19,6 +19,7 @@ import secrets
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import NoReturn
 
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
@@ -40,7 +41,7 @@ class RunCertificates:
     def __repr__(self) -> str:  # never the key, in a log or a traceback
         return "RunCertificates(<in memory>)"
 
-    def __reduce__(self):
+    def __reduce__(self) -> NoReturn:
         raise TypeError("the run's TLS key is not pickled: it stays in the memory of the process that made it")
 
 
@@ -49,10 +50,17 @@ def make_certificates(*, common_name: str = "fbaconf-run") -> RunCertificates:
     localhost, as PEM bytes in memory; the authority's key is not kept."""
     now = datetime.datetime.now(datetime.UTC)
 
-    def name(cn: str):
+    def name(cn: str) -> x509.Name:
         return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, cn)])
 
-    def cert(subject, issuer, public, signer, *, ca: bool):
+    def cert(
+        subject: x509.Name,
+        issuer: x509.Name,
+        public: rsa.RSAPublicKey,
+        signer: rsa.RSAPrivateKey,
+        *,
+        ca: bool,
+    ) -> x509.Certificate:
         b = (
             x509.CertificateBuilder()
             .subject_name(subject)
@@ -90,7 +98,7 @@ def _prctl(option: int, value: int = 0) -> int:
     r = ctypes.CDLL(None, use_errno=True).prctl(option, value, 0, 0, 0)
     if r < 0:
         raise OSError(ctypes.get_errno(), f"prctl({option}) failed")
-    return r
+    return int(r)
 
 
 def is_dumpable() -> bool:

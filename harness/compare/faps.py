@@ -183,10 +183,10 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
         parts.append(f"{int(bad_frame.sum())} of {n} frame(s) differ; first at {detail}")
     # every differing FAP, with how many frames and the first and last (a pattern such as one
     # FAP always copied from another shows here, not in the first difference alone)
-    cols = np.nonzero(per_fap.any(axis=0))[0]
-    if len(cols):
+    differing = np.nonzero(per_fap.any(axis=0))[0]
+    if len(differing):
         rows = []
-        for j in cols:
+        for j in map(int, differing):
             ks = np.nonzero(per_fap[:, j])[0]
             rows.append(
                 {
@@ -205,7 +205,7 @@ def compare_faps(expected: FapFrames, got: FapFrames, *, text_output: bool, play
     return StageResult("faps", Outcome.FAIL, "; ".join(parts), first, metrics, series)
 
 
-def _fap_value(f: FapFrames, k: int, j: int):
+def _fap_value(f: FapFrames, k: int, j: int) -> int | dict[str, int]:
     if j >= 2:
         return int(f.values[k, j])
     nv = len(VISEME_FIELDS)

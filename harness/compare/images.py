@@ -9,6 +9,7 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,8 @@ def _read_encoded(path: Path, max_bytes: int, max_pixels: int) -> np.ndarray:
         rgb = min(c, 3)
         px[:, :, :rgb] = np.asarray(colour_science().cctf_encoding(np.clip(px[:, :, :rgb], 0.0, 1.0), function="sRGB"))
         px = np.clip(px, 0.0, 1.0)
-    return px
+    out: np.ndarray = px
+    return out
 
 
 def _rgb(px: np.ndarray) -> np.ndarray:
@@ -76,7 +78,7 @@ def _delta_e(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.nan_to_num(de, nan=0.0)
 
 
-def _buf(px: np.ndarray):
+def _buf(px: np.ndarray) -> Any:  # an OpenImageIO ImageBuf
     oiio = openimageio()
     h, w, c = px.shape
     b = oiio.ImageBuf(oiio.ImageSpec(w, h, c, oiio.FLOAT))
@@ -105,7 +107,7 @@ def _px8(v: np.ndarray) -> list[int]:
     return [int(x) for x in np.floor(np.asarray(v, dtype=np.float64) * 255.0 + 0.5)]
 
 
-def _neighbourhood(px: np.ndarray):
+def _neighbourhood(px: np.ndarray) -> list[np.ndarray]:
     """The nine 3x3-shifted views of ``px`` (edge-replicated): each pixel's neighbours in turn."""
     h, w = px.shape[:2]
     pad = np.pad(px, ((1, 1), (1, 1), (0, 0)), mode="edge")
@@ -224,7 +226,7 @@ def compare_images(  # noqa: PLR0913 - keyword options of the image stage
     viol_s: list[float] = []
     outcomes: list[Outcome] = []
     notes: list[str] = []
-    firsts: list[dict | None] = []
+    firsts: list[dict[str, Any] | None] = []
     artefacts: dict[str, str] = {}
     agg = {
         "max_error": 0.0,
@@ -325,7 +327,7 @@ def compare_images(  # noqa: PLR0913 - keyword options of the image stage
             y, x = (int(v) for v in np.unravel_index(int(np.argmax(j.diff - j.allowed)), j.diff.shape))
         else:
             y, x = (int(v) for v in np.unravel_index(int(np.argmax(de)), de.shape))
-        first = {
+        fd: dict[str, Any] = {
             "frame": fr,
             "pixel": [x, y],
             "expected": _px8(_rgb(ea)[y, x]),
@@ -333,10 +335,9 @@ def compare_images(  # noqa: PLR0913 - keyword options of the image stage
             "deltae": float(de[y, x]),
             "reason": "; ".join(reasons_fail or reasons_warn),
         }
-        firsts.append(first)
+        firsts.append(fd)
         notes.append(
-            f"frame {fr}: {first['reason']}; worst pixel ({x}, {y}): expected RGB {first['expected']}, "
-            f"got {first['got']}"
+            f"frame {fr}: {fd['reason']}; worst pixel ({x}, {y}): expected RGB {fd['expected']}, got {fd['got']}"
         )
         if written < max_artefact_frames:
             written += 1

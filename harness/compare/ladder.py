@@ -14,6 +14,7 @@ import re
 import shutil
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -33,7 +34,9 @@ from .tolerances import ImageTolerances, VertexTolerances
 from .vertices import compare_vertices, part_namer
 
 
-def outcome_for(ending: Ending, *, invalid_stream: bool = False, conceal_allowed: bool = False):
+def outcome_for(
+    ending: Ending, *, invalid_stream: bool = False, conceal_allowed: bool = False
+) -> tuple[Outcome, str] | None:
     """The case outcome of an ending, or None when the outputs decide (a valid stream decoded).
 
     Valid streams: a reject is a Fail. Invalid streams (the error groups): a reject is a Pass;
@@ -83,7 +86,7 @@ def compare_outputs(
     gdir = gdir if gdir is not None else case.golden_dir(golden)
     stages: list[StageResult] = []
     if case.kind == CaseKind.MULTI:
-        outd = job.path("faps_out_dir")
+        outd = job.need("faps_out_dir")
         for i, (src, gold) in enumerate(zip(case.face_paths(), case.goldens.get("faces", []))):
             expected = FapFrames.load_npz(gdir / gold)
             cand = [outd / f"{src.stem}.{ext}" for ext in ("npz", "fap")]
@@ -111,7 +114,7 @@ def compare_outputs(
                 )
                 continue
             text_in = job.values.get("input", "").lower().endswith(".fap")
-            stages.append(_faps_stage(FapFrames.load_npz(gp), job.path("faps_out"), "faps", text_in))
+            stages.append(_faps_stage(FapFrames.load_npz(gp), job.need("faps_out"), "faps", text_in))
         elif stage == "vertices":
             stages.append(_vertices_stage(case, gdir, job))
         elif stage == "images":
@@ -119,7 +122,7 @@ def compare_outputs(
     return stages
 
 
-def _faps_stage(expected, got_path: Path, name: str, text_input: bool = False) -> StageResult:
+def _faps_stage(expected: FapFrames, got_path: Path, name: str, text_input: bool = False) -> StageResult:
     """Decoded FAPs, exactly. With ``.fap`` text output there is no SET/RETAINED distinction to
     compare, only the values of every FAP the standard fixes; a player (``.fap`` input) is
     compared on its state (:mod:`.faps`)."""
@@ -145,7 +148,7 @@ def _vertices_stage(case: Case, gdir: Path, job: Job) -> StageResult:
     if not gp.is_file():
         return StageResult("vertices", Outcome.ERROR, f"golden missing: {gp} (run fbaconf golden regenerate)")
     got_path = job.path("vertices_out")
-    if not os.path.lexists(got_path):
+    if got_path is None or not os.path.lexists(got_path):
         return StageResult("vertices", Outcome.FAIL, "decoder exited 0 but wrote no vertices output")
     if key == "extra_fap_values":
         return _effective_faps_stage(gp, got_path, tol)
@@ -162,7 +165,7 @@ def _vertices_stage(case: Case, gdir: Path, job: Job) -> StageResult:
     return r
 
 
-def _load_effective(path: Path):
+def _load_effective(path: Path) -> np.ndarray:
     """``extra_fap_values`` of a vertices output, read as defensively as every output."""
     check_output_file(path, DEFAULT_MAX_BYTES)
     with open_npz(path, DEFAULT_MAX_BYTES) as z:
@@ -174,7 +177,7 @@ def _load_effective(path: Path):
     return a.astype(np.float64)
 
 
-def _effective_faps_stage(golden: Path, got_path: Path, tol: dict) -> StageResult:
+def _effective_faps_stage(golden: Path, got_path: Path, tol: dict[str, Any]) -> StageResult:
     """Effective FAPs after FIT / left-right fill (FaceState extra ``fap_values``), float tolerance."""
     name = "effective_faps"
     exp = _load_effective(golden)
@@ -215,7 +218,7 @@ def _effective_faps_stage(golden: Path, got_path: Path, tol: dict) -> StageResul
     )
 
 
-def _part_lookup(golden_vertices: Path) -> Callable[[int], str] | None:
+def _part_lookup(golden_vertices: Path) -> Callable[[int], str | None] | None:
     """Mesh part names of the golden FaceState, for naming a diverging vertex."""
     try:
         return part_namer(load_npz(golden_vertices).parts)

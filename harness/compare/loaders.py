@@ -95,7 +95,7 @@ class _SafeNpz:
     def __enter__(self) -> _SafeNpz:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.zf.close()
 
     def err(self, msg: str, rule: str = "output-array") -> OutputError:
@@ -151,7 +151,7 @@ def open_npz(path: Path, max_bytes: int) -> _SafeNpz:
         raise OutputError(f"not a readable .npz (zip) file: {e}", rule="output-npz", file=str(path)) from None
 
 
-def _want(z: _SafeNpz, key: str, *, kinds: str, shape: tuple, what: str = "") -> np.ndarray:
+def _want(z: _SafeNpz, key: str, *, kinds: str, shape: tuple[int | None, ...], what: str = "") -> np.ndarray:
     """Array ``key`` with dtype kind in ``kinds`` and ``shape`` (None = any size on that axis)."""
     a = z.get(key)
     if a.dtype.kind not in kinds:
@@ -178,7 +178,7 @@ def _scalar(z: _SafeNpz, key: str, kinds: str) -> float:
     v = a.reshape(()).item()
     if isinstance(v, float) and not math.isfinite(v):
         raise z.err(f"'{key}' is {v}", rule="output-nonfinite")
-    return v
+    return float(v)
 
 
 def _load_fapframes_npz(path: Path, max_bytes: int) -> FapFrames:
@@ -237,7 +237,7 @@ def _is_zip(path: Path) -> bool:
         return False
 
 
-def load_output_faps(path, *, max_bytes: int = DEFAULT_MAX_BYTES) -> FapFrames:
+def load_output_faps(path: str | os.PathLike[str], *, max_bytes: int = DEFAULT_MAX_BYTES) -> FapFrames:
     """A decoder's FAP output: ``.fap`` text or an fbaconf FapFrames ``.npz`` (chosen by the
     zip signature, so a mis-named file is still read as what it is).
 
@@ -274,7 +274,9 @@ def load_output_faps(path, *, max_bytes: int = DEFAULT_MAX_BYTES) -> FapFrames:
         ) from None
 
 
-def load_output_vertices(path, *, key: str = "vertices", max_bytes: int = DEFAULT_MAX_BYTES) -> np.ndarray:
+def load_output_vertices(
+    path: str | os.PathLike[str], *, key: str = "vertices", max_bytes: int = DEFAULT_MAX_BYTES
+) -> np.ndarray:
     """Array ``key`` (float[F, N, 3]) of a decoder's vertices ``.npz`` — the FaceState
     format of ``animation/stateio.py`` or any npz holding that array — as float64. Use
     ``key="extra_feature_points"`` for the feature points of a FaceState (calibration).

@@ -6,21 +6,21 @@ from __future__ import annotations
 import math
 import tomllib
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import Field, asdict, dataclass, fields
 from functools import lru_cache
 from importlib import resources
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar, Self
 
 from .base import ToleranceError
 
 
 @lru_cache(maxsize=1)
-def _tolerance_file() -> dict:
+def _tolerance_file() -> dict[str, Any]:
     text = resources.files("fbaconf.harness").joinpath("data", "tolerances.toml").read_text("utf-8")
     return tomllib.loads(text)
 
 
-def load_tolerances() -> dict:
+def load_tolerances() -> dict[str, Any]:
     """The parsed default tolerance file (a fresh copy): ``{"vertices": {...}, "images": {...}}``."""
     return {k: dict(v) for k, v in _tolerance_file().items()}
 
@@ -28,22 +28,27 @@ def load_tolerances() -> dict:
 def _check_number(cls_name: str, key: str, v: Any) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ToleranceError(f"{cls_name}.{key} must be a number, not {type(v).__name__}", rule="tolerance-type")
-    v = float(v)
-    if math.isnan(v) or v < 0:
-        raise ToleranceError(f"{cls_name}.{key} must be >= 0 (got {v})", rule="tolerance-value")
-    return v
+    x = float(v)
+    if math.isnan(x) or x < 0:
+        raise ToleranceError(f"{cls_name}.{key} must be >= 0 (got {x})", rule="tolerance-value")
+    return x
 
 
 class _Tolerances:
+    if TYPE_CHECKING:  # what the dataclass subclasses have: fields() and asdict() take them
+        __dataclass_fields__: ClassVar[dict[str, Field[Any]]]
+
     _section = ""
     _order: tuple[tuple[str, str], ...] = ()  # (warn key, fail key) pairs that must be ordered
 
     @classmethod
-    def defaults(cls):
+    def defaults(cls) -> Self:
         return cls.from_dict(None, None)
 
     @classmethod
-    def from_dict(cls, defaults=None, overrides: Mapping[str, Any] | None = None):
+    def from_dict(
+        cls, defaults: _Tolerances | Mapping[str, Any] | None = None, overrides: Mapping[str, Any] | None = None
+    ) -> Self:
         """Tolerances from ``defaults`` (an instance, a dict, or None for the data file)
         with the keys of ``overrides`` replacing them. Unknown keys, non-numbers, negative
         or NaN values and a warn limit above its fail limit raise :class:`ToleranceError`."""
@@ -79,7 +84,7 @@ class _Tolerances:
         return cls(**vals)
 
     def to_dict(self) -> dict[str, float]:
-        return asdict(self)
+        return {k: float(v) for k, v in asdict(self).items()}
 
 
 @dataclass(frozen=True)

@@ -4,14 +4,26 @@ named with its mesh part."""
 from __future__ import annotations
 
 import bisect
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
 from fbaconf.harness.results import Outcome, StageResult
 
 
-def part_namer(parts) -> Callable[[int], str | None]:
+class MeshPart(Protocol):
+    """A named run of a mesh's vertices (animation's FaceState parts)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def first_vertex(self) -> int: ...
+    @property
+    def vertex_count(self) -> int: ...
+
+
+def part_namer(parts: Iterable[MeshPart | tuple[str, int, int]]) -> Callable[[int], str | None]:
     """A ``part_of(vertex_index)`` callback from FaceState mesh parts (objects with
     ``name``, ``first_vertex``, ``vertex_count``) or ``(name, first, count)`` tuples."""
     rows = sorted(
@@ -73,7 +85,12 @@ def compare_vertices(
         )
     for axis, label in enumerate(("frame count", "vertex count", "coordinate count")):
         if exp.shape[axis] != gt.shape[axis]:
-            first = {"what": label, "axis": axis, "expected": int(exp.shape[axis]), "got": int(gt.shape[axis])}
+            first: dict[str, Any] = {
+                "what": label,
+                "axis": axis,
+                "expected": int(exp.shape[axis]),
+                "got": int(gt.shape[axis]),
+            }
             if axis == 0:
                 first["frame"] = int(min(exp.shape[0], gt.shape[0]))
             return StageResult(
@@ -86,14 +103,14 @@ def compare_vertices(
     gt = gt.astype(np.float64)
     F, N = exp.shape[:2]
 
-    def locate(f: int, v: int, **extra) -> dict:
-        d = {"frame": f, "vertex": v}
+    def locate(f: int, v: int, **extra: object) -> dict[str, Any]:
+        d: dict[str, Any] = {"frame": f, "vertex": v}
         if part_of is not None:
             d["part"] = part_of(v)
         d.update(expected=exp[f, v].tolist(), got=gt[f, v].tolist(), **extra)
         return d
 
-    def part_txt(d: dict) -> str:
+    def part_txt(d: dict[str, Any]) -> str:
         return f" ({d['part']})" if d.get("part") else ""
 
     bad = ~np.isfinite(gt).all(axis=2)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import re
 import shlex
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,7 @@ def clean_text(value: Any) -> str:
     s = value if isinstance(value, str) else str(value)
     s = _ANSI.sub("", s)
 
-    def esc(m: re.Match) -> str:
+    def esc(m: re.Match[str]) -> str:
         c = ord(m.group(0))
         return f"\\x{c:02x}" if c < 0x100 else f"\\u{c:04x}"
 
@@ -50,7 +51,7 @@ def verdict(record: RunRecord) -> str:
     provisional differences: N)``, ``FAIL``, ``SPEED FAIL`` …); from the exit code when the run
     was judged by a baseline or stopped before a verdict."""
     words = (record.verdict or {}).get("verdict")
-    if words and record.exit_code == record.verdict.get("exit_code"):
+    if isinstance(words, str) and words and record.exit_code == record.verdict.get("exit_code"):
         return words
     return VERDICTS.get(record.exit_code, f"EXIT {record.exit_code}")
 
@@ -74,7 +75,7 @@ def _fmt_value(v: Any) -> str:
 _DIFF_WHERE = ("frame", "time_ms", "fap", "name", "vertex", "part", "pixel", "channel", "field", "what")
 
 
-def format_difference(d: dict | None) -> str:
+def format_difference(d: dict[str, Any] | None) -> str:
     """One line for a first difference: ``frame 12, FAP 31 (raise_l_i_eyebrow): expected 120, got 121``."""
     if not d:
         return ""
@@ -135,7 +136,7 @@ DISPLAY_COLUMNS = (
 )
 
 
-def display_counts(results) -> dict[str, int]:
+def display_counts(results: Iterable[CaseResult]) -> dict[str, int]:
     """Counts by :data:`DISPLAY_COLUMNS` (outcomes, required NotSupported apart)."""
     c = dict.fromkeys(DISPLAY_COLUMNS, 0)
     for r in results:
@@ -143,7 +144,7 @@ def display_counts(results) -> dict[str, int]:
     return c
 
 
-def _by(record: RunRecord, key) -> dict[str, dict[str, int]]:
+def _by(record: RunRecord, key: Callable[[CaseResult], str]) -> dict[str, dict[str, int]]:
     groups: dict[str, list[CaseResult]] = {}
     for r in record.results:
         groups.setdefault(key(r), []).append(r)
@@ -243,11 +244,11 @@ def baseline_lines(record: RunRecord, limit: int = 30) -> list[str]:
 _CASE_FOLDER = re.compile(r"/\S*/work/case-[A-Za-z0-9_]+(?=/)")
 
 
-def reproduce_line(r: CaseResult, keep_option: str = "--keep-workdirs", env: dict | None = None) -> str:
+def reproduce_line(r: CaseResult, keep_option: str = "--keep-workdirs", env: dict[str, Any] | None = None) -> str:
     """The command of a case, with the manifest's ``[env]`` before it (``env K=V …``): as run when its
     work folder was kept (``keep_option``), else with the deleted folder named for what it was."""
     pre = ["env"] + [f"{k}={v}" for k, v in sorted((env or {}).items())] if env else []
-    cmd = " ".join(shlex.quote(str(c)) for c in pre + list(r.command))
+    cmd = " ".join(shlex.quote(str(c)) for c in pre + list(r.command or []))
     folders = set(_CASE_FOLDER.findall(cmd))
     if folders and all(Path(f).is_dir() for f in folders):
         return clean_text(cmd)
@@ -275,7 +276,7 @@ def failure_groups(record: RunRecord) -> list[tuple[str, list[CaseResult]]]:
     """The cases worth a look, identical failures grouped (same outcome, same failure
     signature, same message up to paths, addresses and numbers): new failures first, then fixed
     cases, then the worst and largest groups."""
-    groups: dict[tuple, list[CaseResult]] = {}
+    groups: dict[tuple[str, ...], list[CaseResult]] = {}
     for r in _problem_cases(record):
         key = (r.outcome.value, signature(r), r.crash_kind or "", _normalised(r.message, r.case_id), r.baseline or "")
         groups.setdefault(key, []).append(r)

@@ -40,7 +40,7 @@ def _restore_float(v: Any) -> Any:
     return _NONFINITE.get(v, v) if isinstance(v, str) else v
 
 
-def _restore(doc: dict) -> dict:
+def _restore(doc: dict[str, Any]) -> dict[str, Any]:
     """Undo the non-finite spelling in the numeric fields (metrics, series, durations, speed)."""
     doc = json.loads(json.dumps(doc))  # private copy
     doc["duration_s"] = _restore_float(doc.get("duration_s", 0.0))
@@ -69,12 +69,13 @@ def _restore(doc: dict) -> dict:
     return doc
 
 
-def report_json(record: RunRecord) -> dict:
+def report_json(record: RunRecord) -> dict[str, Any]:
     """The JSON document written by :func:`write_json` (``record.to_json()`` made strict JSON)."""
-    return jsonable(record.to_json())
+    doc: dict[str, Any] = jsonable(record.to_json())
+    return doc
 
 
-def write_json(record: RunRecord, path) -> Path:
+def write_json(record: RunRecord, path: str | os.PathLike[str]) -> Path:
     """Write ``record.to_json()`` as indented, strict, ASCII-only JSON (atomically); returns the path."""
     path = Path(path)
     text = json.dumps(report_json(record), indent=2, ensure_ascii=True, allow_nan=False)
@@ -82,7 +83,7 @@ def write_json(record: RunRecord, path) -> Path:
     return path
 
 
-def read_json(path) -> RunRecord:
+def read_json(path: str | os.PathLike[str]) -> RunRecord:
     """Read a report written by :func:`write_json` back (non-finite metrics restored)."""
     with open(path, encoding="utf-8") as f:
         return RunRecord.from_json(_restore(json.load(f)))

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shlex
-from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
@@ -62,12 +63,30 @@ def _properties(parent: ET.Element, props: list[tuple[str, Any]]) -> None:
         ET.SubElement(el, "property", name=clean_text(name), value=clean_text("" if value is None else value))
 
 
-def _close_suite(ts, c: Counter, record: RunRecord) -> None:
+@dataclass
+class _Tally:
+    """A <testsuite>'s (or the whole run's) counts and time."""
+
+    tests: int = 0
+    failures: int = 0
+    errors: int = 0
+    skipped: int = 0
+    time: float = 0.0
+
+    def add(self, other: _Tally) -> None:
+        self.tests += other.tests
+        self.failures += other.failures
+        self.errors += other.errors
+        self.skipped += other.skipped
+        self.time += other.time
+
+
+def _close_suite(ts: ET.Element, c: _Tally, record: RunRecord) -> None:
     """A <testsuite>'s counts, time and timestamp from its counter ``c``."""
-    ts.set("tests", str(c["tests"]))
+    ts.set("tests", str(c.tests))
     for k in ("failures", "errors", "skipped"):
-        ts.set(k, str(c[k]))
-    ts.set("time", _sec(c["time"]))
+        ts.set(k, str(getattr(c, k)))
+    ts.set("time", _sec(c.time))
     if record.started:
         ts.set("timestamp", clean_text(record.started))
 
@@ -88,10 +107,10 @@ def junit_xml(record: RunRecord) -> bytes:
     common += [(f"system.{k}", v) for k, v in (record.system or {}).items()]
     suite_meta = {str(s.get("name")): s for s in record.suites}
     root = ET.Element("testsuites", name=clean_text(f"fbaconf {dec.get('name', '')}".strip()))
-    totals = Counter()
+    totals = _Tally()
     for name in _suite_names(record):
         cases = [r for r in record.results if r.suite == name]
-        c = Counter()
+        c = _Tally()
         ts = ET.SubElement(root, "testsuite", name=clean_text(name))
         meta = suite_meta.get(name, {})
         _properties(ts, common + [(f"suite.{k}", v) for k, v in meta.items() if k != "name"])
@@ -110,7 +129,7 @@ def junit_xml(record: RunRecord) -> bytes:
                 # agrees with the exit code: a known failure or a flake does not fail the run
                 el = ET.SubElement(tc, "skipped", message=_one_line(f"{r.baseline} ({o.value}): {r.message}"))
                 el.text = _case_details(r)
-                c["skipped"] += 1
+                c.skipped += 1
             elif r.baseline == "fixed":
                 el = ET.SubElement(
                     tc,
@@ -120,7 +139,7 @@ def junit_xml(record: RunRecord) -> bytes:
                     ),
                     type="BaselineFixed",
                 )
-                c["failures"] += 1
+                c.failures += 1
             elif o is Outcome.NOT_SUPPORTED and r.required:
                 el = ET.SubElement(
                     tc,
@@ -131,31 +150,31 @@ def junit_xml(record: RunRecord) -> bytes:
                     ),
                     type=o.value,
                 )
-                c["failures"] += 1
+                c.failures += 1
             elif o in (Outcome.FAIL, Outcome.TIMEOUT, Outcome.CRASH):
                 el = ET.SubElement(tc, "failure", message=msg, type=o.value)
                 el.text = _case_details(r)
-                c["failures"] += 1
+                c.failures += 1
             elif o is Outcome.ERROR:
                 el = ET.SubElement(tc, "error", message=msg, type=o.value)
                 el.text = _case_details(r)
-                c["errors"] += 1
+                c.errors += 1
             elif o in (Outcome.NOT_SUPPORTED, Outcome.SKIPPED):
                 el = ET.SubElement(
                     tc, "skipped", message=_one_line(f"{o.value}: {r.message}" if r.message else o.value)
                 )
-                c["skipped"] += 1
+                c.skipped += 1
             elif o is Outcome.QUALITY_WARNING:
                 ET.SubElement(tc, "system-out").text = "QualityWarning (passes): " + _case_details(r)
             elif r.baseline:
                 ET.SubElement(tc, "system-out").text = clean_text(f"baseline: {r.baseline}")
-            c["tests"] += 1
-            c["time"] += r.duration_s if math.isfinite(r.duration_s) and r.duration_s > 0 else 0.0
+            c.tests += 1
+            c.time += r.duration_s if math.isfinite(r.duration_s) and r.duration_s > 0 else 0.0
         _close_suite(ts, c, record)
-        totals.update(c)
+        totals.add(c)
     if record.speed:
         ts = ET.SubElement(root, "testsuite", name="speed")
-        c = Counter()
+        c = _Tally()
         _properties(ts, common)
         for s in record.speed:
             t = sum(float(x.get("seconds", 0.0)) for x in s.samples if isinstance(x, dict))
@@ -177,7 +196,7 @@ def junit_xml(record: RunRecord) -> bytes:
                     ),
                 )
                 el.text = clean_text(text + (f"\n{s.reason}" if s.reason else ""))
-                c["skipped"] += 1
+                c.skipped += 1
             elif not s.passed:
                 below = s.rate_fps < s.required_fps
                 el = ET.SubElement(
@@ -192,23 +211,24 @@ def junit_xml(record: RunRecord) -> bytes:
                     ),
                 )
                 el.text = clean_text(text)
-                c["failures"] += 1
+                c.failures += 1
             else:
                 ET.SubElement(tc, "system-out").text = clean_text(text)
-            c["tests"] += 1
-            c["time"] += t
+            c.tests += 1
+            c.time += t
         _close_suite(ts, c, record)
-        totals.update(c)
-    root.set("tests", str(totals["tests"]))
+        totals.add(c)
+    root.set("tests", str(totals.tests))
     for k in ("failures", "errors", "skipped"):
-        root.set(k, str(totals[k]))
-    root.set("time", _sec(record.duration_s if record.duration_s else totals["time"]))
+        root.set(k, str(getattr(totals, k)))
+    root.set("time", _sec(record.duration_s if record.duration_s else totals.time))
     ET.indent(root)
-    return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
+    xml: bytes = ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    return xml + b"\n"
 
 
-def write_junit(record: RunRecord, path) -> Path:
+def write_junit(record: RunRecord, path: str | os.PathLike[str]) -> Path:
     """Write the run as JUnit XML (one ``<testsuite>`` per suite plus ``speed``), atomically."""
-    path = Path(path)
-    atomic_write_bytes(path, junit_xml(record))
-    return path
+    out = Path(path)
+    atomic_write_bytes(out, junit_xml(record))
+    return out

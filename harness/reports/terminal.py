@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
-from fbaconf.harness.results import Outcome, RunRecord
+from fbaconf.harness.results import CaseResult, Outcome, RunRecord
 from fbaconf.harness.verdict import describe
 from fbaconf.isolation.endings import crash_report
 
@@ -28,7 +28,7 @@ from .common import (
     verdict_reason,
 )
 
-_ANSI_COLOURS = {
+_ANSI_COLOURS: dict[str, str] = {
     Outcome.PASS: "32",
     Outcome.QUALITY_WARNING: "33",
     Outcome.NOT_SUPPORTED: "36",
@@ -38,11 +38,12 @@ _ANSI_COLOURS = {
     Outcome.CRASH: "1;31",
     Outcome.ERROR: "1;35",
 }
-_ANSI_COLOURS.update({o.value: c for o, c in list(_ANSI_COLOURS.items())})
 _ANSI_COLOURS[NS_REQUIRED] = "1;33"
 
 
-def _table(header: list[str], rows: list[list[str]], right: set[int], colour=None) -> list[str]:
+def _table(
+    header: list[str], rows: list[list[str]], right: set[int], colour: Callable[[int, int, str], str] | None = None
+) -> list[str]:
     """Aligned text table; ``colour(row, col, padded_text)`` may wrap a padded cell in ANSI codes."""
     widths = [max(len(str(x)) for x in col) for col in zip(header, *rows)] if rows else [len(h) for h in header]
     out = []
@@ -61,7 +62,7 @@ def _indent(text: str, prefix: str) -> list[str]:
     return [prefix + line for line in text.splitlines()] or [prefix.rstrip()]
 
 
-def _stderr_excerpt(r, n: int = 6) -> tuple[str, list[str]]:
+def _stderr_excerpt(r: CaseResult, n: int = 6) -> tuple[str, list[str]]:
     """What of a case's stderr the summary shows: the crash report's first lines when stderr holds
     one (sanitizer, panic, exception), else the last lines."""
     text = r.stderr_tail
@@ -103,12 +104,12 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
 
     header_cols = list(DISPLAY_COLUMNS) + ["total"]
 
-    def colour_counts(_r, ci, text):
+    def colour_counts(_r: int, ci: int, text: str) -> str:
         if ci == 0 or ci > len(DISPLAY_COLUMNS) or not text.strip() or text.strip() == "0":
             return text
         return paint(_ANSI_COLOURS[DISPLAY_COLUMNS[ci - 1]], text)
 
-    def count_table(title: str, groups: dict[str, dict[str, int]], order: Iterable[str]):
+    def count_table(title: str, groups: dict[str, dict[str, int]], order: Iterable[str]) -> None:
         rows = []
         for name in order:
             c = groups.get(name, dict.fromkeys(DISPLAY_COLUMNS, 0))
@@ -173,7 +174,7 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
         lines.append("")
         lines.append("speed:")
 
-        def colour_speed(ri, ci, text):
+        def colour_speed(ri: int, ci: int, text: str) -> str:
             if ci != 4:
                 return text
             return paint({"PASS": "32", "INCONCLUSIVE": "33"}.get(text.strip(), "31"), text)
@@ -187,17 +188,19 @@ def terminal_summary(record: RunRecord, *, color: bool = False, max_failures: in
                 colour_speed,
             )
         )
-        for s in record.speed:
-            if s.message:
-                lines.append(f"  {clean_text(s.operation)}: {clean_text(s.message)}")
+        for sp in record.speed:
+            if sp.message:
+                lines.append(f"  {clean_text(sp.operation)}: {clean_text(sp.message)}")
 
     detail = describe(record.verdict or {})
     if detail and record.claim:
         lines += ["", f"tools and provisional decisions of {clean_text(record.claim)} (harness/verdict.py):"]
         lines += [f"  {clean_text(x)}" for x in detail]
     if record.provisional_differences:
-        how = "they fail the claim (--strict)" if record.strict else "the claim passes with them; --strict fails them"
-        lines += ["", f"provisional differences ({how}): cases judged by an other reading the decoder declares"]
+        strictly = (
+            "they fail the claim (--strict)" if record.strict else "the claim passes with them; --strict fails them"
+        )
+        lines += ["", f"provisional differences ({strictly}): cases judged by an other reading the decoder declares"]
         lines += [
             f"  {clean_text(d['case_id'])}  rests on {', '.join(d['rests_on'])}; judged by {d.get('reading')}"
             for d in record.provisional_differences

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -12,6 +13,7 @@ from fbaconf.isolation.bounds import ceilings_from
 from ..adapters import resolve
 from ..preflight import preflight
 from ..reports.jsonreport import jsonable
+from ..results import SpeedResult
 from ..usage import resolve_claim
 from ..verdict import speed_verdict
 from .measure import OPERATIONS, SpeedError, SpeedRunError, failed_result, measure, skip_reason
@@ -32,7 +34,7 @@ def _usage(msg: str) -> int:
     return 2
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
     """``fbaconf bench``: exit 0 every measured rate meets its minimum; 1 a decoder run failed (exit
     code, crash, timeout, missing or wrong output); 2 usage or setup error; 3 a speed requirement is
     missed; 4 a rate missed its minimum on a machine busy with other work (inconclusive)."""
@@ -54,7 +56,9 @@ def run(args) -> int:
     except ValueError as e:
         return _usage(str(e))
     ops = args.operation or list(OPERATIONS)
-    results, skipped, failed = [], [], False
+    results: list[SpeedResult] = []
+    skipped: list[tuple[str, str]] = []
+    failed = False
     for op in ops:
         reason = skip_reason(adapter, op)
         if reason:
@@ -78,7 +82,8 @@ def run(args) -> int:
             failed = True
         except SpeedError as e:
             return _usage(str(e))
-        results.append(r)
+        if r is not None:  # None: skipped, as skip_reason said above
+            results.append(r)
     sv = speed_verdict([r.to_json() for r in results])
     code = 1 if failed else (sv[1] if sv else 0)
     if args.json:
@@ -109,7 +114,7 @@ def run(args) -> int:
     return code
 
 
-def render_table(results) -> str:
+def render_table(results: list[SpeedResult]) -> str:
     """Plain-text table: operation, per-frame ms, start-up, measured/required fps, ratio, verdict,
     the decoder's CPU time and wait and the share of the CPUs others used over the timed runs,
     provenance (provisional limits marked with ``*``)."""
@@ -150,7 +155,7 @@ def render_table(results) -> str:
     widths = [max(len(h), *(len(row[i]) for row in rows)) if rows else len(h) for i, h in enumerate(header)]
     right = {2, 3, 4, 5, 6, 8, 9, 10}
 
-    def line(cells):
+    def line(cells: list[str]) -> str:
         return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths)))
 
     out = [line(header), line(["-" * w for w in widths])] + [line(r) for r in rows]
@@ -159,7 +164,7 @@ def render_table(results) -> str:
     return "\n".join(s.rstrip() for s in out)
 
 
-def _num(v: float, digits: int) -> str:
+def _num(v: float | None, digits: int) -> str:
     if v is None or (isinstance(v, float) and math.isnan(v)):
         return "-"
     if math.isinf(v):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import secrets
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -19,9 +20,10 @@ from fbaconf.bitstreams.frames import FapFrames
 from fbaconf.errors import FbaconfInputError
 from fbaconf.safefs import UnsafeFileError, open_regular, read_regular
 
+from ..compare.base import OutputError
 from ..compare.faps import compare_faps
 from ..compare.images import compare_images
-from ..compare.loaders import OutputError, check_output_file, load_output_faps
+from ..compare.loaders import check_output_file, load_output_faps
 from ..compare.tolerances import ImageTolerances
 from .content import Run
 
@@ -67,7 +69,7 @@ def faps_problem(path: Path, run: Run, *, max_bytes: int, player: bool = False) 
 
 
 def images_problem(
-    images_dir: Path, run: Run, ks, *, width: int, height: int, scene: Path | None = None, max_bytes: int
+    images_dir: Path, run: Run, ks: Iterable[int], *, width: int, height: int, scene: Path | None = None, max_bytes: int
 ) -> str | None:
     """Why the images of frames ``ks`` in ``images_dir`` (``frame_<k:05d>.png``) are not the
     reference rendering of ``run`` at ``width`` x ``height`` — judged as the image stage judges

@@ -26,7 +26,9 @@ from __future__ import annotations
 import hashlib
 import secrets
 import tempfile
+from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -34,7 +36,8 @@ from fbaconf.animation.bundled import default_head_scene
 from fbaconf.animation.engine import animate
 from fbaconf.bitstreams import tables
 from fbaconf.bitstreams.decoder import decode
-from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.encoder import encode
+from fbaconf.bitstreams.encoder_options import EncoderOptions
 from fbaconf.bitstreams.faptext import write_fap
 from fbaconf.bitstreams.frames import SET, FapFrames
 from fbaconf.bitstreams.synth import synthetic_sequence
@@ -88,7 +91,7 @@ class Content:
             self._scene[kind] = p
         return self._scene[kind]
 
-    def scenario(self, name: str, **changes) -> Path:
+    def scenario(self, name: str, **changes: Any) -> Path:
         p = self.root / f"{name}.toml"
         if not p.exists():
             p.write_text(Scenario.default().with_(**changes).to_toml(), encoding="utf-8")
@@ -111,7 +114,9 @@ class Run:
                 raise ContentError("the generated blocks' object headers differ")
             head = h
             self._blocks.append(body)
-        self._head = head
+        if head is None:
+            raise ContentError(f"a run of {n} frames has no blocks")
+        self._head: bytes = head
         self._sizes = sizes
         self._decoded: dict[int, FapFrames] = {}
         self._files: list[Path] = []
@@ -166,7 +171,7 @@ class Run:
             self._decoded[j] = decode(b"".join([self._head, self._blocks[j], _END])).frames
         return self._decoded[j]
 
-    def expected(self, ks) -> FapFrames:
+    def expected(self, ks: Iterable[int] | np.ndarray) -> FapFrames:
         """Frames ``ks`` of the reference decoding of the stream (decoding only their blocks)."""
         ks = np.asarray(ks, dtype=np.int64)
         if len(ks) and (ks.min() < 0 or ks.max() >= self.n):
@@ -180,10 +185,12 @@ class Run:
             frame_number=ks,
             time_ms=ks * (1000.0 / first.frame_rate),
             frame_rate=first.frame_rate,
-            is_intra=np.concatenate([x.is_intra for x in rows]) if rows else None,
+            is_intra=np.concatenate([x.is_intra for x in rows]) if rows else np.zeros(0, bool),
         )
 
-    def reference_images(self, ks, out_dir: Path, *, width: int, height: int, scene: Path | None = None) -> list[Path]:
+    def reference_images(
+        self, ks: Sequence[int], out_dir: Path, *, width: int, height: int, scene: Path | None = None
+    ) -> list[Path]:
         """The reference rendering of frames ``ks`` at ``width`` x ``height`` (the default
         scenario's camera and lights, :data:`REFERENCE_SUPERSAMPLE` samples per pixel side), one
         PNG per frame in ``out_dir``, in the order of ``ks``."""

@@ -100,7 +100,7 @@ class Load:
         )
 
     def describe(self) -> str:
-        def pct(x):
+        def pct(x: float | None) -> str:
             return "unknown" if x is None else f"{100 * x:.0f} %"
 
         cpu = "unknown" if self.cpu_s is None else f"{self.cpu_s:.2f} s"
@@ -116,13 +116,18 @@ class Load:
 def account(windows: list[Window], cpus: int) -> Load:
     """The :class:`Load` of a measurement's timed runs (in the order they ran)."""
     wall = sum(w.seconds for w in windows)
-    cpu = None if any(w.cpu_s is None for w in windows) else sum(w.cpu_s for w in windows)
+    cpus_s = [w.cpu_s for w in windows]
+    cpu = None if any(c is None for c in cpus_s) else sum(c for c in cpus_s if c is not None)
     stalls = [w.stall_s for w in windows]
-    stall = None if any(s is None for s in stalls) else sum(stalls)
+    stall = None if any(s is None for s in stalls) else sum(s for s in stalls if s is not None)
     sources = sorted({w.stall_source for w in windows})
     others = [w.others_s for w in windows]
     span = sum(w.span_s for w in windows)
-    during = None if not windows or any(o is None for o in others) else sum(others) / (cpus * span)
+    during = (
+        None
+        if not windows or any(o is None for o in others)
+        else sum(o for o in others if o is not None) / (cpus * span)
+    )
     gap_others, gap_span = 0.0, 0.0
     for a, b in zip(windows, windows[1:]):
         tree = (b.tree_before - a.tree_after) if a.tree_after is not None and b.tree_before is not None else 0.0

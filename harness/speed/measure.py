@@ -46,35 +46,35 @@ import math
 import statistics
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from fbaconf.profiles.model import Claim, load_profiles
 
 from .. import sysinfo
-from ..adapters import Adapter, CommandAdapter, Job, NotSupportedError, PythonAdapter, highest_claim  # noqa: F401
+from ..adapters import Adapter, highest_claim
 from ..results import SpeedResult
 from . import load as speed_load
-from .content import BLOCK_FRAMES, Content, Run, content_stream  # noqa: F401 (re-exported)
-from .runs import (  # noqa: F401 (the names callers and tests reach through this module)
-    DECODE_IMAGE_SIZE,
+from .content import Content
+
+# the names bench and the tests reach through this module, re-exported (`X as X`)
+from .runs import (
     DEFAULT_RENDER_SIZE,
-    EQUIVALENCE_FACTOR,
     LIMIT_FOR,
-    OPERATIONS,
-    RENDER_SUPERSAMPLE,
+    OPERATIONS as OPERATIONS,
     SERIES,
     START_FRAMES,
-    SpeedError,
-    SpeedRunError,
-    _Runner,
-    skip_reason,
+    SpeedError as SpeedError,
+    SpeedRunError as SpeedRunError,
+    _Runner as _Runner,
+    skip_reason as skip_reason,
 )
 
 
-def fit_line(frames, seconds) -> tuple[float, float, float]:
+def fit_line(frames: Sequence[float], seconds: Sequence[float]) -> tuple[float, float, float]:
     """Least-squares ``seconds = startup + frames * per_frame``: (per_frame, startup, r2)."""
     x = np.asarray(frames, dtype=np.float64)
     y = np.asarray(seconds, dtype=np.float64)
@@ -84,7 +84,7 @@ def fit_line(frames, seconds) -> tuple[float, float, float]:
     return float(slope), float(icpt), _r2(x, y, slope, icpt)
 
 
-def _r2(x, y, slope, icpt) -> float:
+def _r2(x: Sequence[float] | np.ndarray, y: Sequence[float] | np.ndarray, slope: float, icpt: float) -> float:
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     ss_tot = float(np.sum((y - y.mean()) ** 2))
@@ -101,6 +101,7 @@ def _choose_lengths(run: Callable[[int], float], *, target_s: float, max_frames:
     target_s = max(target_s, t0)  # the frame-dependent part must dominate start-up noise
     slope = t0 / n0  # upper bound until measured (all of t0 taken as per-frame cost)
     n = n0
+    nxt: float
     while n < max_frames:
         if n == n0:
             nxt = 4 * n0
@@ -180,12 +181,16 @@ def measure(  # noqa: PLR0913 - keyword options of a measurement
     else:
         root = Path(work_dir)
     content = Content(root / "content")
-    opts = dict(lengths=lengths, repeats=repeats, target_s=target_s, max_frames=max_frames, max_run_s=max_run_s)
-    try:
-        runner = _Runner(
-            adapter, operation, content, root / f"runs-{operation}", tuple(render_size), persistent=persistent
+    size = (int(render_size[0]), int(render_size[1]))
+
+    def series(runner: _Runner) -> dict[str, Any]:
+        return _measure_series(
+            runner, lengths=lengths, repeats=repeats, target_s=target_s, max_frames=max_frames, max_run_s=max_run_s
         )
-        fit = _measure_series(runner, **opts)
+
+    try:
+        runner = _Runner(adapter, operation, content, root / f"runs-{operation}", size, persistent=persistent)
+        fit = series(runner)
         if runner.persistent:
             try:
                 same, note = (
@@ -198,11 +203,9 @@ def measure(  # noqa: PLR0913 - keyword options of a measurement
             if same:
                 runner.notes.append(note)
             else:
-                runner = _Runner(
-                    adapter, operation, content, root / f"runs-{operation}-decode", tuple(render_size), persistent=False
-                )
+                runner = _Runner(adapter, operation, content, root / f"runs-{operation}-decode", size, persistent=False)
                 runner.notes.append(note)
-                fit = _measure_series(runner, **opts)
+                fit = series(runner)
         runner.close()
     finally:
         if tmp is not None:
@@ -212,8 +215,8 @@ def measure(  # noqa: PLR0913 - keyword options of a measurement
 
 
 def _measure_series(
-    runner: _Runner, *, lengths, repeats: int, target_s: float, max_frames: int, max_run_s: float
-) -> dict:
+    runner: _Runner, *, lengths: list[int] | None, repeats: int, target_s: float, max_frames: int, max_run_s: float
+) -> dict[str, Any]:
     """Run the measurement proper: the lengths (searched unless given) ``repeats`` times,
     each run's time and accounting; the fits."""
     try:
@@ -224,7 +227,7 @@ def _measure_series(
             )
         else:
             runner.run(lengths[0])  # warm-up, discarded
-        samples: list[dict] = []
+        samples: list[dict[str, Any]] = []
         windows: list[speed_load.Window] = []
         for r in range(repeats):
             order = lengths if r % 2 == 0 else lengths[::-1]
@@ -266,7 +269,7 @@ def _measure_series(
     }
 
 
-def _median_fit(samples: list[dict], key: str, repeats: int) -> tuple[float, float]:
+def _median_fit(samples: list[dict[str, Any]], key: str, repeats: int) -> tuple[float, float]:
     fits = [
         fit_line([s["frames"] for s in samples if s["repeat"] == r], [s[key] for s in samples if s["repeat"] == r])
         for r in range(repeats)
@@ -274,7 +277,7 @@ def _median_fit(samples: list[dict], key: str, repeats: int) -> tuple[float, flo
     return statistics.median(f[0] for f in fits), statistics.median(f[1] for f in fits)
 
 
-def _result(operation: str, claim: str, fit: dict, notes: list[str]) -> SpeedResult:
+def _result(operation: str, claim: str, fit: dict[str, Any], notes: list[str]) -> SpeedResult:
     required, provenance, target_s, max_frames, repeats = (
         fit["required"],
         fit["provenance"],
@@ -291,7 +294,7 @@ def _result(operation: str, claim: str, fit: dict, notes: list[str]) -> SpeedRes
     )
     load: speed_load.Load = fit["load"]
     notes = list(notes)
-    numbers = dict(
+    numbers: dict[str, Any] = dict(
         cpu_s=load.cpu_s,
         wall_s=load.wall_s,
         stall_s=load.stall_s,
@@ -398,7 +401,7 @@ def failed_result(err: SpeedRunError, claim: str) -> SpeedResult:
     )
 
 
-def measure_claim(adapter: Adapter, claim: str | None = None, **kwargs) -> list[SpeedResult]:
+def measure_claim(adapter: Adapter, claim: str | None = None, **kwargs: Any) -> list[SpeedResult]:
     """Decode and (when the adapter outputs images) render speed for ``claim`` (default: the
     adapter's highest claim). A failing decoder run gives a failed result rather than raising;
     setup problems raise :class:`SpeedError`. ``kwargs`` go to :func:`measure`."""

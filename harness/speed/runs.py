@@ -14,13 +14,15 @@ from pathlib import Path
 from fbaconf.errors import FbaconfInputError
 from fbaconf.isolation import endings, sandbox
 from fbaconf.isolation.persistent import PersistentDecoder
+from fbaconf.isolation.process import ProcResult
 from fbaconf.safefs import remove_tree
 
 from .. import sysinfo
 from ..adapters import Adapter, CommandAdapter, Job, PythonAdapter
+from ..compare.base import OutputError
 from ..compare.faps import compare_faps
 from ..compare.ladder import outcome_for
-from ..compare.loaders import OutputError, load_output_faps
+from ..compare.loaders import load_output_faps
 from ..results import Outcome
 from ..runner import hidden_from_decoders
 from . import load as speed_load
@@ -78,7 +80,9 @@ def skip_reason(adapter: Adapter, operation: str) -> str | None:
     return None
 
 
-def _spawned_stall(watch: sysinfo.TreeWatch, cpu_s: float, before, after) -> tuple[float | None, str]:
+def _spawned_stall(
+    watch: sysinfo.TreeWatch, cpu_s: float, before: sysinfo.MachineSample, after: sysinfo.MachineSample
+) -> tuple[float | None, str]:
     """(the time a spawned decoder's tree waited for a CPU, how it is known): its threads' run-queue
     wait as sampled while they lived, scaled up by the share of its CPU time the samples missed
     (processes too short to be seen); where they saw less than half of it, the machine's PSI
@@ -285,16 +289,18 @@ class _Runner:
         judged = outcome_for(ex.ending)
         if judged is not None:
             raise SpeedRunError(self.operation, n, judged[0], judged[1])
-        known = th0 is not None and th1 is not None
+        cpu_s = stall_s = None
+        if th0 is not None and th1 is not None:
+            cpu_s, stall_s = th1[0] - th0[0], th1[1] - th0[1]
         return (
             speed_load.Window(
                 n,
                 elapsed,
                 before,
                 after,
-                cpu_s=th1[0] - th0[0] if known else None,
-                stall_s=th1[1] - th0[1] if known else None,
-                stall_source="thread" if known else "none",
+                cpu_s=cpu_s,
+                stall_s=stall_s,
+                stall_source="thread" if cpu_s is not None else "none",
             ),
             job,
             None,
@@ -304,6 +310,8 @@ class _Runner:
         """One input to the persistent decoder: the time from sending it to its answer; the
         output judged (and left at the returned path until the next input)."""
         a, n = self.adapter, run.n
+        if not isinstance(a, CommandAdapter):  # serve is a command's (skip_reason and the manifest say so)
+            raise SpeedError(f"{a.name}: only a command decoder has a serve command")
         root = self.runs_dir / "serve"
         workdir = root / "case"
         if self._server is None:
@@ -323,13 +331,15 @@ class _Runner:
             remove_tree(out)
         out.mkdir(parents=True)
         path = out / f"faps.{'npz' if a.faps_format == 'npz' else 'fap'}"
-        watch = self._watch
+        watch, server = self._watch, self._server
+        if watch is None:  # started with the server above
+            raise SpeedError("the serve process's watch was not started")
         watch.poll()
         tree0, before = (watch.cpu_s, watch.wait_s), sysinfo.machine_sample()
-        res = self._server.run(run.stream_bytes(), str(path))
+        res = server.run(run.stream_bytes(), str(path))
         watch.poll()
         tree1, after = (watch.cpu_s, watch.wait_s), sysinfo.machine_sample()
-        self._judge(res, n, self._server.argv)
+        self._judge(res, n, server.argv)
         cpu = tree1[0] - tree0[0]
         window = speed_load.Window(
             n,
@@ -343,7 +353,7 @@ class _Runner:
             tree_before=tree0[0],
             tree_after=tree1[0],
         )
-        self._check_output(Job(workdir=workdir, values={"faps_out": str(path)}, frames=n), run, self._server.argv)
+        self._check_output(Job(workdir=workdir, values={"faps_out": str(path)}, frames=n), run, server.argv)
         return window, path
 
     def equivalence(self, lengths: list[int], serve_per_frame: float) -> tuple[bool, str]:
@@ -361,7 +371,7 @@ class _Runner:
                     _w, by_serve = self._serve(run)
                     window, job, argv = self._decode(run, workdir)
                     self._check_output(job, run, argv)
-                    self._same_frames(job.path("faps_out"), by_serve, n)
+                    self._same_frames(job.need("faps_out"), by_serve, n)
                     best[n] = min(best.get(n, math.inf), window.seconds)
                 finally:
                     run.remove()
@@ -381,7 +391,7 @@ class _Runner:
             f"{EQUIVALENCE_FACTOR:g} x): serve is not what is certified, decode was timed"
         )
 
-    def _same_frames(self, by_decode: Path | None, by_serve: Path, n: int) -> None:
+    def _same_frames(self, by_decode: Path, by_serve: Path, n: int) -> None:
         limit = self.adapter.limits.output_mb * 2**20
         try:
             d = load_output_faps(by_decode, max_bytes=limit)
@@ -396,24 +406,24 @@ class _Runner:
                 Outcome.FAIL,
                 f"the manifest declares [commands] serve equivalent to decode, but on {n} frames "
                 f"serve's output differs from decode's: {r.message}",
-                self._server.argv,
+                self._server.argv if self._server is not None else None,
             )
 
-    def _judge(self, res, n: int, argv) -> None:
+    def _judge(self, res: ProcResult, n: int, argv: list[str] | None) -> None:
         """A run that did not decode (exit code, crash, timeout...) fails the measurement."""
         a = self.adapter
         verdict = outcome_for(endings.classify(res, a.limits, a.reject_exit_codes, name=a.name))
         if verdict is not None:
             raise SpeedRunError(self.operation, n, verdict[0], verdict[1], argv, res.stderr_tail)
 
-    def _check_output(self, job: Job, run: Run, argv) -> None:
+    def _check_output(self, job: Job, run: Run, argv: list[str] | None) -> None:
         n = run.n
         key = (
             "images_dir"
             if self.operation == "render"
             else next(k for k in ("faps_out", "vertices_out", "images_dir") if k in job.values)
         )
-        p = job.path(key)
+        p = job.need(key)
         limit = self.adapter.limits.output_mb * 2**20
         why = None
         if key == "faps_out":
@@ -421,7 +431,7 @@ class _Runner:
             if why is not None:
                 why = why.replace("its output", f"its output at {{{key}}}")
         elif key == "vertices_out":
-            if not (p is not None and p.is_file() and p.stat().st_size > 0):
+            if not (p.is_file() and p.stat().st_size > 0):
                 why = f"finished but wrote no output at {{{key}}} ({p})"
         else:
             ks = self._image_frames or sample(n, RANDOM_IMAGES).tolist()

@@ -19,9 +19,10 @@ REPO = Path(__file__).resolve().parents[2]
 # folders beside the stages that are not installed (setup.py's NOT_INSTALLED)
 NOT_STAGES = {"tests", "benchmarks", "examples", "docs", "build", "dist"}
 
-# the core every layer imports
+# the core every layer imports, and (PACKAGES) the trust boundary: what runs, confines and judges
+# an untrusted decoder, and what certifies it
 MODULES = ("fbaconf.errors", "fbaconf.rules", "fbaconf.safefs", "fbaconf._atomic")
-PACKAGES: tuple[str, ...] = ()
+PACKAGES: tuple[str, ...] = ("fbaconf.isolation", "fbaconf.certification", "fbaconf.harness")
 
 
 def _view(root: Path) -> Path:
