@@ -310,10 +310,44 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
     seen: set[int] = set()
     prev_fn: int | None = None
 
+    def frame_end(p: int, mask_tokens: list[str]) -> int:
+        """Where a frame whose mask is ``mask_tokens`` (the rest 0) starting at ``p`` ends."""
+        m = [t == "1" for t in mask_tokens[:NUM_FAPS]]
+        return p + len(mask_tokens) + 1 + 4 * m[0] + 6 * (len(m) > 1 and m[1]) + sum(m[2:])
+
+    def short_mask(p: int) -> int:
+        """The entries of a mask line that is short of 68 entries, or 0. Mask entries are tokens, so
+        a wrapped mask is read across lines; but when this line's entries, taken as the whole mask,
+        end the frame at a line end and the 68 tokens read across lines do not, the line is a short
+        mask: reading on would take the frame number for an entry and shift everything after."""
+        k = tr[p]
+        if not (k < NUM_FAPS and (p == 0 or tl[p - 1] != tl[p]) and all(t in ("0", "1") for t in tt[p : p + k])):
+            return 0
+
+        def ends_line(e: int) -> bool:
+            return e == ntok or (e < ntok and tl[e] != tl[e - 1])
+
+        across = tt[p : p + NUM_FAPS]
+        whole = len(across) == NUM_FAPS and all(t in ("0", "1") for t in across) and ends_line(frame_end(p, across))
+        return k if ends_line(frame_end(p, tt[p : p + k])) and not whole else 0
+
     while pos < ntok:
         start = (tl[pos], tc[pos])
         width = NUM_FAPS
-        if tr[pos] == NUM_FAPS + 1:
+        short = short_mask(pos)
+        if short:
+            rep.fail(
+                "fap-text-mask-short",
+                tl[pos],
+                tc[pos + short - 1] + len(tt[pos + short - 1]),
+                f"mask line has {short} entries, 68 expected (one per FAP); read as if the missing "
+                f"entries were 0, the next line as this frame's values",
+            )
+        if short:
+            mask = np.zeros(NUM_FAPS, bool)
+            mask[:short] = [t == "1" for t in tt[pos : pos + short]]
+            pos += short
+        elif tr[pos] == NUM_FAPS + 1:
             extra = tt[pos + NUM_FAPS]
             if _INT.fullmatch(extra) and len(extra) <= _MAX_INT_CHARS and int(extra) == 0:
                 width = NUM_FAPS + 1
@@ -324,12 +358,14 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
                     f"mask line has {NUM_FAPS + 1} entries (Greta quirk); the extra 69th entry is "
                     f"dropped, entries 1..68 are FAP1..FAP68",
                 )
-        mask = np.zeros(NUM_FAPS, bool)
-        chunk = tt[pos : pos + width]
-        if len(chunk) == width and all(t == "0" or t == "1" for t in chunk):  # the common case
+        if short:
+            pass
+        elif len(chunk := tt[pos : pos + width]) == width and all(t == "0" or t == "1" for t in chunk):  # common
+            mask = np.zeros(NUM_FAPS, bool)
             mask[:] = [t == "1" for t in chunk[:NUM_FAPS]]
             pos += width
         else:
+            mask = np.zeros(NUM_FAPS, bool)
             for k in range(width):
                 what = f"mask entry {k + 1}" + (f" (FAP{k + 1})" if k < NUM_FAPS else " (extra)")
                 v, line, col = take_int(what, start, None, None)
@@ -342,10 +378,10 @@ def _read(text: str, rep: _Reporter) -> tuple[FapFrames, FapFileHeader, list[Tex
         fn, fline, fcol = take_int("frame number", start, 0, _FRAME_MAX)
         if truncated:
             break
+        if prev_fn is not None and fn < prev_fn:  # below the previous one: out of order, repeated or not
+            rep.warn("fap-text-frame-order", fline, fcol, f"frame number {fn} follows frame number {prev_fn}")
         if fn in seen:
             rep.warn("fap-text-frame-duplicate", fline, fcol, f"frame number {fn} already used by an earlier frame")
-        elif prev_fn is not None and fn < prev_fn:
-            rep.warn("fap-text-frame-order", fline, fcol, f"frame number {fn} follows frame number {prev_fn}")
         if fn > header.declared_frames:
             rep.warn(
                 "fap-text-frame-beyond",

@@ -400,6 +400,13 @@ TEXT_FRAME_COUNT = _define(
     TEXT_CLAUSE,
     "The number of frames in the file differs from the header's frame count (reported at the count).",
 )
+TEXT_MASK_SHORT = _define(
+    "FAP-TEXT-014",
+    "error",
+    TEXT_CLAUSE,
+    "A mask line has fewer than 68 entries (reported at its end); the checker reads on as if the missing "
+    "entries were 0, so what follows is not reported as a cascade of shifted values.",
+)
 
 # ---------------------------------------------------------------------------- scene / checker
 SCENE_UNAVAILABLE = _define(

@@ -82,7 +82,15 @@ def build_report(
         "format": REPORT_FORMAT,
         "file": file,
         "claim": str(rep.claim) if rep.claim is not None else None,
-        "status": ("unreadable" if status == 2 else "violations" if status == 1 else "clean"),
+        "status": (
+            "unreadable"
+            if status == 2
+            else "violations"
+            if status == 1
+            else "warnings"
+            if total["warning"]
+            else "clean"
+        ),
         "exit_code": status,
         "counts": total,
         "truncated": len(shown) < len(kept),

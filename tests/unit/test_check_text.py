@@ -133,6 +133,7 @@ TEXT_CASES = {
     R.TEXT_FRAME_DUPLICATE: fap(2, (mask(3), "0 5"), (mask(), "0")),
     R.TEXT_FRAME_BEYOND: fap(1, (mask(3), "5 5")),
     R.TEXT_FRAME_COUNT: fap(2, (mask(3), "0 5")),
+    R.TEXT_MASK_SHORT: fap(2, (" ".join(mask(3).split()[:67]), "0 5"), (mask(3), "1 6")),
 }
 
 
@@ -152,7 +153,7 @@ def test_text_case_triggers_exactly_its_code(code, tmp_path, capsys):
 
 def test_every_text_rule_has_a_code_of_its_severity():
     text_rules = [r for r in R.RULES.values() if r.stage == "fap-text"]
-    assert len(text_rules) == 13
+    assert len(text_rules) == 14  # the rules table of docs/fap-text.md
     for r in text_rules:
         assert r.code is not None and r.code.startswith("FAP-TEXT-") and R.CODES[r.code].severity == r.severity
 
@@ -178,3 +179,53 @@ def test_the_check_agrees_with_the_reader(tokens):
     else:
         assert not errors
         assert sorted((w.rule, w.line, w.column) for w in warnings) == sorted((w.rule, w.line, w.column) for w in found)
+
+
+def _file(n_frames: int, short_at: int | None = None) -> str:
+    """A file of ``n_frames`` frames setting FAPs 3, 19 and 31; the mask of frame ``short_at`` one
+    entry short (67 entries)."""
+    lines = [f"2.1 cascade 25 {n_frames}"]
+    for k in range(n_frames):
+        m = mask(3, 19, 31).split()
+        lines.append(" ".join(m[:67] if k == short_at else m))
+        lines.append(f"{k} {10 + k} {20 + k} {30 + k}")
+    return "\n".join(lines) + "\n"
+
+
+def test_a_mask_line_one_entry_short_is_one_error_at_that_line(tmp_path, capsys):
+    # frame 1's mask is line 4 (header, mask 0, values 0, mask 1): 67 tokens "0"/"1" of one char
+    # and 66 spaces end at column 133; without the rule the frame number took the 68th entry and
+    # every token after shifted (hundreds of findings)
+    found, frames, _ = check_fap_text(_file(50, short_at=1))
+    assert [(w.rule, w.line, w.column) for w in found] == [("fap-text-mask-short", 4, 134)]
+    assert "67 entries" in found[0].message and "68 expected" in found[0].message
+    assert frames is not None and len(frames) == 50 and frames.values[49, 30] == 30 + 49  # read on in step
+    with pytest.raises(TextFormatError) as e:
+        read_fap_text(_file(50, short_at=1))
+    assert e.value.rule == "fap-text-mask-short" and e.value.line == 4
+    p = tmp_path / "short.fap"
+    p.write_text(_file(50, short_at=1))
+    assert main(["check", str(p)]) == 1
+    out = capsys.readouterr().out
+    assert "FAP-TEXT-014" in out and "at line 4:134" in out and "1 error(s), 0 warning(s)" in out
+
+
+def test_a_mask_wrapped_over_lines_is_still_read_as_tokens():
+    m = mask(3, 19).split()
+    text = "2.1 wrapped 25 1\n" + " ".join(m[:34]) + "\n" + " ".join(m[34:]) + "\n0 5 6\n"
+    found, frames, _ = check_fap_text(text)
+    assert found == [] and frames is not None and frames.values[0, 18] == 6
+
+
+def test_a_frame_numbered_below_the_previous_is_out_of_order_even_when_repeated():
+    text = "2.1 order 25 3\n" + "\n".join(f"{mask(3)}\n{fn} {fn}" for fn in (0, 1, 0)) + "\n"
+    found, _, _ = check_fap_text(text)
+    assert {w.rule for w in found} == {"fap-text-frame-order", "fap-text-frame-duplicate"}
+
+
+def test_a_file_with_warnings_only_is_not_headed_clean(tmp_path, capsys):
+    p = tmp_path / "order.fap"
+    p.write_text("2.1 order 25 2\n" + "\n".join(f"{mask(3)}\n{fn} {fn}" for fn in (1, 0)) + "\n")
+    assert main(["check", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0] == f"{p}: warnings" and "FAP-TEXT-010" in out

@@ -228,6 +228,7 @@ RULE_CASES = [
     ("fap-text-frame-beyond", "2.1 a 25 1\n" + mask_line() + "\n2\n", 3, 1, False),
     ("fap-text-frame-count", "2.1 a 25 2\n" + mask_line() + "\n1\n", 1, 10, False),
     ("fap-text-frame-count", "2.1 a 25 3\n", 1, 10, False),
+    ("fap-text-mask-short", "2.1 a 25 1\n" + " ".join(["0"] * 67) + "\n0\n", 2, 134, True),
 ]
 
 
