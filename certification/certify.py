@@ -35,6 +35,7 @@ from fbaconf.conformance.coverage_table import points_of
 from fbaconf.conformance.golden import MANIFEST
 from fbaconf.conformance.suite import Case, golden_root, load_suites
 from fbaconf.errors import FbaconfInputError
+from fbaconf.explain.causes import explain
 from fbaconf.harness import reports
 from fbaconf.harness.adapters import Adapter, CommandAdapter, resolve
 from fbaconf.harness.preflight import preflight
@@ -183,7 +184,9 @@ def certify(decoder: str, claim: str | None, out: Path, options: CertifyOptions 
         print(f"fbaconf certify: {n}", file=sys.stderr)
     summary = "".join(f"{n}\n" for n in notices) + reports.terminal_summary(record, color=False)
     atomic_write_text(out / "summary.txt", summary + "\n")
-    atomic_write_text(out / "statement.md", _statement(record, cv, o.speed, basis))
+    atomic_write_text(
+        out / "statement.md", _statement(record, cv, o.speed, basis) + _cause_lines(record, cases, verdict)
+    )
     counts = {k: n for k, n in record.counts().items() if n}
     cert = {
         "format": FORMAT,
@@ -312,6 +315,28 @@ def _statement(record: RunRecord, cv: ClaimVerdict, speed: bool, basis: dict[str
         "",
     ]
     lines += [f"- {p}" for p in record.provisional]
+    return "\n".join(lines) + "\n"
+
+
+TOP_CAUSES = 3
+
+
+def _cause_lines(record: RunRecord, cases: list[Case], verdict: str) -> str:
+    """On FAIL, the top causes the spectrum ranks (no decoder is run for them here: ``fbaconf
+    explain`` on the package confirms each with a variant)."""
+    if not verdict.startswith("FAIL"):
+        return ""
+    ex = explain(record, {c.full_id: c for c in cases}, why_not="the certificate runs no extra decoder")
+    if not ex.failing:
+        return ""
+    lines = ["", "## Why it fails (top causes, ranked)", "", f"{ex.headline()}; the first {TOP_CAUSES}:", ""]
+    for c in ex.causes[:TOP_CAUSES]:
+        n = len(c.cases)
+        lines.append(
+            f"- {c.what} (`{c.feature}`): {n} case{'s' * (n != 1)}, e.g. {', '.join(c.cases[:3])}"
+            + (f"; concerns {c.concerns}" if c.concerns else "")
+        )
+    lines += ["", "Not confirmed by a decoder run here: `fbaconf explain PACKAGE` confirms each cause with a variant."]
     return "\n".join(lines) + "\n"
 
 

@@ -23,6 +23,7 @@ VERB_MODULES = (
     "fbaconf.rendering.cli",
     "fbaconf.conformance.cli",
     "fbaconf.harness.cli",
+    "fbaconf.explain.cli",
     "fbaconf.certification.cli",
     "fbaconf.fuzz.cli",
 )

@@ -62,7 +62,7 @@ def _nice_ticks(lo: float, hi: float, n: int = 4) -> list[float]:
         start = math.ceil(lo / step) * step
     except (OverflowError, ValueError):
         return [lo, hi]
-    ticks = []
+    ticks: list[float] = []
     t = start
     while t <= hi + step * 1e-9 and len(ticks) < 20:
         ticks.append(round(t, 12))
@@ -136,8 +136,8 @@ def svg_plot(name: str, values: list[float], *, width: int = 380, height: int = 
         if len(seg) > 1:
             parts.append(f'<polyline fill="none" stroke="#cf222e" stroke-width="1.5" points="{" ".join(seg)}"/>')
         elif len(seg) == 1:
-            x, y = seg[0].split(",")
-            parts.append(f'<circle cx="{x}" cy="{y}" r="2.5" fill="#cf222e"/>')
+            cx, cy = seg[0].split(",")
+            parts.append(f'<circle cx="{cx}" cy="{cy}" r="2.5" fill="#cf222e"/>')
     parts.append(
         f'<text x="{ml + pw}" y="14" text-anchor="end">max {_e(f"{max(finite):.4g}")}, '
         f"{len(finite)} of {n} frames</text>"
@@ -194,7 +194,7 @@ def _artefact_groups(artefacts: dict[str, str]) -> list[tuple[str, list[str]]]:
     return out
 
 
-def _diff_table(d: dict) -> str:
+def _diff_table(d: dict[str, Any]) -> str:
     rows = []
     keys = [k for k in d if k not in ("expected", "got")]
     for k in keys:
@@ -208,7 +208,7 @@ def _diff_table(d: dict) -> str:
     return "<table class='diff'><caption class='muted'>first difference</caption>" + "".join(rows) + "</table>"
 
 
-def _case_html(r: CaseResult, out_dir: Path, base_dir: Path, env: dict | None = None) -> str:
+def _case_html(r: CaseResult, out_dir: Path, base_dir: Path, env: dict[str, Any] | None = None) -> str:
     o = r.outcome.value
     h = [
         f"<section class='case k-{o}' id='case-{_e(_anchor(r.case_id))}'>",
@@ -297,7 +297,7 @@ def _counts_table_html(title: str, groups: dict[str, dict[str, int]], order: lis
     h = [f"<table class='counts'><tr><th>{_e(title)}</th>"]
     h += [f"<th class='num'>{_e(c)}</th>" for c in DISPLAY_COLUMNS] + ["<th class='num'>total</th></tr>"]
 
-    def row(name, c, cls=""):
+    def row(name: str, c: dict[str, int], cls: str = "") -> str:
         cells = [f"<tr{cls}><td>{_e(name)}</td>"]
         for col in DISPLAY_COLUMNS:
             n = c.get(col, 0)
@@ -313,7 +313,7 @@ def _counts_table_html(title: str, groups: dict[str, dict[str, int]], order: lis
     return "".join(h)
 
 
-def _kv_table(d: dict) -> str:
+def _kv_table(d: dict[str, Any]) -> str:
     rows = []
     for k, v in d.items():
         if isinstance(v, dict):
@@ -362,6 +362,24 @@ def _provisional_differences_html(record: RunRecord) -> str:
     )
 
 
+def _causes_html(causes: dict[str, Any]) -> str:
+    """The root causes ``fbaconf explain`` found (its JSON: headline, causes), ranked."""
+    h = [f"<h2>Root causes</h2><p>{_e(causes.get('headline', ''))}</p><ol class='causes'>"]
+    for c in causes.get("causes", []):
+        conf = c.get("confirmed")
+        proof = (
+            f"confirmed: {conf['case_id']} {conf['edit']} — {conf['outcome']}" if conf else "not confirmed by a variant"
+        )
+        h.append(
+            f"<li><b>{_e(c.get('what', ''))}</b> <span class='mono'>{_e(c.get('feature', ''))}</span>"
+            f" — {_e(len(c.get('cases', [])))} case(s); {_e(c.get('concerns', ''))}<br>"
+            f"<span class='muted'>{_e(proof)}; first divergence: {_e('; '.join(c.get('divergences', [])))}</span>"
+            f"<details><summary>cases</summary><p class='mono'>{_e(', '.join(c.get('cases', [])))}</p></details></li>"
+        )
+    h.append("</ol>")
+    return "".join(h)
+
+
 def _badge_class(v: str) -> str:
     """PASS green, a pass with what it leaves out (unverified tools, provisional differences) and
     the speed verdicts amber, FAIL and SETUP ERROR red."""
@@ -370,7 +388,14 @@ def _badge_class(v: str) -> str:
     return f"v-{v.split()[0]}"
 
 
-def html_report(record: RunRecord, out_dir, *, base_dir=None, heading: str = "fbaconf run") -> str:
+def html_report(
+    record: RunRecord,
+    out_dir: Path,
+    *,
+    base_dir: Path | None = None,
+    heading: str = "fbaconf run",
+    causes: dict[str, Any] | None = None,
+) -> str:
     """The page written by :func:`write_html` (artefacts outside ``out_dir`` are copied as a side effect)."""
     out_dir = Path(out_dir)
     base_dir = Path(base_dir) if base_dir is not None else out_dir
@@ -396,6 +421,8 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None, heading: str = "fb
         f"<p class='muted'>{_e(_summary_counts(display_counts(record.results)) + _speed_summary(record.speed))}"
         f"; exit code {_e(record.exit_code)}</p>"
     )
+    if causes is not None:
+        h.append(_causes_html(causes))
     # the summary table first, then what fails the run against its baseline, then the failures
     total = display_counts(record.results)
     h.append("<h2>Summary</h2>")
@@ -472,12 +499,13 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None, heading: str = "fb
     h.append("<h2>Run</h2>" + _kv_table({k: val for k, val in run_meta.items() if val not in (None, "")}))
     if record.suites:
         h.append("<table><tr><th>suite</th><th>version</th><th>sha256</th><th class='num'>cases</th></tr>")
-        for s in record.suites:
-            n = s.get("cases")
+        for suite in record.suites:
+            n = suite.get("cases")
             n = len(n) if isinstance(n, (list, tuple)) else n
             h.append(
-                f"<tr><td>{_e(s.get('name'))}</td><td>{_e(s.get('version', ''))}</td>"
-                f"<td class='mono'>{_e(s.get('sha256', ''))}</td><td class='num'>{_e('' if n is None else n)}</td></tr>"
+                f"<tr><td>{_e(suite.get('name'))}</td><td>{_e(suite.get('version', ''))}</td>"
+                f"<td class='mono'>{_e(suite.get('sha256', ''))}</td>"
+                f"<td class='num'>{_e('' if n is None else n)}</td></tr>"
             )
         h.append("</table>")
     if record.system:
@@ -524,14 +552,21 @@ def html_report(record: RunRecord, out_dir, *, base_dir=None, heading: str = "fb
     return "\n".join(h)
 
 
-def write_html(record: RunRecord, out_dir, *, base_dir=None, heading: str = "fbaconf run") -> Path:
+def write_html(
+    record: RunRecord,
+    out_dir: str | os.PathLike[str],
+    *,
+    base_dir: Path | None = None,
+    heading: str = "fbaconf run",
+    causes: dict[str, Any] | None = None,
+) -> Path:
     """Write ``out_dir/index.html``, one self-contained page (inline CSS and SVG, no script).
 
     Artefact paths are relative to ``base_dir`` (default ``out_dir``, the run's output
     folder) or absolute; images not already inside ``out_dir`` are copied into
     ``out_dir/artefacts/`` so that every link is relative. Returns the page's path."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    page = out_dir / "index.html"
-    atomic_write_text(page, html_report(record, out_dir, base_dir=base_dir, heading=heading))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    page = out / "index.html"
+    atomic_write_text(page, html_report(record, out, base_dir=base_dir, heading=heading, causes=causes))
     return page

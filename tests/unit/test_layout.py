@@ -225,6 +225,7 @@ LAYERS = (
     ("conformance", "golden"),
     "isolation",
     "harness",
+    "explain",
     ("certification", "mutation"),
     "fuzz",
     "generators",

@@ -22,7 +22,7 @@ NOT_STAGES = {"tests", "benchmarks", "examples", "docs", "build", "dist"}
 # the core every layer imports, and (PACKAGES) the trust boundary: what runs, confines and judges
 # an untrusted decoder, and what certifies it
 MODULES = ("fbaconf.errors", "fbaconf.rules", "fbaconf.safefs", "fbaconf._atomic")
-PACKAGES: tuple[str, ...] = ("fbaconf.isolation", "fbaconf.certification", "fbaconf.harness")
+PACKAGES: tuple[str, ...] = ("fbaconf.isolation", "fbaconf.certification", "fbaconf.harness", "fbaconf.explain")
 
 
 def _view(root: Path) -> Path:

@@ -1,0 +1,152 @@
+"""How often ``fbaconf explain`` names the mutated rule: each mutant decoder of a hand-annotated
+sample runs every case of predictable@2 (``python -m fbaconf.mutation.run run NAME --all-cases``,
+its own process), explain ranks the causes of its failures (the spectrum only: mutants are
+fbaconf's own patched reference, so no confirming runs), and a mutant scores when a cause whose
+feature matches one of the coverage points written beside it below (by hand, from the mutant's
+description and the coverage model, not from explain's output) comes first, or in the first three.
+
+    python benchmarks/bench_explain_mutants.py [-j N] [NAME ...]
+
+Prints one line per mutant (rank of the first matching cause, the top cause), then the shares
+``first: K/N`` and ``top 3: K/N`` and the wall and CPU time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+from fbaconf.conformance.suite import load_suites
+from fbaconf.explain.causes import explain
+from fbaconf.harness.results import CaseResult, Outcome, RunRecord
+from fbaconf.harness.selection import claim_covers
+
+CLAIM = "predictable@2"
+# mutant -> the coverage points (fnmatch patterns) that name the rule it breaks
+EXPECTED: dict[str, tuple[str, ...]] = {
+    "time-code-ignored": ("timecode.*",),
+    "time-code-minutes-as-seconds": ("timecode.*",),
+    "skip-not-counted": ("skip.*",),
+    "skip-chain-not-continued": ("skip.chain",),
+    "skip-not-in-time": ("skip.*",),
+    "frequency-offset-ignored": ("rate.offset",),
+    "ignore-retained": ("mask.type-1", "status.retained"),
+    "minmax-lists-ignored": ("lists.*",),
+    "minmax-sign-swapped": ("lists.*",),
+    "stuffing-not-removed": ("arith.stuffing",),
+    "model-no-halving": ("arith.model-rescale",),
+    "viseme-prediction-sign": ("highlevel.predicted",),
+    "dct-dc-prediction-ignored": ("dct.predicted",),
+    "dct-scale-index-off-by-one": ("dct.*",),
+    "lookahead-rewind-at-3": ("arith.lookahead-rewind-3",),
+    "lookahead-rewind-at-9": ("arith.lookahead-rewind-9",),
+    "lookahead-error-at-5": ("arith.lookahead-error-5",),
+    "lookahead-error-at-12": ("arith.lookahead-error-12",),
+    "retained-rescaled": ("retained.quant-change",),
+    "faces-share-lists": ("faces.*",),
+    "lists-reset-at-intra": ("lists.persist-intra",),
+    "fit-denominator-ignored": ("fit.denominator",),
+    "fit-impulse-ignored": ("fit.impulse",),
+    "fit-topological-order": ("fit.chain", "fit.derived"),
+    "transform-axis-sign": ("facedef.transform.rotation",),
+    "transform-scale-absolute": ("facedef.transform.scale",),
+    "calibration-ignores-subset": ("calibration.subset",),
+    "left-right-fill-missing": ("lrfill.*",),
+    "ind-syn-step-q0-uses-qp": ("fap_quant.0",),
+    # decisions are rules too: the checker's diagnostic point for the decision the mutant breaks
+    "default-rate-30": ("rate.none", "diag.FAP-DECISION-004"),  # D6: 25 Hz when no rate is signalled
+    "mask-type-2-as-1": ("mask.type-2", "diag.FAP-DECISION-006"),  # D3: mask type 10 frees
+    "ind-syn-mask-type-10-is-all": ("mask.type-2", "diag.FAP-DECISION-006"),
+    # written before their first measurement (the ones above were measured once before the two
+    # decision diagnostics were added to their rows)
+    "ind-syn-frame-rate-offset-before-seconds": ("rate.offset",),
+    "ind-syn-skip-chain-last-chunk-only": ("skip.chain",),
+    "ind-syn-skip-chain-stops-at-14": ("skip.chain",),
+    "ind-syn-mask-01-10-swapped": ("mask.type-1", "mask.type-2", "diag.FAP-DECISION-006"),
+    "ind-syn-mask-00-free": ("mask.type-0", "status.retained"),
+    "ind-syn-mask-11-last-fap-missing": ("mask.type-3",),
+    "ind-syn-list-order-min-first": ("lists.*",),
+    "ind-syn-list-min-positive": ("lists.i_min", "lists.p_min"),
+    "ind-syn-intra-uses-p-list": ("lists.*",),
+    "ind-syn-p-uses-i-list": ("lists.*",),
+    "ind-syn-step-ignores-qp": ("fap_quant.*",),
+    "ind-syn-viseme-blend-p-step-missing": ("highlevel.predicted", "highlevel.quantised"),
+    "ind-syn-expression-intra-order": ("highlevel.*", "expression.*"),
+    "lookahead-rewind-at-11": ("arith.lookahead-rewind-11",),
+    "lookahead-error-at-2": ("arith.lookahead-error-2",),
+    "facedefmesh-zero-top": ("facedef.interval.zero-top",),
+    "facedefmesh-no-fapu": ("facedef.mesh",),
+    "fit-parent-order": ("fit.fan-in",),
+}
+
+
+def _mutant_run(name: str) -> dict:
+    argv = [sys.executable, "-m", "fbaconf.mutation.run", "run", name, "--claim", CLAIM, "--all-cases"]
+    p = subprocess.run(argv, capture_output=True, text=True, timeout=1800)
+    for line in reversed(p.stdout.splitlines()):
+        if line.startswith("{"):
+            return json.loads(line)
+    return {"mutant": name, "killed": False, "error": p.stderr[-300:]}
+
+
+def rank(res: dict, cases: dict) -> tuple[int | None, str]:
+    """(1-based rank of the first cause matching the mutant's points, the top cause's feature)."""
+    failing = {f["case"].split(" (")[0] for f in res.get("failing", [])}
+    results = [
+        CaseResult(
+            case_id=cid,
+            suite=c.suite,
+            claim=c.claim,
+            outcome=Outcome.FAIL if cid in failing else Outcome.PASS,
+            kind=c.kind.value,
+        )
+        for cid, c in cases.items()
+    ]
+    decoder = {"name": res["mutant"], "inputs": ["fba"]}
+    record = RunRecord(decoder=decoder, claim=CLAIM, suites=[], system={}, results=results)
+    ex = explain(record, cases)
+    patterns = EXPECTED[res["mutant"]]
+    for i, c in enumerate(ex.causes, 1):
+        # a cause names its feature and the features no case of the run tells from it
+        if any(fnmatch.fnmatchcase(f, p) for f in (c.feature, *c.aliases) for p in patterns):
+            return i, ex.causes[0].feature
+    return None, ex.causes[0].feature if ex.causes else "-"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("names", nargs="*")
+    a = ap.parse_args()
+    names = a.names or list(EXPECTED)
+    cases = {c.full_id: c for s in load_suites() for c in s.cases if claim_covers(CLAIM, c.claim)}
+    t0, c0 = time.perf_counter(), os.times()
+    with ThreadPoolExecutor(max_workers=a.jobs) as ex:
+        runs = list(ex.map(_mutant_run, names))
+    first = top3 = scored = 0
+    for res in runs:
+        if not res.get("killed"):
+            print(f"{res['mutant']:38s} not killed: not scored {res.get('error', '')}")
+            continue
+        r, top = rank(res, cases)
+        scored += 1
+        first += r == 1
+        top3 += r is not None and r <= 3
+        print(f"{res['mutant']:38s} rank {r if r is not None else '-':>2}  top cause {top}")
+    t = os.times()
+    cpu = (t.children_user + t.children_system + t.user + t.system) - (
+        c0.children_user + c0.children_system + c0.user + c0.system
+    )
+    print(f"first: {first}/{scored} ({100 * first / max(scored, 1):.0f} %)")
+    print(f"top 3: {top3}/{scored} ({100 * top3 / max(scored, 1):.0f} %)")
+    print(f"wall {time.perf_counter() - t0:.0f} s, CPU {cpu:.0f} s, {len(names)} mutants, {CLAIM}")
+
+
+if __name__ == "__main__":
+    main()

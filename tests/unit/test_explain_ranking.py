@@ -1,0 +1,115 @@
+"""The parts of ``fbaconf explain`` that run no decoder: the spectrum score (Ochiai's, computed by
+hand below), the grouping of failing cases into causes on the committed suites (the failing set is
+made here from a coverage point, so the expected cause is known), the ``.fap`` triggers and their
+edits (hand-written texts), and the certificate statement's causes."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from fbaconf.bitstreams.faptext import read_fap_text
+from fbaconf.certification.certify import _cause_lines
+from fbaconf.conformance.coverage_table import points_of
+from fbaconf.conformance.suite import load_suites
+from fbaconf.explain import spectrum, triggers
+from fbaconf.explain.causes import explain
+from fbaconf.explain.render import terminal
+from fbaconf.harness.results import CaseResult, Outcome, RunRecord
+
+
+def _view(cid: str, failing: bool, *features: str) -> spectrum.CaseView:
+    return spectrum.CaseView(cid, "Fail" if failing else "Pass", failing, not failing, frozenset(features))
+
+
+def test_ochiai_by_hand():
+    vs = [_view("a", True, "x", "y"), _view("b", True, "x"), _view("c", False, "y"), _view("d", False)]
+    got = {s.feature: s.ochiai for s in spectrum.scores(vs)}
+    # x: in both failing cases, no passing one: 2 / sqrt(2 * 2); y: 1 failing, 1 passing: 1 / sqrt(2 * 2)
+    assert got == {"x": pytest.approx(1.0), "y": pytest.approx(0.5)}
+    assert spectrum.aliases(vs, "x") == [] and spectrum.aliases([*vs, _view("e", False, "z")], "z") == []
+
+
+def test_features_always_together_are_aliases():
+    vs = [_view("a", True, "p", "q"), _view("b", False, "p", "q", "r"), _view("c", False, "r")]
+    assert spectrum.aliases(vs, "p") == ["q"] and spectrum.aliases(vs, "r") == []
+
+
+def _record(failing: set[str], cases: dict) -> RunRecord:
+    results = [
+        CaseResult(
+            case_id=cid,
+            suite=c.suite,
+            claim=c.claim,
+            outcome=Outcome.FAIL if cid in failing else Outcome.PASS,
+            kind=c.kind.value,
+        )
+        for cid, c in cases.items()
+    ]
+    return RunRecord(decoder={"name": "d", "inputs": ["fba"]}, claim="simple@2", suites=[], system={}, results=results)
+
+
+@pytest.fixture(scope="module")
+def core_cases():
+    return {c.full_id: c for s in load_suites(names=["simple-l1-core"]) for c in s.cases}
+
+
+@pytest.mark.parametrize("point", ["skip.chain", "rate.offset", "timecode.nonzero"])
+def test_the_cases_of_one_point_failing_are_one_cause_naming_it(point, core_cases):
+    failing = {cid for cid, c in core_cases.items() if point in points_of(c)}
+    assert failing, point
+    ex = explain(_record(failing, core_cases), core_cases)
+    top = ex.causes[0]
+    assert point in (top.feature, *top.aliases) and set(top.cases) == failing
+    assert ex.explained == ex.failing == len(failing) and ex.runs == 0
+
+
+def test_a_run_without_failures_says_so_in_one_line(core_cases):
+    ex = explain(_record(set(), core_cases), core_cases)
+    assert ex.causes == [] and terminal(ex).count("\n") == 0 and "no failures" in terminal(ex)
+
+
+def test_a_failing_certificate_names_its_top_causes(core_cases):
+    failing = {cid for cid, c in core_cases.items() if "skip.chain" in points_of(c)}
+    text = _cause_lines(_record(failing, core_cases), list(core_cases.values()), "FAIL")
+    assert "## Why it fails" in text and "skip.chain" in text
+    assert _cause_lines(_record(failing, core_cases), list(core_cases.values()), "PASS") == ""
+
+
+CRLF = "# made by hand\r\n2.1 two words 12.5 2\r\n" + " ".join(["0", "0", "1"] + ["0"] * 65) + "\r\n0 5\r\n"
+
+
+def test_text_triggers_and_their_edits():
+    data = CRLF.encode()
+    assert triggers.text_features(data) >= {"text.crlf", "text.comment", "text.name-spaces", "content.rate-fractional"}
+    no_crlf = triggers.text_variant(data, "text.crlf")
+    assert no_crlf == CRLF.replace("\r\n", "\n")
+    no_comment = triggers.text_variant(data, "text.comment")
+    assert no_comment is not None and "#" not in no_comment and no_comment.startswith("2.1 two words")
+    header = triggers.text_variant(data, "text.name-spaces")
+    assert header is not None and header.splitlines()[1] == "2.1 two_words 12.5 2"
+    rate = triggers.text_variant(data, "content.rate-fractional")
+    assert rate is not None and read_fap_text(rate)[1].frame_rate == 25.0
+    assert "content.rate-fractional" not in triggers.text_features(rate.encode())
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    numbers=st.lists(st.integers(0, 50), min_size=1, max_size=6),
+    rate=st.sampled_from([25.0, 12.5, 30.0]),
+)
+def test_each_content_edit_takes_its_trigger_out(numbers, rate):
+    rows = [f"{' '.join(['0', '0', '1'] + ['0'] * 65)}\n{n} {i}" for i, n in enumerate(numbers)]
+    rate_s = str(int(rate)) if rate.is_integer() else str(rate)
+    text = f"2.1 p {rate_s} {len(numbers)}\n" + "\n".join(rows) + "\n"
+    data = text.encode()
+    present = triggers.text_features(data)
+    for t in triggers.TEXT_TRIGGERS:
+        if t.id in present and not t.form:
+            edited = triggers.text_variant(data, t.id)
+            assert edited is not None and t.id not in triggers.text_features(edited.encode()), t.id
+    fr = read_fap_text(text)[0]
+    assert ("content.frame-order" in present) == bool(any(b <= a for a, b in zip(numbers, numbers[1:])))
+    assert ("content.rate-fractional" in present) == (not math.isclose(fr.frame_rate, round(fr.frame_rate)))
