@@ -35,9 +35,9 @@ from fbaconf.isolation.bounds import DEFAULT_CEILINGS, Ceilings
 
 from .corpus import default_seeds
 from .engine import FuzzConfig, Fuzzer
-from .findings import Finding, write_finding
+from .findings import Finding, minimise_against, write_finding
 from .inputs import Entry, InputKind
-from .minimise import MinimiseStats, minimise
+from .minimise import MinimiseStats
 from .targets import DecoderTarget, Verdict
 
 ROUND_S = 30.0  # a shard's length: corpus merged between rounds
@@ -198,20 +198,8 @@ def minimise_task(spec: ShardSpec, data: bytes, kind: InputKind, key: str, secon
     (JSON text, read by :func:`minimise_report`)."""
     work = Path(tempfile.mkdtemp(prefix="fbaconf-min-"))
     target = _target(spec, work)
-    last = {}
     try:
-
-        def test(cand: bytes, run=target.settled) -> bool:  # its ending bound to it (DecoderTarget.settled)
-            v = run(Entry(cand, kind=kind, origin="minimise")).verdict
-            if v is not None and v.key == key:
-                last["v"] = v
-                return True
-            return False
-
-        minimal, stats = minimise(
-            data, test, max_tests=tests, max_seconds=seconds, check=lambda c: test(c, target.alone)
-        )
-        v = last.get("v")
+        minimal, stats, v = minimise_against(target, data, kind, key, seconds=seconds, tests=tests)
         return _json(
             {
                 "minimal": _b64(minimal),

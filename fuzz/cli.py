@@ -8,6 +8,7 @@
     fbaconf fuzz --decoder D.toml --replay FILE         # run one input, print its classification
     fbaconf fuzz --promote DIR [--data-dir PATH]         # findings -> regression suite cases
     fbaconf fuzz export DIR [--valid N] [--seed S]        # seeds + dictionary for libFuzzer/AFL++/OSS-Fuzz
+    fbaconf fuzz minimise FILE --decoder D.toml [-o OUT]  # re-minimise a crash file (from any fuzzer)
 
 Exit codes: 0 no findings (replay: the input behaves), 1 findings, 2 usage or setup error.
 The stage's modules are listed in :mod:`fbaconf.fuzz`; see docs/fuzzing.md.
@@ -38,12 +39,20 @@ def register(sub) -> None:
     p.add_argument(
         "export",
         nargs="?",
-        choices=["export"],
-        metavar="export",
+        choices=["export", "minimise"],
+        metavar="export|minimise",
         help="'export DIR': write a seed corpus, an AFL++/libFuzzer dictionary and an OSS-Fuzz "
-        "snippet for the fuzzers vendors run (see docs/fuzzing.md)",
+        "snippet for the fuzzers vendors run (see docs/fuzzing.md); 'minimise FILE': classify one input "
+        "(a crash file of any fuzzer) with --decoder or --self and write the smallest input that does the "
+        "same (same class and signature) to -o (default FILE.min.<ext>)",
     )
-    p.add_argument("export_dir", nargs="?", type=Path, metavar="DIR", help="(export) the folder to write")
+    p.add_argument(
+        "export_dir",
+        nargs="?",
+        type=Path,
+        metavar="DIR|FILE",
+        help="(export) the folder to write; (minimise) the input",
+    )
     p.add_argument(
         "--valid",
         type=int,
@@ -88,6 +97,9 @@ def register(sub) -> None:
     )
     p.add_argument("--no-oracle", action="store_true", help="do not compare output on valid inputs")
     p.add_argument("--minimise-seconds", type=float, default=30.0, help="time budget per finding's minimisation")
+    p.add_argument(
+        "--minimise-tests", type=int, default=None, help="most inputs one minimisation runs (default: the fuzzer's)"
+    )
     p.add_argument(
         "--seeds",
         type=Path,
@@ -137,6 +149,17 @@ def _extra_seeds(paths: list[Path]):
 
 
 def cmd_fuzz(args) -> int:
+    args.minimise_file = None
+    if args.export == "minimise":
+        if args.export_dir is None or not (args.decoder or args.self_) or args.cluster or args.replay:
+            usage = "fbaconf fuzz minimise FILE (--decoder D.toml | --self) [-o OUT]"
+            print(f"fbaconf fuzz: error: usage: {usage}", file=sys.stderr)
+            return 2
+        if not args.export_dir.is_file():
+            print(f"fbaconf fuzz: error: {args.export_dir}: no such file", file=sys.stderr)
+            return 2
+        args.minimise_file, args.minimise_out, args.output = args.export_dir, args.output, None
+        args.export = None
     if args.export is not None:
         if args.export_dir is None or args.decoder or args.self_ or args.promote:
             print("fbaconf fuzz: error: usage: fbaconf fuzz export DIR [--valid N] [--seed S]", file=sys.stderr)
@@ -277,6 +300,8 @@ def _self(args) -> int:
         kind = _kind_of(args.replay, args.target)
         v = replay(target, args.replay.read_bytes(), kind)
         return _print_replay(v, args)
+    if args.minimise_file is not None:
+        return _minimise_file(target, args, tests=5000)
     out = (args.output or Path("fbaconf-fuzz") / "self").resolve()
     fz = Fuzzer(
         target,
@@ -310,6 +335,55 @@ def _default_kind(adapter) -> InputKind:
 def _kind_of(path: Path, target: InputKind | None) -> InputKind:
     by_suffix = {".bt": InputKind.SCENE, ".bifs": InputKind.BIFS, ".fap": InputKind.TEXT}
     return by_suffix.get(path.suffix.lower(), InputKind.SCENE if target == InputKind.SCENE else InputKind.STREAM)
+
+
+def _minimise_file(target, args, *, tests: int) -> int:
+    """``fbaconf fuzz minimise FILE``: the input's verdict on a process of its own, then the same
+    minimisation a finding of the fuzzer gets (:func:`findings.minimise_against`), so a crash file of
+    AFL++ or libFuzzer ends with the signature and the minimal input ``fbaconf fuzz`` gives that bug."""
+    from fbaconf._atomic import atomic_write_bytes
+
+    from .findings import minimise_against
+
+    path: Path = args.minimise_file
+    kind = _kind_of(path, args.target)
+    data = path.read_bytes()
+    v = getattr(target, "alone", target.execute)(_entry(data, kind)).verdict
+    if v is None:
+        print("no finding: the input is handled cleanly (nothing to minimise)")
+        return 0
+    minimal, stats, mv = minimise_against(
+        target, data, kind, v.key, seconds=args.minimise_seconds, tests=args.minimise_tests or tests
+    )
+    out = args.minimise_out or path.with_name(f"{path.stem}.min{path.suffix or '.fba'}")
+    atomic_write_bytes(out, minimal)
+    doc = {
+        "class": v.cls,
+        "signature": v.signature,
+        "message": (mv or v).message,
+        "bytes_before": stats.bytes_before,
+        "bytes_after": stats.bytes_after,
+        "tests": stats.tests,
+        "seconds": round(stats.seconds, 2),
+        "reproduced": stats.reproduced,
+        "flaky": stats.flaky,
+        "minimal": str(out),
+    }
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        flaky = "  FLAKY: does not repeat on a fresh process" if stats.flaky else ""
+        print(
+            f"{v.cls} ({v.signature}): {stats.bytes_before} -> {stats.bytes_after} bytes "
+            f"({stats.tests} tests, {stats.seconds:.1f} s) -> {out}{flaky}"
+        )
+    return 1
+
+
+def _entry(data: bytes, kind: InputKind):
+    from .inputs import Entry
+
+    return Entry(data, kind=kind, origin="minimise")
 
 
 def _print_replay(v, args) -> int:
@@ -367,6 +441,8 @@ def _decoder(args, expected: set[int]) -> int:
         if args.replay is not None:
             v = replay(target, args.replay.read_bytes(), args.target)
             return _print_replay(v, args)
+        if args.minimise_file is not None:
+            return _minimise_file(target, args, tests=600)
         info = {
             "name": adapter.name,
             "manifest": str(adapter.manifest_path) if adapter.manifest_path else None,

@@ -18,9 +18,8 @@ from fbaconf.scenes import bifs, bt
 
 from .choosers import RandomChooser
 from .corpus import scene_seeds
-from .findings import Finding, write_finding
+from .findings import Finding, minimise_against, write_finding
 from .inputs import Entry, InputKind, gen_valid
-from .minimise import minimise
 from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
@@ -380,36 +379,11 @@ class Fuzzer:
             self.stopped = True
 
     def _minimise(self, f: Finding, deadline: float) -> None:
-        key = f.verdict.key
-        kind = f.original.kind
-        last: dict[str, Verdict | None] = {}
-
-        settled = getattr(self.target, "settled", self.target.execute)  # its ending bound to it (targets.py)
-        alone = getattr(self.target, "alone", self.target.execute)  # a process of its own: the two checks
-
-        def test(cand: bytes, run=settled) -> bool:
-            out = run(Entry(cand, kind=kind, origin="minimise"))
-            ok = out.verdict is not None and out.verdict.key == key
-            if ok:
-                last["v"] = out.verdict
-            return ok
-
-        bounds = None
-        if kind == InputKind.STREAM:
-            try:
-                bounds = f.original.get_model().boundaries()
-            except Exception:  # noqa: BLE001
-                bounds = None
         budget = max(min(self.minimise_seconds, deadline - time.perf_counter()), min(10.0, self.minimise_seconds))
-        f.minimal, f.min_stats = minimise(
-            f.original.data,
-            test,
-            max_tests=self.minimise_tests,
-            max_seconds=budget,
-            boundaries=bounds,
-            check=lambda c: test(c, alone),
+        f.minimal, f.min_stats, v = minimise_against(
+            self.target, f.original.data, f.original.kind, f.verdict.key, seconds=budget, tests=self.minimise_tests
         )
-        f.min_verdict = last.get("v", f.verdict)
+        f.min_verdict = v or f.verdict
         self.progress.message(
             f"  minimised {f.id}: {f.min_stats.bytes_before} -> {f.min_stats.bytes_after} bytes "
             f"({f.min_stats.tests} tests, {f.min_stats.seconds:.1f} s)"

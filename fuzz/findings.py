@@ -13,7 +13,7 @@ from fbaconf._atomic import atomic_write_bytes, atomic_write_text
 from fbaconf.harness.adapters import Job
 
 from .inputs import Entry, InputKind
-from .minimise import MinimiseStats
+from .minimise import MinimiseStats, minimise
 from .selftarget import SelfTarget
 from .targets import DecoderTarget, FuzzSetupError, Verdict
 
@@ -154,6 +154,38 @@ def load_findings(fuzz_dir: Path) -> list[tuple[Path, dict]]:
             raise FuzzSetupError(f"unreadable finding {p}: not a JSON object")
         out.append((p.parent, doc))
     return out
+
+
+def minimise_against(
+    target, data: bytes, kind: InputKind, key: str, *, seconds: float, tests: int
+) -> tuple[bytes, MinimiseStats, Verdict | None]:
+    """The smallest input found on which ``target`` gives a verdict of ``key`` (class and
+    signature), the statistics, and the minimal input's verdict: prefixes at plane boundaries
+    (the syntax model's, for a stream), then bytes, then bits; checked on a process of its own at
+    both ends (``alone``), every other test through the target's fast path (``settled``). The
+    fuzzer's findings and ``fbaconf fuzz minimise`` are minimised by this one function, so a bug
+    gets one signature and one minimal input whichever found it."""
+    last: dict[str, Verdict | None] = {}
+    settled = getattr(target, "settled", target.execute)  # its ending bound to it (targets.py)
+    alone = getattr(target, "alone", target.execute)  # a process of its own: the two checks
+
+    def test(cand: bytes, run=settled) -> bool:
+        out = run(Entry(cand, kind=kind, origin="minimise"))
+        ok = out.verdict is not None and out.verdict.key == key
+        if ok:
+            last["v"] = out.verdict
+        return ok
+
+    bounds = None
+    if kind == InputKind.STREAM:
+        try:
+            bounds = Entry(data, kind=kind).get_model().boundaries()
+        except Exception:  # noqa: BLE001 - an input the syntax model cannot walk is minimised by bytes only
+            bounds = None
+    minimal, stats = minimise(
+        data, test, max_tests=tests, max_seconds=seconds, boundaries=bounds, check=lambda c: test(c, alone)
+    )
+    return minimal, stats, last.get("v")
 
 
 def replay(target, data: bytes, kind: InputKind = InputKind.STREAM) -> Verdict | None:

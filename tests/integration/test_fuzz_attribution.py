@@ -5,10 +5,12 @@ finding, naming that input; the finding replays, and is minimised."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
+from fbaconf.cli import main
 from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
 from fbaconf.fuzz.inputs import Entry
 from fbaconf.fuzz.targets import PIPELINE_DEPTH, DecoderTarget
@@ -87,3 +89,28 @@ def test_a_crash_among_queued_inputs_is_found_on_its_input_replays_and_is_minimi
         assert target.execute(Entry(bytes(40), origin="replay")).verdict is None
     finally:
         target.close()
+
+
+@pytest.mark.parametrize("spawn", [False, True])
+def test_a_crash_file_of_any_fuzzer_is_re_minimised_to_the_fuzzers_signature(tmp_path, capsys, spawn):
+    """``fbaconf fuzz minimise FILE``: a crash file as AFL++ or libFuzzer write it (any name, no
+    finding folder) gets the class and signature the fuzzer gives that input, and the minimal input
+    the fuzzer's minimisation reaches (the 4 bytes the decoder crashes on)."""
+    m = _manifest(tmp_path)
+    crash = tmp_path / "id:000000,sig:11,src:000003,op:havoc"
+    crash.write_bytes(_seeds()[N].data)
+    work = tmp_path / "work"
+    work.mkdir()
+    target = DecoderTarget(adapters.resolve(str(m)), work, timeout_s=5, fork_server=not spawn, persistent=not spawn)
+    try:
+        expected = target.alone(Entry(crash.read_bytes(), origin="replay")).verdict
+    finally:
+        target.close()
+    assert expected is not None and expected.cls == "crash"
+    out = tmp_path / "min.fba"
+    capsys.readouterr()
+    argv = ["fuzz", "minimise", str(crash), "--decoder", str(m), "-o", str(out), "--json", "--timeout", "5"]
+    assert main(argv + (["--spawn"] if spawn else [])) == 1
+    doc = json.loads(capsys.readouterr().out)
+    assert (doc["class"], doc["signature"]) == (expected.cls, expected.signature)
+    assert out.read_bytes() == b"BOOM" and doc["reproduced"] and not doc["flaky"]
