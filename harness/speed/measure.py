@@ -23,7 +23,7 @@ it (:mod:`.load`), which gives the verdict: pass, fail or inconclusive.
 
 Operations. ``decode``: the adapter's ``decode`` command with the FAP output (outputs a
 command names unconditionally are supplied too and their cost is included; a named
-``{images_dir}`` gets an 8x8 scenario of two frames, the first and one drawn per run).
+``{images_dir}`` gets a 32x32 scenario of two frames, the first and one drawn per run).
 ``render``: the same command with ``{images_dir}`` and a scenario of every frame at
 ``render_size`` with 2 x 2 samples per pixel; skipped (``None``, see :func:`skip_reason`) for
 adapters without the ``images`` output. A scene (the bundled default head; BT, or BIFS for a
