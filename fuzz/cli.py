@@ -171,7 +171,8 @@ def cmd_fuzz(args) -> int:
             json.dumps(doc, indent=1)
             if args.json
             else f"{doc['seeds']} seed streams ({doc['suite']} suite, {doc['prefixes']} prefixes, {doc['generated']} "
-            f"generated), {doc['tokens']} dictionary tokens -> {doc['dir']}"
+            f"generated): {doc['corpus']} to start from in corpus/, {doc['more']} in more/, "
+            f"{doc['stress']} long ones in stress/; {doc['tokens']} dictionary tokens -> {doc['dir']}"
         )
         return 0
     if not (args.decoder or args.self_ or args.promote):

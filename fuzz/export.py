@@ -5,11 +5,16 @@ reach every part of the syntax instead of from nothing.
 
 Layout::
 
-    DIR/corpus/<origin>-<sha1:12>.fba   conformance suite streams, their 1–3-plane prefixes,
-                                        and generated valid streams (deduplicated by content)
+    DIR/corpus/<origin>-<sha1:12>.fba   the seeds to start from: the smallest streams that together
+                                        reach every feature of the syntax model, at most 200
+    DIR/more/                           the other small seeds (suite streams, 1–3-plane prefixes,
+                                        generated valid streams; deduplicated by content)
+    DIR/stress/                         the long streams (over 8 KiB: thousands of frames), kept
+                                        apart: at engine defaults a seed must decode in a few ms
     DIR/fba.dict                        AFL++/libFuzzer dictionary (byte-aligned tokens)
     DIR/oss-fuzz/build.sh               OSS-Fuzz build snippet (seed corpus zip + dictionary)
     DIR/fuzz_target.c                   a libFuzzer target template (LLVMFuzzerTestOneInput)
+    DIR/fuzz_target_fbadec.c            the same around examples/fbadec (fbaconf's own C decoder)
     DIR/README.md                       how to use them
 """
 
@@ -23,7 +28,10 @@ from pathlib import Path
 from .choosers import RandomChooser
 from .corpus import conformance_seeds, short_prefixes
 from .inputs import Entry, gen_valid
-from .model import DICTIONARY
+from .model import DICTIONARY, features_of
+
+STRESS_BYTES = 8192  # a longer seed is thousands of frames: seconds per input under ASan
+MAX_SEEDS = 200  # AFL++ warns of "far too many input files" above this; libFuzzer reads them all first
 
 # Byte sequences worth splicing in, beyond the start codes of the syntax model's dictionary:
 # each is (bytes, what). Bit patterns narrower than a byte (plane flags, mask types) cannot be
@@ -90,7 +98,7 @@ TARGET_C = """/* A libFuzzer target for a face object stream decoder (fbaconf fu
  * reject invalid streams with an error return, and never crash, hang or leak.
  *
  *   clang -g -O1 -fsanitize=fuzzer,address,undefined fuzz_target.c your_decoder.c -o fba_fuzzer
- *   ./fba_fuzzer -dict=fba.dict corpus/
+ *   mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -artifact_prefix=new/ new corpus
  */
 #include <stddef.h>
 #include <stdint.h>
@@ -103,6 +111,20 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
 }
 """
 
+TARGET_FBADEC_C = """/* The libFuzzer target of fbaconf's own C decoder, examples/fbadec (see docs/fuzzing.md). */
+#include <stddef.h>
+#include <stdint.h>
+
+#include "fbadec.h"
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+    fba_result res;
+    fba_error err;
+    if (fba_decode(data, size, &res, &err) == 0) fba_result_free(&res);
+    return 0;
+}
+"""
+
 README = """# Seeds and a dictionary for coverage-guided fuzzing of a face object stream decoder
 
 Made by `fbaconf fuzz export` ({n} seed streams: {suite} conformance streams, {prefixes}
@@ -110,51 +132,101 @@ short prefixes of them, {generated} generated valid streams; {tokens} dictionary
 
 | file | for |
 |---|---|
-| `corpus/` | the seed corpus: valid streams and conformance error cases (coverage starts deep) |
+| `corpus/` | {start} seeds to start from: the smallest streams reaching every syntax-model feature |
+| `more/` | the {more} other small seeds (add them with a second corpus folder if you like) |
+| `stress/` | {stress} long streams (thousands of frames): seconds per input under ASan, not for defaults |
 | `fba.dict` | AFL++ / libFuzzer dictionary: start codes, aligned stuffing, header patterns |
-| `fuzz_target.c` | a libFuzzer target template |
+| `fuzz_target.c` | a libFuzzer target template; `fuzz_target_fbadec.c` the same around examples/fbadec |
 | `oss-fuzz/build.sh` | the lines an OSS-Fuzz `build.sh` needs to ship the seeds and the dictionary |
 
+Build with a sanitizer: a read past a buffer does not crash a plain build. New inputs go to a
+folder of their own (`new/`, `findings/`), never into `corpus/`.
+
 ```sh
-# libFuzzer
+# libFuzzer (clang): ASan + UBSan; 10 s per input at most
 clang -g -O1 -fsanitize=fuzzer,address,undefined fuzz_target.c your_decoder.c -o fba_fuzzer
-./fba_fuzzer -dict=fba.dict corpus/
-# AFL++
-afl-fuzz -i corpus -o findings -x fba.dict -- ./your_decoder @@ /dev/null
+mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -artifact_prefix=new/ new corpus
+# AFL++: ASan build of your command-line decoder (DECODER IN OUT); -t 1000+: 1 s per input, a seed
+# that takes longer is skipped instead of ending the dry run
+AFL_USE_ASAN=1 afl-cc -g -O1 your_decoder_main.c your_decoder.c -o decoder-afl
+afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ -- ./decoder-afl @@ /dev/null
 ```
 
-A crash found this way can be classified, minimised and promoted to a regression case with
-`fbaconf fuzz --decoder D.toml --replay FILE` and `fbaconf fuzz --promote`.
+A crash file of either is classified, minimised (as `fbaconf fuzz` minimises its own findings)
+and promoted to a regression case with `fbaconf fuzz minimise FILE --decoder D.toml` and
+`fbaconf fuzz --promote`.
 """
+
+
+def _features(data: bytes) -> set[str]:
+    try:
+        return features_of(data)
+    except Exception:  # noqa: BLE001 - a seed the syntax model cannot walk adds no feature
+        return set()
+
+
+def distil(entries: list[Entry], limit: int = MAX_SEEDS) -> tuple[list[Entry], list[Entry]]:
+    """(the seeds to start from, the rest): smallest first, a seed is kept when it reaches a
+    syntax-model feature no kept seed reaches (a greedy cover, as afl-cmin does with edges), up to
+    ``limit``."""
+    keep: list[Entry] = []
+    rest: list[Entry] = []
+    seen: set[str] = set()
+    for e in sorted(entries, key=lambda e: (len(e.data), e.origin)):
+        f = _features(e.data)
+        if len(keep) < limit and not f <= seen:
+            keep.append(e)
+            seen |= f
+        else:
+            rest.append(e)
+    return keep, rest
 
 
 def export(out: Path, n_valid: int = 64, seed: int = 0) -> dict:
     """Write the export to ``out``; returns counts."""
     out = Path(out)
-    corpus_dir = out / "corpus"
-    corpus_dir.mkdir(parents=True, exist_ok=True)
     entries = seed_corpus(n_valid, seed)
-    seen: set[str] = set()
-    counts = {"suite": 0, "prefixes": 0, "generated": 0}
+    unique: dict[str, Entry] = {}
     for e in entries:
-        digest = hashlib.sha1(e.data, usedforsecurity=False).hexdigest()
-        if digest in seen:
-            continue
-        seen.add(digest)
-        origin = e.origin.removeprefix("seed:")
-        kind = "generated" if origin.startswith("generated") else "prefixes" if "planes]" in origin else "suite"
-        counts[kind] += 1
-        slug = re.sub(r"[^A-Za-z0-9]+", "-", origin).strip("-")[:60]
-        (corpus_dir / f"{slug}-{digest[:12]}.fba").write_bytes(e.data)
+        unique.setdefault(hashlib.sha1(e.data, usedforsecurity=False).hexdigest(), e)
+    small = [e for e in unique.values() if len(e.data) <= STRESS_BYTES]
+    stress = [e for e in unique.values() if len(e.data) > STRESS_BYTES]
+    start, more = distil(small)
+    counts = {"suite": 0, "prefixes": 0, "generated": 0}
+    for folder, group in (("corpus", start), ("more", more), ("stress", stress)):
+        (out / folder).mkdir(parents=True, exist_ok=True)
+        for e in group:
+            digest = hashlib.sha1(e.data, usedforsecurity=False).hexdigest()
+            origin = e.origin.removeprefix("seed:")
+            kind = "generated" if origin.startswith("generated") else "prefixes" if "planes]" in origin else "suite"
+            counts[kind] += 1
+            slug = re.sub(r"[^A-Za-z0-9]+", "-", origin).strip("-")[:60]
+            (out / folder / f"{slug}-{digest[:12]}.fba").write_bytes(e.data)
     tokens = dictionary_tokens()
     (out / "fba.dict").write_text(dictionary_text())
     (out / "oss-fuzz").mkdir(exist_ok=True)
     (out / "oss-fuzz" / "build.sh").write_text(BUILD_SH)
     (out / "fuzz_target.c").write_text(TARGET_C)
-    n = len(seen)
+    (out / "fuzz_target_fbadec.c").write_text(TARGET_FBADEC_C)
+    n = len(unique)
     (out / "README.md").write_text(
         README.format(
-            n=n, suite=counts["suite"], prefixes=counts["prefixes"], generated=counts["generated"], tokens=len(tokens)
+            n=n,
+            start=len(start),
+            more=len(more),
+            stress=len(stress),
+            suite=counts["suite"],
+            prefixes=counts["prefixes"],
+            generated=counts["generated"],
+            tokens=len(tokens),
         )
     )
-    return {"seeds": n, **counts, "tokens": len(tokens), "dir": str(out)}
+    return {
+        "seeds": n,
+        "corpus": len(start),
+        "more": len(more),
+        "stress": len(stress),
+        **counts,
+        "tokens": len(tokens),
+        "dir": str(out),
+    }
