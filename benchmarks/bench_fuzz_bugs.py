@@ -1,7 +1,8 @@
 """Time to planted bugs, FuzzBench/Magma style: each bug a patch of examples/fbadec/fbadec.c
 (``benchmarks/fuzz_bugs/*.patch``: a one-byte heap overflow behind one condition of the syntax,
-which ASan reports and a plain build survives), each engine given the same seeds (``fbaconf fuzz
-export``: the distilled ``corpus/``) and the same budget per trial, every build with ASan.
+which ASan reports and a plain build survives), each engine given the same budget per trial and the
+distilled seeds of ``fbaconf fuzz export`` (``corpus/``; ``fbaconf fuzz`` adds its own, the
+conformance suites' streams), every build with ASan.
 
     python benchmarks/bench_fuzz_bugs.py [--bug PATCH ...] [--budget S] [--trials N]
                                          [--engines E,E,...] [--json FILE]
@@ -10,9 +11,10 @@ Engines: ``fbaconf-persistent`` (fbadec's ``--serve``), ``fbaconf-fork-server``,
 (``fbaconf fuzz`` in each mode), ``aflpp`` (afl-fuzz on an ``AFL_USE_ASAN`` build of fbadec's
 command line), ``libfuzzer`` (clang ``-fsanitize=fuzzer,address,undefined`` on
 ``fuzz_target_fbadec.c``), and ``aflpp+fbaconf-mutator`` / ``libfuzzer+fbaconf-mutator`` (the same
-with fbaconf's structure-aware mutator), reported as unavailable while fbaconf builds no such
-mutator. An engine that is not installed is reported with its install line. A bug that a seed
-already triggers is reported as such and not scored (it measures nothing about fuzzing).
+with fbaconf's structure-aware mutator, ``fba_mutator.c`` of the export: linked into the libFuzzer
+target, loaded by AFL++ as its custom mutator). An engine that is not installed is reported with
+its install line. A bug that a seed already triggers is reported as such and not scored (it measures
+nothing about fuzzing).
 
 Prints one table (bug x engine: found/trials, median seconds to the bug, execs/s) and, with
 ``--json``, ``{"bugs": {NAME: {ENGINE: {"found", "trials", "median_s", "execs_per_s"}}}}``.
@@ -85,8 +87,7 @@ def have(tool: str) -> bool:
 
 
 def unavailable(engine: str) -> str | None:
-    if "+fbaconf-mutator" in engine:
-        return "fbaconf builds no structure-aware C mutator for this engine yet"
+    engine = engine.removesuffix("+fbaconf-mutator")
     if engine == "aflpp" and not (have("afl-fuzz") and have("afl-cc")):
         return f"not installed: {INSTALL['aflpp']}"
     if engine == "libfuzzer" and not have("clang"):
@@ -113,17 +114,21 @@ def build(bug: Path, work: Path, export: Path, engines: list[str]) -> dict[str, 
             (d / "fbadec.toml").write_text(MANIFEST.format(serve=serve))
             out[f"manifest-{mode}"] = d / "fbadec.toml"
         out["asan"] = work / "fbaconf-plain" / "fbadec"
-    if "aflpp" in engines:
+    if any(e.startswith("aflpp") for e in engines):
         env = dict(os.environ, AFL_USE_ASAN="1", AFL_QUIET="1")
         _cc(["afl-cc", "-g", "-O1", "-o", str(work / "fbadec-afl"), *files], env=env)
         out["aflpp"] = work / "fbadec-afl"
+    if "aflpp+fbaconf-mutator" in engines:
+        _cc([cc, "-O2", "-shared", "-fPIC", "-DFBA_AFL", str(export / "fba_mutator.c"), "-o", str(work / "m.so")])
+        out["mutator.so"] = work / "m.so"
+    target = [str(export / "fuzz_target_fbadec.c"), str(src / "fbadec.c")]
+    flags = ["clang", "-g", "-O1", "-fsanitize=fuzzer,address,undefined", "-I", str(src)]
     if "libfuzzer" in engines:
-        target = export / "fuzz_target_fbadec.c"
-        _cc(
-            ["clang", "-g", "-O1", "-fsanitize=fuzzer,address,undefined", "-I", str(src), "-o", str(work / "fz")]
-            + [str(target), str(src / "fbadec.c")]
-        )
+        _cc([*flags, "-o", str(work / "fz"), *target])
         out["libfuzzer"] = work / "fz"
+    if "libfuzzer+fbaconf-mutator" in engines:
+        _cc([*flags, "-DFBA_LIBFUZZER", "-o", str(work / "fzm"), *target, str(export / "fba_mutator.c")])
+        out["libfuzzer+fbaconf-mutator"] = work / "fzm"
     return out
 
 
@@ -166,8 +171,8 @@ def _json_tail(text: str) -> dict:
         return {}
 
 
-def run_aflpp(binary: Path, export: Path, budget: float, seed: int, work: Path) -> Trial:
-    out = work / f"afl-{seed}"
+def run_aflpp(binary: Path, export: Path, budget: float, seed: int, work: Path, mutator: Path | None = None) -> Trial:
+    out = work / f"afl-{seed}{'-m' if mutator else ''}"
     env = dict(
         os.environ,
         AFL_SKIP_CPUFREQ="1",
@@ -175,6 +180,7 @@ def run_aflpp(binary: Path, export: Path, budget: float, seed: int, work: Path) 
         AFL_NO_AFFINITY="1",
         AFL_I_DONT_CARE_ABOUT_MISSING_CRASHES="1",
         AFL_BENCH_UNTIL_CRASH="1",
+        **({"AFL_CUSTOM_MUTATOR_LIBRARY": str(mutator)} if mutator else {}),
     )
     argv = ["afl-fuzz", "-i", str(export / "corpus"), "-o", str(out), "-x", str(export / "fba.dict")]
     argv += ["-t", "1000+", "-V", str(int(budget)), "-s", str(seed), "--", str(binary), "@@", os.devnull]
@@ -204,7 +210,7 @@ def _f(v: str | None) -> float | None:
 
 
 def run_libfuzzer(binary: Path, export: Path, budget: float, seed: int, work: Path) -> Trial:
-    new = work / f"lf-{seed}"
+    new = work / f"lf-{binary.name}-{seed}"
     new.mkdir()
     argv = [str(binary), f"-dict={export / 'fba.dict'}", f"-seed={seed}", f"-max_total_time={int(budget)}"]
     argv += ["-timeout=10", "-print_final_stats=1", f"-artifact_prefix={new}/", str(new), str(export / "corpus")]
@@ -237,7 +243,9 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="fbaconf-bugs-") as tmp:
         export = Path(tmp) / "export"
         sh([sys.executable, "-m", "fbaconf", "fuzz", "export", str(export)], check=True)
-        seeds = sorted(p for d in ("corpus", "more", "stress") for p in (export / d).glob("*.fba"))
+        # the seeds an engine is given (corpus/) and the rest of the small ones; the long streams of
+        # stress/ take seconds each under ASan and no engine here starts from them
+        seeds = sorted(p for d in ("corpus", "more") for p in (export / d).glob("*.fba"))
         for bug in bugs:
             name = bug.name.removesuffix(".patch")
             work = Path(tmp) / name
@@ -262,10 +270,17 @@ def main() -> int:
                 for s in range(a.trials):
                     if engine.startswith("fbaconf-"):
                         t = run_fbaconf(engine.removeprefix("fbaconf-"), built, export, a.budget, s, work)
-                    elif engine == "aflpp":
-                        t = run_aflpp(built["aflpp"], export, a.budget, s, work)
+                    elif engine.startswith("aflpp"):
+                        t = run_aflpp(
+                            built["aflpp"],
+                            export,
+                            a.budget,
+                            s,
+                            work,
+                            built.get("mutator.so") if "+" in engine else None,
+                        )
                     else:
-                        t = run_libfuzzer(built["libfuzzer"], export, a.budget, s, work)
+                        t = run_libfuzzer(built[engine], export, a.budget, s, work)
                     trials.append(t)
                 times = [t.seconds if t.found and t.seconds is not None else a.budget * 2 for t in trials]
                 found = sum(t.found for t in trials)

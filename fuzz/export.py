@@ -15,6 +15,7 @@ Layout::
     DIR/oss-fuzz/build.sh               OSS-Fuzz build snippet (seed corpus zip + dictionary)
     DIR/fuzz_target.c                   a libFuzzer target template (LLVMFuzzerTestOneInput)
     DIR/fuzz_target_fbadec.c            the same around examples/fbadec (fbaconf's own C decoder)
+    DIR/fba_mutator.c                   the structure-aware mutator for libFuzzer and AFL++
     DIR/README.md                       how to use them
 """
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import random
 import re
+import shutil
 from pathlib import Path
 
 from .choosers import RandomChooser
@@ -30,6 +32,7 @@ from .corpus import conformance_seeds, short_prefixes
 from .inputs import Entry, gen_valid
 from .model import DICTIONARY, features_of
 
+MUTATOR_C = Path(__file__).with_name("fba_mutator.c")  # the structure-aware mutator, in C
 STRESS_BYTES = 8192  # a longer seed is thousands of frames: seconds per input under ASan
 MAX_SEEDS = 200  # AFL++ warns of "far too many input files" above this; libFuzzer reads them all first
 
@@ -137,6 +140,7 @@ short prefixes of them, {generated} generated valid streams; {tokens} dictionary
 | `stress/` | {stress} long streams (thousands of frames): seconds per input under ASan, not for defaults |
 | `fba.dict` | AFL++ / libFuzzer dictionary: start codes, aligned stuffing, header patterns |
 | `fuzz_target.c` | a libFuzzer target template; `fuzz_target_fbadec.c` the same around examples/fbadec |
+| `fba_mutator.c` | fbaconf's structure-aware mutator (`-DFBA_LIBFUZZER`: in the target; `-DFBA_AFL`: for AFL++) |
 | `oss-fuzz/build.sh` | the lines an OSS-Fuzz `build.sh` needs to ship the seeds and the dictionary |
 
 Build with a sanitizer: a read past a buffer does not crash a plain build. New inputs go to a
@@ -150,6 +154,12 @@ mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -artifact_prefix=new/ ne
 # that takes longer is skipped instead of ending the dry run
 AFL_USE_ASAN=1 afl-cc -g -O1 your_decoder_main.c your_decoder.c -o decoder-afl
 afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ -- ./decoder-afl @@ /dev/null
+# with fbaconf's structure-aware mutator: libFuzzer links it in, AFL++ loads it
+clang -g -O1 -fsanitize=fuzzer,address,undefined -DFBA_LIBFUZZER fuzz_target.c fba_mutator.c your_decoder.c \\
+  -o fba_fuzzer
+cc -O2 -shared -fPIC -DFBA_AFL fba_mutator.c -o fba_mutator.so
+AFL_CUSTOM_MUTATOR_LIBRARY=./fba_mutator.so afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ \\
+  -- ./decoder-afl @@ /dev/null
 ```
 
 A crash file of either is classified, minimised (as `fbaconf fuzz` minimises its own findings)
@@ -208,6 +218,7 @@ def export(out: Path, n_valid: int = 64, seed: int = 0) -> dict:
     (out / "oss-fuzz" / "build.sh").write_text(BUILD_SH)
     (out / "fuzz_target.c").write_text(TARGET_C)
     (out / "fuzz_target_fbadec.c").write_text(TARGET_FBADEC_C)
+    shutil.copyfile(MUTATOR_C, out / "fba_mutator.c")
     n = len(unique)
     (out / "README.md").write_text(
         README.format(
