@@ -5,7 +5,7 @@ fbaconf's own patched reference, so no confirming runs), and a mutant scores whe
 feature matches one of the coverage points written beside it below (by hand, from the mutant's
 description and the coverage model, not from explain's output) comes first, or in the first three.
 
-    python benchmarks/bench_explain_mutants.py [-j N] [NAME ...]
+    python benchmarks/bench_explain_mutants.py [-j N] [--keep DIR] [NAME ...]
 
 Prints one line per mutant (rank of the first matching cause, the top cause), then the shares
 ``first: K/N`` and ``top 3: K/N`` and the wall and CPU time.
@@ -21,6 +21,7 @@ import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 from fbaconf.conformance.suite import load_suites
 from fbaconf.explain.causes import explain
@@ -86,11 +87,16 @@ EXPECTED: dict[str, tuple[str, ...]] = {
 }
 
 
-def _mutant_run(name: str) -> dict:
+def _mutant_run(name: str, keep: Path | None = None) -> dict:
+    if keep is not None and (keep / f"{name}.json").is_file():  # a run kept earlier: rank it again
+        return json.loads((keep / f"{name}.json").read_text())
     argv = [sys.executable, "-m", "fbaconf.mutation.run", "run", name, "--claim", CLAIM, "--all-cases"]
     p = subprocess.run(argv, capture_output=True, text=True, timeout=1800)
     for line in reversed(p.stdout.splitlines()):
         if line.startswith("{"):
+            if keep is not None:
+                keep.mkdir(parents=True, exist_ok=True)
+                (keep / f"{name}.json").write_text(line + "\n")
             return json.loads(line)
     return {"mutant": name, "killed": False, "error": p.stderr[-300:]}
 
@@ -113,8 +119,8 @@ def rank(res: dict, cases: dict) -> tuple[int | None, str]:
     ex = explain(record, cases)
     patterns = EXPECTED[res["mutant"]]
     for i, c in enumerate(ex.causes, 1):
-        # a cause names its feature and the features no case of the run tells from it
-        if any(fnmatch.fnmatchcase(f, p) for f in (c.feature, *c.aliases) for p in patterns):
+        # a cause names its feature, the features no case of the run tells from it, and those ranked equal
+        if any(fnmatch.fnmatchcase(f, p) for f in (c.feature, *c.aliases, *c.tied) for p in patterns):
             return i, ex.causes[0].feature
     return None, ex.causes[0].feature if ex.causes else "-"
 
@@ -122,13 +128,14 @@ def rank(res: dict, cases: dict) -> tuple[int | None, str]:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--keep", type=Path, help="keep each mutant's run here, and rank a kept run again")
     ap.add_argument("names", nargs="*")
     a = ap.parse_args()
     names = a.names or list(EXPECTED)
     cases = {c.full_id: c for s in load_suites() for c in s.cases if claim_covers(CLAIM, c.claim)}
     t0, c0 = time.perf_counter(), os.times()
     with ThreadPoolExecutor(max_workers=a.jobs) as ex:
-        runs = list(ex.map(_mutant_run, names))
+        runs = list(ex.map(lambda n: _mutant_run(n, a.keep), names))
     first = top3 = scored = 0
     for res in runs:
         if not res.get("killed"):

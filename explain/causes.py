@@ -246,6 +246,9 @@ class Cause:
     confirmed: Trial | None = None
     tried: list[Trial] = field(default_factory=list)
     aliases: list[str] = field(default_factory=list)  # features the run's cases cannot tell from this one
+    # features ranked equal that explain the same failing cases (the passing ones differ): the
+    # ranking's choice among them is by name, so the cause names them all
+    tied: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -399,6 +402,15 @@ def explain(
                 break
             chosen, confirmed, tried = _choose(_in_rank_order(cands), vs, pool, cases, runner, keep)
             ids = spectrum.explained_by(vs, chosen.feature, pool)
+            aliases = spectrum.aliases(vs, chosen.feature)
+            tied = [
+                s.feature
+                for s in ranked
+                if s.feature != chosen.feature
+                and s.feature not in aliases
+                and (round(s.ochiai, 9), s.failed, s.passed) == (round(chosen.ochiai, 9), chosen.failed, chosen.passed)
+                and spectrum.explained_by(vs, s.feature, pool) == ids
+            ]
             m = meaning(chosen.feature)
             ex.causes.append(
                 Cause(
@@ -412,7 +424,8 @@ def explain(
                     _divergences(vs, ids),
                     confirmed,
                     [t for t in tried if t.feature == chosen.feature],
-                    spectrum.aliases(vs, chosen.feature),
+                    aliases,
+                    [] if confirmed is not None else tied,  # a confirmed cause is separated from its ties
                 )
             )
             pool -= set(ids)

@@ -23,6 +23,8 @@ def terminal(ex: Explanation) -> str:
                 f"    always with: {', '.join(c.aliases[:6])}{' …' if len(c.aliases) > 6 else ''} (no case of the "
                 "run has one without the other: a case that does would tell them apart)"
             )
+        if c.tied:
+            lines.append(f"    ranked equal: {', '.join(c.tied[:6])}{' …' if len(c.tied) > 6 else ''}")
         if c.concerns:
             lines.append(f"    concerns: {c.concerns}")
         shown = ", ".join(c.cases[:SHOWN_CASES]) + (f" … (+{n - SHOWN_CASES})" if n > SHOWN_CASES else "")
