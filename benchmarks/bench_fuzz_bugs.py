@@ -113,7 +113,10 @@ def build(bug: Path, work: Path, export: Path, engines: list[str]) -> dict[str, 
             _cc([cc, "-O1", "-g", *ASAN.split(), "-o", str(d / "fbadec"), *files])
             (d / "fbadec.toml").write_text(MANIFEST.format(serve=serve))
             out[f"manifest-{mode}"] = d / "fbadec.toml"
-        out["asan"] = work / "fbaconf-plain" / "fbadec"
+    # the judge of every engine's crash: ASan alone, whose report names the function (UBSan, first
+    # to see the planted store in the other builds, names only a line)
+    _cc([cc, "-O1", "-g", "-fsanitize=address", "-o", str(work / "judge"), *files])
+    out["judge"] = work / "judge"
     if any(e.startswith("aflpp") for e in engines):
         env = dict(os.environ, AFL_USE_ASAN="1", AFL_QUIET="1")
         _cc(["afl-cc", "-g", "-O1", "-o", str(work / "fbadec-afl"), *files], env=env)
@@ -138,13 +141,14 @@ def _cc(argv: list[str], env: dict[str, str] | None = None) -> None:
         raise RuntimeError(f"build failed: {' '.join(argv)}\n{p.stderr[-2000:]}")
 
 
-def seed_triggers(binary: Path, seeds: list[Path]) -> str | None:
+def planted(judge: Path, crash: Path) -> bool:
+    """Whether ``crash`` makes the ASan build report the planted overflow (not some other bug)."""
+    return MARK in sh([str(judge), str(crash), os.devnull], timeout=60).stderr
+
+
+def seed_triggers(judge: Path, seeds: list[Path]) -> str | None:
     """The first seed on which the ASan build reports the planted bug, if any."""
-    for s in seeds:
-        p = sh([str(binary), str(s), os.devnull], timeout=60)
-        if MARK in p.stderr:
-            return s.name
-    return None
+    return next((s.name for s in seeds if planted(judge, s)), None)
 
 
 def run_fbaconf(mode: str, built: dict[str, Path], export: Path, budget: float, seed: int, work: Path) -> Trial:
@@ -157,9 +161,10 @@ def run_fbaconf(mode: str, built: dict[str, Path], export: Path, budget: float, 
     doc = _json_tail(p.stdout)
     times = []
     for f in sorted((out / "findings").glob("*/finding.json")):
-        text = f.read_text()
-        if MARK in text:
-            times.append(float(json.loads(text).get("found_at_s", 0.0)))
+        doc_f = json.loads(f.read_text())
+        original = next(f.parent.glob("original.*"), None)
+        if doc_f.get("class") == "crash" and original is not None and planted(built["judge"], original):
+            times.append(float(doc_f.get("found_at_s", 0.0)))
     return Trial(bool(times), min(times) if times else None, doc.get("execs_per_s") if doc else None)
 
 
@@ -171,7 +176,9 @@ def _json_tail(text: str) -> dict:
         return {}
 
 
-def run_aflpp(binary: Path, export: Path, budget: float, seed: int, work: Path, mutator: Path | None = None) -> Trial:
+def run_aflpp(
+    binary: Path, judge: Path, export: Path, budget: float, seed: int, work: Path, mutator: Path | None = None
+) -> Trial:
     out = work / f"afl-{seed}{'-m' if mutator else ''}"
     env = dict(
         os.environ,
@@ -189,8 +196,7 @@ def run_aflpp(binary: Path, export: Path, budget: float, seed: int, work: Path, 
     stats = _afl_stats(out / "default" / "fuzzer_stats")
     crashes = sorted((out / "default" / "crashes").glob("id:*"), key=lambda p: p.stat().st_mtime)
     for c in crashes:
-        r = sh([str(binary), str(c), os.devnull], timeout=60)
-        if MARK in r.stderr:
+        if planted(judge, c):
             start = float(stats.get("start_time", t0))
             return Trial(True, max(0.0, c.stat().st_mtime - start), _f(stats.get("execs_per_sec")))
     return Trial(False, None, _f(stats.get("execs_per_sec")))
@@ -209,7 +215,7 @@ def _f(v: str | None) -> float | None:
         return None
 
 
-def run_libfuzzer(binary: Path, export: Path, budget: float, seed: int, work: Path) -> Trial:
+def run_libfuzzer(binary: Path, judge: Path, export: Path, budget: float, seed: int, work: Path) -> Trial:
     new = work / f"lf-{binary.name}-{seed}"
     new.mkdir()
     argv = [str(binary), f"-dict={export / 'fba.dict'}", f"-seed={seed}", f"-max_total_time={int(budget)}"]
@@ -219,7 +225,8 @@ def run_libfuzzer(binary: Path, export: Path, budget: float, seed: int, work: Pa
     wall = time.perf_counter() - t0
     execs = re.search(r"stat::number_of_executed_units:\s*(\d+)", p.stderr)
     rate = int(execs.group(1)) / wall if execs and wall > 0 else None
-    found = MARK in p.stderr and "ERROR: AddressSanitizer" in p.stderr
+    crash = next(iter(sorted(new.glob("crash-*"))), None)
+    found = crash is not None and planted(judge, crash)
     return Trial(found, wall if found else None, rate)
 
 
@@ -252,11 +259,11 @@ def main() -> int:
             work.mkdir()
             row: dict[str, dict] = {}
             try:
-                built = build(bug, work, export, runnable + ["fbaconf-plain"])
+                built = build(bug, work, export, runnable)
             except RuntimeError as e:
                 print(f"{name}: {e}", file=sys.stderr)
                 continue
-            hit = seed_triggers(built["asan"], seeds)
+            hit = seed_triggers(built["judge"], seeds)
             if hit:
                 results[name] = {"_seed_triggered": {"seed": hit}}
                 print(f"{name}: the seed {hit} triggers it already: not scored")
@@ -273,6 +280,7 @@ def main() -> int:
                     elif engine.startswith("aflpp"):
                         t = run_aflpp(
                             built["aflpp"],
+                            built["judge"],
                             export,
                             a.budget,
                             s,
@@ -280,7 +288,7 @@ def main() -> int:
                             built.get("mutator.so") if "+" in engine else None,
                         )
                     else:
-                        t = run_libfuzzer(built[engine], export, a.budget, s, work)
+                        t = run_libfuzzer(built[engine], built["judge"], export, a.budget, s, work)
                     trials.append(t)
                 times = [t.seconds if t.found and t.seconds is not None else a.budget * 2 for t in trials]
                 found = sum(t.found for t in trials)
