@@ -147,10 +147,11 @@ def _documented_lines() -> list[str]:
     return [ln for ln in block.splitlines() if ln.strip() and not ln.startswith("#")]
 
 
-def test_the_documented_engine_lines_build_and_start(tmp_path):
-    """The lines of docs/fuzzing.md, verbatim, from a copy of the repository's layout: the export, the
-    planted bug's patch, both sanitizer builds; each engine started on the exported seeds for a few
-    inputs (the 60 s hunt itself is measured, not tested: docs/fuzzing.md gives its numbers)."""
+def test_the_documented_engine_lines_build_and_start(tmp_path, exported):
+    """The lines of docs/fuzzing.md, verbatim, from a copy of the repository's layout: the planted
+    bug's patch, both sanitizer builds (on the module's export: the export line is test_cli_export's);
+    each engine started on the exported seeds for a few inputs (the 60 s hunt itself is measured, not
+    tested: docs/fuzzing.md gives its numbers)."""
     if not (shutil.which("clang") and shutil.which("afl-cc") and shutil.which("afl-fuzz")):
         pytest.skip("clang and afl++ not installed (apt-get install -y clang afl++)")
     root = Path(__file__).resolve().parents[2]
@@ -158,8 +159,10 @@ def test_the_documented_engine_lines_build_and_start(tmp_path):
         shutil.copytree(root / rel, tmp_path / rel, ignore=shutil.ignore_patterns("fbadec", "fbadec-asan"))
     lines = _documented_lines()
     assert len(lines) == 6, lines  # export, patch, clang build, libFuzzer run, afl-cc build, afl-fuzz run
+    assert lines[0] == "fbaconf fuzz export fba-fuzz"  # run by test_cli_export; its output is the module's
+    shutil.copytree(exported[0], tmp_path / "fba-fuzz")
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
-    for line in (*lines[:3], lines[4]):  # the export, the patch and both builds, as they are
+    for line in (*lines[1:3], lines[4]):  # the patch and both builds, as they are
         r = subprocess.run(line, shell=True, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)  # noqa: S602 - the documented line itself
         assert r.returncode == 0, f"{line}\n{r.stderr[-1500:]}"
     fuzz = lines[3].replace("-max_total_time=60", "-runs=200")
