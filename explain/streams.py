@@ -6,55 +6,35 @@ the coder and the syntax (skips, time codes, look-ahead stuffing, DCT, quantiser
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from fbaconf.bitstreams.decoder import decode_frames
 from fbaconf.bitstreams.encoder import encode
 from fbaconf.bitstreams.encoder_options import EncoderOptions
-from fbaconf.bitstreams.frames import FREE, FapFrames
 
-Change = Callable[[FapFrames], None]
-
-
-def _drop(*faps: int) -> Change:
-    def change(fr: FapFrames) -> None:
-        st = fr.status.copy()
-        st[:, [f - 1 for f in faps]] = FREE
-        fr.status = st
-
-    return change
+from . import edits
 
 
-def _rate25(fr: FapFrames) -> None:
-    fr.frame_rate = 25.0
-
-
-def _nothing(fr: FapFrames) -> None:
-    return None
-
-
-def edit_for(point: str) -> tuple[str, Change] | None:
+def edit_for(point: str) -> tuple[str, edits.Change] | None:
     """(what the edit does, the change of the decoded frames) that takes ``point`` out of a stream,
     or None for a point no stream edit removes (claims, limits, scenes, models)."""
     family, _, rest = point.partition(".")
     if family == "fap" and rest.split(".")[0].isdigit():
         n = int(rest.split(".")[0])
-        return f"without FAP {n}", _drop(n)
+        return f"without FAP {n}", edits.drop(n)
     if family in ("highlevel", "viseme", "expression"):
-        return "without FAP 1/2 (no viseme, no expression)", _drop(1, 2)
+        return "without FAP 1/2 (no viseme, no expression)", edits.drop(1, 2)
     if family == "rate":
-        return "at 25 Hz, one rate (re-encoded)", _rate25
+        return "at 25 Hz, one rate (re-encoded)", edits.rate25
     if family in (
         "arith", "coding", "dct", "fap_quant", "lists", "mask", "plane", "retained", "skip", "status",
         "stream", "symbol", "timecode", "defaults", "diag",
     ):  # fmt: skip
-        return "re-encoded by fbaconf's encoder with its defaults", _nothing
+        return "re-encoded by fbaconf's encoder with its defaults", edits.nothing
     return None
 
 
-def stream_variant(data: bytes, change: Change) -> bytes | None:
+def stream_variant(data: bytes, change: edits.Change) -> bytes | None:
     """The stream decoded by the reference, changed, and re-encoded; None when it cannot be
     (an invalid stream, frames the encoder refuses)."""
     try:

@@ -19,7 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fbaconf.bitstreams.faptext import FapFileHeader, read_fap_text, write_fap
-from fbaconf.bitstreams.frames import FREE, RETAINED, SET, FapFrames
+from fbaconf.bitstreams.frames import RETAINED, SET, FapFrames
+
+from . import edits
 
 # inner/outer lip FAP pairs (FAP table: the inner lip FAP n and the outer lip FAP of the same point)
 LIP_PAIRS = ((52, 5), (58, 11), (57, 10), (51, 4), (56, 9), (55, 8), (53, 6), (54, 7), (59, 12), (60, 13))
@@ -99,7 +101,7 @@ def _with_header(t: TextInput, **change: object) -> str | None:
     return "".join(lines)
 
 
-def _rewrite(t: TextInput, change: Callable[[FapFrames], None]) -> str | None:
+def _rewrite(t: TextInput, change: edits.Change) -> str | None:
     if t.frames is None:
         return None
     fr = t.frames.copy()
@@ -114,38 +116,6 @@ def _set(fr: FapFrames) -> np.ndarray:
 
 def _fields(t: TextInput, *faps: int) -> bool:
     return t.frames is not None and bool(_set(t.frames)[:, [f - 1 for f in faps]].any())
-
-
-def _drop(*faps: int) -> Callable[[FapFrames], None]:
-    def change(fr: FapFrames) -> None:
-        st = fr.status.copy()
-        st[:, [f - 1 for f in faps]] = FREE
-        fr.status = st
-
-    return change
-
-
-def _rate25(fr: FapFrames) -> None:
-    fr.frame_rate = 25.0
-
-
-_DEFS = (3, 9)  # viseme_def, expression_def in HIGH_LEVEL_FIELDS
-
-
-def _no_defs(fr: FapFrames) -> None:
-    h = fr.high.copy()
-    h[:, list(_DEFS)] = 0
-    fr.high = h
-
-
-def _rows(fr: FapFrames) -> None:
-    fr.frame_number = np.arange(len(fr), dtype=np.int64)
-
-
-def _keep(fr: FapFrames) -> None:
-    st = fr.status.copy()
-    st[st == RETAINED] = SET
-    fr.status = st
 
 
 def _numbers(t: TextInput) -> np.ndarray:
@@ -223,7 +193,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "69-entry mask lines",
         "FAP-TEXT mask line (68 entries)",
         lambda t: 69 in _mask_lengths(t),
-        lambda t: _rewrite(t, lambda fr: None),
+        lambda t: _rewrite(t, edits.nothing),
         True,
         rewrites=True,
     ),
@@ -235,7 +205,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
             t.frames is not None
             and len([ln for ln in _COMMENT.sub("", t.text).splitlines() if ln.strip()]) > 1 + 2 * len(t.frames)
         ),
-        lambda t: _rewrite(t, lambda fr: None),
+        lambda t: _rewrite(t, edits.nothing),
         True,
         rewrites=True,
     ),
@@ -244,7 +214,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "a fractional frame rate",
         "FAP-TEXT header frame rate (a real number)",
         lambda t: t.header is not None and not float(t.header.frame_rate).is_integer(),
-        lambda t: _rewrite(t, _rate25),
+        lambda t: _rewrite(t, edits.rate25),
         False,
         rewrites=True,
         refines="content.rate-not-25",
@@ -254,7 +224,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "a frame rate other than 25 Hz",
         "FAP-TEXT header frame rate",
         lambda t: t.header is not None and float(t.header.frame_rate) != 25.0,
-        lambda t: _rewrite(t, _rate25),
+        lambda t: _rewrite(t, edits.rate25),
         False,
         rewrites=True,
     ),
@@ -263,7 +233,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "a first frame numbered above 0",
         "FAP-TEXT frame numbers (a frame's time is its number / rate)",
         lambda t: len(_numbers(t)) > 0 and int(_numbers(t)[0]) != 0,
-        lambda t: _rewrite(t, _rows),
+        lambda t: _rewrite(t, edits.rows),
         False,
         rewrites=True,
     ),
@@ -272,7 +242,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "frame numbers with gaps (frames held)",
         "FAP-TEXT frame numbers (values hold between frames)",
         lambda t: bool((np.diff(_numbers(t)) > 1).any()),
-        lambda t: _rewrite(t, _rows),
+        lambda t: _rewrite(t, edits.rows),
         False,
         rewrites=True,
     ),
@@ -281,7 +251,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "a frame numbered at or past the header's frame count",
         "FAP-TEXT frame numbers (the header's count is informative, not a bound)",
         lambda t: t.header is not None and len(_numbers(t)) > 0 and int(_numbers(t).max()) >= t.header.declared_frames,
-        lambda t: _rewrite(t, _rows),
+        lambda t: _rewrite(t, edits.rows),
         False,
         rewrites=True,
     ),
@@ -290,7 +260,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "frame numbers that repeat or go back",
         "FAP-TEXT frame numbers (FAP-TEXT-010)",
         lambda t: bool((np.diff(_numbers(t)) < 1).any()),
-        lambda t: _rewrite(t, _rows),
+        lambda t: _rewrite(t, edits.rows),
         False,
         rewrites=True,
     ),
@@ -299,7 +269,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "FAP 1/2 (viseme, expression) sent",
         "FAP-TEXT FAP 1 = 4 values, FAP 2 = 6 values",
         lambda t: _fields(t, 1, 2),
-        lambda t: _rewrite(t, _drop(1, 2)),
+        lambda t: _rewrite(t, edits.drop(1, 2)),
         False,
         rewrites=True,
     ),
@@ -307,8 +277,8 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "content.viseme_def",
         "a viseme_def or expression_def set",
         "FAP 1/2 fields viseme_def, expression_def",
-        lambda t: t.frames is not None and bool(t.frames.high[:, list(_DEFS)].any()),
-        lambda t: _rewrite(t, _no_defs),
+        lambda t: t.frames is not None and bool(t.frames.high[:, list(edits.DEFS)].any()),
+        lambda t: _rewrite(t, edits.no_defs),
         False,
         rewrites=True,
         refines="content.high-level",
@@ -318,7 +288,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "values held from an earlier frame (FAPs not in a later mask)",
         "FAP-TEXT mask 0: the FAP keeps its value",
         lambda t: t.frames is not None and bool((t.frames.status == RETAINED).any()),
-        lambda t: _rewrite(t, _keep),
+        lambda t: _rewrite(t, edits.keep),
         False,
         rewrites=True,
     ),
@@ -327,7 +297,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "an inner and an outer lip FAP of one point",
         "FAP table: inner and outer lip FAPs are independent",
         lambda t: any(_fields(t, a) and _fields(t, b) for a, b in LIP_PAIRS),
-        lambda t: _rewrite(t, _drop(*(a for a, _ in LIP_PAIRS))),
+        lambda t: _rewrite(t, edits.drop(*(a for a, _ in LIP_PAIRS))),
         False,
         rewrites=True,
     ),
@@ -336,7 +306,7 @@ TEXT_TRIGGERS: tuple[Trigger, ...] = (
         "head rotation FAPs 48-50 set",
         "FAP table: FAPs 48-50 in AU (1e-5 rad)",
         lambda t: _fields(t, *HEAD_ROTATION),
-        lambda t: _rewrite(t, _drop(*HEAD_ROTATION)),
+        lambda t: _rewrite(t, edits.drop(*HEAD_ROTATION)),
         False,
         rewrites=True,
     ),

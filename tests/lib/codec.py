@@ -14,6 +14,43 @@ GROUPS = tables.groups()
 QP = tables.quant_steps()
 
 
+def group_masks(draw) -> tuple[list[int], np.ndarray]:
+    """(mask type per group, coded per FAP): each group none, all (type 11) or partial (01/10)."""
+    types: list[int] = []
+    coded = np.zeros(68, dtype=bool)
+    for g in GROUPS:
+        kind = draw(st.sampled_from(["none", "all", "partial"]))
+        if kind == "all":
+            coded[g.first_fap - 1 : g.last_fap] = True
+            types.append(3)
+        elif kind == "none":
+            types.append(draw(st.sampled_from([0, 1, 2])))
+        else:
+            coded[g.first_fap - 1 : g.last_fap] = draw(st.lists(st.booleans(), min_size=g.size, max_size=g.size))
+            types.append(draw(st.sampled_from([1, 2])))
+    return types, coded
+
+
+def high_fields(draw, frames: FapFrames, k: int, coded: np.ndarray) -> None:
+    """Frame ``k``'s viseme (FAP 1) and expression (FAP 2) fields where coded, in their ranges."""
+    if coded[0]:
+        frames.high[k, 0:4] = [
+            draw(st.integers(0, 14)),
+            draw(st.integers(0, 14)),
+            draw(st.integers(0, 63)),
+            draw(st.integers(0, 1)),
+        ]
+    if coded[1]:
+        frames.high[k, 4:10] = [
+            draw(st.integers(0, 6)),
+            draw(st.integers(0, 63)),
+            draw(st.integers(0, 6)),
+            draw(st.integers(0, 63)),
+            draw(st.integers(0, 1)),
+            draw(st.integers(0, 1)),
+        ]
+
+
 @st.composite
 def sequences(draw):
     """Random FAP sequences with explicit group mask types, segment by segment."""
@@ -24,19 +61,7 @@ def sequences(draw):
     for _ in range(n_seg):
         seg_len = draw(st.integers(1, 8))
         q = q_fixed if quant_mode == "fixed" else draw(st.integers(0, 31))
-        types = []
-        coded = np.zeros(68, dtype=bool)
-        for g in GROUPS:
-            kind = draw(st.sampled_from(["none", "all", "partial"]))
-            if kind == "all":
-                coded[g.first_fap - 1 : g.last_fap] = True
-                types.append(3)
-            elif kind == "none":
-                types.append(draw(st.sampled_from([0, 1, 2])))
-            else:
-                bits = draw(st.lists(st.booleans(), min_size=g.size, max_size=g.size))
-                coded[g.first_fap - 1 : g.last_fap] = bits
-                types.append(draw(st.sampled_from([1, 2])))
+        types, coded = group_masks(draw)
         for _ in range(seg_len):
             rows.append((q, tuple(types), coded.copy()))
     n = len(rows)
@@ -52,22 +77,7 @@ def sequences(draw):
             # codable: |value| <= 1860 x QP (1860 when lossless); stay inside it
             unit = int(QP[f - 1]) if q else 1
             frames.values[k, f - 1] = draw(value_draw) * unit // draw(st.integers(1, 4))
-        if coded[0]:
-            frames.high[k, 0:4] = [
-                draw(st.integers(0, 14)),
-                draw(st.integers(0, 14)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 1)),
-            ]
-        if coded[1]:
-            frames.high[k, 4:10] = [
-                draw(st.integers(0, 6)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 6)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 1)),
-                draw(st.integers(0, 1)),
-            ]
+        high_fields(draw, frames, k, coded)
     rate = draw(st.sampled_from([25.0, 30.0, 30000 / 1001, 10.0, 12.5, 0.5, 60.0]))
     frames.frame_rate = rate
     opts = EncoderOptions(

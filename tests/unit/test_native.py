@@ -27,11 +27,12 @@ from fbaconf.errors import BitstreamError
 from fbaconf.profiles.checker import analyse
 from fbaconf.profiles.sample_streams import value_overflow_stream
 
+from lib.codec import group_masks, high_fields
+
 pytestmark = pytest.mark.skipif(
     not arith.native_available(), reason="native extension fbaconf.bitstreams._fastarith not built (no C compiler?)"
 )
 
-GROUPS = tables.groups()
 QP = tables.quant_steps()
 FRAME_FIELDS = (
     "values",
@@ -140,17 +141,7 @@ def sequences(draw):
     for _ in range(n_seg):
         seg_len = draw(st.integers(1, 12))
         q = draw(st.integers(0, 31))
-        types, coded = [], np.zeros(68, dtype=bool)
-        for g in GROUPS:
-            kind = draw(st.sampled_from(["none", "all", "partial"]))
-            if kind == "all":
-                coded[g.first_fap - 1 : g.last_fap] = True
-                types.append(3)
-            elif kind == "none":
-                types.append(draw(st.sampled_from([0, 1, 2])))
-            else:
-                coded[g.first_fap - 1 : g.last_fap] = draw(st.lists(st.booleans(), min_size=g.size, max_size=g.size))
-                types.append(draw(st.sampled_from([1, 2])))
+        types, coded = group_masks(draw)
         rows += [(q, tuple(types), coded.copy())] * seg_len
     n = len(rows)
     frames = FapFrames.empty(n)
@@ -161,22 +152,7 @@ def sequences(draw):
         for f in np.nonzero(coded[2:])[0] + 3:
             unit = int(QP[f - 1]) if q else 1
             frames.values[k, f - 1] = draw(st.integers(-amp, amp)) * unit
-        if coded[0]:
-            frames.high[k, 0:4] = [
-                draw(st.integers(0, 14)),
-                draw(st.integers(0, 14)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 1)),
-            ]
-        if coded[1]:
-            frames.high[k, 4:10] = [
-                draw(st.integers(0, 6)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 6)),
-                draw(st.integers(0, 63)),
-                draw(st.integers(0, 1)),
-                draw(st.integers(0, 1)),
-            ]
+        high_fields(draw, frames, k, coded)
     frames.frame_rate = draw(st.sampled_from([25.0, 30.0, 10.0]))
     opts = EncoderOptions(
         fap_quant_per_frame=np.array([r[0] for r in rows]),
