@@ -420,8 +420,10 @@ def _decoder(args, expected: set[int]) -> int:
     out: Path = args.output.resolve()
     if args.target is None:
         args.target = _default_kind(adapter)
-    out.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix="fuzz-work-", dir=out))
+    if args.minimise_file is None:
+        out.mkdir(parents=True, exist_ok=True)
+    # minimising one file writes no run folder: its work folder is a temporary one
+    work = Path(tempfile.mkdtemp(prefix="fuzz-work-", dir=None if args.minimise_file is not None else out))
     target = None
     try:
         seeds = default_seeds() + _extra_seeds(args.seeds)

@@ -92,7 +92,7 @@ def test_a_crash_among_queued_inputs_is_found_on_its_input_replays_and_is_minimi
 
 
 @pytest.mark.parametrize("spawn", [False, True])
-def test_a_crash_file_of_any_fuzzer_is_re_minimised_to_the_fuzzers_signature(tmp_path, capsys, spawn):
+def test_a_crash_file_of_any_fuzzer_is_re_minimised_to_the_fuzzers_signature(tmp_path, capsys, spawn, monkeypatch):
     """``fbaconf fuzz minimise FILE``: a crash file as AFL++ or libFuzzer write it (any name, no
     finding folder) gets the class and signature the fuzzer gives that input, and the minimal input
     the fuzzer's minimisation reaches (the 4 bytes the decoder crashes on)."""
@@ -114,3 +114,6 @@ def test_a_crash_file_of_any_fuzzer_is_re_minimised_to_the_fuzzers_signature(tmp
     doc = json.loads(capsys.readouterr().out)
     assert (doc["class"], doc["signature"]) == (expected.cls, expected.signature)
     assert out.read_bytes() == b"BOOM" and doc["reproduced"] and not doc["flaky"]
+    monkeypatch.chdir(tmp_path)  # from a folder of its own: minimising one file leaves no run folder
+    assert main(argv + (["--spawn"] if spawn else [])) == 1
+    assert not (tmp_path / "fbaconf-fuzz").exists()
