@@ -169,12 +169,11 @@ static const int GROUP_SIZE[10] = {2, 16, 12, 8, 4, 5, 3, 10, 4, 4};
 #define AC_MAXFREQ 16383
 #define AC_STUFF_RUN 22
 
-/* Largest symbol alphabet: bounds up to 31*60 = 1860 at q = 1 -> 3721 symbols. */
-#define MODEL_MAXN 3721
 
 /* ---------------------------------------------------------------- decoder state */
 typedef struct {
     int n, lo;            /* n symbols, symbol s means value lo + s */
+    int cap;              /* symbols the arrays hold: grown to the alphabet when a model is set up */
     int32_t *freq, *cum;  /* freq[0..n-1], cum[0..n] descending, cum[n] = 0 */
 } model;
 
@@ -212,7 +211,6 @@ typedef struct {
 
     model lm[2][FBA_NFAP];            /* [0] intra, [1] predicted */
     model hm[2][HM_COUNT];
-    int32_t *pool;
     int32_t dc_prev[FBA_NFAP];
     uint8_t dc_valid[FBA_NFAP];
 
@@ -255,10 +253,22 @@ static void marker(dec *d, const char *what)
 }
 
 /* ---------------------------------------------------------------- arithmetic decoder (§3) */
-static void model_init(model *m, int lo, int hi)
+/* Arrays sized to the alphabet (up to 3,721 symbols: bounds of 31*60 at q = 1), allocated when a
+ * model is first set up: most streams code a few FAPs, and a decode that allocated every model's
+ * largest table up front spent its time in the allocator. */
+static void model_init(dec *d, model *m, int lo, int hi)
 {
+    int n = hi - lo + 1;
+    if (n > m->cap) {
+        int32_t *f = realloc(m->freq, (size_t)n * sizeof *f);
+        if (f) m->freq = f;
+        int32_t *c = f ? realloc(m->cum, ((size_t)n + 1) * sizeof *c) : NULL;
+        if (!c) fail(d, d->pos, "out-of-memory", "cannot allocate a model of %d symbols", n);
+        m->cum = c;
+        m->cap = n;
+    }
     m->lo = lo;
-    m->n = hi - lo + 1;
+    m->n = n;
     for (int k = 0; k < m->n; k++) m->freq[k] = 1;
     for (int k = 0; k <= m->n; k++) m->cum[k] = m->n - k;
 }
@@ -690,16 +700,16 @@ static void intra_header(dec *d)
     int q = d->fap_quant ? d->fap_quant : 1;
     for (int i = 2; i < FBA_NFAP; i++) {
         if (!d->coded[i]) continue;
-        model_init(&d->lm[0][i], -(d->bound[1][i] / q), d->bound[0][i] / q);
-        model_init(&d->lm[1][i], -(d->bound[3][i] / q), d->bound[2][i] / q);
+        model_init(d, &d->lm[0][i], -(d->bound[1][i] / q), d->bound[0][i] / q);
+        model_init(d, &d->lm[1][i], -(d->bound[3][i] / q), d->bound[2][i] / q);
     }
     int B = d->fap_quant ? (63 + d->fap_quant / 2) / d->fap_quant : 63;
     static const int hl_max[HM_COUNT] = {14, 14, -1, 6, -1, 6, -1};
     for (int k = 0; k < HM_COUNT; k++) {
         if (!d->coded[k < HM_ES1 ? 0 : 1]) continue;
         int m = hl_max[k] < 0 ? B : hl_max[k];
-        model_init(&d->hm[0][k], 0, m);
-        model_init(&d->hm[1][k], -m, m);
+        model_init(d, &d->hm[0][k], 0, m);
+        model_init(d, &d->hm[1][k], -m, m);
     }
 }
 
@@ -884,20 +894,6 @@ int fba_decode(const uint8_t *data, size_t len, fba_result *res, fba_error *err)
     volatile int ok = 0;
     int64_t end_bits = d->nbits;
     if (setjmp(d->jb) == 0) {
-        size_t per = 2 * MODEL_MAXN + 1, nmod = 2 * FBA_NFAP + 2 * HM_COUNT;
-        d->pool = malloc(per * nmod * sizeof *d->pool);
-        if (!d->pool) fail(d, 0, "out-of-memory", "cannot allocate the models");
-        int32_t *p = d->pool;
-        for (int t = 0; t < 2; t++) {
-            for (int i = 0; i < FBA_NFAP; i++, p += per) {
-                d->lm[t][i].freq = p;
-                d->lm[t][i].cum = p + MODEL_MAXN;
-            }
-            for (int k = 0; k < HM_COUNT; k++, p += per) {
-                d->hm[t][k].freq = p;
-                d->hm[t][k].cum = p + MODEL_MAXN;
-            }
-        }
         decode_object(d, &end_bits);
         int64_t em = find_emulation(d, end_bits);
         if (em >= 0)
@@ -913,7 +909,10 @@ int fba_decode(const uint8_t *data, size_t len, fba_result *res, fba_error *err)
                      "byte-aligned 0x000001 that is not a start code (D9)");
         }
     }
-    free(d->pool);
+    for (int t = 0; t < 2; t++) {
+        for (int i = 0; i < FBA_NFAP; i++) { free(d->lm[t][i].freq); free(d->lm[t][i].cum); }
+        for (int k = 0; k < HM_COUNT; k++) { free(d->hm[t][k].freq); free(d->hm[t][k].cum); }
+    }
     free(d->sc);
     if (ok) {
         res->frames = d->frames;
