@@ -16,6 +16,7 @@ from pathlib import Path
 from fbaconf.errors import FbaconfInputError
 from fbaconf.scenes import bifs, bt
 
+from . import cmutator
 from .choosers import RandomChooser
 from .corpus import scene_seeds
 from .findings import Finding, minimise_against, write_finding
@@ -415,6 +416,8 @@ class Fuzzer:
                 "missing": sorted(set(st.universe) - st.features),
             },
             "corpus": st.corpus,
+            # which structure-aware mutator made the streams: the C one (fba_mutator.c) or the Python one
+            "stream_mutator": "C" if cmutator.library() is not None else "Python",
             "decoder": self.decoder_info,
             "finding_ids": [f.id for f in self.findings.values()],
         }

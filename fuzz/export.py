@@ -154,9 +154,10 @@ mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -artifact_prefix=new/ ne
 # that takes longer is skipped instead of ending the dry run
 AFL_USE_ASAN=1 afl-cc -g -O1 your_decoder_main.c your_decoder.c -o decoder-afl
 afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ -- ./decoder-afl @@ /dev/null
-# with fbaconf's structure-aware mutator: libFuzzer links it in, AFL++ loads it
-clang -g -O1 -fsanitize=fuzzer,address,undefined -DFBA_LIBFUZZER fuzz_target.c fba_mutator.c your_decoder.c \\
-  -o fba_fuzzer
+# with fbaconf's structure-aware mutator: libFuzzer links it in (built on its own: not instrumented,
+# its branches are no coverage of your decoder), AFL++ loads it
+clang -O2 -c -DFBA_LIBFUZZER fba_mutator.c -o fba_mutator.o
+clang -g -O1 -fsanitize=fuzzer,address,undefined fuzz_target.c fba_mutator.o your_decoder.c -o fba_fuzzer
 cc -O2 -shared -fPIC -DFBA_AFL fba_mutator.c -o fba_mutator.so
 AFL_CUSTOM_MUTATOR_LIBRARY=./fba_mutator.so afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ \\
   -- ./decoder-afl @@ /dev/null

@@ -1,4 +1,5 @@
-"""Mutators of streams: structure-aware (field-level) and byte-level, with a dictionary of the syntax's tokens."""
+"""Mutators of streams: structure-aware (the C mutator, and field-level ones in Python) and byte-level,
+with a dictionary of the syntax's tokens."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from collections.abc import Callable
 
 from fbaconf.bitstreams.bitedit import bit_range, insert_bits, join_bits, remove_bits, set_bits, truncate_bits
 
+from . import cmutator
 from .inputs import Entry, InputKind
 from .model import DICTIONARY, Field
 
@@ -270,21 +272,40 @@ BYTE_MUTATORS: dict[str, Callable] = {
 }
 
 
-def mutate_stream(rng: random.Random, e: Entry, corpus: list[Entry], *, field_share: float = 0.7) -> tuple[bytes, str]:
-    """One near-valid input from ``e``: a field-aware mutation (sometimes followed by byte-level ones),
-    or byte-level mutations. Returns (data, description)."""
-    names = []
+def mutate_stream(
+    rng: random.Random, e: Entry, corpus: list[Entry], *, field_share: float = 0.7, native: bool = True
+) -> tuple[bytes, str]:
+    """One near-valid input from ``e``: a structure-aware mutation (sometimes followed by byte-level
+    ones), or byte-level mutations. Returns (data, description).
+
+    The structure-aware share goes to the C mutator (``fba_mutator.c``, the one the exported
+    libFuzzer and AFL++ builds use: 1-3 mutations or a crossover, no Python parse of ``e``) when it
+    is built (``native`` and a C compiler), with a third left to the Python field mutators (a
+    dictionary token, a broken stuffing, a chain of 60,000 skips); without it, all of it to them."""
+    names: list[str] = []
     data = None
     if rng.random() < field_share:
-        for _ in range(3):
-            name = rng.choice(list(FIELD_MUTATORS))
-            try:
-                data = FIELD_MUTATORS[name](rng, e, corpus)
-            except ValueError:
-                data = None
-            if data is not None:
-                names.append(name)
-                break
+        lib = cmutator.library() if native else None
+        if lib is not None and rng.random() < 2 / 3:
+            others = [x for x in corpus if x.kind == InputKind.STREAM and x is not e]
+            if others and rng.random() < 0.1:
+                data = cmutator.cross(lib, e.data, _pick(rng, others).data, rng.getrandbits(32))
+                names.append("c-cross")
+            else:
+                data = e.data
+                for _ in range(rng.choice((1, 1, 1, 2, 3))):
+                    data = cmutator.mutate(lib, data, rng.getrandbits(32))
+                names.append("c-structure")
+        else:
+            for _ in range(3):
+                name = rng.choice(list(FIELD_MUTATORS))
+                try:
+                    data = FIELD_MUTATORS[name](rng, e, corpus)
+                except ValueError:
+                    data = None
+                if data is not None:
+                    names.append(name)
+                    break
     if data is None or rng.random() < 0.15:
         base = e.data if data is None else data
         name = rng.choice(list(BYTE_MUTATORS))

@@ -111,7 +111,7 @@ def test_every_mutator_yields_typed_errors_only(seeds):
     names = set()
     for i in range(240):
         e = corpus[i % len(corpus)]
-        data, how = mutate_stream(rng, e, corpus)
+        data, how = mutate_stream(rng, e, corpus, native=False)
         names.update(how.split("+"))
         try:
             decode(data)
@@ -260,10 +260,11 @@ def _fuzz_planted(
     return fz, target, out
 
 
-# input budgets: the run stops at the first finding of the class (typically within 30 inputs)
+# input budgets: the run stops at the first finding of the class (typically within 30 inputs). A
+# zero frame rate (hangdec) is about 3 % of the inputs: 300 leave a miss at about 1e-4
 PLANTED = [
     ("skipchain", "crash", "SIGSEGV", 300),
-    ("hangdec", "hang", "timeout", 150),
+    ("hangdec", "hang", "timeout", 300),
     ("allocdec", "memory", "memory-limit", 300),
 ]
 
