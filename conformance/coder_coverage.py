@@ -7,9 +7,10 @@
   from outside: the interval and the model's table before it, the symbol it returns; the §3.3
   narrowing and renormalisation tests are then re-run on that interval (interval only: the tests
   never read ``value``).
-* ``arith.lookahead-rewind-<p>`` / ``arith.lookahead-error-<p>``: a run of 22 zeros that completes at
-  position p (1..14) of a block's 14-bit look-ahead, the bit after it a '1' (the decoder removes it
-  as a stuffing bit and must hand it back) or a '0' (a violation that is no error, D7).
+* ``arith.lookahead-<p>``: a run of 22 zeros that completes at position p (1..14) of a block's 14-bit
+  look-ahead; ``arith.lookahead-rewind-<p>`` / ``arith.lookahead-error-<p>``: the same with the bit
+  after it a '1' (the decoder removes it as a stuffing bit and must hand it back) or a '0' (a
+  violation that is no error, D7).
 """
 
 from __future__ import annotations
@@ -97,7 +98,9 @@ def coder_points(data: bytes) -> set[str]:
             if at is None:
                 continue
             slot = (data[at // 8] >> (7 - at % 8)) & 1 if at < 8 * len(data) else 0
-            hits.add(f"arith.lookahead-{'rewind' if slot else 'error'}-{at - start - length}")
+            pos = at - start - length
+            hits.add(f"arith.lookahead-{pos}")  # the position, whatever follows: both kinds' common point
+            hits.add(f"arith.lookahead-{'rewind' if slot else 'error'}-{pos}")
     return hits
 
 
