@@ -2,12 +2,10 @@
 passing ones do not, and a greedy grouping of the failing cases into causes.
 
 The score of a feature f is Ochiai's, ``ef / sqrt(F * (ef + ep))`` (ef, ep: failing and passing
-cases with f; F: failing cases still unexplained), weighted by the share of the P passing cases
-that do not have f, ``1 - ep / (P + 1)``: 1 when f is in every unexplained failing case and in no
-passing one. Ochiai alone lets a feature nearly every case has (an intra plane, an end code) win
-whenever most cases fail, though the passing cases show it working; the weight leaves a feature
-that only failing cases have ahead of it (measured on the mutant decoders,
-``benchmarks/bench_explain_mutants.py``: the mutated rule first for 39 of 50 instead of 37).
+cases with f; F: failing cases still unexplained): 1 when f is in every unexplained failing case
+and in no passing one. (Weighting it by the share of passing cases without f lifted the mutant
+decoders' ranking, ``benchmarks/bench_explain_mutants.py``, from 41 to 43 of 50 first, and lost
+five of Xface's confirmed quirks to content features: real players come first.)
 Causes are taken greedily: the best feature explains the failing cases that have it, those leave
 the pool, the scores are taken again over the rest, until every failing case
 is explained or no feature is left in any of them. Ties go to the feature that explains more
@@ -57,11 +55,7 @@ def scores(views: Sequence[CaseView], pool: Iterable[str] | None = None) -> list
             ef[f] = ef.get(f, 0) + 1
     ep = {f: sum(1 for v in passing if f in v.features) for f in ef}
     seen = {f: sum(1 for v in views if f in v.features) for f in ef}
-    n_pass = len(passing)
-    out = [
-        Score(f, ef[f] / math.sqrt(n_fail * (ef[f] + ep[f])) * (1 - ep[f] / (n_pass + 1)), ef[f], ep[f], seen[f])
-        for f in ef
-    ]
+    out = [Score(f, ef[f] / math.sqrt(n_fail * (ef[f] + ep[f])), ef[f], ep[f], seen[f]) for f in ef]
     return sorted(out, key=_order)
 
 

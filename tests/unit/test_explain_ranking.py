@@ -27,10 +27,8 @@ def _view(cid: str, failing: bool, *features: str) -> spectrum.CaseView:
 def test_ochiai_by_hand():
     vs = [_view("a", True, "x", "y"), _view("b", True, "x"), _view("c", False, "y"), _view("d", False)]
     got = {s.feature: s.ochiai for s in spectrum.scores(vs)}
-    # Ochiai ef / sqrt(F * (ef + ep)) times the share of the P = 2 passing cases without the feature,
-    # 1 - ep / (P + 1). x: in both failing cases, no passing one: 2 / sqrt(2 * 2) * (1 - 0 / 3) = 1;
-    # y: 1 failing, 1 passing: 1 / sqrt(2 * 2) * (1 - 1 / 3) = 1 / 3
-    assert got == {"x": pytest.approx(1.0), "y": pytest.approx(1 / 3)}
+    # x: in both failing cases, no passing one: 2 / sqrt(2 * 2); y: 1 failing, 1 passing: 1 / sqrt(2 * 2)
+    assert got == {"x": pytest.approx(1.0), "y": pytest.approx(0.5)}
     assert spectrum.aliases(vs, "x") == [] and spectrum.aliases([*vs, _view("e", False, "z")], "z") == []
 
 
