@@ -795,9 +795,11 @@ static void mutate_symbol(stream *st, fba_rng *r)
     *v = clampi(pick_value(r, lo, hi, *v), lo, hi);
 }
 
+/* A header field's new value: half the time any value of its width (fields are narrow: a 5-bit hour
+ * is drawn uniformly), else an end or a neighbour of the old one. */
 static uint32_t pick_field(fba_rng *r, uint32_t top, uint32_t old)
 {
-    switch (below(r, 5)) {
+    switch (below(r, 8)) {
     case 0: return 0;
     case 1: return top;
     case 2: return (old + 1) & top;
@@ -808,8 +810,8 @@ static uint32_t pick_field(fba_rng *r, uint32_t top, uint32_t old)
 
 static void mutate_header(stream *st, fba_rng *r)
 {
-    /* the first plane half the time: where a decoder sets itself up (rate, period header, models) */
-    plane *p = &st->p[below(r, 2) ? 0 : below(r, (uint32_t)st->n)];
+    /* the first plane a third of the time: where a decoder sets itself up (rate, period header, models) */
+    plane *p = &st->p[below(r, 3) == 0 ? 0 : below(r, (uint32_t)st->n)];
     int i = 2 + (int)below(r, NFAP - 2);
     switch (below(r, 18)) {
     case 16: p->is_fr = 1; p->fr = 0; p->sec = 0; break; /* the zero rate (a division by it, a loop stepping by it) */
