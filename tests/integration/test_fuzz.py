@@ -248,7 +248,10 @@ def _fuzz_planted(
             out_dir=out,
             progress=False,
             max_execs=max_execs,
-            minimise_seconds=5,
+            # a budget of tests, not seconds: the machine's load must not decide whether a finding
+            # gets shorter (the seconds only stop a decoder that hangs on every candidate)
+            minimise_tests=40,
+            minimise_seconds=120,
             run_seeds_first=0,
             valid_pool=4,
         ),
