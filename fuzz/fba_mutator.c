@@ -1,8 +1,9 @@
 /* fba_mutator.c - fbaconf's structure-aware mutator of face object streams, for the coverage-guided
- * engines parser authors run: libFuzzer (LLVMFuzzerCustomMutator / LLVMFuzzerCustomCrossOver, built
- * with -DFBA_LIBFUZZER into the fuzz target), AFL++ (the custom-mutator API, built with -DFBA_AFL as a
- * shared library for AFL_CUSTOM_MUTATOR_LIBRARY) and fbaconf's own engine (fuzz/cmutator.py loads it
- * through ctypes: fba_mutate and fba_cross). Written by `fbaconf fuzz export`.
+ * engines parser authors run: libFuzzer (LLVMFuzzerCustomMutator / LLVMFuzzerCustomCrossOver: built
+ * with -DFBA_LIBFUZZER on its own, uninstrumented, and linked into the fuzz target), AFL++ (the
+ * custom-mutator API, built with -DFBA_AFL as a shared library for AFL_CUSTOM_MUTATOR_LIBRARY) and
+ * fbaconf's own engine (fuzz/cmutator.py loads it through ctypes: fba_mutate, fba_cross, and
+ * fba_rewrite / fba_edit_symbol for tools and tests). Written by `fbaconf fuzz export`.
  *
  * Byte-level havoc breaks a face object stream at once: its planes are bit-packed headers followed by
  * adaptive arithmetic-coded blocks, and a plane without a start code of its own starts where the
