@@ -25,7 +25,7 @@ from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
 from .selftarget import SelfTarget
-from .targets import ExecResult, FuzzSetupError, Run, Verdict
+from .targets import HANG_CONFIRM_FACTOR, ExecResult, FuzzSetupError, Run, Verdict
 from .text import mutate_text, text_seeds
 
 
@@ -41,6 +41,7 @@ class Stats:
     minimise_s: float = 0.0
     by_origin: dict[str, int] = field(default_factory=dict)
     measured: int = 0  # inputs whose syntax-model coverage was measured (every coverage_every-th)
+    slow_not_hung: int = 0  # timeouts that finished alone with more time: the machine's load, no finding
 
     @property
     def elapsed(self) -> float:
@@ -357,8 +358,16 @@ class Fuzzer:
 
     def _finding(self, index: int, inp: Entry, v: Verdict, deadline: float) -> None:
         st = self.stats
-        st.hits += 1
         f = self.findings.get(v.key)
+        still_hangs = getattr(self.target, "still_hangs", None)
+        if f is None and v.cls == "hang" and still_hangs is not None and not still_hangs(inp):
+            st.slow_not_hung += 1  # slowed past the limit by the machine, not hung: no finding
+            self.progress.message(
+                f"input #{index} timed out, then finished alone with {HANG_CONFIRM_FACTOR:g} times the "
+                "timeout: the machine's load, not a hang of the decoder's"
+            )
+            return
+        st.hits += 1
         if f is not None:
             f.hits += 1
             return
@@ -407,6 +416,7 @@ class Fuzzer:
             "execs_per_cpu_s": round(st.execs / max(1e-9, st.cpu_s), 1),
             "findings": st.findings,
             "finding_hits": st.hits,
+            "timeouts_not_confirmed": st.slow_not_hung,
             "syntax_coverage": {
                 "covered": c,
                 "total": n,

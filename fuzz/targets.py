@@ -27,6 +27,8 @@ from fbaconf.safefs import empty_dir, remove_tree
 from .inputs import Entry, InputKind
 from .model import reference_parse
 
+HANG_CONFIRM_FACTOR = 4.0  # a timeout is a hang when the input also outlasts this many times the limit alone
+
 
 @dataclass
 class Verdict:
@@ -354,6 +356,29 @@ class DecoderTarget:
         w.server = PersistentDecoder(
             w.argv[0], w.root, w.slots[0].job.workdir, self._view(w, w.argv[0]), self.limits, env=self.adapter.env
         )
+
+    def still_hangs(self, inp: Entry, factor: float = HANG_CONFIRM_FACTOR) -> bool:
+        """Whether ``inp`` times out again on a process and sandbox of its own given ``factor``
+        times the timeout. A decoder that the machine's load (other work, the fuzzer's own) slowed
+        past its limit finishes then: the lab's, not a finding of the decoder's. One that loops or
+        waits forever does not."""
+        if not self.is_command:
+            return True
+        lim = self.limits
+        longer = Limits(lim.timeout_s * factor, lim.memory_mb, lim.memory_kind, lim.output_mb, lim.processes)
+        workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
+        try:
+            job = self._job(inp.data, workdir)
+            argv = self.argv_for(job)
+            view = self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders())
+            res = sandbox.run(argv, job.workdir, longer, env=self.adapter.env, view=view)
+            ending = endings.classify(res, longer, self.reject_exit_codes, name=self.adapter.name)
+            return ending.kind == "timeout"
+        finally:
+            try:
+                remove_tree(workdir)
+            except OSError:
+                pass
 
     def alone(self, inp: Entry) -> ExecResult:
         """``inp`` on a decoder process of its own, whose whole life is this input's: how a

@@ -278,6 +278,24 @@ def skipchain_run(tmp_path_factory, seeds):
     return _fuzz_planted("skipchain", tmp, seeds, 300, "crash") + (tmp,)
 
 
+def test_a_decoder_slowed_past_its_timeout_is_not_a_hang(tmp_path, seeds):
+    """A timeout is confirmed before it becomes a finding: the input alone, with four times the
+    limit. A decoder that takes 0.8 s under a 0.5 s limit (as a loaded machine makes a fast one)
+    finishes then — no finding, counted as the machine's; hangdec, which loops forever, is still
+    found (test_planted_bug_found_classified_minimised)."""
+    (tmp_path / "slow.py").write_text("import sys, time\ntime.sleep(0.8)\nsys.exit(1)\n")
+    (tmp_path / "slow.toml").write_text(
+        'name = "slow"\nclaims = ["simple@1"]\ninputs = ["fba"]\noutputs = ["faps"]\nfaps_format = "fap"\n'
+        "reject_exit_codes = [1]\n[commands]\n"
+        'decode = ["{python}", "-I", "-S", "{manifest_dir}/slow.py", "{input}", "{faps_out}"]\n'
+        "[limits]\ntimeout_s = 0.5\nmemory_mb = 256\noutput_mb = 16\n"
+    )
+    target = DecoderTarget(load_manifest(tmp_path / "slow.toml"), tmp_path / "work")
+    fz = Fuzzer(target, seeds[:2], FuzzConfig(seed=1, seconds=60, jobs=1, progress=False, max_execs=2))
+    fz.run()
+    assert not fz.findings and fz.stats.slow_not_hung == 2
+
+
 @pytest.mark.parametrize("name,cls,sig,execs", PLANTED[1:])
 def test_planted_bug_found_classified_minimised(name, cls, sig, execs, tmp_path, seeds):
     fz, target, out = _fuzz_planted(name, tmp_path, seeds, execs, cls)
