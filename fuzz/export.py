@@ -140,7 +140,7 @@ short prefixes of them, {generated} generated valid streams; {tokens} dictionary
 | `stress/` | {stress} long streams (thousands of frames): seconds per input under ASan, not for defaults |
 | `fba.dict` | AFL++ / libFuzzer dictionary: start codes, aligned stuffing, header patterns |
 | `fuzz_target.c` | a libFuzzer target template; `fuzz_target_fbadec.c` the same around examples/fbadec |
-| `fba_mutator.c` | fbaconf's structure-aware mutator (`-DFBA_LIBFUZZER`: in the target; `-DFBA_AFL`: for AFL++) |
+| `fba_mutator.c` | fbaconf's structure-aware mutator: parses, mutates, re-encodes (libFuzzer, AFL++: below) |
 | `oss-fuzz/build.sh` | the lines an OSS-Fuzz `build.sh` needs to ship the seeds and the dictionary |
 
 Build with a sanitizer: a read past a buffer does not crash a plain build. New inputs go to a
