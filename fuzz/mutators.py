@@ -287,9 +287,9 @@ def mutate_stream(
     if rng.random() < field_share:
         lib = cmutator.library() if native else None
         if lib is not None and rng.random() < 2 / 3:
-            others = [x for x in corpus if x.kind == InputKind.STREAM and x is not e]
-            if others and rng.random() < 0.1:
-                data = cmutator.cross(lib, e.data, _pick(rng, others).data, rng.getrandbits(32))
+            other = _pick(rng, corpus) if rng.random() < 0.1 else None
+            if other is not None and other.kind == InputKind.STREAM and other is not e:
+                data = cmutator.cross(lib, e.data, other.data, rng.getrandbits(32))
                 names.append("c-cross")
             else:
                 data = e.data
