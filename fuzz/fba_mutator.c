@@ -34,6 +34,7 @@
 
 #define NFAP 68
 #define NHM 7          /* viseme select 1, 2, blend; expression select 1, intensity 1, select 2, intensity 2 */
+#define NSYM (NHM + NFAP - 2) /* a plane's symbols: the NHM high-level ones, then low-level FAPs 3..68 */
 #define MAX_PLANES 4096
 #define MAX_SKIP 1000000u
 #define STUFF_RUN 22
@@ -73,8 +74,8 @@ typedef struct {
     uint32_t skip;
     /* intra header (a predicted plane keeps its period's, for a flip to intra) */
     uint8_t q, mtype[10], mbit[NFAP], gender, coding, lflag[4], lval[4][NFAP];
-    /* symbols: the values the blocks code (intra: the value; predicted: the difference) */
-    int32_t hv[3], he[4], low[NFAP];
+    /* the values its blocks code (intra: the value; predicted: the difference), in NSYM order */
+    int32_t sym[NSYM];
     uint8_t vdef, initf, edef;
 } plane;
 
@@ -238,16 +239,19 @@ static void codec_free(codec *c)
 
 static int blend_max(int q) { return q ? (63 + q / 2) / q : 63; }
 
+/* Whether a group's mask type lists its FAPs one by one (01 and 10), and whether FAP i of group g
+ * is coded under plane p's mask (§1.2: 00 none, 11 all). */
+static int lists_bits(int type) { return type == 1 || type == 2; }
+
+static int coded_in(const plane *p, int g, int i) { return lists_bits(p->mtype[g]) ? p->mbit[i] : p->mtype[g] == 3; }
+
 /* An intra plane's header taken into the state: mask, lists, models re-initialised (§3.2, D4, D5). */
 static int codec_intra(codec *c, const plane *p)
 {
     c->q = p->q;
     for (int g = 0; g < 10; g++) {
         c->mtype[g] = p->mtype[g];
-        for (int j = 0; j < GROUP_SIZE[g]; j++) {
-            int i = GROUP_FIRST[g] + j, t = p->mtype[g];
-            c->coded[i] = (uint8_t)((t == 1 || t == 2) ? p->mbit[i] : t == 3);
-        }
+        for (int j = 0; j < GROUP_SIZE[g]; j++) c->coded[GROUP_FIRST[g] + j] = (uint8_t)coded_in(p, g, GROUP_FIRST[g] + j);
     }
     c->coding = p->coding;
     if (p->coding) return 0;
@@ -417,7 +421,7 @@ static int read_plane(reader *r, codec *c, plane *p, const plane *period)
             p->mtype[g] = (uint8_t)rbits(r, 2);
             for (int j = 0; j < GROUP_SIZE[g]; j++) {
                 int i = GROUP_FIRST[g] + j;
-                p->mbit[i] = (p->mtype[g] == 1 || p->mtype[g] == 2) ? (uint8_t)rbits(r, 1) : 1;
+                p->mbit[i] = lists_bits(p->mtype[g]) ? (uint8_t)rbits(r, 1) : 1;
             }
         }
         p->gender = (uint8_t)rbits(r, 1);
@@ -427,19 +431,13 @@ static int read_plane(reader *r, codec *c, plane *p, const plane *period)
             for (int l = 0; l < 4; l++) p->lval[l][i] = (uint8_t)(c->bound[l][i] / 60 > 31 ? 31 : c->bound[l][i] / 60);
         if (!p->coding) {
             for (int l = 0; l < 4; l++) p->lflag[l] = (uint8_t)rbits(r, 1);
-            uint8_t coded[NFAP];
-            for (int g = 0; g < 10; g++)
-                for (int j = 0; j < GROUP_SIZE[g]; j++) {
-                    int i = GROUP_FIRST[g] + j, t = p->mtype[g];
-                    coded[i] = (uint8_t)((t == 1 || t == 2) ? p->mbit[i] : t == 3);
-                }
             for (int l = 0; l < 4; l++) {
                 if (!p->lflag[l]) continue;
                 for (int g = 1; g < 10; g++)
                     for (int j = 0; j < GROUP_SIZE[g]; j++) {
                         int i = GROUP_FIRST[g] + j;
                         if (j % 4 == 0 && !rbits(r, 1)) return -1;
-                        if (coded[i]) p->lval[l][i] = (uint8_t)rbits(r, 5);
+                        if (coded_in(p, g, i)) p->lval[l][i] = (uint8_t)rbits(r, 5);
                     }
             }
         }
@@ -451,20 +449,20 @@ static int read_plane(reader *r, codec *c, plane *p, const plane *period)
     adec a;
     if (c->coded[0]) {
         astart(r, &a);
-        for (int k = 0; k < 3; k++) p->hv[k] = adecode(r, &a, &c->hm[t][k]);
+        for (int k = 0; k < 3; k++) p->sym[k] = adecode(r, &a, &c->hm[t][k]);
         aend(r, &a);
         p->vdef = (uint8_t)rbits(r, 1);
     }
     if (c->coded[1]) {
         astart(r, &a);
-        for (int k = 0; k < 4; k++) p->he[k] = adecode(r, &a, &c->hm[t][3 + k]);
+        for (int k = 3; k < NHM; k++) p->sym[k] = adecode(r, &a, &c->hm[t][k]);
         aend(r, &a);
         p->initf = (uint8_t)rbits(r, 1);
         p->edef = (uint8_t)rbits(r, 1);
     }
     astart(r, &a);
     for (int i = 2; i < NFAP; i++)
-        if (c->coded[i]) p->low[i] = adecode(r, &a, &c->lm[t][i]);
+        if (c->coded[i]) p->sym[NHM + i - 2] = adecode(r, &a, &c->lm[t][i]);
     aend(r, &a);
     return r->bad ? -1 : 0;
 }
@@ -639,6 +637,25 @@ static void aflush(aenc *e)
 
 static int32_t clampi(int32_t v, int32_t lo, int32_t hi) { return v < lo ? lo : v > hi ? hi : v; }
 
+/* High-level symbols [from, to) of plane p (0-2 the viseme block, 3-6 the expression block) coded
+ * and the block ended; c->hl follows the values they give (hl[3] is viseme_def: symbol k >= 3 is
+ * hl[k + 1]). A predicted difference is kept so that the value stays in its range unless `exact`. */
+static void write_high(aenc *e, codec *c, const plane *p, int t, int exact, int from, int to)
+{
+    int B = blend_max(c->q), qd = c->q ? c->q : 1;
+    for (int k = from; k < to; k++) {
+        int32_t *hl = &c->hl[k < 3 ? k : k + 1], unit = HL_MAX[k] < 0 ? qd : 1, lim = HL_MAX[k] < 0 ? B : HL_MAX[k];
+        model *m = &c->hm[t][k];
+        int32_t v = p->sym[k];
+        if (t && !exact) v = clampi(v, -*hl / unit, lim - *hl / unit);
+        aencode(e, m, v);
+        v = clampi(v, m->lo, m->lo + m->n - 1);
+        *hl = t ? *hl + v * unit : v * unit;
+    }
+    aflush(e);
+    *e = (aenc){e->w, 0, TOP, 0, 0};
+}
+
 /* The stream written from its structure; `exact`: predicted high-level differences written as they
  * are (else kept so that the value they give stays in its range). */
 static void write_stream(const stream *st, writer *w, int exact)
@@ -671,7 +688,7 @@ static void write_stream(const stream *st, writer *w, int exact)
             for (int g = 0; g < 10; g++) {
                 field(w, 1, 1);
                 field(w, p->mtype[g], 2);
-                if (p->mtype[g] == 1 || p->mtype[g] == 2)
+                if (lists_bits(p->mtype[g]))
                     for (int j = 0; j < GROUP_SIZE[g]; j++) field(w, p->mbit[GROUP_FIRST[g] + j], 1);
             }
             field(w, p->gender, 1);
@@ -682,9 +699,9 @@ static void write_stream(const stream *st, writer *w, int exact)
                     if (!p->lflag[l]) continue;
                     for (int g = 1; g < 10; g++)
                         for (int j = 0; j < GROUP_SIZE[g]; j++) {
-                            int i = GROUP_FIRST[g] + j, t = p->mtype[g];
+                            int i = GROUP_FIRST[g] + j;
                             if (j % 4 == 0) field(w, 1, 1);
-                            if ((t == 1 || t == 2) ? p->mbit[i] : t == 3) field(w, p->lval[l][i], 5);
+                            if (coded_in(p, g, i)) field(w, p->lval[l][i], 5);
                         }
                 }
             }
@@ -693,39 +710,20 @@ static void write_stream(const stream *st, writer *w, int exact)
         c->planes++;
         note_cut(w);
         if (c->coding) break; /* a DCT segment: its payload is the raw tail */
-        int t = intra ? 0 : 1, B = blend_max(c->q), qd = c->q ? c->q : 1;
+        int t = intra ? 0 : 1;
         aenc e = {w, 0, TOP, 0, 0};
         if (c->coded[0]) {
-            int32_t lim[3] = {14, 14, B};
-            for (int k2 = 0; k2 < 3; k2++) {
-                int32_t v = p->hv[k2], unit = k2 == 2 ? qd : 1;
-                if (t && !exact) v = clampi(v, -c->hl[k2] / unit, lim[k2] - c->hl[k2] / unit);
-                aencode(&e, &c->hm[t][k2], v);
-                v = clampi(v, c->hm[t][k2].lo, c->hm[t][k2].lo + c->hm[t][k2].n - 1);
-                c->hl[k2] = t ? c->hl[k2] + v * unit : v * unit;
-            }
-            aflush(&e);
-            e = (aenc){w, 0, TOP, 0, 0};
-            note_field(w, 1);
-            wbit(w, p->vdef);
+            write_high(&e, c, p, t, exact, 0, 3);
+            field(w, p->vdef, 1);
         }
         if (c->coded[1]) {
-            int32_t lim[4] = {6, B, 6, B};
-            for (int k2 = 0; k2 < 4; k2++) {
-                int32_t v = p->he[k2], unit = (k2 & 1) ? qd : 1;
-                if (t && !exact) v = clampi(v, -c->hl[4 + k2] / unit, lim[k2] - c->hl[4 + k2] / unit);
-                aencode(&e, &c->hm[t][3 + k2], v);
-                v = clampi(v, c->hm[t][3 + k2].lo, c->hm[t][3 + k2].lo + c->hm[t][3 + k2].n - 1);
-                c->hl[4 + k2] = t ? c->hl[4 + k2] + v * unit : v * unit;
-            }
-            aflush(&e);
-            e = (aenc){w, 0, TOP, 0, 0};
+            write_high(&e, c, p, t, exact, 3, NHM);
             field(w, p->initf, 1);
             field(w, p->edef, 1);
         }
         note_cut(w);
         for (int i = 2; i < NFAP; i++)
-            if (c->coded[i]) aencode(&e, &c->lm[t][i], p->low[i]);
+            if (c->coded[i]) aencode(&e, &c->lm[t][i], p->sym[NHM + i - 2]);
         aflush(&e);
     }
     codec_free(c);
@@ -768,13 +766,13 @@ static void alphabet(const stream *st, size_t k, int which, int32_t *lo, int32_t
     while (pi > 0 && !st->p[pi].intra) pi--;
     const plane *ip = &st->p[pi];
     int intra = st->p[k].intra, q = ip->q ? ip->q : 1, B = blend_max(ip->q);
-    if (which < 7) {
+    if (which < NHM) {
         int m = HL_MAX[which] < 0 ? B : HL_MAX[which];
         *lo = intra ? 0 : -m;
         *hi = m;
         return;
     }
-    int i = which - 7 + 2;
+    int i = which - NHM + 2;
     int32_t b[4];
     for (int l = 0; l < 4; l++) { /* the latest list that set it, else the default */
         b[l] = (l < 2 ? (IRANGE[i] + 59) / 60 : (PRANGE[i] + 59) / 60) * 60;
@@ -790,8 +788,8 @@ static void mutate_symbol(stream *st, fba_rng *r)
     size_t k = below(r, (uint32_t)st->n);
     plane *p = &st->p[k];
     if (p->coding) return;
-    int which = (int)below(r, 10) < 3 ? (int)below(r, 7) : 7 + (int)below(r, NFAP - 2);
-    int32_t lo, hi, *v = which < 3 ? &p->hv[which] : which < 7 ? &p->he[which - 3] : &p->low[which - 7 + 2];
+    int which = (int)below(r, 10) < 3 ? (int)below(r, NHM) : NHM + (int)below(r, NFAP - 2);
+    int32_t lo, hi, *v = &p->sym[which];
     alphabet(st, k, which, &lo, &hi);
     *v = clampi(pick_value(r, lo, hi, *v), lo, hi);
 }
@@ -958,11 +956,11 @@ size_t fba_edit_symbol(const uint8_t *data, size_t size, uint8_t *out, size_t ma
     stream st;
     fba_rng r = {1};
     size_t n = 0;
-    if (parse(data, size, &st) && k < st.n && which >= 0 && which < 7 + NFAP - 2) {
+    if (parse(data, size, &st) && k < st.n && which >= 0 && which < NSYM) {
         plane *p = &st.p[k];
         int32_t lo, hi;
         alphabet(&st, k, which, &lo, &hi);
-        *(which < 3 ? &p->hv[which] : which < 7 ? &p->he[which - 3] : &p->low[which - 7 + 2]) = clampi(value, lo, hi);
+        p->sym[which] = clampi(value, lo, hi);
         n = emit(&st, out, max_size, &r, 1, 0);
     }
     stream_free(&st);

@@ -3,10 +3,12 @@ of process endings) and fbaconf itself (--self)."""
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import os
 import tempfile
 import threading
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -320,23 +322,30 @@ class DecoderTarget:
             else:
                 pending = w.server.start(w.argv[k], job.workdir, slot=k)
             return Run(pending.wait, lambda: self._clean_if(inp, ExecResult(self._judge(inp, job, pending.result()))))
-        workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
-        try:
-            job = self._job(inp.data, workdir)
+        with self._own_folder(inp.data) as job:
             if self.is_command:
-                argv = self.argv_for(job)
-                view = self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders())
-                out = ExecResult(
-                    self._judge(inp, job, sandbox.run(argv, job.workdir, self.limits, env=self.adapter.env, view=view))
-                )
+                out = ExecResult(self._judge(inp, job, self._sandboxed(job, self.limits)))
             else:
                 out = ExecResult(self._run_python(inp, job))
+        return Run.done(out)
+
+    @contextlib.contextmanager
+    def _own_folder(self, data: bytes) -> Iterator[Job]:
+        """A job for ``data`` in a fresh case folder, removed afterwards."""
+        workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
+        try:
+            yield self._job(data, workdir)
         finally:
             try:
                 remove_tree(workdir)
             except OSError:
                 pass
-        return Run.done(out)
+
+    def _sandboxed(self, job: Job, limits: Limits):
+        """The decoder's command on ``job`` in a sandbox of its own under ``limits``."""
+        argv = self.argv_for(job)
+        view = self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders())
+        return sandbox.run(argv, job.workdir, limits, env=self.adapter.env, view=view)
 
     def _clean_if(self, inp: Entry, out: ExecResult) -> ExecResult:
         """``out`` as it is; a clean input of 4 KB at most, shorter than the last, is kept as
@@ -364,21 +373,10 @@ class DecoderTarget:
         waits forever does not."""
         if not self.is_command:
             return True
-        lim = self.limits
-        longer = Limits(lim.timeout_s * factor, lim.memory_mb, lim.memory_kind, lim.output_mb, lim.processes)
-        workdir = Path(tempfile.mkdtemp(prefix="x-", dir=self.work_root))
-        try:
-            job = self._job(inp.data, workdir)
-            argv = self.argv_for(job)
-            view = self.adapter.sandbox_view(argv, job.workdir, hidden=hidden_from_decoders())
-            res = sandbox.run(argv, job.workdir, longer, env=self.adapter.env, view=view)
-            ending = endings.classify(res, longer, self.reject_exit_codes, name=self.adapter.name)
-            return ending.kind == "timeout"
-        finally:
-            try:
-                remove_tree(workdir)
-            except OSError:
-                pass
+        longer = dataclasses.replace(self.limits, timeout_s=self.limits.timeout_s * factor)
+        with self._own_folder(inp.data) as job:
+            res = self._sandboxed(job, longer)
+        return endings.classify(res, longer, self.reject_exit_codes, name=self.adapter.name).kind == "timeout"
 
     def alone(self, inp: Entry) -> ExecResult:
         """``inp`` on a decoder process of its own, whose whole life is this input's: how a

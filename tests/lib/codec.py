@@ -31,24 +31,19 @@ def group_masks(draw) -> tuple[list[int], np.ndarray]:
     return types, coded
 
 
+# the high-level fields of FAP 1 (viseme: select1, select2, blend, viseme_def) and FAP 2 (expression:
+# select1, intensity1, select2, intensity2, init_face, expression_def): their columns and ranges
+HIGH_RANGES = (
+    (0, 0, ((0, 14), (0, 14), (0, 63), (0, 1))),
+    (1, 4, ((0, 6), (0, 63), (0, 6), (0, 63), (0, 1), (0, 1))),
+)
+
+
 def high_fields(draw, frames: FapFrames, k: int, coded: np.ndarray) -> None:
     """Frame ``k``'s viseme (FAP 1) and expression (FAP 2) fields where coded, in their ranges."""
-    if coded[0]:
-        frames.high[k, 0:4] = [
-            draw(st.integers(0, 14)),
-            draw(st.integers(0, 14)),
-            draw(st.integers(0, 63)),
-            draw(st.integers(0, 1)),
-        ]
-    if coded[1]:
-        frames.high[k, 4:10] = [
-            draw(st.integers(0, 6)),
-            draw(st.integers(0, 63)),
-            draw(st.integers(0, 6)),
-            draw(st.integers(0, 63)),
-            draw(st.integers(0, 1)),
-            draw(st.integers(0, 1)),
-        ]
+    for fap, first, ranges in HIGH_RANGES:
+        if coded[fap]:
+            frames.high[k, first : first + len(ranges)] = [draw(st.integers(lo, hi)) for lo, hi in ranges]
 
 
 @st.composite
