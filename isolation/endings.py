@@ -41,7 +41,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .process import Note
+from .process import MEMORY_TEXT, Note
 
 if TYPE_CHECKING:
     from .process import ProcResult
@@ -272,6 +272,14 @@ def classify(
     # the crash report's own first line (sanitizer ERROR, panic, exception), not whatever stderr ended with
     said = f"; stderr: {report.line}" if report is not None and report.line else _last_line(err)
     where = f" in {report.where}" if report is not None and report.where else ""
+    if (report is not None and any(t in report.line.lower() for t in MEMORY_TEXT)) or (
+        res.signal == "SIGABRT" and any(t in err.lower() for t in MEMORY_TEXT)
+    ):
+        # the runtime's own out-of-memory report (MemoryError, std::bad_alloc, OutOfMemoryError, a Rust
+        # allocation abort): an allocation the kernel refuses and one killed at the limit are the same
+        # act, and which of the two the decoder meets — the lab's free memory decides — must not
+        # change the verdict
+        return Ending(EndingKind.MEMORY, f"{cmd} ran out of memory under the {limits.memory_mb} MB limit{said}")
     if res.signal:
         what = f" ({report.kind}{where})" if report else ""
         return Ending(EndingKind.CRASH, f"{cmd} crashed: killed by {res.signal}{what}{said}", report)

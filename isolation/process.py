@@ -91,7 +91,8 @@ class Finish:
     notes: tuple[Note, ...] = ()
 
 
-_MEMORY_TEXT = (
+# what runtimes print when an allocation fails (lower case)
+MEMORY_TEXT = (
     "memoryerror",
     "bad_alloc",
     "out of memory",
@@ -143,7 +144,7 @@ def result(
         if res.signal == "SIGXCPU":
             res.timed_out = True
             res.notes.append(Note.CPU_LIMIT)
-    if Note.AS_LIMIT in res.notes and not res.timed_out and any(s in res.stderr_tail.lower() for s in _MEMORY_TEXT):
+    if Note.AS_LIMIT in res.notes and not res.timed_out and any(s in res.stderr_tail.lower() for s in MEMORY_TEXT):
         res.memory_limit_hit = True
     total = sum(tree_size(d, stop_at=limits.output_mb * 2**20 * 4) for d in measure_dirs)
     res.output_bytes = total

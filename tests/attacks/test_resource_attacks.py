@@ -177,3 +177,25 @@ def test_isolation_report_names_what_is_missing(monkeypatch):
         "writable cgroups with the memory controller",
         "writable cgroups with the pids controller",
     ]
+
+
+PY_OOM = 'Traceback (most recent call last):\n  File "d.py", line 9, in <module>\n    b = bytearray(n)\nMemoryError\n'
+CXX_OOM = "terminate called after throwing an instance of 'std::bad_alloc'\n  what():  std::bad_alloc\n"
+
+
+def test_an_allocation_the_kernel_refuses_is_the_memory_limit_like_one_killed_at_it():
+    """A decoder asking for gigabytes under a 256 MB limit is killed at the limit when the machine has
+    the memory to hand out, and gets MemoryError / std::bad_alloc when it has not: the lab's free
+    memory decides which, so both are the memory limit, not a crash of one and a blow-up of the other."""
+    lim = Limits(memory_mb=256)
+    for res in (
+        sandbox.ProcResult(["python3", "d.py"], 1, stderr_tail=PY_OOM),
+        sandbox.ProcResult(["./d"], None, signal="SIGABRT", stderr_tail=CXX_OOM),
+    ):
+        e = endings.classify(res, lim, name="d")
+        assert e.kind == endings.EndingKind.MEMORY and "ran out of memory under the 256 MB limit" in e.message
+    # a rejection that mentions memory in its own words is a rejection; another exception a crash
+    said = sandbox.ProcResult(["./d"], 1, stderr_tail="cannot allocate memory for 10^9 frames: refused\n")
+    assert endings.classify(said, lim).kind == endings.EndingKind.REJECT
+    other = sandbox.ProcResult(["python3", "d.py"], 1, stderr_tail=PY_OOM.replace("MemoryError", "KeyError: 3"))
+    assert endings.classify(other, lim).kind == endings.EndingKind.CRASH
