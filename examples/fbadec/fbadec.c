@@ -171,10 +171,17 @@ static const int GROUP_SIZE[10] = {2, 16, 12, 8, 4, 5, 3, 10, 4, 4};
 
 
 /* ---------------------------------------------------------------- decoder state */
+/* The model of §3.2 (frequencies from 1, +1 per symbol, halved once the total reaches 16383),
+ * kept as a Fenwick tree of the frequencies: a symbol costs O(log n), where a cumulative table
+ * costs O(n) per update, and alphabets reach 3,721 symbols (bounds of 31*60 at q = 1). A model is
+ * uniform until its second update, so setting one up is O(1) (an intra plane sets up two per
+ * coded FAP, most of which code a symbol or none before the next one does it again). */
 typedef struct {
     int n, lo;            /* n symbols, symbol s means value lo + s */
-    int cap;              /* symbols the arrays hold: grown to the alphabet when a model is set up */
-    int32_t *freq, *cum;  /* freq[0..n-1], cum[0..n] descending, cum[n] = 0 */
+    int cap;              /* symbols the arrays hold: grown to the alphabet when first needed */
+    int uniform, one;     /* uniform but for symbol `one` (frequency 2; -1: none) */
+    int32_t total;        /* cum[0] of §3.2: the sum of the frequencies */
+    int32_t *freq, *tree; /* freq[0..n-1]; tree[1..n] the Fenwick sums of freq */
 } model;
 
 typedef struct {
@@ -253,37 +260,87 @@ static void marker(dec *d, const char *what)
 }
 
 /* ---------------------------------------------------------------- arithmetic decoder (§3) */
-/* Arrays sized to the alphabet (up to 3,721 symbols: bounds of 31*60 at q = 1), allocated when a
- * model is first set up: most streams code a few FAPs, and a decode that allocated every model's
- * largest table up front spent its time in the allocator. */
-static void model_init(dec *d, model *m, int lo, int hi)
+static void model_init(model *m, int lo, int hi)
 {
-    int n = hi - lo + 1;
-    if (n > m->cap) {
-        int32_t *f = realloc(m->freq, (size_t)n * sizeof *f);
-        if (f) m->freq = f;
-        int32_t *c = f ? realloc(m->cum, ((size_t)n + 1) * sizeof *c) : NULL;
-        if (!c) fail(d, d->pos, "out-of-memory", "cannot allocate a model of %d symbols", n);
-        m->cum = c;
-        m->cap = n;
-    }
     m->lo = lo;
-    m->n = n;
-    for (int k = 0; k < m->n; k++) m->freq[k] = 1;
-    for (int k = 0; k <= m->n; k++) m->cum[k] = m->n - k;
+    m->n = hi - lo + 1;
+    m->uniform = 1;
+    m->one = -1;
+    m->total = m->n;
 }
 
-static void model_update(model *m, int s)
+static void tree_build(model *m)
 {
-    if (m->cum[0] >= AC_MAXFREQ) {
-        m->cum[m->n] = 0;
-        for (int k = m->n - 1; k >= 0; k--) {
-            m->freq[k] = (m->freq[k] + 1) / 2;
-            m->cum[k] = m->cum[k + 1] + m->freq[k];
+    for (int i = 1; i <= m->n; i++) m->tree[i] = m->freq[i - 1];
+    for (int i = 1; i <= m->n; i++) {
+        int j = i + (i & -i);
+        if (j <= m->n) m->tree[j] += m->tree[i];
+    }
+}
+
+/* cum[k] of §3.2: the sum of freq[k..n-1] */
+static int32_t cum(const model *m, int k)
+{
+    if (m->uniform) return m->n - k + (k <= m->one);
+    int32_t below = 0;
+    for (int i = k; i > 0; i -= i & -i) below += m->tree[i];
+    return m->total - below;
+}
+
+/* The first k >= 1 with cum[k] <= target (cum descends to cum[n] = 0; target < cum[0]). */
+static int find(const model *m, uint64_t target)
+{
+    if (m->uniform) {
+        int64_t k = (int64_t)m->n - (int64_t)target;
+        if (k < 1) k = 1;
+        while ((uint64_t)cum(m, (int)k) > target) k++;
+        return (int)k;
+    }
+    /* cum[k] <= target  <=>  freq[0] + ... + freq[k-1] >= total - target: descend the tree */
+    int32_t need = m->total - (int32_t)target;
+    int pos = 0, step = 1;
+    while (step * 2 <= m->n) step *= 2;
+    for (; step; step /= 2)
+        if (pos + step <= m->n && m->tree[pos + step] < need) {
+            pos += step;
+            need -= m->tree[pos];
         }
+    return pos + 1;
+}
+
+static void model_update(dec *d, model *m, int s)
+{
+    if (m->uniform && m->one < 0) {
+        m->one = s;
+        m->total++;
+        return;
+    }
+    if (m->uniform) {
+        if (m->n > m->cap) {
+            int32_t *f = realloc(m->freq, (size_t)m->n * sizeof *f);
+            if (f) m->freq = f;
+            int32_t *t = f ? realloc(m->tree, ((size_t)m->n + 1) * sizeof *t) : NULL;
+            if (!t) fail(d, d->pos, "out-of-memory", "cannot allocate a model of %d symbols", m->n);
+            m->tree = t;
+            m->cap = m->n;
+        }
+        for (int k = 0; k < m->n; k++) m->freq[k] = 1;
+        m->freq[m->one]++;
+        m->tree[0] = 0;
+        tree_build(m);
+        m->uniform = 0;
+    }
+    if (m->total >= AC_MAXFREQ) {
+        m->total = 0;
+        for (int k = 0; k < m->n; k++) {
+            m->freq[k] = (m->freq[k] + 1) / 2;
+            m->total += m->freq[k];
+        }
+        tree_build(m);
     }
     m->freq[s]++;
-    for (int k = 0; k <= s; k++) m->cum[k]++;
+    m->total++;
+    for (int i = s + 1; i <= m->n; i += i & -i) m->tree[i]++;
 }
 
 /* One arithmetic input bit, with the stuffing of §3.3: after 22 zeros a '1' follows and is
@@ -337,17 +394,11 @@ static int arith_decode(dec *d, arith *a, model *m)
     if (a->value < a->low || a->value > a->high)
         fail(d, d->pos, "arith-state", "arithmetic decoder state out of range");
     uint64_t len = (uint64_t)a->high - a->low + 1;
-    uint64_t c0 = (uint64_t)m->cum[0];
+    uint64_t c0 = (uint64_t)m->total;
     uint64_t target = (((uint64_t)a->value - a->low + 1) * c0 - 1) / len;
-    /* first k >= 1 with cum[k] <= target (cum is descending, cum[n] = 0) */
-    int lo = 1, hi = m->n;
-    while (lo < hi) {
-        int mid = lo + (hi - lo) / 2;
-        if ((uint64_t)m->cum[mid] <= target) hi = mid; else lo = mid + 1;
-    }
-    int k = lo;
-    uint32_t nh = (uint32_t)(a->low - 1 + len * (uint64_t)m->cum[k - 1] / c0);
-    uint32_t nl = (uint32_t)(a->low + len * (uint64_t)m->cum[k] / c0);
+    int k = find(m, target);
+    uint32_t nh = (uint32_t)(a->low - 1 + len * (uint64_t)cum(m, k - 1) / c0);
+    uint32_t nl = (uint32_t)(a->low + len * (uint64_t)cum(m, k) / c0);
     a->high = nh;
     a->low = nl;
     for (;;) {
@@ -364,7 +415,7 @@ static int arith_decode(dec *d, arith *a, model *m)
         a->high = 2 * a->high + 1;
         a->value = 2 * a->value + arith_bit(d, a);
     }
-    model_update(m, k - 1);
+    model_update(d, m, k - 1);
     return m->lo + k - 1;
 }
 
@@ -700,16 +751,16 @@ static void intra_header(dec *d)
     int q = d->fap_quant ? d->fap_quant : 1;
     for (int i = 2; i < FBA_NFAP; i++) {
         if (!d->coded[i]) continue;
-        model_init(d, &d->lm[0][i], -(d->bound[1][i] / q), d->bound[0][i] / q);
-        model_init(d, &d->lm[1][i], -(d->bound[3][i] / q), d->bound[2][i] / q);
+        model_init(&d->lm[0][i], -(d->bound[1][i] / q), d->bound[0][i] / q);
+        model_init(&d->lm[1][i], -(d->bound[3][i] / q), d->bound[2][i] / q);
     }
     int B = d->fap_quant ? (63 + d->fap_quant / 2) / d->fap_quant : 63;
     static const int hl_max[HM_COUNT] = {14, 14, -1, 6, -1, 6, -1};
     for (int k = 0; k < HM_COUNT; k++) {
         if (!d->coded[k < HM_ES1 ? 0 : 1]) continue;
         int m = hl_max[k] < 0 ? B : hl_max[k];
-        model_init(d, &d->hm[0][k], 0, m);
-        model_init(d, &d->hm[1][k], -m, m);
+        model_init(&d->hm[0][k], 0, m);
+        model_init(&d->hm[1][k], -m, m);
     }
 }
 
@@ -910,8 +961,8 @@ int fba_decode(const uint8_t *data, size_t len, fba_result *res, fba_error *err)
         }
     }
     for (int t = 0; t < 2; t++) {
-        for (int i = 0; i < FBA_NFAP; i++) { free(d->lm[t][i].freq); free(d->lm[t][i].cum); }
-        for (int k = 0; k < HM_COUNT; k++) { free(d->hm[t][k].freq); free(d->hm[t][k].cum); }
+        for (int i = 0; i < FBA_NFAP; i++) { free(d->lm[t][i].freq); free(d->lm[t][i].tree); }
+        for (int k = 0; k < HM_COUNT; k++) { free(d->hm[t][k].freq); free(d->hm[t][k].tree); }
     }
     free(d->sc);
     if (ok) {
