@@ -11,13 +11,14 @@
  * does (spec notes §1 and §3, decisions D1-D9):
  *
  *   parse    the stream into planes (start code or not, every header field, the symbols of the
- *            viseme, expression and low-level blocks decoded with the adaptive models), as far as
- *            it decodes; what follows (an error, a DCT segment payload) is kept as raw bits;
+ *            viseme, expression and low-level blocks decoded with the adaptive models, a DCT
+ *            group's payload), as far as it decodes; what follows an error is kept as raw bits;
  *   mutate   that structure: a symbol value (its alphabet's ends, +/-1, random), a header field
  *            (frame rate, time code, skip count, fap_quant, masks, gender, min/max lists, the
  *            is_* flags, intra/predicted), whole planes (drop, duplicate, swap, start code on or
- *            off or changed to another code), the end code; crossover joins the planes of two
- *            streams;
+ *            off or changed to another code), the end code, a DCT group's events, DC, length and
+ *            high-level fields, many fields of one plane at an end at once; crossover joins the
+ *            planes of two streams;
  *   write    it back: every header field, every block re-encoded through the arithmetic coder with
  *            models evolving as the decoder's do, symbols kept inside the alphabet the (mutated)
  *            header gives them, next_start_code() stuffing recomputed, the raw tail appended.
@@ -26,7 +27,7 @@
  * symbol it affects; a mask change adds or drops symbols), and the decoder's deep code is reached.
  * A few mutations break one thing on purpose: a field written in place after the write (markers,
  * reserved values), a predicted high-level difference taken out of range, truncation at a
- * structure boundary. Not re-encoded: DCT segment payloads (kept as raw bits after their header). */
+ * structure boundary. */
 #include <stddef.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -50,6 +51,128 @@ static const int GROUP_SIZE[10] = {2, 16, 12, 8, 4, 5, 3, 10, 4, 4};
 static const int16_t IRANGE[NFAP] = {0, 0, 1080, 600, 1860, 600, 600, 600, 600, 1860, 1860, 600, 600, 600, 1080, 1080, 1080, 420, 1080, 1080, 600, 600, 1200, 1200, 900, 900, 600, 600, 420, 420, 900, 900, 900, 900, 900, 900, 900, 900, 900, 900, 600, 600, 1080, 1080, 1080, 1080, 1080, 1860, 1860, 1860, 600, 1860, 600, 600, 600, 600, 1860, 1860, 600, 600, 540, 540, 680, 900, 900, 900, 900, 900};
 static const int16_t PRANGE[NFAP] = {0, 0, 360, 180, 600, 180, 180, 180, 180, 600, 600, 180, 180, 180, 360, 360, 360, 180, 600, 600, 240, 240, 420, 420, 300, 300, 180, 180, 120, 120, 360, 360, 360, 360, 360, 360, 300, 300, 300, 300, 180, 180, 420, 420, 420, 420, 420, 600, 600, 600, 180, 600, 180, 180, 180, 180, 600, 600, 180, 180, 120, 120, 180, 180, 240, 240, 300, 300};
 static const int HL_MAX[NHM] = {14, 14, -1, 6, -1, 6, -1}; /* -1: the blend/intensity bound of fap_quant (D5) */
+
+/* The DCT segment mode's AC codewords, {run, |level|, length, code}: bitstreams/data/dct_provisional.toml
+ * [ac] (provisional: fbaconf's choice, not the normative table; tests/integration/test_fuzz_mutator.py
+ * holds this copy to the file). Escape: the 9-bit code, the run (4 bits), |level| (14 bits), the sign. */
+struct ac_code { uint8_t run, level, len; uint16_t code; };
+static const struct ac_code AC_TABLE[] = {
+  {0, 1, 2, 0x2},
+  {0, 2, 4, 0xc},
+  {0, 3, 5, 0x1a},
+  {1, 1, 5, 0x1b},
+  {0, 4, 6, 0x38},
+  {0, 5, 6, 0x39},
+  {0, 6, 7, 0x74},
+  {0, 7, 7, 0x75},
+  {0, 8, 7, 0x76},
+  {1, 2, 7, 0x77},
+  {2, 1, 7, 0x78},
+  {0, 9, 8, 0xf2},
+  {0, 10, 8, 0xf3},
+  {0, 11, 8, 0xf4},
+  {3, 1, 8, 0xf5},
+  {0, 12, 9, 0x1ed},
+  {0, 13, 9, 0x1ee},
+  {0, 14, 9, 0x1ef},
+  {0, 15, 9, 0x1f0},
+  {0, 16, 9, 0x1f1},
+  {1, 3, 9, 0x1f2},
+  {4, 1, 9, 0x1f3},
+  {0, 17, 10, 0x3e8},
+  {0, 18, 10, 0x3e9},
+  {0, 19, 10, 0x3ea},
+  {0, 20, 10, 0x3eb},
+  {0, 21, 10, 0x3ec},
+  {0, 22, 10, 0x3ed},
+  {0, 24, 10, 0x3ee},
+  {1, 4, 10, 0x3ef},
+  {5, 1, 10, 0x3f0},
+  {0, 23, 11, 0x7e2},
+  {0, 25, 11, 0x7e3},
+  {0, 26, 11, 0x7e4},
+  {0, 27, 11, 0x7e5},
+  {0, 28, 11, 0x7e6},
+  {0, 29, 11, 0x7e7},
+  {0, 30, 11, 0x7e8},
+  {0, 31, 11, 0x7e9},
+  {0, 35, 11, 0x7ea},
+  {1, 5, 11, 0x7eb},
+  {2, 2, 11, 0x7ec},
+  {6, 1, 11, 0x7ed},
+  {0, 32, 12, 0xfdc},
+  {0, 33, 12, 0xfdd},
+  {0, 34, 12, 0xfde},
+  {0, 36, 12, 0xfdf},
+  {0, 37, 12, 0xfe0},
+  {0, 38, 12, 0xfe1},
+  {0, 39, 12, 0xfe2},
+  {0, 40, 12, 0xfe3},
+  {0, 41, 12, 0xfe4},
+  {0, 42, 12, 0xfe5},
+  {0, 43, 12, 0xfe6},
+  {0, 44, 12, 0xfe7},
+  {0, 52, 12, 0xfe8},
+  {1, 6, 12, 0xfe9},
+  {1, 7, 12, 0xfea},
+  {2, 3, 12, 0xfeb},
+  {8, 1, 12, 0xfec},
+  {0, 45, 13, 0x1fda},
+  {0, 46, 13, 0x1fdb},
+  {0, 47, 13, 0x1fdc},
+  {0, 48, 13, 0x1fdd},
+  {0, 49, 13, 0x1fde},
+  {0, 50, 13, 0x1fdf},
+  {0, 51, 13, 0x1fe0},
+  {0, 53, 13, 0x1fe1},
+  {0, 54, 13, 0x1fe2},
+  {0, 55, 13, 0x1fe3},
+  {0, 56, 13, 0x1fe4},
+  {0, 57, 13, 0x1fe5},
+  {0, 59, 13, 0x1fe6},
+  {0, 60, 13, 0x1fe7},
+  {0, 61, 13, 0x1fe8},
+  {0, 62, 13, 0x1fe9},
+  {0, 65, 13, 0x1fea},
+  {0, 66, 13, 0x1feb},
+  {0, 70, 13, 0x1fec},
+  {0, 73, 13, 0x1fed},
+  {1, 8, 13, 0x1fee},
+  {1, 9, 13, 0x1fef},
+  {1, 10, 13, 0x1ff0},
+  {1, 11, 13, 0x1ff1},
+  {7, 1, 13, 0x1ff2},
+  {0, 58, 14, 0x3fe6},
+  {0, 63, 14, 0x3fe7},
+  {0, 67, 14, 0x3fe8},
+  {0, 68, 14, 0x3fe9},
+  {0, 69, 14, 0x3fea},
+  {0, 71, 14, 0x3feb},
+  {0, 72, 14, 0x3fec},
+  {0, 74, 14, 0x3fed},
+  {0, 75, 14, 0x3fee},
+  {0, 77, 14, 0x3fef},
+  {0, 79, 14, 0x3ff0},
+  {0, 80, 14, 0x3ff1},
+  {0, 82, 14, 0x3ff2},
+  {0, 83, 14, 0x3ff3},
+  {0, 84, 14, 0x3ff4},
+  {0, 86, 14, 0x3ff5},
+  {0, 87, 14, 0x3ff6},
+  {0, 93, 14, 0x3ff7},
+  {0, 94, 14, 0x3ff8},
+  {0, 95, 14, 0x3ff9},
+  {1, 12, 14, 0x3ffa},
+  {1, 14, 14, 0x3ffb},
+  {2, 4, 14, 0x3ffc},
+  {2, 5, 14, 0x3ffd},
+  {3, 2, 14, 0x3ffe},
+  {9, 1, 14, 0x3fff},
+};
+#define AC_ESCAPE_LEN 9
+#define AC_ESCAPE_CODE 0x1EC
+#define AC_MAX_LEVEL 16383
+#define DCT_LEN 16
 
 /* ---------------------------------------------------------------- random numbers */
 typedef struct { uint64_t s; } fba_rng;
@@ -77,7 +200,20 @@ typedef struct {
     /* the values its blocks code (intra: the value; predicted: the difference), in NSYM order */
     int32_t sym[NSYM];
     uint8_t vdef, initf, edef;
+    int32_t dct;                        /* a DCT plane group's payload: its index in the stream's pool, or -1 */
 } plane;
+
+/* A DCT plane group's payload (dct_provisional.toml): its length, the high-level fields of each frame
+ * (per pass, viseme then expression: a repeat flag and the fields as written, unsigned), and per FAP
+ * the DC value as coded (an intra group's level, a predicted one's difference) and the AC events. */
+typedef struct {
+    uint8_t len1;                       /* segment_length_minus1 */
+    uint8_t rep[2][DCT_LEN];            /* 1: the frame repeats the high-level values (not for an intra group's first) */
+    uint16_t hv[2][DCT_LEN][6];
+    int32_t dc[NFAP];
+    uint8_t nev[NFAP], run[NFAP][DCT_LEN - 1];
+    int16_t lev[NFAP][DCT_LEN - 1];
+} dctdata;
 
 typedef struct {
     plane *p;
@@ -86,7 +222,22 @@ typedef struct {
     int64_t post_bit, post_end; /* raw bits after the end code (of `tail`) */
     const uint8_t *tail;   /* raw bits kept after the planes: [tail_bit, tail_end) of `tail` */
     int64_t tail_bit, tail_end;
+    dctdata *dp;           /* the DCT payloads the planes point into */
+    size_t ndp, capdp;
 } stream;
+
+static int32_t add_dct(stream *st)
+{
+    if (st->ndp == st->capdp) {
+        size_t nc = st->capdp ? st->capdp * 2 : 4;
+        dctdata *nd = realloc(st->dp, nc * sizeof *nd);
+        if (!nd) return -1;
+        st->dp = nd;
+        st->capdp = nc;
+    }
+    memset(&st->dp[st->ndp], 0, sizeof *st->dp);
+    return (int32_t)st->ndp++;
+}
 
 static plane *add_plane(stream *st)
 {
@@ -100,6 +251,7 @@ static plane *add_plane(stream *st)
     }
     plane *p = &st->p[st->n];
     memset(p, 0, sizeof *p);
+    p->dct = -1;
     return p;
 }
 
@@ -381,8 +533,100 @@ static int at_data_end(const reader *r, int64_t p)
     return 1;
 }
 
+/* ---------------------------------------------------------------- DCT segment payloads */
+/* Payload bits carry the DCT mode's own emulation prevention: a '1' after every 22nd consecutive '0',
+ * the run counted from the last '1' of the stream (so it starts with the zeros before the payload). */
+typedef struct { reader *r; int zrun; } preader;
+
+static int pbit(preader *p)
+{
+    int b = (int)rbits(p->r, 1);
+    if (b) {
+        p->zrun = 0;
+    } else if (++p->zrun >= STUFF_RUN) {
+        if (!rbits(p->r, 1)) p->r->bad = 1;
+        p->zrun = 0;
+    }
+    return b;
+}
+
+static uint32_t pbits(preader *p, int n)
+{
+    uint32_t v = 0;
+    for (int i = 0; i < n; i++) v = (v << 1) | (uint32_t)pbit(p);
+    return v;
+}
+
+/* Signed Exp-Golomb of order k (v > 0 -> 2v-1, v <= 0 -> -2v); a prefix over 24 zeros is invalid. */
+static int32_t eg_read(preader *p, int k)
+{
+    int z = 0;
+    while (!p->r->bad && !pbit(p))
+        if (++z > 24) { p->r->bad = 1; return 0; }
+    int64_t n = ((int64_t)1 << (z + k)) + (int64_t)pbits(p, z + k) - ((int64_t)1 << k);
+    return (int32_t)((n & 1) ? (n + 1) / 2 : -(n / 2));
+}
+
+/* One AC event: 1 (run, level), 0 end of block, -1 no valid event. */
+static int ac_read(preader *p, int *run, int *level)
+{
+    uint32_t code = 0;
+    for (int len = 1; len <= 14 && !p->r->bad; len++) {
+        code = (code << 1) | (uint32_t)pbit(p);
+        if (len == 1 && code == 0) return 0;
+        if (len == AC_ESCAPE_LEN && code == AC_ESCAPE_CODE) {
+            *run = (int)pbits(p, 4);
+            *level = (int)pbits(p, 14);
+            if (pbit(p)) *level = -*level;
+            return *level ? 1 : -1;
+        }
+        for (size_t e = 0; e < sizeof AC_TABLE / sizeof *AC_TABLE; e++)
+            if (AC_TABLE[e].len == len && AC_TABLE[e].code == code) {
+                *run = AC_TABLE[e].run;
+                *level = pbit(p) ? -AC_TABLE[e].level : AC_TABLE[e].level;
+                return 1;
+            }
+    }
+    return -1;
+}
+
+/* The widths of a DCT group's high-level fields: [pass][first frame of an intra group], 0 ends. */
+static const uint8_t HL_WIDTH[2][2][6] = {{{5, 5, 7, 1}, {4, 4, 6, 1}}, {{4, 7, 4, 7, 1, 1}, {3, 6, 3, 6, 1, 1}}};
+
+/* A DCT plane group's payload; 0 when it reads as the decoder reads it. */
+static int read_dct(reader *r, const codec *c, int intra, dctdata *dd)
+{
+    preader p = {r, 0};
+    while (p.zrun < STUFF_RUN && r->pos - 1 - p.zrun >= 0 && !rbit(r, r->pos - 1 - p.zrun)) p.zrun++;
+    dd->len1 = (uint8_t)pbits(&p, 4);
+    for (int pass = 0; pass < 2; pass++) {
+        if (!c->coded[pass]) continue;
+        for (int j = 0; j <= dd->len1; j++) {
+            int first = intra && j == 0;
+            if (!first && (dd->rep[pass][j] = (uint8_t)pbit(&p))) continue;
+            for (int f = 0; f < 6 && HL_WIDTH[pass][first][f]; f++) dd->hv[pass][j][f] = (uint16_t)pbits(&p, HL_WIDTH[pass][first][f]);
+        }
+    }
+    for (int i = 2; i < NFAP && !r->bad; i++) {
+        if (!c->coded[i]) continue;
+        dd->dc[i] = eg_read(&p, intra ? 3 : 2);
+        int k = 1, n = 0, run, level, e;
+        while ((e = ac_read(&p, &run, &level)) > 0) {
+            k += run;
+            if (k > 15) return -1; /* run-overflow: the decoder's to judge; such a group is kept raw */
+            dd->run[i][n] = (uint8_t)run;
+            dd->lev[i][n++] = (int16_t)level;
+            k++;
+        }
+        if (e < 0) return -1;
+        dd->nev[i] = (uint8_t)n;
+    }
+    if (p.zrun >= 20 && !rbits(r, 1)) return -1; /* the final stuffing '1' */
+    return r->bad ? -1 : 0;
+}
+
 /* One plane from r->pos into p (its start code flags already set); 0 when it decoded. */
-static int read_plane(reader *r, codec *c, plane *p, const plane *period)
+static int read_plane(reader *r, codec *c, stream *st, plane *p, const plane *period)
 {
     p->intra = (uint8_t)rbits(r, 1);
     p->om = (uint8_t)rbits(r, 2);
@@ -444,7 +688,12 @@ static int read_plane(reader *r, codec *c, plane *p, const plane *period)
         if (r->bad || codec_intra(c, p)) return -1;
     }
     c->planes++;
-    if (c->coding) return 1; /* a DCT segment: its header is read, its payload stays raw */
+    if (c->coding) {
+        int32_t at = add_dct(st);
+        if (at < 0 || read_dct(r, c, p->intra, &st->dp[at])) return -1;
+        p->dct = at;
+        return 0;
+    }
     int t = p->intra ? 0 : 1;
     adec a;
     if (c->coded[0]) {
@@ -503,11 +752,9 @@ static int parse(const uint8_t *d, size_t n, stream *st)
         if (!p) { st->tail_bit = at; break; }
         p->sc = sc;
         p->sc_code = sc ? code : 0xBB;
-        int rc = read_plane(&r, c, p, period ? &st->p[period_at] : NULL);
-        if (rc < 0) { st->tail_bit = at; break; }
+        if (read_plane(&r, c, st, p, period ? &st->p[period_at] : NULL) < 0) { st->tail_bit = at; break; }
         if (p->intra) { period = p; period_at = st->n; }
         st->n++;
-        if (rc > 0) { st->tail_bit = r.pos; break; } /* the DCT payload and all after it, raw */
     }
     codec_free(c);
     free(c);
@@ -656,6 +903,84 @@ static void write_high(aenc *e, codec *c, const plane *p, int t, int exact, int 
     *e = (aenc){e->w, 0, TOP, 0, 0};
 }
 
+/* A DCT group's payload written as read_dct reads it (the zero run entering it counted back over
+ * what is written; a run or level out of range written as it is: the decoder judges it). */
+typedef struct { writer *w; int zrun; } pwriter;
+
+static void pwbit(pwriter *p, int b)
+{
+    wbit(p->w, b);
+    if (b) {
+        p->zrun = 0;
+    } else if (++p->zrun >= STUFF_RUN) {
+        wbit(p->w, 1);
+        p->zrun = 0;
+    }
+}
+
+static void pwbits(pwriter *p, uint64_t v, int n)
+{
+    for (int i = n - 1; i >= 0; i--) pwbit(p, (int)((v >> i) & 1));
+}
+
+static void eg_write(pwriter *p, int32_t v, int k)
+{
+    uint64_t m = (v > 0 ? 2 * (uint64_t)v - 1 : 2 * (uint64_t)(-(int64_t)v)) + ((uint64_t)1 << k);
+    int e = 0;
+    while (m >> (e + 1)) e++;
+    for (int z = e - k; z > 0; z--) pwbit(p, 0);
+    pwbit(p, 1);
+    pwbits(p, m - ((uint64_t)1 << e), e);
+}
+
+static void ac_write(pwriter *p, int run, int level)
+{
+    int a = level < 0 ? -level : level;
+    for (size_t e = 0; e < sizeof AC_TABLE / sizeof *AC_TABLE; e++)
+        if (AC_TABLE[e].run == run && AC_TABLE[e].level == a) {
+            pwbits(p, AC_TABLE[e].code, AC_TABLE[e].len);
+            pwbit(p, level < 0);
+            return;
+        }
+    pwbits(p, AC_ESCAPE_CODE, AC_ESCAPE_LEN);
+    pwbits(p, (uint32_t)run & 15, 4);
+    pwbits(p, (uint32_t)a & AC_MAX_LEVEL, 14);
+    pwbit(p, level < 0);
+}
+
+static void write_dct(writer *w, const codec *c, int intra, const dctdata *dd)
+{
+    pwriter p = {w, 0};
+    while (p.zrun < STUFF_RUN && w->pos - 1 - p.zrun >= 0) {
+        int64_t b = w->pos - 1 - p.zrun;
+        if ((w->d[b >> 3] >> (7 - (b & 7))) & 1) break;
+        p.zrun++;
+    }
+    pwbits(&p, dd->len1 & 15u, 4);
+    for (int pass = 0; pass < 2; pass++) {
+        if (!c->coded[pass]) continue;
+        for (int j = 0; j <= (dd->len1 & 15); j++) {
+            int first = intra && j == 0;
+            if (!first) {
+                pwbit(&p, dd->rep[pass][j]);
+                if (dd->rep[pass][j]) continue;
+            }
+            for (int f = 0; f < 6 && HL_WIDTH[pass][first][f]; f++) {
+                int width = HL_WIDTH[pass][first][f];
+                pwbits(&p, dd->hv[pass][j][f] & ((1u << width) - 1), width);
+            }
+        }
+    }
+    for (int i = 2; i < NFAP; i++) {
+        if (!c->coded[i]) continue;
+        note_cut(w);
+        eg_write(&p, dd->dc[i], intra ? 3 : 2);
+        for (int n = 0; n < dd->nev[i]; n++) ac_write(&p, dd->run[i][n], dd->lev[i][n]);
+        pwbit(&p, 0); /* end of block */
+    }
+    if (p.zrun >= 20) wbit(w, 1);
+}
+
 /* The stream written from its structure; `exact`: predicted high-level differences written as they
  * are (else kept so that the value they give stays in its range). */
 static void write_stream(const stream *st, writer *w, int exact)
@@ -709,7 +1034,11 @@ static void write_stream(const stream *st, writer *w, int exact)
         }
         c->planes++;
         note_cut(w);
-        if (c->coding) break; /* a DCT segment: its payload is the raw tail */
+        if (c->coding) { /* a plane that became a DCT group without a payload gets an empty one */
+            static const dctdata none;
+            write_dct(w, c, intra, p->dct >= 0 ? &st->dp[p->dct] : &none);
+            continue;
+        }
         int t = intra ? 0 : 1;
         aenc e = {w, 0, TOP, 0, 0};
         if (c->coded[0]) {
@@ -783,17 +1112,6 @@ static void alphabet(const stream *st, size_t k, int which, int32_t *lo, int32_t
     *hi = (intra ? b[0] : b[2]) / q;
 }
 
-static void mutate_symbol(stream *st, fba_rng *r)
-{
-    size_t k = below(r, (uint32_t)st->n);
-    plane *p = &st->p[k];
-    if (p->coding) return;
-    int which = (int)below(r, 10) < 3 ? (int)below(r, NHM) : NHM + (int)below(r, NFAP - 2);
-    int32_t lo, hi, *v = &p->sym[which];
-    alphabet(st, k, which, &lo, &hi);
-    *v = clampi(pick_value(r, lo, hi, *v), lo, hi);
-}
-
 /* A header field's new value: half the time any value of its width (fields are narrow: a 5-bit hour
  * is drawn uniformly), else an end or a neighbour of the old one. */
 static uint32_t pick_field(fba_rng *r, uint32_t top, uint32_t old)
@@ -807,12 +1125,95 @@ static uint32_t pick_field(fba_rng *r, uint32_t top, uint32_t old)
     }
 }
 
+/* The intra plane whose header plane k decodes under (the first plane is intra, D2). */
+static size_t period_of(const stream *st, size_t k)
+{
+    while (k > 0 && !st->p[k].intra) k--;
+    return k;
+}
+
+/* A FAP coded in plane k (10 draws; else any low-level FAP) */
+static int coded_fap(const stream *st, size_t k, fba_rng *r)
+{
+    const plane *ip = &st->p[period_of(st, k)];
+    int i = 2 + (int)below(r, NFAP - 2);
+    for (int n = 0; n < 10; n++, i = 2 + (int)below(r, NFAP - 2)) {
+        int g = 9;
+        while (GROUP_FIRST[g] > i) g--;
+        if (coded_in(ip, g, i)) break;
+    }
+    return i;
+}
+
+/* One thing of a DCT group's payload: an AC event's run (the largest that keeps the events inside
+ * coefficients 1-15 lands the last on 15), its level, an event added or dropped, the DC value, the
+ * segment length, a high-level field; rarely a run past coefficient 15. */
+static void mutate_dct(stream *st, fba_rng *r, plane *p, size_t k)
+{
+    if (p->dct < 0 && (p->dct = add_dct(st)) < 0) return;
+    dctdata *dd = &st->dp[p->dct];
+    int i = coded_fap(st, k, r), n = dd->nev[i], used = 0;
+    for (int e = 0; e < n; e++) used += dd->run[i][e] + 1;
+    int slack = 15 - used, e = n ? (int)below(r, (uint32_t)n) : 0;
+    switch (below(r, 8)) {
+    case 0:
+    case 1:
+        if (!n) break;
+        if (below(r, 8) == 0) dd->run[i][e] = (uint8_t)below(r, 16);
+        else dd->run[i][e] = (uint8_t)clampi(pick_value(r, 0, dd->run[i][e] + slack, dd->run[i][e]), 0, 15);
+        break;
+    case 2:
+        if (n) dd->lev[i][e] = (int16_t)clampi(pick_value(r, -AC_MAX_LEVEL, AC_MAX_LEVEL, dd->lev[i][e]), -AC_MAX_LEVEL, AC_MAX_LEVEL);
+        break;
+    case 3: /* an event added */
+        if (slack < 1) break;
+        e = (int)below(r, (uint32_t)n + 1);
+        memmove(&dd->run[i][e + 1], &dd->run[i][e], (size_t)(n - e));
+        memmove(&dd->lev[i][e + 1], &dd->lev[i][e], (size_t)(n - e) * sizeof **dd->lev);
+        dd->run[i][e] = (uint8_t)clampi(pick_value(r, 0, slack - 1, 0), 0, slack - 1);
+        dd->lev[i][e] = (int16_t)((below(r, 2) ? 1 : -1) * (int32_t)(1 + below(r, 40)));
+        dd->nev[i]++;
+        break;
+    case 4: /* an event dropped, or all */
+        if (!n) break;
+        if (below(r, 4) == 0) { dd->nev[i] = 0; break; }
+        memmove(&dd->run[i][e], &dd->run[i][e + 1], (size_t)(n - e - 1));
+        memmove(&dd->lev[i][e], &dd->lev[i][e + 1], (size_t)(n - e - 1) * sizeof **dd->lev);
+        dd->nev[i]--;
+        break;
+    case 5: dd->dc[i] = pick_value(r, -(1 << 21), 1 << 21, dd->dc[i]); break;
+    case 6: dd->len1 = (uint8_t)pick_field(r, 15, dd->len1); break;
+    default: {
+        int pass = (int)below(r, 2), j = (int)below(r, (uint32_t)(dd->len1 & 15) + 1), first = p->intra && j == 0;
+        int f = (int)below(r, pass ? 6 : 4), width = HL_WIDTH[pass][first][f];
+        if (!first && below(r, 3) == 0) dd->rep[pass][j] ^= 1;
+        else dd->hv[pass][j][f] = (uint16_t)pick_field(r, (1u << width) - 1, dd->hv[pass][j][f]);
+        break;
+    }
+    }
+}
+
+static void mutate_symbol(stream *st, fba_rng *r)
+{
+    size_t k = below(r, (uint32_t)st->n);
+    plane *p = &st->p[k];
+    if (st->p[period_of(st, k)].coding) {
+        mutate_dct(st, r, p, k);
+        return;
+    }
+    int which = (int)below(r, 10) < 3 ? (int)below(r, NHM) : NHM + (int)below(r, NFAP - 2);
+    int32_t lo, hi, *v = &p->sym[which];
+    alphabet(st, k, which, &lo, &hi);
+    *v = clampi(pick_value(r, lo, hi, *v), lo, hi);
+}
+
 static void mutate_header(stream *st, fba_rng *r)
 {
     /* the first plane a third of the time: where a decoder sets itself up (rate, period header, models) */
     plane *p = &st->p[below(r, 3) == 0 ? 0 : below(r, (uint32_t)st->n)];
     int i = 2 + (int)below(r, NFAP - 2);
-    switch (below(r, 18)) {
+    switch (below(r, 19)) {
+    case 18: p->coding ^= 1; break; /* arithmetic <-> DCT segments (a DCT group without a payload gets an empty one) */
     case 16: p->is_fr = 1; p->fr = 0; p->sec = 0; break; /* the zero rate (a division by it, a loop stepping by it) */
     case 17: p->is_tc = 1; p->h = (uint8_t)(23 + below(r, 9)); p->m = (uint8_t)(59 + below(r, 5)); p->s = (uint8_t)(59 + below(r, 5)); break;
     case 0: p->is_fr = 1; p->fr = (uint8_t)pick_field(r, 255, p->fr); break;
@@ -842,6 +1243,49 @@ static void mutate_header(stream *st, fba_rng *r)
     case 13: p->is_fr ^= 1; break;
     case 14: p->is_tc ^= 1; break;
     default: p->vdef ^= 1; p->initf = (uint8_t)below(r, 2); p->edef = (uint8_t)below(r, 2); break;
+    }
+}
+
+/* Many fields of one plane at an end at once, structure-level interesting values: a bug behind
+ * several conditions (a long block of extreme symbols and its stuffing, a list at its top at a coarse
+ * quantiser, an AC event on the last coefficient) lies where single mutations seldom meet. */
+static void mutate_extremes(stream *st, fba_rng *r)
+{
+    size_t k = below(r, (uint32_t)st->n);
+    plane *p = &st->p[k];
+    int top = (int)below(r, 2); /* all at the top, or all at the bottom; each part three times in four */
+    if (k > 0 && below(r, 2)) p->intra = 1; /* half the time a new period's header (a predicted plane keeps its period's) */
+    if (p->intra) {
+        if (below(r, 4)) p->q = top ? 31 : 1;
+        if (below(r, 4))
+            for (int g = 0; g < 10; g++) p->mtype[g] = 3; /* every FAP coded */
+        if (below(r, 4))
+            for (int l = 0; l < 4; l++) { /* every min/max list sent, each bound at 31 or 0 (x 60) */
+                p->lflag[l] = 1;
+                for (int i = 2; i < NFAP; i++) p->lval[l][i] = top ? 31 : 0;
+            }
+    }
+    if (st->p[period_of(st, k)].coding) { /* every FAP's last AC event on coefficient 15 */
+        if (p->dct < 0 && (p->dct = add_dct(st)) < 0) return;
+        dctdata *dd = &st->dp[p->dct];
+        for (int i = 2; i < NFAP; i++) {
+            int n = dd->nev[i], used = 0;
+            for (int e = 0; e < n; e++) used += dd->run[i][e] + 1;
+            if (n) {
+                dd->run[i][n - 1] = (uint8_t)clampi(dd->run[i][n - 1] + 15 - used, 0, 15);
+            } else {
+                dd->nev[i] = 1;
+                dd->run[i][0] = 14;
+            }
+            if (top) dd->lev[i][dd->nev[i] - 1] = AC_MAX_LEVEL;
+            else if (!dd->lev[i][dd->nev[i] - 1]) dd->lev[i][dd->nev[i] - 1] = 1;
+        }
+        return;
+    }
+    for (int which = 0; which < NSYM; which++) { /* every symbol at one end of its alphabet */
+        int32_t lo, hi;
+        alphabet(st, k, which, &lo, &hi);
+        p->sym[which] = top ? hi : lo;
     }
 }
 
@@ -892,7 +1336,11 @@ static size_t emit(const stream *st, uint8_t *out, size_t max, fba_rng *r, int e
     return n;
 }
 
-static void stream_free(stream *st) { free(st->p); }
+static void stream_free(stream *st)
+{
+    free(st->p);
+    free(st->dp);
+}
 
 /* One structure-aware mutation of data[0, size) in place (at most max_size bytes); the new size. */
 size_t fba_mutate(uint8_t *data, size_t size, size_t max_size, unsigned int seed)
@@ -909,7 +1357,7 @@ size_t fba_mutate(uint8_t *data, size_t size, size_t max_size, unsigned int seed
     if (!src || !out) { free(src); free(out); stream_free(&st); return size; }
     memcpy(src, data, size);
     st.tail = src;
-    uint32_t op = below(&r, 20);
+    uint32_t op = below(&r, 21);
     int exact = 0, raw_op = 0;
     if (op < 8) {
         for (uint32_t k = 1 + (below(&r, 4) == 0 ? below(&r, 4) : 0); k > 0; k--) mutate_symbol(&st, &r);
@@ -922,6 +1370,8 @@ size_t fba_mutate(uint8_t *data, size_t size, size_t max_size, unsigned int seed
         raw_op = 1;
     } else if (op < 19) {
         raw_op = 2;
+    } else if (op < 20) {
+        mutate_extremes(&st, &r);
     } else {
         plane *p = &st.p[below(&r, (uint32_t)st.n)]; /* another start code where a plane's is */
         p->sc = 1;
@@ -981,6 +1431,11 @@ size_t fba_cross(const uint8_t *a, size_t na, const uint8_t *b, size_t nb, uint8
             plane *p = add_plane(&sa);
             if (!p) break;
             *p = sb.p[from + k];
+            if (p->dct >= 0) { /* its payload moves into a's pool */
+                int32_t at = add_dct(&sa);
+                if (at >= 0) sa.dp[at] = sb.dp[p->dct];
+                p->dct = at;
+            }
             sa.n++;
         }
         sa.tail = sb.tail;
@@ -1037,15 +1492,19 @@ size_t afl_custom_fuzz(void *data, uint8_t *buf, size_t buf_size, uint8_t **out_
         m->buf = nb;
         m->cap = max_size;
     }
-    unsigned int seed = fba_rand(&m->r);
+    /* AFL++ mutates each queue entry afresh (libFuzzer stacks up to five mutations on one input), and a
+     * bug behind two steps (a plane made predicted, then its symbol at an end) needs both at once: 1, 2
+     * or 4 mutations stacked, after a crossover with another queue entry one time in eight */
+    unsigned int seed = fba_rand(&m->r), k = 1u << (seed >> 8) % 3;
     size_t n;
     if (add_buf && add_buf_size && seed % 8 == 0) {
         n = fba_cross(buf, buf_size, add_buf, add_buf_size, m->buf, max_size, seed);
+        k--;
     } else {
         n = buf_size < max_size ? buf_size : max_size;
         memcpy(m->buf, buf, n);
-        n = fba_mutate(m->buf, n, max_size, seed);
     }
+    for (; k > 0; k--) n = fba_mutate(m->buf, n, max_size, fba_rand(&m->r));
     *out_buf = m->buf;
     return n;
 }
