@@ -8,13 +8,13 @@ conformance suites' streams), every build with ASan.
                                          [--engines E,E,...] [--json FILE]
 
 Engines: ``fbaconf-persistent`` (fbadec's ``--serve``), ``fbaconf-fork-server``, ``fbaconf-spawn``
-(``fbaconf fuzz`` in each mode), ``aflpp`` (afl-fuzz on an ``AFL_USE_ASAN`` build of fbadec's
-command line), ``libfuzzer`` (clang ``-fsanitize=fuzzer,address,undefined`` on
-``fuzz_target_fbadec.c``), and ``aflpp+fbaconf-mutator`` / ``libfuzzer+fbaconf-mutator`` (the same
-with fbaconf's structure-aware mutator, ``fba_mutator.c`` of the export: linked into the libFuzzer
-target, loaded by AFL++ as its custom mutator). An engine that is not installed is reported with
-its install line. A bug that a seed already triggers is reported as such and not scored (it measures
-nothing about fuzzing).
+(``fbaconf fuzz`` in each mode), ``aflpp`` (afl-fuzz in persistent mode on an ``AFL_USE_ASAN`` build
+of ``fuzz_target_fbadec.c`` by ``afl-clang-fast -fsanitize=fuzzer``), ``libfuzzer`` (clang
+``-fsanitize=fuzzer,address,undefined`` on ``fuzz_target_fbadec.c``), and ``aflpp+fbaconf-mutator``
+/ ``libfuzzer+fbaconf-mutator`` (the same with fbaconf's structure-aware mutator, ``fba_mutator.c``
+of the export: linked into the libFuzzer target, loaded by AFL++ as its custom mutator). An engine
+that is not installed is reported with its install line. A bug that a seed already triggers is
+reported as such and not scored (it measures nothing about fuzzing).
 
 Prints one table (bug x engine: found/trials, median seconds to the bug, execs/s) and, with
 ``--json``, ``{"bugs": {NAME: {ENGINE: {"found", "trials", "median_s", "execs_per_s"}}}}``.
@@ -88,7 +88,7 @@ def have(tool: str) -> bool:
 
 def unavailable(engine: str) -> str | None:
     engine = engine.removesuffix("+fbaconf-mutator")
-    if engine == "aflpp" and not (have("afl-fuzz") and have("afl-cc")):
+    if engine == "aflpp" and not (have("afl-fuzz") and have("afl-clang-fast")):
         return f"not installed: {INSTALL['aflpp']}"
     if engine == "libfuzzer" and not have("clang"):
         return f"not installed: {INSTALL['libfuzzer']}"
@@ -117,14 +117,17 @@ def build(bug: Path, work: Path, export: Path, engines: list[str]) -> dict[str, 
     # to see the planted store in the other builds, names only a line)
     _cc([cc, "-O1", "-g", "-fsanitize=address", "-o", str(work / "judge"), *files])
     out["judge"] = work / "judge"
+    target = [str(export / "fuzz_target_fbadec.c"), str(src / "fbadec.c")]
     if any(e.startswith("aflpp") for e in engines):
+        # the libFuzzer target in AFL++'s persistent mode (afl-clang-fast links its libFuzzer driver):
+        # AFL++'s recommended form for a decoding function, one process for many inputs
         env = dict(os.environ, AFL_USE_ASAN="1", AFL_QUIET="1")
-        _cc(["afl-cc", "-g", "-O1", "-o", str(work / "fbadec-afl"), *files], env=env)
+        afl = ["afl-clang-fast", "-g", "-O1", "-fsanitize=fuzzer", "-I", str(src), "-o", str(work / "fbadec-afl")]
+        _cc([*afl, *target], env=env)
         out["aflpp"] = work / "fbadec-afl"
     if "aflpp+fbaconf-mutator" in engines:
         _cc([cc, "-O2", "-shared", "-fPIC", "-DFBA_AFL", str(export / "fba_mutator.c"), "-o", str(work / "m.so")])
         out["mutator.so"] = work / "m.so"
-    target = [str(export / "fuzz_target_fbadec.c"), str(src / "fbadec.c")]
     flags = ["clang", "-g", "-O1", "-fsanitize=fuzzer,address,undefined", "-I", str(src)]
     if "libfuzzer" in engines:
         _cc([*flags, "-o", str(work / "fz"), *target])
@@ -194,7 +197,7 @@ def run_aflpp(
         **({"AFL_CUSTOM_MUTATOR_LIBRARY": str(mutator)} if mutator else {}),
     )
     argv = ["afl-fuzz", "-i", str(export / "corpus"), "-o", str(out), "-x", str(export / "fba.dict")]
-    argv += ["-t", "1000+", "-V", str(int(budget)), "-s", str(seed), "--", str(binary), "@@", os.devnull]
+    argv += ["-t", "1000+", "-V", str(int(budget)), "-s", str(seed), "--", str(binary)]
     t0 = time.time()
     sh(argv, env=env, timeout=budget + 120)
     stats = _afl_stats(out / "default" / "fuzzer_stats")

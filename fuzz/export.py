@@ -150,17 +150,19 @@ folder of their own (`new/`, `findings/`), never into `corpus/`.
 # libFuzzer (clang): ASan + UBSan; 10 s per input at most
 clang -g -O1 -fsanitize=fuzzer,address,undefined fuzz_target.c your_decoder.c -o fba_fuzzer
 mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -artifact_prefix=new/ new corpus
-# AFL++: ASan build of your command-line decoder (DECODER IN OUT); -t 1000+: 1 s per input, a seed
-# that takes longer is skipped instead of ending the dry run
-AFL_USE_ASAN=1 afl-cc -g -O1 your_decoder_main.c your_decoder.c -o decoder-afl
-afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ -- ./decoder-afl @@ /dev/null
+# AFL++: the same target in AFL++'s persistent mode (afl-clang-fast links its libFuzzer driver),
+# ASan; -t 1000+: 1 s per input, a seed that takes longer is skipped instead of ending the dry run
+AFL_USE_ASAN=1 afl-clang-fast -g -O1 -fsanitize=fuzzer fuzz_target.c your_decoder.c -o decoder-afl
+afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ -- ./decoder-afl
+# a decoder with only a command line (DECODER IN OUT): a fork per input, about a tenth the speed
+AFL_USE_ASAN=1 afl-cc -g -O1 your_decoder_main.c your_decoder.c -o decoder-afl-cli
+afl-fuzz -i corpus -o findings-cli -x fba.dict -t 1000+ -- ./decoder-afl-cli @@ /dev/null
 # with fbaconf's structure-aware mutator: libFuzzer links it in (built on its own: not instrumented,
 # its branches are no coverage of your decoder), AFL++ loads it
 clang -O2 -c -DFBA_LIBFUZZER fba_mutator.c -o fba_mutator.o
 clang -g -O1 -fsanitize=fuzzer,address,undefined fuzz_target.c fba_mutator.o your_decoder.c -o fba_fuzzer
 cc -O2 -shared -fPIC -DFBA_AFL fba_mutator.c -o fba_mutator.so
-AFL_CUSTOM_MUTATOR_LIBRARY=./fba_mutator.so afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ \\
-  -- ./decoder-afl @@ /dev/null
+AFL_CUSTOM_MUTATOR_LIBRARY=./fba_mutator.so afl-fuzz -i corpus -o findings -x fba.dict -t 1000+ -- ./decoder-afl
 ```
 
 A crash file of either is classified, minimised (as `fbaconf fuzz` minimises its own findings)

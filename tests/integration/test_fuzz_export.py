@@ -152,13 +152,13 @@ def test_the_documented_engine_lines_build_and_start(tmp_path, exported):
     bug's patch, both sanitizer builds (on the module's export: the export line is test_cli_export's);
     each engine started on the exported seeds for a few inputs (the 60 s hunt itself is measured, not
     tested: docs/fuzzing.md gives its numbers)."""
-    if not (shutil.which("clang") and shutil.which("afl-cc") and shutil.which("afl-fuzz")):
+    if not (shutil.which("clang") and shutil.which("afl-clang-fast") and shutil.which("afl-fuzz")):
         pytest.skip("clang and afl++ not installed (apt-get install -y clang afl++)")
     root = Path(__file__).resolve().parents[2]
     for rel in ("examples/fbadec", "benchmarks/fuzz_bugs"):
         shutil.copytree(root / rel, tmp_path / rel, ignore=shutil.ignore_patterns("fbadec", "fbadec-asan"))
     lines = _documented_lines()
-    assert len(lines) == 6, lines  # export, patch, clang build, libFuzzer run, afl-cc build, afl-fuzz run
+    assert len(lines) == 6, lines  # export, patch, clang build, libFuzzer run, afl-clang-fast build, afl-fuzz run
     assert lines[0] == "fbaconf fuzz export fba-fuzz"  # run by test_cli_export; its output is the module's
     shutil.copytree(exported[0], tmp_path / "fba-fuzz")
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
