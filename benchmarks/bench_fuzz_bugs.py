@@ -16,8 +16,10 @@ of the export: linked into the libFuzzer target, loaded by AFL++ as its custom m
 that is not installed is reported with its install line. A bug that a seed already triggers is
 reported as such and not scored (it measures nothing about fuzzing).
 
-Prints one table (bug x engine: found/trials, median seconds to the bug, execs/s) and, with
-``--json``, ``{"bugs": {NAME: {ENGINE: {"found", "trials", "median_s", "execs_per_s"}}}}``.
+Prints one table (bug x engine: found/trials, median seconds to the bug, execs/s), then each
+engine's inputs/s over one budget on fbadec without a bug (``--no-throughput``: not measured) and,
+with ``--json``, ``{"bugs": {NAME: {ENGINE: {"found", "trials", "median_s", "execs_per_s"}}},
+"throughput": {ENGINE: execs/s}}``.
 """
 
 from __future__ import annotations
@@ -95,13 +97,13 @@ def unavailable(engine: str) -> str | None:
     return None
 
 
-def build(bug: Path, work: Path, export: Path, engines: list[str]) -> dict[str, Path]:
-    """The bug's fbadec (a patched copy) built for each engine that will run; a build that fails
-    raises with the compiler's words."""
+def build(bug: Path | None, work: Path, export: Path, engines: list[str]) -> dict[str, Path]:
+    """The bug's fbadec (a patched copy; None: fbadec as it is) built for each engine that will run;
+    a build that fails raises with the compiler's words."""
     src = work / "src"
     shutil.copytree(FBADEC, src, ignore=shutil.ignore_patterns("fbadec", "fbadec-asan", "*.o"))
-    p = sh(["patch", "-s", "-p1", "-d", str(src), "-i", str(bug)])
-    if p.returncode:
+    p = sh(["patch", "-s", "-p1", "-d", str(src), "-i", str(bug)]) if bug is not None else None
+    if p is not None and p.returncode:
         raise RuntimeError(f"{bug.name}: the patch does not apply: {p.stdout}{p.stderr}")
     out: dict[str, Path] = {}
     cc = os.environ.get("CC", "cc")
@@ -156,6 +158,15 @@ def planted(judge: Path, crash: Path) -> bool:
 def seed_triggers(judge: Path, seeds: list[Path]) -> str | None:
     """The first seed on which the ASan build reports the planted bug, if any."""
     return next((s.name for s in seeds if planted(judge, s)), None)
+
+
+def run_trial(engine: str, built: dict[str, Path], export: Path, budget: float, seed: int, work: Path) -> Trial:
+    if engine.startswith("fbaconf-"):
+        return run_fbaconf(engine.removeprefix("fbaconf-"), built, export, budget, seed, work)
+    if engine.startswith("aflpp"):
+        mutator = built.get("mutator.so") if "+" in engine else None
+        return run_aflpp(built["aflpp"], built["judge"], export, budget, seed, work, mutator)
+    return run_libfuzzer(built[engine], built["judge"], export, budget, seed, work)
 
 
 def run_fbaconf(mode: str, built: dict[str, Path], export: Path, budget: float, seed: int, work: Path) -> Trial:
@@ -241,15 +252,19 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--bug", action="append", type=Path, default=[], help="a patch of examples/fbadec/fbadec.c")
     ap.add_argument("--budget", type=float, default=60.0, help="seconds per trial (default 60)")
-    ap.add_argument("--trials", type=int, default=3, help="trials per bug and engine, seeds 0..N-1 (default 3)")
+    ap.add_argument("--trials", type=int, default=3, help="trials per bug and engine (default 3; 0: no bug)")
     ap.add_argument("--engines", default=",".join(ENGINES), help="comma-separated (default: all)")
     ap.add_argument("--json", type=Path, help="write the results here")
+    ap.add_argument(
+        "--throughput", action=argparse.BooleanOptionalAction, default=True,
+        help="also run each engine one budget on fbadec without a bug for its inputs/s (default on)",
+    )  # fmt: skip
     a = ap.parse_args()
     engines = [e.strip() for e in a.engines.split(",") if e.strip()]
     bad = [e for e in engines if e not in ENGINES]
     if bad:
         ap.error(f"unknown engine(s) {bad}; known: {', '.join(ENGINES)}")
-    bugs = [b.resolve() for b in a.bug] or sorted(BUGS.glob("*.patch"))
+    bugs = ([b.resolve() for b in a.bug] or sorted(BUGS.glob("*.patch"))) if a.trials > 0 else []  # 0: inputs/s only
     notes = {e: why for e in engines if (why := unavailable(e))}
     runnable = [e for e in engines if e not in notes]
     results: dict[str, dict[str, dict]] = {}
@@ -280,23 +295,7 @@ def main() -> int:
                     row[engine] = {"found": 0, "trials": 0, "median_s": None, "execs_per_s": None}
                     row[engine]["note"] = notes[engine]
                     continue
-                trials = []
-                for s in range(a.trials):
-                    if engine.startswith("fbaconf-"):
-                        t = run_fbaconf(engine.removeprefix("fbaconf-"), built, export, a.budget, s, work)
-                    elif engine.startswith("aflpp"):
-                        t = run_aflpp(
-                            built["aflpp"],
-                            built["judge"],
-                            export,
-                            a.budget,
-                            s,
-                            work,
-                            built.get("mutator.so") if "+" in engine else None,
-                        )
-                    else:
-                        t = run_libfuzzer(built[engine], built["judge"], export, a.budget, s, work)
-                    trials.append(t)
+                trials = [run_trial(engine, built, export, a.budget, s, work) for s in range(a.trials)]
                 times = [t.seconds if t.found and t.seconds is not None else a.budget * 2 for t in trials]
                 found = sum(t.found for t in trials)
                 rates = [t.execs_per_s for t in trials if t.execs_per_s]
@@ -309,11 +308,24 @@ def main() -> int:
                 }
             results[name] = row
             print(_row(name, row, engines), flush=True)
+        rates: dict[str, float | None] = {}
+        if a.throughput:
+            # inputs/s on the parser itself (fbadec without a bug), a whole budget each: a trial that
+            # finds its bug at once is mostly the engine's start and says little about its speed
+            work = Path(tmp) / "no-bug"
+            work.mkdir()
+            built = build(None, work, export, runnable)
+            rates = {e: run_trial(e, built, export, a.budget, 0, work).execs_per_s for e in runnable}
+            base = rates.get("fbaconf-persistent")
+            print(f"inputs/s on fbadec without a bug ({a.budget:g} s each):")
+            for e, r in rates.items():
+                ratio = f"  ({r / base:.1f}x fbaconf-persistent)" if r and base and e != "fbaconf-persistent" else ""
+                print(f"  {e:28s} {r:9,.0f}{ratio}" if r else f"  {e:28s} -")
     print(f"budget {a.budget:g} s x {a.trials} trial(s); wall {time.perf_counter() - t_all:.0f} s")
     for e, why in notes.items():
         print(f"{e}: {why}")
     if a.json:
-        a.json.write_text(json.dumps({"bugs": results}, indent=1) + "\n")
+        a.json.write_text(json.dumps({"bugs": results, "throughput": rates}, indent=1) + "\n")
     return 0
 
 
