@@ -189,7 +189,8 @@ int main(int argc, char **argv)
     for (int i = 1; i < argc && n < 64; i++) {
         FILE *f = fopen(argv[i], "rb");
         if (!f) return 2;
-        len[n++] = fread(buf[n], 1, sizeof buf[0], f);
+        len[n] = fread(buf[n], 1, sizeof buf[0], f);
+        n++;
         fclose(f);
     }
     unsigned s = 1;
