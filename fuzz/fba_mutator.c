@@ -637,6 +637,7 @@ static int read_plane(reader *r, codec *c, stream *st, plane *p, const plane *pe
         memcpy(p->mbit, period->mbit, sizeof p->mbit);
         memcpy(p->lval, period->lval, sizeof p->lval);
         p->gender = period->gender;
+        p->coding = period->coding;
     }
     p->fr = 25;
     if (p->intra) {
