@@ -28,12 +28,11 @@ import shutil
 from pathlib import Path
 
 from .choosers import RandomChooser
-from .corpus import conformance_seeds, short_prefixes
+from .corpus import STRESS_BYTES, conformance_seeds, short_prefixes
 from .inputs import Entry, gen_valid
 from .model import DICTIONARY, features_of
 
 MUTATOR_C = Path(__file__).with_name("fba_mutator.c")  # the structure-aware mutator, in C
-STRESS_BYTES = 8192  # a longer seed is thousands of frames: seconds per input under ASan
 MAX_SEEDS = 200  # AFL++ warns of "far too many input files" above this; libFuzzer reads them all first
 
 # Byte sequences worth splicing in, beyond the start codes of the syntax model's dictionary:
