@@ -1088,12 +1088,41 @@ static int32_t pick_value(fba_rng *r, int32_t lo, int32_t hi, int32_t old)
     }
 }
 
+/* The intra plane whose header plane k decodes under (the first plane is intra, D2). */
+static size_t period_of(const stream *st, size_t k)
+{
+    while (k > 0 && !st->p[k].intra) k--;
+    return k;
+}
+
+/* The group of low-level FAP i (0-based). */
+static int group_of(int i)
+{
+    int g = 9;
+    while (GROUP_FIRST[g] > i) g--;
+    return g;
+}
+
+/* Coefficients FAP i's AC events take in a DCT group (each its run of zeros and itself); at most 15. */
+static int ac_used(const dctdata *dd, int i)
+{
+    int used = 0;
+    for (int e = 0; e < dd->nev[i]; e++) used += dd->run[i][e] + 1;
+    return used;
+}
+
+/* Plane p's DCT payload, an empty one made for a plane that has none; NULL out of memory. */
+static dctdata *dct_of(stream *st, plane *p)
+{
+    if (p->dct < 0 && (p->dct = add_dct(st)) < 0) return NULL;
+    return &st->dp[p->dct];
+}
+
 /* The alphabet of the symbol `which` of plane k (0..2 viseme, 3..6 expression, 7+ low-level FAP
  * which-7+2), from the header in force there. */
 static void alphabet(const stream *st, size_t k, int which, int32_t *lo, int32_t *hi)
 {
-    size_t pi = k;
-    while (pi > 0 && !st->p[pi].intra) pi--;
+    size_t pi = period_of(st, k);
     const plane *ip = &st->p[pi];
     int intra = st->p[k].intra, q = ip->q ? ip->q : 1, B = blend_max(ip->q);
     if (which < NHM) {
@@ -1126,23 +1155,12 @@ static uint32_t pick_field(fba_rng *r, uint32_t top, uint32_t old)
     }
 }
 
-/* The intra plane whose header plane k decodes under (the first plane is intra, D2). */
-static size_t period_of(const stream *st, size_t k)
-{
-    while (k > 0 && !st->p[k].intra) k--;
-    return k;
-}
-
 /* A FAP coded in plane k (10 draws; else any low-level FAP) */
 static int coded_fap(const stream *st, size_t k, fba_rng *r)
 {
     const plane *ip = &st->p[period_of(st, k)];
     int i = 2 + (int)below(r, NFAP - 2);
-    for (int n = 0; n < 10; n++, i = 2 + (int)below(r, NFAP - 2)) {
-        int g = 9;
-        while (GROUP_FIRST[g] > i) g--;
-        if (coded_in(ip, g, i)) break;
-    }
+    for (int n = 0; n < 10 && !coded_in(ip, group_of(i), i); n++) i = 2 + (int)below(r, NFAP - 2);
     return i;
 }
 
@@ -1151,11 +1169,9 @@ static int coded_fap(const stream *st, size_t k, fba_rng *r)
  * segment length, a high-level field; rarely a run past coefficient 15. */
 static void mutate_dct(stream *st, fba_rng *r, plane *p, size_t k)
 {
-    if (p->dct < 0 && (p->dct = add_dct(st)) < 0) return;
-    dctdata *dd = &st->dp[p->dct];
-    int i = coded_fap(st, k, r), n = dd->nev[i], used = 0;
-    for (int e = 0; e < n; e++) used += dd->run[i][e] + 1;
-    int slack = 15 - used, e = n ? (int)below(r, (uint32_t)n) : 0;
+    dctdata *dd = dct_of(st, p);
+    if (!dd) return;
+    int i = coded_fap(st, k, r), n = dd->nev[i], slack = 15 - ac_used(dd, i), e = n ? (int)below(r, (uint32_t)n) : 0;
     switch (below(r, 8)) {
     case 0:
     case 1:
@@ -1231,8 +1247,7 @@ static void mutate_header(stream *st, fba_rng *r)
     case 6: p->q = (uint8_t)pick_field(r, 31, p->q); break;
     case 7: { int g = (int)below(r, 10); p->mtype[g] = (uint8_t)below(r, 4); break; }
     case 8: { /* a FAP in or out of the mask (its group's mask then lists FAPs one by one) */
-        int g = 9;
-        while (GROUP_FIRST[g] > i) g--;
+        int g = group_of(i);
         if (p->mtype[g] == 0 || p->mtype[g] == 3) p->mtype[g] = 1;
         p->mbit[i] ^= 1;
         break;
@@ -1267,13 +1282,12 @@ static void mutate_extremes(stream *st, fba_rng *r)
             }
     }
     if (st->p[period_of(st, k)].coding) { /* every FAP's last AC event on coefficient 15 */
-        if (p->dct < 0 && (p->dct = add_dct(st)) < 0) return;
-        dctdata *dd = &st->dp[p->dct];
+        dctdata *dd = dct_of(st, p);
+        if (!dd) return;
         for (int i = 2; i < NFAP; i++) {
-            int n = dd->nev[i], used = 0;
-            for (int e = 0; e < n; e++) used += dd->run[i][e] + 1;
+            int n = dd->nev[i];
             if (n) {
-                dd->run[i][n - 1] = (uint8_t)clampi(dd->run[i][n - 1] + 15 - used, 0, 15);
+                dd->run[i][n - 1] = (uint8_t)clampi(dd->run[i][n - 1] + 15 - ac_used(dd, i), 0, 15);
             } else {
                 dd->nev[i] = 1;
                 dd->run[i][0] = 14;
