@@ -239,6 +239,19 @@ static int32_t add_dct(stream *st)
     return (int32_t)st->ndp++;
 }
 
+/* The stream as a fresh one (all zero), keeping its tables of planes and DCT payloads. */
+static void stream_clear(stream *st)
+{
+    plane *p = st->p;
+    dctdata *dp = st->dp;
+    size_t cap = st->cap, capdp = st->capdp;
+    memset(st, 0, sizeof *st);
+    st->p = p;
+    st->cap = cap;
+    st->dp = dp;
+    st->capdp = capdp;
+}
+
 static plane *add_plane(stream *st)
 {
     if (st->n == st->cap) {
@@ -381,12 +394,27 @@ static void codec_reset(codec *c)
     c->q = 0;
 }
 
-static void codec_free(codec *c)
+/* The codec as a fresh one (all zero), keeping each model's tables for the next stream: a model
+ * fills them before it reads them (at its second update). */
+static void codec_clear(codec *c)
 {
+    model lm[2][NFAP], hm[2][NHM];
+    memcpy(lm, c->lm, sizeof lm);
+    memcpy(hm, c->hm, sizeof hm);
+    memset(c, 0, sizeof *c);
     for (int t = 0; t < 2; t++) {
-        for (int i = 0; i < NFAP; i++) { free(c->lm[t][i].freq); free(c->lm[t][i].tree); }
-        for (int k = 0; k < NHM; k++) { free(c->hm[t][k].freq); free(c->hm[t][k].tree); }
+        for (int i = 0; i < NFAP; i++) {
+            c->lm[t][i].freq = lm[t][i].freq;
+            c->lm[t][i].tree = lm[t][i].tree;
+            c->lm[t][i].cap = lm[t][i].cap;
+        }
+        for (int k = 0; k < NHM; k++) {
+            c->hm[t][k].freq = hm[t][k].freq;
+            c->hm[t][k].tree = hm[t][k].tree;
+            c->hm[t][k].cap = hm[t][k].cap;
+        }
     }
+    codec_reset(c);
 }
 
 static int blend_max(int q) { return q ? (63 + q / 2) / q : 63; }
@@ -718,14 +746,12 @@ static int read_plane(reader *r, codec *c, stream *st, plane *p, const plane *pe
 }
 
 /* The stream's structure; 0 when it is not a face object stream at all. */
-static int parse(const uint8_t *d, size_t n, stream *st)
+static int parse(const uint8_t *d, size_t n, stream *st, codec *c)
 {
-    memset(st, 0, sizeof *st);
+    stream_clear(st);
     if (n < 4 || !is_prefix(d, n, 0) || d[3] != 0xBA) return 0;
     reader r = {d, (int64_t)n * 8, 32, 0};
-    codec *c = calloc(1, sizeof *c);
-    if (!c) return 0;
-    codec_reset(c);
+    codec_clear(c);
     const plane *period = NULL;
     size_t period_at = 0;
     st->tail = d;
@@ -757,8 +783,6 @@ static int parse(const uint8_t *d, size_t n, stream *st)
         if (p->intra) { period = p; period_at = st->n; }
         st->n++;
     }
-    codec_free(c);
-    free(c);
     return 1;
 }
 
@@ -984,11 +1008,9 @@ static void write_dct(writer *w, const codec *c, int intra, const dctdata *dd)
 
 /* The stream written from its structure; `exact`: predicted high-level differences written as they
  * are (else kept so that the value they give stays in its range). */
-static void write_stream(const stream *st, writer *w, int exact)
+static void write_stream(const stream *st, writer *w, int exact, codec *c)
 {
-    codec *c = calloc(1, sizeof *c);
-    if (!c) { w->full = 1; return; }
-    codec_reset(c);
+    codec_clear(c);
     wbits(w, 0x000001BAu, 32);
     for (size_t k = 0; k < st->n && !w->full; k++) {
         const plane *p = &st->p[k];
@@ -1056,8 +1078,6 @@ static void write_stream(const stream *st, writer *w, int exact)
             if (c->coded[i]) aencode(&e, &c->lm[t][i], p->sym[NHM + i - 2]);
         aflush(&e);
     }
-    codec_free(c);
-    free(c);
     for (int64_t b = st->tail_bit; b < st->tail_end && !w->full; b++) /* the raw tail */
         wbit(w, (st->tail[b >> 3] >> (7 - (b & 7))) & 1);
     if (st->end_code && st->tail_bit == st->tail_end) {
@@ -1066,13 +1086,6 @@ static void write_stream(const stream *st, writer *w, int exact)
             wbit(w, (st->tail[b >> 3] >> (7 - (b & 7))) & 1);
     }
     while (w->pos & 7) wbit(w, 0);
-}
-
-static void writer_free(writer *w)
-{
-    free(w->fbit);
-    free(w->fw);
-    free(w->cut);
 }
 
 /* ---------------------------------------------------------------- mutations */
@@ -1328,10 +1341,52 @@ static void mutate_planes(stream *st, fba_rng *r)
     }
 }
 
-static size_t emit(const stream *st, uint8_t *out, size_t max, fba_rng *r, int exact, int raw_op)
+/* ---------------------------------------------------------------- working memory */
+/* What a call needs is kept for the next call of its thread: two streams' tables, the codec (a
+ * parse's, then a write's), the writer's notes and the byte buffers. A fuzzer calls the mutator
+ * thousands of times a second, and in a sanitizer build (a libFuzzer target: the mutator's
+ * allocations go through ASan's allocator, whose quarantine holds freed memory back) fresh tables on
+ * every call touched fresh pages: 16 % of a libFuzzer run went to page faults. */
+typedef struct {
+    stream s[2];
+    codec c;
+    uint8_t *src, *out;
+    size_t capsrc, capout;
+    int64_t *fbit, *cut;
+    uint8_t *fw;
+    size_t capf, capcut;
+} scratch;
+
+static _Thread_local scratch *tls_scratch;
+
+static scratch *scratch_get(void)
 {
-    writer w = {out, max, 0, 0, NULL, NULL, 0, 0, NULL, 0, 0};
-    write_stream(st, &w, exact);
+    if (!tls_scratch) tls_scratch = calloc(1, sizeof *tls_scratch);
+    return tls_scratch;
+}
+
+/* A byte buffer of at least n bytes (1 at least), kept in *buf; NULL when it cannot grow. */
+static uint8_t *bytes_of(uint8_t **buf, size_t *cap, size_t n)
+{
+    if (n == 0) n = 1;
+    if (*cap < n) {
+        uint8_t *b = realloc(*buf, n);
+        if (!b) return NULL;
+        *buf = b;
+        *cap = n;
+    }
+    return *buf;
+}
+
+static size_t emit(scratch *sc, const stream *st, uint8_t *out, size_t max, fba_rng *r, int exact, int raw_op)
+{
+    writer w = {out, max, 0, 0, sc->fbit, sc->fw, 0, sc->capf, sc->cut, 0, sc->capcut};
+    write_stream(st, &w, exact, &sc->c);
+    sc->fbit = w.fbit; /* the notes' tables, grown or not, for the next call */
+    sc->fw = w.fw;
+    sc->capf = w.capf;
+    sc->cut = w.cut;
+    sc->capcut = w.capcut;
     size_t n = (size_t)((w.pos + 7) >> 3);
     if (raw_op == 1 && w.nf) { /* a field written in place: markers, reserved values, out of range */
         size_t f = below(r, (uint32_t)w.nf);
@@ -1346,57 +1401,47 @@ static size_t emit(const stream *st, uint8_t *out, size_t max, fba_rng *r, int e
         int64_t cut = w.cut[below(r, (uint32_t)w.ncut)];
         n = (size_t)((cut + 7) >> 3);
     }
-    writer_free(&w);
     if (w.full) return 0;
     return n;
-}
-
-static void stream_free(stream *st)
-{
-    free(st->p);
-    free(st->dp);
 }
 
 /* One structure-aware mutation of data[0, size) in place (at most max_size bytes); the new size. */
 size_t fba_mutate(uint8_t *data, size_t size, size_t max_size, unsigned int seed)
 {
     fba_rng r = {0x9E3779B97F4A7C15ULL ^ seed};
-    stream st;
-    if (!parse(data, size, &st) || st.n == 0) { /* not a face object stream we can read: one bit */
-        stream_free(&st);
+    scratch *sc = scratch_get();
+    stream *st = sc ? &sc->s[0] : NULL;
+    if (!st || !parse(data, size, st, &sc->c) || st->n == 0) { /* not a face object stream we can read: one bit */
         if (size) data[below(&r, (uint32_t)size)] ^= (uint8_t)(1u << below(&r, 8));
         return size;
     }
     /* the raw tail points into data, which the output overwrites: keep a copy */
-    uint8_t *src = malloc(size ? size : 1), *out = malloc(max_size ? max_size : 1);
-    if (!src || !out) { free(src); free(out); stream_free(&st); return size; }
+    uint8_t *src = bytes_of(&sc->src, &sc->capsrc, size), *out = bytes_of(&sc->out, &sc->capout, max_size);
+    if (!src || !out) return size;
     memcpy(src, data, size);
-    st.tail = src;
+    st->tail = src;
     uint32_t op = below(&r, 21);
     int exact = 0, raw_op = 0;
     if (op < 8) {
-        for (uint32_t k = 1 + (below(&r, 4) == 0 ? below(&r, 4) : 0); k > 0; k--) mutate_symbol(&st, &r);
+        for (uint32_t k = 1 + (below(&r, 4) == 0 ? below(&r, 4) : 0); k > 0; k--) mutate_symbol(st, &r);
         exact = below(&r, 4) == 0;
     } else if (op < 14) {
-        mutate_header(&st, &r);
+        mutate_header(st, &r);
     } else if (op < 16) {
-        mutate_planes(&st, &r);
+        mutate_planes(st, &r);
     } else if (op < 18) {
         raw_op = 1;
     } else if (op < 19) {
         raw_op = 2;
     } else if (op < 20) {
-        mutate_extremes(&st, &r);
+        mutate_extremes(st, &r);
     } else {
-        plane *p = &st.p[below(&r, (uint32_t)st.n)]; /* another start code where a plane's is */
+        plane *p = &st->p[below(&r, (uint32_t)st->n)]; /* another start code where a plane's is */
         p->sc = 1;
         p->sc_code = (uint8_t)(below(&r, 2) ? 0xB0 + below(&r, 16) : fba_rand(&r));
     }
-    size_t n = emit(&st, out, max_size, &r, exact, raw_op);
+    size_t n = emit(sc, st, out, max_size, &r, exact, raw_op);
     if (n) memcpy(data, out, n); else n = size;
-    free(src);
-    free(out);
-    stream_free(&st);
     return n;
 }
 
@@ -1404,11 +1449,10 @@ size_t fba_mutate(uint8_t *data, size_t size, size_t max_size, unsigned int seed
  * stream the reference encoder wrote, the same bytes. 0 when it is not a face object stream. */
 size_t fba_rewrite(const uint8_t *data, size_t size, uint8_t *out, size_t max_size)
 {
-    stream st;
+    scratch *sc = scratch_get();
     fba_rng r = {1};
     size_t n = 0;
-    if (parse(data, size, &st) && st.n) n = emit(&st, out, max_size, &r, 1, 0);
-    stream_free(&st);
+    if (sc && parse(data, size, &sc->s[0], &sc->c) && sc->s[0].n) n = emit(sc, &sc->s[0], out, max_size, &r, 1, 0);
     return n;
 }
 
@@ -1418,17 +1462,17 @@ size_t fba_rewrite(const uint8_t *data, size_t size, uint8_t *out, size_t max_si
 size_t fba_edit_symbol(const uint8_t *data, size_t size, uint8_t *out, size_t max_size, size_t k, int which,
                        int32_t value)
 {
-    stream st;
+    scratch *sc = scratch_get();
+    stream *st = sc ? &sc->s[0] : NULL;
     fba_rng r = {1};
     size_t n = 0;
-    if (parse(data, size, &st) && k < st.n && which >= 0 && which < NSYM) {
-        plane *p = &st.p[k];
+    if (st && parse(data, size, st, &sc->c) && k < st->n && which >= 0 && which < NSYM) {
+        plane *p = &st->p[k];
         int32_t lo, hi;
-        alphabet(&st, k, which, &lo, &hi);
+        alphabet(st, k, which, &lo, &hi);
         p->sym[which] = clampi(value, lo, hi);
-        n = emit(&st, out, max_size, &r, 1, 0);
+        n = emit(sc, st, out, max_size, &r, 1, 0);
     }
-    stream_free(&st);
     return n;
 }
 
@@ -1436,33 +1480,31 @@ size_t fba_edit_symbol(const uint8_t *data, size_t size, uint8_t *out, size_t ma
 size_t fba_cross(const uint8_t *a, size_t na, const uint8_t *b, size_t nb, uint8_t *out, size_t max, unsigned int seed)
 {
     fba_rng r = {0xD1B54A32D192ED03ULL ^ seed};
-    stream sa, sb;
-    int ok = parse(a, na, &sa) && parse(b, nb, &sb);
+    scratch *sc = scratch_get();
+    stream *sa = sc ? &sc->s[0] : NULL, *sb = sc ? &sc->s[1] : NULL;
     size_t n = 0;
-    if (ok && sa.n && sb.n) {
-        size_t cut = 1 + below(&r, (uint32_t)sa.n), from = below(&r, (uint32_t)sb.n), more = sb.n - from;
-        while (sa.n > cut) sa.n--;
+    if (sc && parse(a, na, sa, &sc->c) && parse(b, nb, sb, &sc->c) && sa->n && sb->n) {
+        size_t cut = 1 + below(&r, (uint32_t)sa->n), from = below(&r, (uint32_t)sb->n), more = sb->n - from;
+        while (sa->n > cut) sa->n--;
         for (size_t k = 0; k < more; k++) {
-            plane *p = add_plane(&sa);
+            plane *p = add_plane(sa);
             if (!p) break;
-            *p = sb.p[from + k];
+            *p = sb->p[from + k];
             if (p->dct >= 0) { /* its payload moves into a's pool */
-                int32_t at = add_dct(&sa);
-                if (at >= 0) sa.dp[at] = sb.dp[p->dct];
+                int32_t at = add_dct(sa);
+                if (at >= 0) sa->dp[at] = sb->dp[p->dct];
                 p->dct = at;
             }
-            sa.n++;
+            sa->n++;
         }
-        sa.tail = sb.tail;
-        sa.tail_bit = sb.tail_bit;
-        sa.tail_end = sb.tail_end;
-        sa.end_code = sb.end_code;
-        sa.post_bit = sb.post_bit;
-        sa.post_end = sb.post_end;
-        n = emit(&sa, out, max, &r, 0, 0);
+        sa->tail = sb->tail;
+        sa->tail_bit = sb->tail_bit;
+        sa->tail_end = sb->tail_end;
+        sa->end_code = sb->end_code;
+        sa->post_bit = sb->post_bit;
+        sa->post_end = sb->post_end;
+        n = emit(sc, sa, out, max, &r, 0, 0);
     }
-    if (ok) stream_free(&sb);
-    stream_free(&sa);
     if (!n) {
         n = na < max ? na : max;
         memcpy(out, a, n);
