@@ -237,7 +237,8 @@ def run_libfuzzer(binary: Path, judge: Path, export: Path, budget: float, seed: 
     new = work / f"lf-{binary.name}-{seed}"
     new.mkdir()
     argv = [str(binary), f"-dict={export / 'fba.dict'}", f"-seed={seed}", f"-max_total_time={int(budget)}"]
-    argv += ["-timeout=10", "-print_final_stats=1", f"-artifact_prefix={new}/", str(new), str(export / "corpus")]
+    argv += ["-timeout=10", "-entropic_scale_per_exec_time=1", "-print_final_stats=1", f"-artifact_prefix={new}/"]
+    argv += [str(new), str(export / "corpus")]
     t0 = time.perf_counter()
     p = sh(argv, timeout=budget + 120)
     wall = time.perf_counter() - t0

@@ -100,7 +100,7 @@ TARGET_C = """/* A libFuzzer target for a face object stream decoder (fbaconf fu
  * reject invalid streams with an error return, and never crash, hang or leak.
  *
  *   clang -g -O1 -fsanitize=fuzzer,address,undefined fuzz_target.c your_decoder.c -o fba_fuzzer
- *   mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -artifact_prefix=new/ new corpus
+ *   mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -entropic_scale_per_exec_time=1 -artifact_prefix=new/ new corpus
  */
 #include <stddef.h>
 #include <stdint.h>
@@ -146,9 +146,10 @@ Build with a sanitizer: a read past a buffer does not crash a plain build. New i
 folder of their own (`new/`, `findings/`), never into `corpus/`.
 
 ```sh
-# libFuzzer (clang): ASan + UBSan; 10 s per input at most
+# libFuzzer (clang): ASan + UBSan; 10 s per input at most; an input's share of the time weighed by
+# its speed (libFuzzer's default ignores it: a corpus of long valid streams then runs ten times slower)
 clang -g -O1 -fsanitize=fuzzer,address,undefined fuzz_target.c your_decoder.c -o fba_fuzzer
-mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -artifact_prefix=new/ new corpus
+mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -entropic_scale_per_exec_time=1 -artifact_prefix=new/ new corpus
 # AFL++: the same target in AFL++'s persistent mode (afl-clang-fast links its libFuzzer driver),
 # ASan; -t 1000+: 1 s per input, a seed that takes longer is skipped instead of ending the dry run
 AFL_USE_ASAN=1 afl-clang-fast -g -O1 -fsanitize=fuzzer fuzz_target.c your_decoder.c -o decoder-afl
