@@ -108,6 +108,7 @@ def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -
                 kinds=(spec.kind,),
                 coverage_every=spec.coverage_every,
                 minimise_findings=False,
+                fresh_helper=False,  # the shards have every CPU already
             ),
         )
         fz.run()

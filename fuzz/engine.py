@@ -20,6 +20,7 @@ from . import cmutator
 from .choosers import RandomChooser
 from .corpus import STRESS_BYTES, scene_seeds
 from .findings import Finding, minimise_against, write_finding
+from .fresh import FreshStreams, helper_worthwhile, input_rng
 from .inputs import Entry, InputKind, gen_valid
 from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
@@ -120,6 +121,7 @@ class FuzzConfig:
     max_corpus: int = 400
     valid_pool: int = 24  # fresh valid streams made up front
     fresh_valid_share: float = 0.04  # share of inputs that are a fresh valid stream
+    fresh_helper: bool = True  # encode them ahead in a helper process (when a CPU is free: fuzz.fresh)
     prefer_short: float = 0.5
     run_seeds_first: int = 64
     coverage_every: int = 1  # measure syntax-model coverage on every n-th input
@@ -211,6 +213,9 @@ class Fuzzer:
         # stream among the rest (_parent seldom mutates one: it is reached here)
         seeds = self.corpus.get(InputKind.STREAM, [])
         self.seeds_first = [i for i, e in enumerate(seeds) if i < self.run_seeds_first or len(e.data) > STRESS_BYTES]
+        self.fresh = FreshStreams(
+            self.seed, self._fresh_wanted, helper=c.fresh_helper and helper_worthwhile(self.jobs, self.max_execs)
+        )
 
     # ---------------------------------------------------------------- generation
     def make_input(self, index: int, corpus_size: int | None = None) -> Entry:
@@ -224,14 +229,14 @@ class Fuzzer:
         return e
 
     def _make_input(self, index: int, kind: InputKind, corpus: list[Entry]) -> Entry:
-        rng = random.Random(self.seed * 1_000_003 + index)
+        rng = input_rng(self.seed, index)
         if kind == InputKind.STREAM:
             if index < len(self.seeds_first) and self.seeds_first[index] < len(corpus):  # the seeds first
                 e = corpus[self.seeds_first[index]]
                 return Entry(e.data, origin=e.origin, valid=e.valid, recon=e.recon, model=e.model)
             r = rng.random()
-            if r < self.fresh_valid_share:  # a new valid stream (encoding is slow: kept rare in-process)
-                return gen_valid(RandomChooser(rng))
+            if r < self.fresh_valid_share:  # a new valid stream (slow to encode: rare, made ahead)
+                return self.fresh.take(index)
             if r < 0.06 and self.valid_pool:  # a generated valid stream as it is (round-trip oracle)
                 e = self.valid_pool[rng.randrange(len(self.valid_pool))]
                 return Entry(e.data, origin=e.origin, valid=True, recon=e.recon, model=e.model)
@@ -254,6 +259,14 @@ class Fuzzer:
         e = corpus[rng.randrange(len(corpus))] if corpus else Entry(b"", kind=InputKind.BIFS)
         name = rng.choice(list(BYTE_MUTATORS))
         return Entry(BYTE_MUTATORS[name](rng, e.data, corpus), kind=InputKind.BIFS, origin=f"mutate:{name}<-{e.origin}")
+
+    def _fresh_wanted(self, index: int) -> bool:
+        """Whether input ``index`` will be a fresh valid stream (_make_input's first draw)."""
+        return (
+            self.kinds[index % len(self.kinds)] == InputKind.STREAM
+            and index >= len(self.seeds_first)
+            and input_rng(self.seed, index).random() < self.fresh_valid_share
+        )
 
     def _parent(self, rng: random.Random, corpus: list[Entry]) -> Entry:
         """The corpus entry to mutate: the shorter of two with ``prefer_short``, and a stream of
@@ -281,6 +294,7 @@ class Fuzzer:
             else:
                 self._run_batches(deadline)
         finally:
+            self.fresh.close()
             close = getattr(self.target, "close", None)
             if close is not None:
                 close()

@@ -100,7 +100,8 @@ TARGET_C = """/* A libFuzzer target for a face object stream decoder (fbaconf fu
  * reject invalid streams with an error return, and never crash, hang or leak.
  *
  *   clang -g -O1 -fsanitize=fuzzer,address,undefined fuzz_target.c your_decoder.c -o fba_fuzzer
- *   mkdir -p new && ./fba_fuzzer -dict=fba.dict -timeout=10 -entropic_scale_per_exec_time=1 -artifact_prefix=new/ new corpus
+ *   mkdir -p new
+ *   ./fba_fuzzer -dict=fba.dict -timeout=10 -entropic_scale_per_exec_time=1 -artifact_prefix=new/ new corpus
  */
 #include <stddef.h>
 #include <stdint.h>

@@ -209,6 +209,36 @@ def test_same_seed_same_inputs(seeds):
     assert [a.make_input(i).data for i in range(60, 90)] == [b.make_input(i).data for i in range(60, 90)]
 
 
+def test_fresh_streams_from_the_helper_are_the_loops_own(seeds):
+    """The helper process encodes the run's fresh valid streams ahead of the loop: every one it
+    hands over is the stream the loop makes itself for that input (a run replays with or without
+    it), and a helper that dies leaves the loop to make them, the same again."""
+    with_helper = Fuzzer(SelfTarget(), seeds, FuzzConfig(seed=3, progress=False, valid_pool=2, fresh_helper=True))
+    alone = Fuzzer(SelfTarget(), seeds, FuzzConfig(seed=3, progress=False, valid_pool=2, fresh_helper=False))
+    fresh = [i for i in range(600) if with_helper._fresh_wanted(i)]
+    assert len(fresh) > 10  # ~4 % of the inputs after the seeds
+    fs = with_helper.fresh
+    fs.helper = True  # whatever this machine's CPUs: the helper is what is tested
+    try:
+        got = {}
+        for i in fresh[:-6]:
+            e = fs.take(i)
+            got[i] = e.data
+            while fs.proc is not None and fs.queue and fs.queue[0] <= i + 40:  # let it run ahead
+                fs._drain(1.0)
+        assert fs.proc is not None, "the helper did not start"
+        from_helper = len(fs.ready)
+        assert from_helper > 0, "nothing made ahead"
+        fs.proc.kill()
+        fs.proc.wait()
+        for i in fresh[-6:]:
+            got[i] = fs.take(i).data
+        assert fs.proc is None  # a dead helper is noticed and let go
+    finally:
+        fs.close()
+    assert got == {i: alone.make_input(i).data for i in fresh}
+
+
 # ------------------------------------------------------------------ planted-bug decoders
 
 
