@@ -213,9 +213,9 @@ class Fuzzer:
         # stream among the rest (_parent seldom mutates one: it is reached here)
         seeds = self.corpus.get(InputKind.STREAM, [])
         self.seeds_first = [i for i, e in enumerate(seeds) if i < self.run_seeds_first or len(e.data) > STRESS_BYTES]
-        self.fresh = FreshStreams(
-            self.seed, self._fresh_wanted, helper=c.fresh_helper and helper_worthwhile(self.jobs, self.max_execs)
-        )
+        # the helper lives as long as a run (make_input outside one makes its streams itself)
+        self.fresh = FreshStreams(self.seed, self._fresh_wanted, helper=False)
+        self.fresh_helper = c.fresh_helper and helper_worthwhile(self.jobs, self.max_execs)
 
     # ---------------------------------------------------------------- generation
     def make_input(self, index: int, corpus_size: int | None = None) -> Entry:
@@ -288,6 +288,7 @@ class Fuzzer:
         st.started = time.perf_counter()
         st.cpu_started = time.process_time()
         deadline = st.started + self.seconds
+        self.fresh.helper = self.fresh_helper
         try:
             if self.jobs == 1:
                 self._run_pipelined(deadline)

@@ -239,6 +239,28 @@ def test_fresh_streams_from_the_helper_are_the_loops_own(seeds):
     assert got == {i: alone.make_input(i).data for i in fresh}
 
 
+def test_the_fresh_stream_helper_lives_as_long_as_the_run(seeds):
+    """The helper starts with a run and is gone (killed and reaped) when it ends; inputs made
+    outside a run (a finding regenerated) start none."""
+    fz = Fuzzer(SelfTarget(), seeds, FuzzConfig(seed=2, seconds=2, progress=False, valid_pool=2))
+    fz.fresh_helper = True  # whatever this machine's CPUs
+    pids: list[int] = []
+    record = fz._record
+
+    def watching(i, inp, out, dl):
+        if fz.fresh.proc is not None and not pids:
+            pids.append(fz.fresh.proc.pid)
+        return record(i, inp, out, dl)
+
+    fz._record = watching
+    fz.run()
+    assert pids, "the helper never ran: the test would prove nothing"
+    assert not Path(f"/proc/{pids[0]}").exists()
+    for i in range(fz.stats.execs, fz.stats.execs + 200):
+        fz.make_input(i)
+    assert fz.fresh.proc is None
+
+
 # ------------------------------------------------------------------ planted-bug decoders
 
 
