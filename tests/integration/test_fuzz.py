@@ -242,8 +242,10 @@ def test_fresh_streams_from_the_helper_are_the_loops_own(seeds):
 def test_the_fresh_stream_helper_lives_as_long_as_the_run(seeds):
     """The helper starts with a run and is gone (killed and reaped) when it ends; inputs made
     outside a run (a finding regenerated) start none."""
-    fz = Fuzzer(SelfTarget(), seeds, FuzzConfig(seed=2, seconds=2, progress=False, valid_pool=2))
-    fz.fresh_helper = True  # whatever this machine's CPUs
+    config = FuzzConfig(seed=2, seconds=120, max_execs=150, progress=False, valid_pool=2, run_seeds_first=0)
+    fz = Fuzzer(SelfTarget(), seeds, config)
+    fz.fresh_helper = True  # whatever this machine's CPUs and the run's length
+    assert sum(map(fz._fresh_wanted, range(150))) >= 3  # the run has fresh streams to make
     pids: list[int] = []
     record = fz._record
 
