@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -30,6 +31,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from fbaconf.conformance.suite import CaseKind, golden_root, load_suites
+from fbaconf.errors import FbaconfInputError
 from fbaconf.harness.adapters import ManifestError, PythonAdapter, resolve
 from fbaconf.harness.runner import RunContext, run_case
 from fbaconf.harness.selection import claim_covers
@@ -167,6 +169,10 @@ def format_results(results: list[dict]) -> str:
 # ------------------------------------------------------------------ adapter
 
 
+REJECTED = "fbaconf-refdecoder: error: "  # how the decoder program says it rejects its input (exit 2)
+RULE = re.compile(r" \[rule ([^\]]+)\]$")
+
+
 class MutantAdapter(PythonAdapter):
     """In-process adapter class for manifests: each case runs the mutant decoder program in a
     subprocess (``python -m fbaconf.mutation.run decode NAME ...``), so the mutant's
@@ -203,6 +209,13 @@ class MutantAdapter(PythonAdapter):
             if "images" in self.outputs:
                 argv += ["--images-dir", job.values["images_dir"]]
         p = subprocess.run(argv, capture_output=True, text=True, timeout=self.limits.timeout_s)
+        said = p.stderr.strip().splitlines()[-1] if p.stderr.strip() else ""
+        if p.returncode == 2 and said.startswith(REJECTED):
+            # the program's own rejection (a typed input error): judged as the in-process reference's
+            # is, a rejection naming its rule, not a crash of the adapter
+            what = said[len(REJECTED) :]
+            m = RULE.search(what)
+            raise FbaconfInputError(what[: m.start()] if m else what, rule=m.group(1) if m else None)
         if p.returncode != 0:
             raise RuntimeError(f"mutant decoder exited {p.returncode}: {p.stderr.strip()[-300:]}")
 

@@ -9,8 +9,9 @@ import sys
 
 import pytest
 
-from fbaconf.conformance.suite import load_suites
+from fbaconf.conformance.suite import golden_root, load_suites
 from fbaconf.harness.adapters import ManifestError, resolve
+from fbaconf.harness.runner import RunContext, run_case
 from fbaconf.mutation import own, run
 from fbaconf.mutation.core import Mutant, snippet_count
 
@@ -92,6 +93,26 @@ def test_mutant_adapter_manifest(tmp_path):
     bad.write_text(open(a.manifest_path).read().replace('mutant = "prediction-sign"', 'mutant = "no-such"'))
     with pytest.raises(ManifestError):
         resolve(bad)
+
+
+def test_a_mutant_rejects_through_its_adapter_as_it_does_in_process(tmp_path):
+    """The mutant decoder program's own rejection (exit 2, a typed error naming its rule) is a
+    rejection through the bundled adapter too, as in the in-process run: the same outcome and
+    ending for the same case, not a crash of the adapter (explain reruns a run's failing cases
+    through its decoder and takes a changed ending for undefined behaviour)."""
+    name, case_id = "viseme-prediction-sign", "simple-l1-core/blend-64"
+    (case,) = [c for s in load_suites() for c in s.cases if c.full_id == case_id]
+    inproc = _run(name, [case_id])  # in a process of its own: a mutant patches the process it runs in
+    assert {f["outcome"] for f in inproc["failing"]} == {"Fail"}, inproc
+    m = tmp_path / "m.toml"
+    text = open(resolve("mutant").manifest_path).read()
+    m.write_text(text.replace('"prediction-sign"', f'"{name}"').replace('name = "mutant"', 'name = "mutant-x"'))
+    adapter = resolve(m)
+    adapter.outputs = ["faps"]
+    ctx = RunContext(adapter, "predictable@2", tmp_path / "out", golden_root(), False, tmp_path)
+    r = run_case(ctx, case)
+    assert (r.outcome.value, r.ending) == ("Fail", "reject"), (r.outcome, r.ending, r.message)
+    assert "[rule viseme-select-range]" in r.message and "RuntimeError" not in r.message
 
 
 # The rules of the cases independent faulty decoders got past: each with a mutant that breaks it and the
