@@ -2,9 +2,9 @@
 
 An input is a pure function of the run's seed and its index (:func:`input_rng`), and whether input
 ``i`` is a fresh valid stream is that generator's first draw: the loop knows which of the coming
-inputs are before it reaches them. Encoding one takes the reference encoder ~8 ms, against well
-under a millisecond to make and judge any other input, so at a 4 % share they took a quarter of
-the loop's time while the second CPU waited on a decoder that needs microseconds. A helper
+inputs are before it reaches them. Encoding one takes the reference encoder 3-6 ms, against well
+under a millisecond to make and judge any other input, so at a 4 % share they took a sixth of the
+loop's time while the second CPU waited on a decoder that needs microseconds. A helper
 process (``python -m fbaconf.fuzz.fresh SEED``: input numbers on its stdin, pickled entries on its
 stdout) encodes them there; the stream it hands back is the one the loop would have made from the
 same generator state, so a run replays input for input with or without it, and whatever goes wrong
@@ -28,12 +28,13 @@ from typing import IO
 from .choosers import RandomChooser
 from .inputs import Entry, gen_valid
 
-# how many inputs ahead the helper is asked: at a 4 % share about ten streams, ~80 ms of encoding
+# how many inputs ahead the helper is asked: at a 4 % share about ten streams, 30-60 ms of encoding
 AHEAD = 256
-# how long the loop waits for the stream the helper is making before it makes it itself
+# how long the loop waits for the stream the helper is making before it makes it itself: about one
+# stream's encoding, past which making it here is no slower
 WAIT_S = 0.008
-# a helper costs a process start (~0.5 s of CPU importing the encoder) and pays for itself after
-# some 60 streams: runs shorter than this many inputs make theirs in the loop
+# a helper costs a process start (~0.5 s of CPU importing the encoder, while the first streams are
+# made in the loop anyway): a run of fewer inputs (some 60 fresh streams) makes its own
 MIN_EXECS = 1500
 _HEAD = struct.Struct("<qQ")  # a record: the input's number, the pickle's length
 
