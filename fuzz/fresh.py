@@ -25,6 +25,8 @@ import time
 from collections.abc import Callable
 from typing import IO
 
+from fbaconf.harness.sysinfo import usable_cpus
+
 from .choosers import RandomChooser
 from .inputs import Entry, gen_valid
 
@@ -54,8 +56,7 @@ def fresh_valid(seed: int, index: int) -> Entry:
 def helper_worthwhile(jobs: int, max_execs: int | None) -> bool:
     """Whether a run gains from the helper: one decoder at a time (the loop is the limit and a CPU
     is free), a machine with two CPUs or more, and a run long enough to repay its start."""
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return jobs == 1 and cpus >= 2 and (max_execs is None or max_execs >= MIN_EXECS)
+    return jobs == 1 and usable_cpus() >= 2 and (max_execs is None or max_execs >= MIN_EXECS)
 
 
 class FreshStreams:
@@ -143,9 +144,9 @@ class FreshStreams:
         try:
             while chunk := os.read(fd, 1 << 20):
                 self._buf += chunk
-        except BlockingIOError:
-            chunk = b"."
-        if not chunk:  # end of its output: it died
+        except BlockingIOError:  # all there is for now
+            pass
+        else:  # end of its output: it died
             self.close()
             return
         while len(self._buf) >= _HEAD.size:

@@ -155,12 +155,18 @@ def test_dct_groups_are_parsed_mutated_and_written_again(lib):
     assert ok > 500 and payload > 40, (ok, payload)
 
 
-def test_the_ac_codewords_are_the_data_files():
-    """The mutator's copy of the AC table is bitstreams/data/dct_provisional.toml's (the decoder's
-    own reads the file), and so is the escape code."""
+FBADEC_C = Path(__file__).resolve().parents[2] / "examples" / "fbadec" / "fbadec.c"
+
+
+@pytest.mark.parametrize("c_file", [MUTATOR_C, FBADEC_C], ids=["fba_mutator.c", "fbadec.c"])
+def test_the_ac_codewords_are_the_data_files(c_file):
+    """The C copies of the AC table — the mutator's, and the example decoder's (each stands alone:
+    the export ships the mutator as one file, fbadec is an implementation of its own) — are
+    bitstreams/data/dct_provisional.toml's (the reference decoder reads the file), and so is the
+    escape code."""
     data = resources.files("fbaconf.bitstreams").joinpath("data", DATA_FILE).read_text("utf-8")
     doc = tomllib.loads(data)["ac"]
-    text = Path(MUTATOR_C).read_text()
+    text = Path(c_file).read_text()
     body = text[text.index("AC_TABLE[] = {") : text.index("};", text.index("AC_TABLE[] = {"))]
     got = [
         (int(r), int(lv), int(n), int(c, 16))
