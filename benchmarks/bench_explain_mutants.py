@@ -1,7 +1,8 @@
 """How often ``fbaconf explain`` names the mutated rule: each mutant decoder of a hand-annotated
 sample runs every case of predictable@2 (``python -m fbaconf.mutation.run run NAME --all-cases``,
-its own process), explain ranks the causes of its failures (the spectrum only: mutants are
-fbaconf's own patched reference, so no confirming runs), and a mutant scores when a cause whose
+its own process), explain ranks the causes of its failures (the spectrum over the cases'
+features, each failing case's taken up to its first difference, which the mutant's run records;
+mutants are fbaconf's own patched reference, so no confirming runs), and a mutant scores when a cause whose
 feature matches one of the coverage points written beside it below (by hand, from the mutant's
 description and the coverage model, not from explain's output) comes first, or in the first three.
 
@@ -25,7 +26,7 @@ from pathlib import Path
 
 from fbaconf.conformance.suite import load_suites
 from fbaconf.explain.causes import explain
-from fbaconf.harness.results import CaseResult, Outcome, RunRecord
+from fbaconf.harness.results import CaseResult, Outcome, RunRecord, StageResult
 from fbaconf.harness.selection import claim_covers
 
 CLAIM = "predictable@2"
@@ -103,7 +104,12 @@ def _mutant_run(name: str, keep: Path | None = None) -> dict:
 
 def rank(res: dict, cases: dict) -> tuple[int | None, str]:
     """(1-based rank of the first cause matching the mutant's points, the top cause's feature)."""
-    failing = {f["case"].split(" (")[0] for f in res.get("failing", [])}
+    failing: dict[str, list[StageResult]] = {}
+    for f in res.get("failing", []):  # a case's first format's entry, else its second's
+        failing.setdefault(f["case"].split(" (")[0], []).extend(
+            StageResult(d["stage"], Outcome.FAIL, first_difference=d["first_difference"])
+            for d in f.get("differences", [])
+        )
     results = [
         CaseResult(
             case_id=cid,
@@ -111,6 +117,7 @@ def rank(res: dict, cases: dict) -> tuple[int | None, str]:
             claim=c.claim,
             outcome=Outcome.FAIL if cid in failing else Outcome.PASS,
             kind=c.kind.value,
+            stages=failing.get(cid, []),
         )
         for cid, c in cases.items()
     ]

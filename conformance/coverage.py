@@ -259,6 +259,24 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
     return hits
 
 
+def stream_points_through(data: bytes, row: int) -> set[str] | None:
+    """The points of ``data``'s planes up to and including the one that decodes output frame
+    ``row`` (the stream cut after that plane, as a stream without an end code): what a decoder
+    had read when it wrote that frame. None when the stream does not decode that far."""
+    planes, frames, err, _ = _decode_any(data)
+    if err is not None or frames is None or not 0 <= row < len(frames.bit_offset):
+        return None
+    start = int(frames.bit_offset[row])  # a DCT segment's frames all come from its one plane
+    plane = next((p for p in planes if p.bit_offset == start), None)
+    if plane is None:
+        return None
+    end = plane.end_offset
+    cut = bytearray(data[: (end + 7) // 8])
+    if end % 8:
+        cut[-1] &= 0xFF << (8 - end % 8) & 0xFF  # the rest of the last byte zero: read as padding
+    return stream_points(bytes(cut))
+
+
 def _retained_across_quant(planes, frames) -> set[str]:
     """``retained.quant-change``: a FAP holds (RETAINED) in a plane of another fap_quant than the
     plane that last set it — the held value is the dequantised one, not re-scaled (notes §3.3)."""

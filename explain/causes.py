@@ -1,4 +1,5 @@
-"""A run's failures as root causes: the cases' features and first divergences, the spectrum
+"""A run's failures as root causes: the cases' features and first divergences (a failing case's
+features less those its stream first has after its first divergence, :mod:`localise`), the spectrum
 ranking, and (where the decoder can be run in the sandbox) confirming edits and reruns.
 
 Read in this order: :func:`views` (what each case has and where it failed), :func:`explain`
@@ -21,7 +22,7 @@ from fbaconf.conformance.suite import Case, CaseKind
 from fbaconf.harness.adapters import Adapter
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
 
-from . import spectrum, streams, triggers
+from . import localise, spectrum, streams, triggers
 from .confirm import Budget, Runner
 
 # features every case of a claim or a suite form has: they name no behaviour
@@ -99,13 +100,17 @@ def views(record: RunRecord, cases: dict[str, Case]) -> list[spectrum.CaseView]:
     inputs = list(record.decoder.get("inputs") or ["fba"])
     out = []
     for r in record.results:
+        case = cases.get(r.case_id)
+        features = case_features(case, r, inputs)
+        if r.outcome in FAILING:
+            features -= localise.after_divergence(case, r)
         out.append(
             spectrum.CaseView(
                 case_id=r.case_id,
                 outcome=r.outcome.value,
                 failing=r.outcome in FAILING,
                 passing=r.outcome.ok,
-                features=case_features(cases.get(r.case_id), r, inputs),
+                features=features,
                 divergence=divergence(r) if r.outcome in FAILING else "",
             )
         )
