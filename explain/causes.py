@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from fbaconf.conformance.coverage import load_model
+from fbaconf.conformance.coverage import load_model, stream_points
 from fbaconf.conformance.coverage_table import points_of
 from fbaconf.conformance.suite import Case, CaseKind
 from fbaconf.harness.adapters import Adapter
@@ -192,7 +192,9 @@ def _refines_another(feature: str, tied: Sequence[spectrum.Score]) -> bool:
 def _variant(case: Case, feature: str, inputs: Sequence[str]) -> tuple[str, bytes, str, bool] | None:
     """(input key, the variant's bytes, what the edit did, whether it also normalises the text's
     form) for ``case`` without ``feature``, in the form the decoder takes; None where no edit takes
-    it out."""
+    it out — also where the edit leaves it in (a re-encoded stream still has intra planes, a 25 Hz
+    rate is still an integer one): a decoder passing such a variant passed for another reason,
+    and the feature would be confirmed by what the edit took out beside it."""
     fba, fap = case.input_path("fba"), case.input_path("fap")
     if feature == ERROR_KIND or case.kind == CaseKind.ERROR:
         return None
@@ -201,13 +203,15 @@ def _variant(case: Case, feature: str, inputs: Sequence[str]) -> tuple[str, byte
         if e is None:
             return None
         data = streams.stream_variant(fba.read_bytes(), e[1])
-        return None if data is None else ("fba", data, e[0], False)
+        if data is None or feature in stream_points(data):
+            return None
+        return "fba", data, e[0], False
     if taken_input(case, inputs) == "fap" and fap is not None and fap.is_file():
         tid = _text_edit(feature)
         if tid is None:
             return None
         text = triggers.text_variant(fap.read_bytes(), tid)
-        if text is None:
+        if text is None or tid in triggers.text_features(text.encode()):
             return None
         t = triggers.TRIGGERS[tid]
         return "fap", text.encode(), f"without {t.what}", t.rewrites

@@ -1,8 +1,11 @@
 """Edits of a binary stream that take one trigger out: the stream the reference decodes, changed
 and re-encoded by fbaconf's encoder (its defaults: fap_quant 1, intra planes where needed, plane
-start codes at intra planes, no skips, no time codes, arithmetic coding). The edit for a coverage
-point is chosen by the point's family; the re-encoding alone already takes out every trigger of
-the coder and the syntax (skips, time codes, look-ahead stuffing, DCT, quantiser changes...)."""
+start codes at intra planes, no time codes, arithmetic coding). The edit for a coverage point is
+chosen by the point's family. The re-encoding alone takes out many triggers of the coder and the
+syntax (time codes, DCT, quantiser changes, most look-ahead stuffing) but not all: a stream keeps
+its intra planes and its end code, the encoder chooses masks and lists of its own, and the skips
+are in the frame numbers (renumbered for the skip points). explain makes no variant that still
+has its point (``causes._variant``)."""
 
 from __future__ import annotations
 
@@ -26,8 +29,10 @@ def edit_for(point: str) -> tuple[str, edits.Change] | None:
         return "without FAP 1/2 (no viseme, no expression)", edits.drop(1, 2)
     if family == "rate":
         return "at 25 Hz, one rate (re-encoded)", edits.rate25
+    if family == "skip":
+        return "frames numbered without gaps: no skips (re-encoded)", edits.rows
     if family in (
-        "arith", "coding", "dct", "fap_quant", "lists", "mask", "plane", "retained", "skip", "status",
+        "arith", "coding", "dct", "fap_quant", "lists", "mask", "plane", "retained", "status",
         "stream", "symbol", "timecode", "defaults", "diag",
     ):  # fmt: skip
         return "re-encoded by fbaconf's encoder with its defaults", edits.nothing

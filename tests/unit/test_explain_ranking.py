@@ -12,10 +12,11 @@ from hypothesis import given, settings, strategies as st
 
 from fbaconf.bitstreams.faptext import read_fap_text
 from fbaconf.certification.certify import _cause_lines
+from fbaconf.conformance.coverage import stream_points
 from fbaconf.conformance.coverage_table import points_of
 from fbaconf.conformance.suite import load_suites
 from fbaconf.explain import spectrum, triggers
-from fbaconf.explain.causes import explain
+from fbaconf.explain.causes import _variant, explain
 from fbaconf.explain.render import terminal
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
 
@@ -113,3 +114,14 @@ def test_each_content_edit_takes_its_trigger_out(numbers, rate):
     fr = read_fap_text(text)[0]
     assert ("content.frame-order" in present) == bool(any(b <= a for a, b in zip(numbers, numbers[1:])))
     assert ("content.rate-fractional" in present) == (not math.isclose(fr.frame_rate, round(fr.frame_rate)))
+
+
+def test_a_stream_edit_that_leaves_its_point_in_makes_no_variant(core_cases):
+    # every stream starts with an intra plane (D2) and the edit for a coding point re-encodes the
+    # stream: a variant "without plane.intra" would still have one, and a decoder passing it
+    # would confirm plane.intra for what the re-encoding took out beside it (a quantiser, a skip)
+    case = next(c for c in core_cases.values() if "skip.chain" in points_of(c))
+    assert _variant(case, "plane.intra", ["fba"]) is None
+    assert _variant(case, "rate.integer", ["fba"]) is None or "rate.integer" not in points_of(case)
+    key, data, _what, _form = _variant(case, "skip.chain", ["fba"])
+    assert key == "fba" and "skip.chain" not in stream_points(data) and "plane.intra" in stream_points(data)
