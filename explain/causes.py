@@ -202,7 +202,7 @@ def _variant(case: Case, feature: str, inputs: Sequence[str]) -> tuple[str, byte
         e = streams.edit_for(feature)
         if e is None:
             return None
-        data = streams.stream_variant(fba.read_bytes(), e[1])
+        data = streams.stream_variant(fba.read_bytes(), e[1], e[2])
         if data is None or feature in stream_points(data):
             return None
         return "fba", data, e[0], False

@@ -125,3 +125,13 @@ def test_a_stream_edit_that_leaves_its_point_in_makes_no_variant(core_cases):
     assert _variant(case, "rate.integer", ["fba"]) is None or "rate.integer" not in points_of(case)
     key, data, _what, _form = _variant(case, "skip.chain", ["fba"])
     assert key == "fba" and "skip.chain" not in stream_points(data) and "plane.intra" in stream_points(data)
+
+
+def test_a_list_edit_re_encodes_under_the_default_ranges(core_cases):
+    # arith-q1-all-faps sends tight lists in its intra plane and its values fit the default ranges
+    # (the FAP table's): re-encoded under them it needs no list (lists.none)
+    case = core_cases["simple-l1-core/arith-q1-all-faps"]
+    assert "lists.i_max" in points_of(case)
+    key, data, what, _form = _variant(case, "lists.i_max", ["fba"])
+    points = stream_points(data)
+    assert "lists.none" in points and not any(p.startswith("lists.i_") for p in points), what
