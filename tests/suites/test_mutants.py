@@ -4,14 +4,17 @@ every required case and a handful of mutants are each killed by a case (the full
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
+import time
 
 import pytest
 
 from fbaconf.conformance.suite import golden_root, load_suites
-from fbaconf.harness.adapters import ManifestError, resolve
+from fbaconf.harness.adapters import Job, ManifestError, resolve
 from fbaconf.harness.runner import RunContext, run_case
+from fbaconf.isolation.endings import EndingKind
 from fbaconf.mutation import own, run
 from fbaconf.mutation.core import Mutant, snippet_count
 
@@ -113,6 +116,34 @@ def test_a_mutant_rejects_through_its_adapter_as_it_does_in_process(tmp_path):
     r = run_case(ctx, case)
     assert (r.outcome.value, r.ending) == ("Fail", "reject"), (r.outcome, r.ending, r.message)
     assert "[rule viseme-select-range]" in r.message and "RuntimeError" not in r.message
+
+
+def test_the_mutant_adapter_writes_what_the_case_compares_and_times_out_as_a_timeout(tmp_path, monkeypatch):
+    """The bundled adapter asks the mutant program for the outputs the case compares only (as the
+    reference adapter writes them): a FAPs case of 16,500 frames rendered as images ran past the
+    limit. A program killed at the limit is a timeout of the decoder, not a crash of the adapter."""
+    adapter = resolve("mutant")  # outputs faps, vertices and images, as shipped
+    values = {k: str(tmp_path / k) for k in ("input", "faps_out", "vertices_out", "images_dir")}
+    job = Job(workdir=tmp_path, values=values, unwanted=frozenset(("vertices_out", "images_dir")))
+    seen: list[list[str]] = []
+
+    def finished(argv, **kw):
+        seen.append(argv)
+        return subprocess.CompletedProcess(argv, 0, "", "")
+
+    monkeypatch.setattr(run.subprocess, "run", finished)
+    assert adapter.execute(job).ending.kind == EndingKind.DECODED
+    assert "--faps-out" in seen[0] and "--vertices-out" not in seen[0] and "--images-dir" not in seen[0]
+    adapter.execute(Job(workdir=tmp_path, values=values))
+    assert {"--faps-out", "--vertices-out", "--images-dir"} <= set(seen[1])
+
+    def too_long(argv, timeout, **kw):
+        time.sleep(timeout)  # what subprocess.run does before it kills the program
+        raise subprocess.TimeoutExpired(argv, timeout)
+
+    monkeypatch.setattr(run.subprocess, "run", too_long)
+    adapter.limits = dataclasses.replace(adapter.limits, timeout_s=0.05)
+    assert adapter.execute(job).ending.kind == EndingKind.TIMEOUT
 
 
 # The rules of the cases independent faulty decoders got past: each with a mutant that breaks it and the
