@@ -164,6 +164,9 @@ class Trial:
     confirmed: bool
     control: str | None = None  # the writer's rewrite without the edit, where one was run
     input: str | None = None  # the variant's input, kept for the reproduce line
+    # the case's other features the variant lacks too: a passing variant confirms the feature
+    # only together with these (dropping FAP 1 drops its viseme and its held values with it)
+    also: list[str] = field(default_factory=list)
 
 
 def _text_edit(feature: str) -> str | None:
@@ -189,12 +192,22 @@ def _refines_another(feature: str, tied: Sequence[spectrum.Score]) -> bool:
     return t is not None and t.refines in {c.feature for c in tied}
 
 
-def _variant(case: Case, feature: str, inputs: Sequence[str]) -> tuple[str, bytes, str, bool] | None:
-    """(input key, the variant's bytes, what the edit did, whether it also normalises the text's
-    form) for ``case`` without ``feature``, in the form the decoder takes; None where no edit takes
-    it out — also where the edit leaves it in (a re-encoded stream still has intra planes, a 25 Hz
-    rate is still an integer one): a decoder passing such a variant passed for another reason,
-    and the feature would be confirmed by what the edit took out beside it."""
+@dataclass(frozen=True)
+class Variant:
+    """A case's input without one feature, in the form the decoder takes."""
+
+    key: str  # the input it replaces: "fba" or "fap"
+    data: bytes
+    edit: str  # what the edit did
+    rewritten: bool  # the writer's rewrite also normalised the text's form
+    gone: frozenset[str]  # every feature of the case's input the variant no longer has
+
+
+def _variant(case: Case, feature: str, inputs: Sequence[str]) -> Variant | None:
+    """``case`` without ``feature``; None where no edit takes it out — also where the edit leaves
+    it in (a re-encoded stream still has intra planes, a 25 Hz rate is still an integer one): a
+    decoder passing such a variant passed for another reason, and the feature would be confirmed
+    by what the edit took out beside it."""
     fba, fap = case.input_path("fba"), case.input_path("fap")
     if feature == ERROR_KIND or case.kind == CaseKind.ERROR:
         return None
@@ -202,19 +215,25 @@ def _variant(case: Case, feature: str, inputs: Sequence[str]) -> tuple[str, byte
         e = streams.edit_for(feature)
         if e is None:
             return None
-        data = streams.stream_variant(fba.read_bytes(), e[1], e[2])
-        if data is None or feature in stream_points(data):
+        original = fba.read_bytes()
+        data = streams.stream_variant(original, e[1], e[2])
+        if data is None:
             return None
-        return "fba", data, e[0], False
+        gone = stream_points(original) - stream_points(data)
+        return Variant("fba", data, e[0], False, frozenset(gone)) if feature in gone else None
     if taken_input(case, inputs) == "fap" and fap is not None and fap.is_file():
         tid = _text_edit(feature)
         if tid is None:
             return None
-        text = triggers.text_variant(fap.read_bytes(), tid)
-        if text is None or tid in triggers.text_features(text.encode()):
+        original = fap.read_bytes()
+        text = triggers.text_variant(original, tid)
+        if text is None:
+            return None
+        gone = triggers.text_features(original) - triggers.text_features(text.encode())
+        if tid not in gone:
             return None
         t = triggers.TRIGGERS[tid]
-        return "fap", text.encode(), f"without {t.what}", t.rewrites
+        return Variant("fap", text.encode(), f"without {t.what}", t.rewrites, frozenset(gone | {feature}))
     return None
 
 
@@ -222,10 +241,11 @@ def _try(runner: Runner, case: Case, feature: str, features: frozenset[str], kee
     v = _variant(case, feature, runner.adapter.inputs)
     if v is None:
         return None
-    key, data, what, rewritten = v
+    key, data, rewritten = v.key, v.data, v.rewritten
     label = feature.replace("/", "_")
     res, path = runner.variant(case, key, data, label)
-    trial = Trial(feature, case.full_id, what, res.outcome.value, res.outcome.ok)
+    also = sorted((v.gone & features) - {feature})
+    trial = Trial(feature, case.full_id, v.edit, res.outcome.value, res.outcome.ok, also=also)
     forms = {f for f in features if f in triggers.TRIGGERS and triggers.TRIGGERS[f].form} - {feature}
     fap = case.input_path("fap")
     if trial.confirmed and rewritten and forms and runner.left > 0 and fap is not None:

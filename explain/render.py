@@ -35,6 +35,9 @@ def terminal(ex: Explanation) -> str:
             t = c.confirmed
             ctl = f" (the writer's rewrite alone: {t.control})" if t.control else ""
             lines.append(f"    confirmed: {t.case_id} {t.edit}: {t.outcome}{ctl}")
+            if t.also:
+                more = f"{', '.join(t.also[:6])}{' …' if len(t.also) > 6 else ''}"
+                lines.append(f"    the variant also lacks: {more} (the edit does not tell them apart)")
             lines.append(f"    reproduce: {reproduce(ex, t)}")
         elif c.tried:
             lines.append("    not confirmed: " + "; ".join(f"{t.case_id} {t.edit}: {t.outcome}" for t in c.tried[:3]))
@@ -66,6 +69,8 @@ def markdown(ex: Explanation, counts: dict[str, int]) -> str:
     ]
     for i, c in enumerate(ex.causes, 1):
         conf = f"{c.confirmed.case_id}: {c.confirmed.edit} → {c.confirmed.outcome}" if c.confirmed else "—"
+        if c.confirmed is not None and c.confirmed.also:
+            conf += f" (also without {', '.join(f'`{a}`' for a in c.confirmed.also)})"
         div = (c.divergences[0] if c.divergences else "").replace("|", "\\|")
         lines.append(f"| {i} | {c.what} (`{c.feature}`) | {len(c.cases)}: {_names(c.cases)} | {div} | {conf} |")
     lines.append(END.format(name=name))

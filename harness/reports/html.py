@@ -370,6 +370,8 @@ def _causes_html(causes: dict[str, Any]) -> str:
         proof = (
             f"confirmed: {conf['case_id']} {conf['edit']} — {conf['outcome']}" if conf else "not confirmed by a variant"
         )
+        if conf and conf.get("also"):
+            proof += f" (the variant also lacks {', '.join(conf['also'])}: the edit does not tell them apart)"
         h.append(
             f"<li><b>{_e(c.get('what', ''))}</b> <span class='mono'>{_e(c.get('feature', ''))}</span>"
             f" — {_e(len(c.get('cases', [])))} case(s); {_e(c.get('concerns', ''))}<br>"

@@ -16,8 +16,8 @@ from fbaconf.conformance.coverage import stream_points
 from fbaconf.conformance.coverage_table import points_of
 from fbaconf.conformance.suite import load_suites
 from fbaconf.explain import spectrum, triggers
-from fbaconf.explain.causes import _variant, explain
-from fbaconf.explain.render import terminal
+from fbaconf.explain.causes import Cause, Explanation, Trial, _variant, explain
+from fbaconf.explain.render import markdown, terminal
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
 
 
@@ -123,8 +123,10 @@ def test_a_stream_edit_that_leaves_its_point_in_makes_no_variant(core_cases):
     case = next(c for c in core_cases.values() if "skip.chain" in points_of(c))
     assert _variant(case, "plane.intra", ["fba"]) is None
     assert _variant(case, "rate.integer", ["fba"]) is None or "rate.integer" not in points_of(case)
-    key, data, _what, _form = _variant(case, "skip.chain", ["fba"])
-    assert key == "fba" and "skip.chain" not in stream_points(data) and "plane.intra" in stream_points(data)
+    v = _variant(case, "skip.chain", ["fba"])
+    assert v is not None and v.key == "fba"
+    assert "skip.chain" not in stream_points(v.data) and "plane.intra" in stream_points(v.data)
+    assert "skip.chain" in v.gone and "plane.intra" not in v.gone
 
 
 def test_a_list_edit_re_encodes_under_the_default_ranges(core_cases):
@@ -132,6 +134,22 @@ def test_a_list_edit_re_encodes_under_the_default_ranges(core_cases):
     # (the FAP table's): re-encoded under them it needs no list (lists.none)
     case = core_cases["simple-l1-core/arith-q1-all-faps"]
     assert "lists.i_max" in points_of(case)
-    key, data, what, _form = _variant(case, "lists.i_max", ["fba"])
-    points = stream_points(data)
-    assert "lists.none" in points and not any(p.startswith("lists.i_") for p in points), what
+    v = _variant(case, "lists.i_max", ["fba"])
+    assert v is not None
+    points = stream_points(v.data)
+    assert "lists.none" in points and not any(p.startswith("lists.i_") for p in points), v.edit
+    assert {"lists.i_max", "lists.i_min"} <= v.gone
+
+
+def test_a_confirming_variant_names_what_else_it_took_out(core_cases):
+    # the edit for a high-level point drops FAPs 1 and 2: every point of theirs goes with it, so a
+    # decoder that passes the variant has not shown that init_face, rather than FAP 1, failed it
+    case = core_cases["simple-l1-core/high-level-held"]
+    assert "highlevel.init_face" in points_of(case)
+    v = _variant(case, "highlevel.init_face", ["fba"])
+    assert v is not None and {"highlevel.init_face", "fap.1", "fap.2"} <= v.gone
+    trial = Trial("highlevel.init_face", case.full_id, v.edit, "Pass", True, also=["fap.1", "fap.2"])
+    cause = Cause("highlevel.init_face", "init_face set", "", "trigger", [case.full_id], confirmed=trial)
+    ex = Explanation("d", "simple@1", 1, 1, [cause])
+    assert "the variant also lacks: fap.1, fap.2" in terminal(ex)
+    assert "(also without `fap.1`, `fap.2`)" in markdown(ex, {"Fail": 1})
