@@ -2,11 +2,13 @@
 sample runs every case of predictable@2 (``python -m fbaconf.mutation.run run NAME --all-cases``,
 its own process), explain ranks the causes of its failures (the spectrum over the cases'
 features, each failing case's taken up to its first difference, which the mutant's run records;
-mutants are fbaconf's own patched reference, so no confirming runs), and a mutant scores when a cause whose
+with ``--confirm``, as explain runs on a run of a decoder it can run: each cause confirmed by
+running the mutant, through the bundled mutant manifest, on variants without its trigger, and the
+failing cases that did not decode run again), and a mutant scores when a cause whose
 feature matches one of the coverage points written beside it below (by hand, from the mutant's
 description and the coverage model, not from explain's output) comes first, or in the first three.
 
-    python benchmarks/bench_explain_mutants.py [-j N] [--keep DIR] [NAME ...]
+    python benchmarks/bench_explain_mutants.py [-j N] [--keep DIR] [--confirm] [NAME ...]
 
 Prints one line per mutant (rank of the first matching cause, the top cause), then the shares
 ``first: K/N`` and ``top 3: K/N`` and the wall and CPU time.
@@ -20,12 +22,14 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from fbaconf.conformance.suite import load_suites
 from fbaconf.explain.causes import explain
+from fbaconf.harness.adapters import Adapter, resolve
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord, StageResult
 from fbaconf.harness.selection import claim_covers
 
@@ -88,6 +92,18 @@ EXPECTED: dict[str, tuple[str, ...]] = {
 }
 
 
+def _adapter(name: str, folder: Path) -> Adapter:
+    """The mutant ``name`` as a decoder: the bundled mutant manifest with its name."""
+    text = Path(str(resolve("mutant").manifest_path)).read_text()
+    m = folder / f"{name}.toml"
+    m.write_text(
+        text.replace('mutant = "prediction-sign"', f'mutant = "{name}"').replace(
+            'name = "mutant"', f'name = "mutant-{name}"'
+        )
+    )
+    return resolve(str(m))
+
+
 def _mutant_run(name: str, keep: Path | None = None) -> dict:
     if keep is not None and (keep / f"{name}.json").is_file():  # a run kept earlier: rank it again
         return json.loads((keep / f"{name}.json").read_text())
@@ -102,28 +118,28 @@ def _mutant_run(name: str, keep: Path | None = None) -> dict:
     return {"mutant": name, "killed": False, "error": p.stderr[-300:]}
 
 
-def rank(res: dict, cases: dict) -> tuple[int | None, str]:
-    """(1-based rank of the first cause matching the mutant's points, the top cause's feature)."""
-    failing: dict[str, list[StageResult]] = {}
-    for f in res.get("failing", []):  # a case's first format's entry, else its second's
-        failing.setdefault(f["case"].split(" (")[0], []).extend(
-            StageResult(d["stage"], Outcome.FAIL, first_difference=d["first_difference"])
-            for d in f.get("differences", [])
-        )
+def rank(res: dict, cases: dict, adapter: Adapter | None = None) -> tuple[int | None, str]:
+    """(1-based rank of the first cause matching the mutant's points, the top cause's feature);
+    with ``adapter`` (the mutant as a decoder) explain confirms its causes as it does for a run."""
+    failing: dict[str, CaseResult] = {}
+    for f in res.get("failing", []):  # a case's first format's entry, and the second's differences
+        cid = f["case"].split(" (")[0]
+        if cid not in failing and cid in cases:
+            c = cases[cid]
+            failing[cid] = CaseResult(cid, c.suite, c.claim, Outcome(f["outcome"]), kind=c.kind.value)
+            failing[cid].ending = f.get("ending")
+        if cid in failing:
+            failing[cid].stages.extend(
+                StageResult(d["stage"], Outcome.FAIL, first_difference=d["first_difference"])
+                for d in f.get("differences", [])
+            )
     results = [
-        CaseResult(
-            case_id=cid,
-            suite=c.suite,
-            claim=c.claim,
-            outcome=Outcome.FAIL if cid in failing else Outcome.PASS,
-            kind=c.kind.value,
-            stages=failing.get(cid, []),
-        )
+        failing.get(cid) or CaseResult(cid, c.suite, c.claim, Outcome.PASS, kind=c.kind.value, ending="decoded")
         for cid, c in cases.items()
     ]
     decoder = {"name": res["mutant"], "inputs": ["fba"]}
     record = RunRecord(decoder=decoder, claim=CLAIM, suites=[], system={}, results=results)
-    ex = explain(record, cases)
+    ex = explain(record, cases, adapter=adapter)
     patterns = EXPECTED[res["mutant"]]
     for i, c in enumerate(ex.causes, 1):
         # a cause names its feature, the features no case of the run tells from it, and those ranked equal
@@ -136,6 +152,12 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("-j", "--jobs", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--keep", type=Path, help="keep each mutant's run here, and rank a kept run again")
+    ap.add_argument(
+        "--confirm",
+        action="store_true",
+        help="explain as it runs on a run: confirming each cause by running the mutant on variants, "
+        "and rerunning its failing cases (the bundled mutant manifest; about 100 runs a mutant)",
+    )
     ap.add_argument("names", nargs="*")
     a = ap.parse_args()
     names = a.names or list(EXPECTED)
@@ -143,12 +165,16 @@ def main() -> None:
     t0, c0 = time.perf_counter(), os.times()
     with ThreadPoolExecutor(max_workers=a.jobs) as ex:
         runs = list(ex.map(lambda n: _mutant_run(n, a.keep), names))
+    killed = [res for res in runs if res.get("killed")]
+    with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(max_workers=a.jobs) as ex:
+        ranks = list(
+            ex.map(lambda res: rank(res, cases, _adapter(res["mutant"], Path(tmp)) if a.confirm else None), killed)
+        )
     first = top3 = scored = 0
     for res in runs:
         if not res.get("killed"):
             print(f"{res['mutant']:38s} not killed: not scored {res.get('error', '')}")
-            continue
-        r, top = rank(res, cases)
+    for res, (r, top) in zip(killed, ranks):
         scored += 1
         first += r == 1
         top3 += r is not None and r <= 3

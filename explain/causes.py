@@ -12,7 +12,7 @@ from __future__ import annotations
 import shlex
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -360,13 +360,19 @@ def _choose(
 ) -> tuple[spectrum.Score, Trial | None, list[Trial]]:
     """The cause to take next: in ``order``, the first whose variant the decoder passes (a feature
     that only happens to be shared by failures of several causes is confirmed by none of its
-    variants, and gives way); the first in ``order`` when none is confirmed within the budget."""
+    variants, and gives way); the first in ``order`` when none is confirmed within the budget.
+
+    A passing variant that also lacks a candidate ranked before its own confirms that one as much
+    (the edit does not tell them apart: dropping FAPs 1 and 2 changes the arithmetic coding, and a
+    look-ahead stuffing no edit can take out alone goes with it), and the ranking decides: the
+    earlier candidate is taken (unless a variant without it failed), confirmed by that variant,
+    the later one among what it also lacks."""
     tried: list[Trial] = []
     if runner is None:
         return order[0], None, tried
     spent = runner.runs
     features = {v.case_id: v.features for v in vs}
-    for cand in order:
+    for k, cand in enumerate(order):
         for cid in sorted(spectrum.explained_by(vs, cand.feature, pool), key=lambda i: (len(features[i]), i))[:2]:
             if runner.runs - spent >= runner.budget.per_cause or runner.left <= 0 or cid not in cases:
                 break
@@ -374,7 +380,12 @@ def _choose(
             if t is not None:
                 tried.append(t)
                 if t.confirmed:
-                    return cand, t, tried
+                    refuted = {x.feature for x in tried if not x.confirmed}  # failed without it: not it
+                    earlier = next((c for c in order[:k] if c.feature in t.also and c.feature not in refuted), None)
+                    if earlier is None:
+                        return cand, t, tried
+                    also = sorted((set(t.also) - {earlier.feature}) | {cand.feature})
+                    return earlier, replace(t, feature=earlier.feature, also=also), tried
     return order[0], None, tried
 
 
@@ -454,7 +465,8 @@ def explain(
                     confirmed,
                     [t for t in tried if t.feature == chosen.feature],
                     aliases,
-                    [] if confirmed is not None else tied,  # a confirmed cause is separated from its ties
+                    # a confirmed cause is separated from its ties, but for those its variant lacked too
+                    tied if confirmed is None else [f for f in tied if f in confirmed.also],
                 )
             )
             pool -= set(ids)

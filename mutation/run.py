@@ -90,6 +90,7 @@ def run_mutant(
                         "case": c.full_id if fmt == formats[0] else f"{c.full_id} ({fmt})",
                         "outcome": r.outcome.value,
                         "message": r.message[:300],
+                        "ending": r.ending,  # how the mutant's decode ended (explain reruns what did not decode)
                         # where it first differed, per stage: explain localises a cause by it
                         "differences": [
                             {"stage": st.stage, "first_difference": st.first_difference}

@@ -6,6 +6,7 @@ edits (hand-written texts), and the certificate statement's causes."""
 from __future__ import annotations
 
 import math
+import types
 
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -15,7 +16,7 @@ from fbaconf.certification.certify import _cause_lines
 from fbaconf.conformance.coverage import stream_points
 from fbaconf.conformance.coverage_table import points_of
 from fbaconf.conformance.suite import load_suites
-from fbaconf.explain import spectrum, triggers
+from fbaconf.explain import causes, spectrum, triggers
 from fbaconf.explain.causes import Cause, Explanation, Trial, _variant, explain
 from fbaconf.explain.render import markdown, terminal
 from fbaconf.harness.results import CaseResult, Outcome, RunRecord
@@ -153,3 +154,31 @@ def test_a_confirming_variant_names_what_else_it_took_out(core_cases):
     ex = Explanation("d", "simple@1", 1, 1, [cause])
     assert "the variant also lacks: fap.1, fap.2" in terminal(ex)
     assert "(also without `fap.1`, `fap.2`)" in markdown(ex, {"Fail": 1})
+
+
+def _scores(*names: str) -> list[spectrum.Score]:
+    return [spectrum.Score(n, 1.0 - i / 10, 1, 0, 1) for i, n in enumerate(names)]
+
+
+@pytest.mark.parametrize(
+    ("first_variant", "chosen", "also"),
+    [
+        (None, "a", ["b"]),  # no edit takes a out alone; b's passing variant lacks a too: a, as ranked
+        (False, "b", ["a"]),  # the decoder failed without a: the passing variant confirms b
+    ],
+)
+def test_a_passing_variant_that_also_lacks_a_better_candidate_confirms_that_one(
+    monkeypatch, first_variant, chosen, also
+):
+    vs = [_view("c1", True, "a", "b"), _view("c2", False)]
+    runner = types.SimpleNamespace(runs=0, left=10, budget=types.SimpleNamespace(per_cause=6))
+
+    def trial(runner_, case, feature, features, keep):
+        if feature == "a":
+            return None if first_variant is None else Trial("a", "c1", "edit a", "Fail", False)
+        return Trial("b", "c1", "edit b", "Pass", True, also=["a"])
+
+    monkeypatch.setattr(causes, "_try", trial)
+    cand, confirmed, _tried = causes._choose(_scores("a", "b"), vs, {"c1"}, {"c1": None}, runner, None)
+    assert cand.feature == chosen and confirmed is not None and confirmed.feature == chosen
+    assert confirmed.also == also
