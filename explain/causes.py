@@ -254,6 +254,8 @@ def _try(runner: Runner, case: Case, feature: str, features: frozenset[str], kee
             cres, _ = runner.variant(case, key, ctl.encode(), "control")
             trial.control = cres.outcome.value
             trial.confirmed = not cres.outcome.ok  # the rewrite alone passes: the form, not this, failed it
+            # the rewrite alone (the same forms gone) still failed: the forms are not what it lacks too
+            trial.also = [a for a in trial.also if a not in forms]
     if trial.confirmed and keep is not None:
         trial.input = str(runner.keep(path, keep / f"{case.suite}~{case.id}~{label}{path.suffix}"))
     return trial

@@ -182,3 +182,25 @@ def test_a_passing_variant_that_also_lacks_a_better_candidate_confirms_that_one(
     cand, confirmed, _tried = causes._choose(_scores("a", "b"), vs, {"c1"}, {"c1": None}, runner, None)
     assert cand.feature == chosen and confirmed is not None and confirmed.feature == chosen
     assert confirmed.also == also
+
+
+def test_a_rewrite_whose_control_fails_does_not_name_the_forms_it_normalised():
+    # comments-crlf holds values (content.held) in a text with comments, CRLF line ends and a name
+    # with spaces; the edit for held values rewrites the text through fbaconf's writer, which
+    # normalises all three. The variant passes and the control (the rewrite alone) fails: the
+    # forms are cleared, so the confirmation names none of them beside held values
+    (case,) = [c for s in load_suites(names=["simple-l1-text"]) for c in s.cases if c.id == "comments-crlf"]
+    features = frozenset(triggers.text_features(case.input_path("fap").read_bytes()))
+    assert {"content.held", "text.comment", "text.crlf", "text.name-spaces"} <= features
+
+    class Runner:
+        left = 10
+        adapter = types.SimpleNamespace(inputs=["fap"])
+
+        def variant(self, case_, key, data, label):
+            ok = label != "control"
+            return types.SimpleNamespace(outcome=Outcome.PASS if ok else Outcome.FAIL), None
+
+    t = causes._try(Runner(), case, "content.held", features, None)
+    assert t is not None and t.confirmed and t.control == "Fail"
+    assert not {"text.comment", "text.crlf", "text.name-spaces"} & set(t.also)
