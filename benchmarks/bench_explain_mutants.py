@@ -126,8 +126,9 @@ def rank(res: dict, cases: dict, adapter: Adapter | None = None) -> tuple[int | 
         cid = f["case"].split(" (")[0]
         if cid not in failing and cid in cases:
             c = cases[cid]
-            failing[cid] = CaseResult(cid, c.suite, c.claim, Outcome(f["outcome"]), kind=c.kind.value)
-            failing[cid].ending = f.get("ending")
+            failing[cid] = CaseResult(
+                cid, c.suite, c.claim, Outcome(f["outcome"]), kind=c.kind.value, ending=f.get("ending")
+            )
         if cid in failing:
             failing[cid].stages.extend(
                 StageResult(d["stage"], Outcome.FAIL, first_difference=d["first_difference"])

@@ -32,7 +32,7 @@ from pathlib import Path
 
 from fbaconf.conformance.suite import CaseKind, golden_root, load_suites
 from fbaconf.errors import FbaconfInputError
-from fbaconf.harness.adapters import ManifestError, PythonAdapter, resolve
+from fbaconf.harness.adapters import OUTPUT_PLACEHOLDER, ManifestError, PythonAdapter, resolve
 from fbaconf.harness.runner import RunContext, run_case
 from fbaconf.harness.selection import claim_covers
 from fbaconf.reference import decoder as refdecoder
@@ -176,7 +176,6 @@ def format_results(results: list[dict]) -> str:
 # ------------------------------------------------------------------ adapter
 
 
-REJECTED = "fbaconf-refdecoder: error: "  # how the decoder program says it rejects its input (exit 2)
 RULE = re.compile(r" \[rule ([^\]]+)\]$")
 
 
@@ -211,22 +210,18 @@ class MutantAdapter(PythonAdapter):
                     argv += [opt, job.values[key]]
             # only what the case compares, as the reference adapter writes: a case of 16,500
             # frames that compares FAPs is not rendered
-            for out, opt, key in (
-                ("faps", "--faps-out", "faps_out"),
-                ("vertices", "--vertices-out", "vertices_out"),
-                ("images", "--images-dir", "images_dir"),
-            ):
+            for out, key in OUTPUT_PLACEHOLDER.items():  # the program's options: --faps-out ...
                 if out in self.outputs and key not in job.unwanted:
-                    argv += [opt, job.values[key]]
+                    argv += [f"--{key.replace('_', '-')}", job.values[key]]
         try:
             p = subprocess.run(argv, capture_output=True, text=True, timeout=self.limits.timeout_s)
         except subprocess.TimeoutExpired:
             return  # killed at the limit: execute() finds the time past it, a timeout (not a crash)
         said = p.stderr.strip().splitlines()[-1] if p.stderr.strip() else ""
-        if p.returncode == 2 and said.startswith(REJECTED):
+        if p.returncode == 2 and said.startswith(refdecoder.ERROR_PREFIX):
             # the program's own rejection (a typed input error): judged as the in-process reference's
             # is, a rejection naming its rule, not a crash of the adapter
-            what = said[len(REJECTED) :]
+            what = said[len(refdecoder.ERROR_PREFIX) :]
             m = RULE.search(what)
             raise FbaconfInputError(what[: m.start()] if m else what, rule=m.group(1) if m else None)
         if p.returncode != 0:

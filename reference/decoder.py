@@ -29,6 +29,10 @@ from fbaconf.reference.pipeline import is_fap_text, multi_outputs, reference_out
 # Nothing of the harness is imported here: this program starts once per case.
 
 
+# how the program says it rejects its input (exit 2); what follows is the typed error
+ERROR_PREFIX = "fbaconf-refdecoder: error: "
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="fbaconf-refdecoder", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -61,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 multi_outputs(a.inputs, a.out_dir, a.format)
     except FbaconfInputError as e:
-        print(f"fbaconf-refdecoder: error: {e}", file=sys.stderr)
+        print(f"{ERROR_PREFIX}{e}", file=sys.stderr)
         return 2
     return 0
 
