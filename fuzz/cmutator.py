@@ -75,7 +75,7 @@ def mutate(lib: ctypes.CDLL, data: bytes, seed: int) -> bytes:
     """One mutation of ``data`` (the same bytes for the same seed)."""
     buf = ctypes.create_string_buffer(data, len(data) + ROOM)
     n = lib.fba_mutate(buf, len(data), len(data) + ROOM, seed & 0xFFFFFFFF)
-    return buf.raw[:n]
+    return ctypes.string_at(buf, n)
 
 
 def cross(lib: ctypes.CDLL, a: bytes, b: bytes, seed: int) -> bytes:
@@ -83,7 +83,7 @@ def cross(lib: ctypes.CDLL, a: bytes, b: bytes, seed: int) -> bytes:
     cap = len(a) + len(b) + ROOM
     out = ctypes.create_string_buffer(cap)
     n = lib.fba_cross(a, len(a), b, len(b), out, cap, seed & 0xFFFFFFFF)
-    return out.raw[:n]
+    return ctypes.string_at(out, n)
 
 
 def rewrite(lib: ctypes.CDLL, data: bytes) -> bytes | None:
@@ -91,7 +91,7 @@ def rewrite(lib: ctypes.CDLL, data: bytes) -> bytes | None:
     cap = len(data) + ROOM
     out = ctypes.create_string_buffer(cap)
     n = lib.fba_rewrite(data, len(data), out, cap)
-    return out.raw[:n] if n else None
+    return ctypes.string_at(out, n) if n else None
 
 
 def edit_symbol(lib: ctypes.CDLL, data: bytes, plane: int, which: int, value: int) -> bytes | None:
@@ -100,4 +100,4 @@ def edit_symbol(lib: ctypes.CDLL, data: bytes, plane: int, which: int, value: in
     cap = len(data) + ROOM
     out = ctypes.create_string_buffer(cap)
     n = lib.fba_edit_symbol(data, len(data), out, cap, plane, which, value)
-    return out.raw[:n] if n else None
+    return ctypes.string_at(out, n) if n else None

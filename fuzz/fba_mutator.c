@@ -271,12 +271,13 @@ static plane *add_plane(stream *st)
 /* ---------------------------------------------------------------- adaptive models (§3.2) */
 /* The model of §3.2: frequencies starting at 1, cum[k] the sum of freq[k..n-1] (descending, cum[0]
  * the total), +1 for the symbol coded, every frequency halved (rounding up) once the total reaches
- * 16383. Kept here as a Fenwick tree of the frequencies, so a symbol costs O(log n) and not the
- * O(n) of updating a cumulative table (alphabets reach 3,721 symbols: bounds of 31*60 at q = 1);
- * and a model gets its tree only at its second update, uniform until then but for one symbol (an
+ * 16383. Kept here as a Fenwick tree of what each frequency has above 1 (extra[k] = freq[k] - 1), so
+ * a symbol costs O(log n) and not the O(n) of updating a cumulative table (alphabets reach 3,721
+ * symbols: bounds of 31*60 at q = 1), and setting a model up is clearing two arrays, not summing
+ * them; a model gets its tree only at its second update, uniform until then but for one symbol (an
  * intra plane's model codes one symbol before the next intra plane sets it up again). Same numbers
  * as the table, faster. */
-typedef struct { int n, lo, cap, uniform, one; int32_t total, *freq, *tree; } model;
+typedef struct { int n, lo, cap, uniform, one; int32_t total, *extra, *tree; } model;
 
 static void model_init(model *m, int lo, int hi)
 {
@@ -294,14 +295,15 @@ static void tree_add(model *m, int k, int32_t d)
 
 static int32_t prefix(const model *m, int k) /* freq[0] + ... + freq[k-1] */
 {
-    int32_t t = 0;
+    int32_t t = k;
     for (int i = k; i > 0; i -= i & -i) t += m->tree[i];
     return t;
 }
 
 static void tree_build(model *m)
 {
-    for (int i = 1; i <= m->n; i++) m->tree[i] = m->freq[i - 1];
+    m->tree[0] = 0;
+    for (int i = 1; i <= m->n; i++) m->tree[i] = m->extra[i - 1];
     for (int i = 1; i <= m->n; i++) {
         int j = i + (i & -i);
         if (j <= m->n) m->tree[j] += m->tree[i];
@@ -322,13 +324,14 @@ static int find(const model *m, uint64_t target)
         while ((uint64_t)cum(m, (int)k) > target) k++;
         return (int)k;
     }
-    /* cum[k] <= target  <=>  prefix(k) >= total - target: the smallest such k, by descending the tree */
+    /* cum[k] <= target  <=>  prefix(k) >= total - target: the smallest such k, by descending the tree
+     * (a node covering `step` symbols holds their extras; their frequencies add `step` more) */
     int32_t need = m->total - (int32_t)target, pos = 0, step = 1;
     while (step * 2 <= m->n) step *= 2;
     for (; step; step /= 2)
-        if (pos + step <= m->n && m->tree[pos + step] < need) {
+        if (pos + step <= m->n && m->tree[pos + step] + step < need) {
             pos += step;
-            need -= m->tree[pos];
+            need -= m->tree[pos] + step;
         }
     return pos + 1 < 1 ? 1 : pos + 1;
 }
@@ -342,29 +345,29 @@ static int model_update(model *m, int s)
     }
     if (m->uniform) {
         if (m->n > m->cap) {
-            int32_t *f = realloc(m->freq, (size_t)m->n * sizeof *f), *t;
+            int32_t *f = realloc(m->extra, (size_t)m->n * sizeof *f), *t;
             if (!f) return -1;
-            m->freq = f;
+            m->extra = f;
             t = realloc(m->tree, (size_t)(m->n + 1) * sizeof *t);
             if (!t) return -1;
             m->tree = t;
             m->cap = m->n;
         }
-        for (int k = 0; k < m->n; k++) m->freq[k] = 1;
-        m->freq[m->one]++;
-        m->tree[0] = 0;
-        tree_build(m);
+        memset(m->extra, 0, (size_t)m->n * sizeof *m->extra);
+        memset(m->tree, 0, (size_t)(m->n + 1) * sizeof *m->tree);
+        m->extra[m->one] = 1;
+        tree_add(m, m->one, 1);
         m->uniform = 0;
     }
-    if (m->total >= MAXFREQ) {
-        m->total = 0;
+    if (m->total >= MAXFREQ) { /* (1 + e + 1) / 2 = 1 + e / 2 */
+        m->total = m->n;
         for (int k = 0; k < m->n; k++) {
-            m->freq[k] = (m->freq[k] + 1) / 2;
-            m->total += m->freq[k];
+            m->extra[k] >>= 1;
+            m->total += m->extra[k];
         }
         tree_build(m);
     }
-    m->freq[s]++;
+    m->extra[s]++;
     m->total++;
     tree_add(m, s, 1);
     return 0;
@@ -404,12 +407,12 @@ static void codec_clear(codec *c)
     memset(c, 0, sizeof *c);
     for (int t = 0; t < 2; t++) {
         for (int i = 0; i < NFAP; i++) {
-            c->lm[t][i].freq = lm[t][i].freq;
+            c->lm[t][i].extra = lm[t][i].extra;
             c->lm[t][i].tree = lm[t][i].tree;
             c->lm[t][i].cap = lm[t][i].cap;
         }
         for (int k = 0; k < NHM; k++) {
-            c->hm[t][k].freq = hm[t][k].freq;
+            c->hm[t][k].extra = hm[t][k].extra;
             c->hm[t][k].tree = hm[t][k].tree;
             c->hm[t][k].cap = hm[t][k].cap;
         }
