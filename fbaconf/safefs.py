@@ -3,6 +3,8 @@ their folder.
 
 * :func:`remove_tree` deletes a folder however deep it is (no recursion, no path-length
   limit: it walks by directory file descriptors) without following a symlink out of it;
+* :func:`empty_tree` empties a reused case folder to its kept folders the same way, while the
+  decoder that may change it runs;
 * :func:`open_regular` / :func:`read_regular` open a file only if it is a regular file (no
   FIFO, device, socket or symlink — which could block the harness, stream forever or point
   at a file the decoder must not choose) and cap how much is read;
@@ -17,9 +19,10 @@ import errno
 import os
 import re
 import stat
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, TypeAlias
 
 from fbaconf.errors import FbaconfInputError
 
@@ -174,24 +177,96 @@ def _walk(parent_fd: int, name: str, *, remove: bool, stop_at: int | None, sizes
     return sizes[0]
 
 
-def empty_dir(path: Path | str, keep: frozenset[str] = frozenset()) -> None:
-    """Remove everything inside the directory ``path`` but the entries named in ``keep``
-    (links not followed: a link is removed, never its target). A ``path`` that is not a
-    real directory (a decoder put a link or a file in its place) is removed and made anew."""
+# folders kept by name, each emptied to its own tree (None: left as it is)
+Tree: TypeAlias = "Mapping[str, Tree | None]"
+
+
+def empty_tree(path: Path | str, keep: Tree) -> None:
+    """Remove everything below the directory ``path`` but the folders named in ``keep``: a
+    name mapped to a mapping is a folder emptied the same way (made if missing), one mapped to
+    None is left as it is. ``path`` that is not a real directory (a link, a file) is removed
+    and made anew.
+
+    The walk holds directory descriptors, each opened without following a link, and never
+    resolves a path below ``path`` again: a decoder that runs meanwhile (the next input of a
+    pipelined worker) and swaps a folder for a link to one of the host's cannot have the
+    harness empty that one — a check of the path followed by a use of it could."""
     path = os.fspath(path)
     try:
-        st = os.lstat(path)
+        fd = os.open(path, _DIR_FLAGS)
     except FileNotFoundError:
         os.mkdir(path)
-        return
-    if not stat.S_ISDIR(st.st_mode):
+        fd = os.open(path, _DIR_FLAGS)
+    except OSError:  # a link or a file in its place
         remove_tree(path)
         os.mkdir(path)
-        return
-    with os.scandir(path) as it:
-        names = [e.name for e in it if e.name not in keep]
-    for name in names:
-        remove_tree(os.path.join(path, name))
+        fd = os.open(path, _DIR_FLAGS)
+    try:
+        _empty_at(fd, keep)
+    finally:
+        os.close(fd)
+
+
+def _empty_at(fd: int, keep: Tree) -> None:
+    """:func:`empty_tree` of the folder ``fd``."""
+    seen = set()
+    with os.scandir(fd) as it:
+        entries = [(e.name, _is_dir(e)) for e in it]
+    for name, is_dir in entries:
+        if is_dir and name in keep:
+            seen.add(name)
+            sub = keep[name]
+            if sub is None:
+                continue
+            try:
+                child = _open_dir(fd, name)
+            except (FileNotFoundError, NotADirectoryError, OSError):  # swapped meanwhile
+                _remove_at(fd, name)
+                seen.discard(name)
+                continue
+            try:
+                _empty_at(child, sub)
+            finally:
+                os.close(child)
+        else:
+            _remove_at(fd, name)
+    for name, sub in keep.items():
+        if name not in seen and sub is not None:
+            _remove_at(fd, name)  # what took its place since the scan
+            os.mkdir(name, 0o755, dir_fd=fd)
+
+
+def _is_dir(e: os.DirEntry[str]) -> bool:
+    try:
+        return e.is_dir(follow_symlinks=False)
+    except OSError:
+        return False
+
+
+def _remove_at(fd: int, name: str) -> None:
+    """Remove the entry ``name`` of the folder ``fd``, whatever it is (a folder with its tree);
+    one swapped for another kind meanwhile is tried again as what it has become."""
+    for _ in range(3):
+        try:
+            try:
+                os.unlink(name, dir_fd=fd)
+            except PermissionError:
+                _chmod_dir(fd)
+                os.unlink(name, dir_fd=fd)
+            return
+        except FileNotFoundError:
+            return
+        except IsADirectoryError:
+            pass
+        try:
+            _walk(fd, name, remove=True, stop_at=None)
+            return
+        except FileNotFoundError:
+            return
+        except OSError as e:
+            if e.errno not in (errno.ELOOP, errno.ENOTDIR):
+                raise
+    raise TreeChangedError(f"{name!r} kept changing while it was removed")
 
 
 def tree_size(path: Path | str, stop_at: int) -> int:

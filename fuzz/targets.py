@@ -24,7 +24,7 @@ from fbaconf.isolation.persistent import FLAKY, PersistentDecoder
 from fbaconf.isolation.process import Note
 from fbaconf.isolation.sandbox import Limits
 from fbaconf.profiles.checker import check_stream
-from fbaconf.safefs import empty_dir, remove_tree
+from fbaconf.safefs import Tree, empty_tree, remove_tree
 
 from .inputs import Entry, InputKind
 from .model import reference_parse
@@ -65,7 +65,8 @@ class ExecResult:
 
 PIPELINE_DEPTH = 8  # case folders per worker of a fork server or persistent decoder
 
-_KEEP = {"case": frozenset(("in", "out", "tmp")), "out": frozenset(("images", "faces"))}
+# what a case folder keeps between inputs: its input folder as it is, its output folders emptied
+_CASE_TREE: Tree = {"in": None, "out": {"images": {}, "faces": {}}, "tmp": {}}
 
 
 @dataclass
@@ -74,7 +75,7 @@ class _Slot:
 
     job: object
     input: Path
-    dirs: list
+    folder: str  # the case folder (its tree: _CASE_TREE)
     input_fd: int | None = None
     input_len: int = 0
 
@@ -235,7 +236,7 @@ class DecoderTarget:
                     _Slot(
                         job,
                         Path(job.values["input"] if self.kind != InputKind.SCENE else job.values["scene"]),
-                        [str(d), str(d / "out"), str(d / "out" / "images"), str(d / "out" / "faces"), str(d / "tmp")],
+                        str(d),
                     )
                 )
             with self._workers_lock:
@@ -245,8 +246,7 @@ class DecoderTarget:
     def _reuse(self, slot: _Slot, data: bytes, write_input: bool = True):
         """The slot's job for the next input: the input rewritten in place (through a
         descriptor kept open), the outputs and everything else an earlier input left removed."""
-        for d in slot.dirs:
-            empty_dir(d, keep=_KEEP.get(os.path.basename(d), frozenset()) if d != slot.dirs[0] else _KEEP["case"])
+        empty_tree(slot.folder, _CASE_TREE)
         if write_input:
             if slot.input_fd is None:
                 slot.input_fd = os.open(slot.input, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)

@@ -1,18 +1,23 @@
 """Resource accounting against honest and hostile decoders: memory judged from the
 kernel's OOM events (never from page cache reaching the limit), the output limit enforced
 while the decoder writes, trees of any depth counted and removed, no inotify instances taken
-from the host's user, ``memory_kind = "rss"`` sampling the decoder's tree (not the launcher).
+from the host's user, ``memory_kind = "rss"`` sampling the decoder's tree (not the launcher), a
+reused case folder emptied without following a link a decoder put in it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import resource
 import sys
 import textwrap
+import threading
+import time
 from pathlib import Path
 
 import fbaconf
+from fbaconf import safefs
 from fbaconf.conformance.suite import load_suites
 from fbaconf.harness import adapters
 from fbaconf.harness.results import Outcome
@@ -199,3 +204,77 @@ def test_an_allocation_the_kernel_refuses_is_the_memory_limit_like_one_killed_at
     assert endings.classify(said, lim).kind == endings.EndingKind.REJECT
     other = sandbox.ProcResult(["python3", "d.py"], 1, stderr_tail=PY_OOM.replace("MemoryError", "KeyError: 3"))
     assert endings.classify(other, lim).kind == endings.EndingKind.CRASH
+
+
+CASE_TREE = {"in": None, "out": {"images": {}, "faces": {}}, "tmp": {}}
+
+
+def test_a_case_folder_is_emptied_to_its_tree_whatever_was_left_in_it(tmp_path):
+    """What a decoder leaves in a reused case folder goes (files, links, a deep tree, a file
+    where a folder belongs); the input folder stays as it is; a link's target is never touched."""
+    host = tmp_path / "host"
+    host.mkdir()
+    (host / "precious").write_text("x")
+    case = tmp_path / "case"
+    (case / "in").mkdir(parents=True)
+    (case / "in" / "input.fba").write_bytes(b"input")
+    (case / "out" / "images").mkdir(parents=True)
+    (case / "out" / "images" / "0001.png").write_bytes(b"png")
+    (case / "out" / "faps.fap").write_text("faps")
+    (case / "out" / "faces").symlink_to(host)  # a link where a kept folder belongs
+    (case / "tmp").write_text("a file where a folder belongs")
+    deep = case / "junk"
+    for _ in range(200):
+        deep = deep / "d"
+    deep.mkdir(parents=True)
+    (case / "link-to-host").symlink_to(host)
+    safefs.empty_tree(case, CASE_TREE)
+    assert sorted(p.name for p in case.iterdir()) == ["in", "out", "tmp"]
+    assert (case / "in" / "input.fba").read_bytes() == b"input"
+    assert sorted(p.name for p in (case / "out").iterdir()) == ["faces", "images"]
+    for d in (case / "out" / "images", case / "out" / "faces", case / "tmp"):
+        assert d.is_dir() and not d.is_symlink() and not any(d.iterdir())
+    assert (host / "precious").read_text() == "x"
+
+
+def test_a_folder_swapped_for_a_link_while_the_case_folder_is_emptied_is_not_followed(tmp_path):
+    """A pipelined worker empties a case folder while its decoder runs the next input, with write
+    access to it: a decoder that keeps swapping ``out`` for a link to a host folder must not get the
+    harness to empty that folder (a check of a path then a use of it did, within milliseconds)."""
+    host = tmp_path / "host"
+    (host / "images").mkdir(parents=True)
+    (host / "images" / "precious").write_text("x")
+    case = tmp_path / "case"
+    (case / "in").mkdir(parents=True)
+    (case / "out" / "images").mkdir(parents=True)
+    stop = threading.Event()
+
+    def swapper() -> None:
+        i = 0
+        while not stop.is_set():
+            i += 1
+            with contextlib.suppress(OSError):
+                os.rename(case / "out", tmp_path / f"aside{i}")
+            try:
+                os.symlink(host, tmp_path / "link")
+                os.rename(tmp_path / "link", case / "out")
+            except OSError:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp_path / "link")
+            time.sleep(0.0003)
+
+    t = threading.Thread(target=swapper)
+    t.start()
+    sweeps, t0 = 0, time.monotonic()
+    try:
+        while time.monotonic() - t0 < 1.5 and (host / "images" / "precious").exists():
+            with contextlib.suppress(OSError):  # a folder that keeps changing may be given up on
+                safefs.empty_tree(case, CASE_TREE)
+            sweeps += 1
+    finally:
+        stop.set()
+        t.join()
+    assert sweeps > 100
+    assert (host / "images" / "precious").read_text() == "x"
+    safefs.empty_tree(case, CASE_TREE)
+    assert not (case / "out").is_symlink() and sorted(p.name for p in (case / "out").iterdir()) == ["faces", "images"]
