@@ -14,26 +14,26 @@ not supported; a reject code from ``reject_exit_codes``; anything else is a Fail
 path's extension is the manifest's ``faps_format``. The decoder flushes its answer (nothing
 else is sent until it arrives) and ends when its stdin closes.
 
-Framing, one input at a time. The next input is written only once the previous one's answer
-is in, so whatever happens between two answers — a crash, a hang, a report on stderr — is
-the input in flight's (unless confirmation says otherwise: "Answers bound to what they
-answer", below), and the inputs queued behind it are sent, in order, to a fresh process
-(after a first crash a spare process is kept starting in the background, so the next input
-need not wait for a sandbox). Reads and writes are bounded in size and time, in both
-directions: the input is written with the input's deadline while the harness keeps reading
-(a decoder that answers instead of reading cannot block it), an answer is one line of at most
-:data:`MAX_ANSWER` bytes, and a decoder that sends more than the one answer asked for — an
-answer before its input, two answers, a megabyte of text, another request's id — has broken
-the protocol (``protocol-error``, an unexpected exit), and the process is replaced. Whose
-error it is: a garbled line, a flood, or a second line after the answer, the input in flight's;
-bytes written before the input in flight was (an answer ahead of its request, whose random id
-cannot be guessed), or a repeated answer to the previous request, the previous input's — for
-a decoder that reads one request at a time, that is what wrote them. To make that possible,
-an input's result is given out only once the next queued input has answered too (when one is
-queued: the decoder keeps working meanwhile), and an input wrongly held up by the previous
-one's error is sent again to a fresh process. A process that exits while decoding is that
-input's ending as its exit status says (a crash, a memory limit...); one that exits 0 without
-answering is a protocol error too.
+Framing, one input at a time. The next input is written only once the previous one's answer is
+in, so whatever happens between two answers — a crash, a hang, a report on stderr — is the
+input in flight's (unless confirmation says otherwise: "Answers bound to what they answer",
+below), and the inputs queued behind it are sent, in order, to a fresh process (after a first
+crash two spare processes are kept starting in the background, so the next input need not wait
+for a sandbox: a crash can cost two, as said below). Reads and writes are bounded in size and
+time, in both directions: the input is written with the input's deadline while the harness
+keeps reading (a decoder that answers instead of reading cannot block it), an answer is one
+line of at most :data:`MAX_ANSWER` bytes, and a decoder that sends more than the one answer
+asked for — an answer before its input, two answers, a megabyte of text, another request's id —
+has broken the protocol (``protocol-error``, an unexpected exit), and the process is replaced.
+Whose error it is: a garbled line, a flood, or a second line after the answer, the input in
+flight's; bytes written before the input in flight was (an answer ahead of its request, whose
+random id cannot be guessed), or a repeated answer to the previous request, the previous
+input's — for a decoder that reads one request at a time, that is what wrote them. To make that
+possible, an input's result is given out only once the next queued input has answered too (when
+one is queued: the decoder keeps working meanwhile), and an input wrongly held up by the
+previous one's error is sent again to a fresh process. A process that exits while decoding is
+that input's ending as its exit status says (a crash, a memory limit...); one that exits 0
+without answering is a protocol error too.
 
 A crash (the process dies: a signal, a sanitizer abort, a panic), a hang (no answer within
 ``timeout_s``) or a memory or output blow-up is the ending of the input being decoded, and
@@ -90,6 +90,7 @@ from .serve import (
 from .watch import Watch
 
 FLAKY = Note.NOT_REPRODUCED_ALONE
+SPARES = 2  # processes kept starting ahead once a decoder has crashed (PersistentDecoder._start)
 NO_ANSWER = Note.NO_ANSWER
 
 
@@ -143,7 +144,7 @@ class PersistentDecoder:
         self.starts = 0
         self.io = self.root / ".io"
         self.server: Server | None = None
-        self._spare: Server | None = None  # started ahead, after a first crash
+        self._spares: collections.deque[Server] = collections.deque()  # started ahead, after a first crash
         self._alone_spare: Server | None = None  # the next run alone's process, started ahead
         self._pending: collections.deque[Answer] = collections.deque()
         self._inflight: Answer | None = None
@@ -204,20 +205,24 @@ class PersistentDecoder:
         if alone:
             spare, self._alone_spare = self._alone_spare, None
         else:
-            spare, self._spare = self._spare, None
+            spare = self._spares.popleft() if self._spares else None
         if spare is not None and spare.exit_status() is not None:  # it died waiting
             spare.stop()
             spare = None
         return spare
 
     def _start(self) -> Server:
-        """The process for the next inputs: the spare if one is ready, else a new one. After a
-        first restart a spare is kept starting in the background, so a decoder that crashes
-        often does not wait for a sandbox to start before each next input."""
+        """The process for the next inputs: a spare if one is ready, else a new one. After a
+        first restart :data:`SPARES` are kept starting in the background, so a decoder that
+        crashes often does not wait for a sandbox to start before each next input: a crash in a
+        process that answered before takes two (its input confirmed as a fresh process's first,
+        which crashes too, then the next input), and a sandbox takes tens of milliseconds to
+        start on a busy machine, longer than a crashing decoder's next crash may take."""
         srv = self.server = self._take_spare() or self._launch()
         self.starts += 1
         if self.starts > 1:
-            self._spare = self._launch()
+            while len(self._spares) < SPARES:
+                self._spares.append(self._launch())
         return srv
 
     def _drop(self) -> None:
@@ -228,9 +233,10 @@ class PersistentDecoder:
 
     def close(self) -> None:
         self._drop()
-        for which in ("_spare", "_alone_spare"):
-            spare = getattr(self, which)
-            setattr(self, which, None)
+        spares = [*self._spares, self._alone_spare]
+        self._spares.clear()
+        self._alone_spare = None
+        for spare in spares:
             if spare is not None:
                 spare.stop()
 

@@ -18,6 +18,7 @@ from fbaconf.fuzz.targets import DecoderTarget, FuzzSetupError
 from fbaconf.harness import adapters
 from fbaconf.isolation import endings, forkclient, forkserver_build, sandbox
 from fbaconf.isolation.forkclient import ForkServer
+from fbaconf.isolation.persistent import SPARES
 from fbaconf.isolation.sandbox import Limits, default_view
 
 from lib.manifests import python_decoder
@@ -274,13 +275,13 @@ def test_persistent_protocol_survives_crashes_and_hangs(tmp_path):
         # the first, one after SEGV, HANG, JUNK and each QUIT, and two to confirm SEGV and HANG (each ended
         # a process that had answered an input before: run again as a fresh process's first input)
         assert dec.starts == 8
-        # after the first restart a spare was kept starting, and each later restart took it
-        assert dec._launches == dec.starts + 1
-        spare = dec._spare.proc
-        assert spare.poll() is None  # ready for the next crash
+        # after the first restart two spares were kept starting, and each later restart took one
+        assert dec._launches == dec.starts + SPARES == dec.starts + 2
+        spares = [s.proc for s in dec._spares]
+        assert len(spares) == 2 and all(p.poll() is None for p in spares)  # ready for the next crashes
     finally:
         t.close()
-    assert spare.poll() is not None  # stopped with the worker
+    assert all(p.poll() is not None for p in spares)  # stopped with the worker
 
 
 def test_serve_takes_no_per_input_placeholders(tmp_path):
