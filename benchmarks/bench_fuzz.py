@@ -15,8 +15,8 @@ the same number of seconds on the same machine:
 * ``bare persistent``: a loop that only writes one input to ``skipchain --serve`` and reads
   the answer — the ceiling for the persistent protocol.
 
-All fuzz runs are one decoder at a time (``-j 1``) with coverage measured on every 4th input
-(the default), minimisation excluded from execs/s. Prints execs/s and the ratios the issue
+All fuzz runs are one decoder at a time (``-j 1``) with coverage measured on every 8th input
+(the default: ``--coverage-every 8``), minimisation excluded from execs/s. Prints execs/s and the ratios the issue
 asks for: harness vs bare spawn (goal >= 0.5), persistent vs fork server.
 
     python benchmarks/bench_fuzz.py [--seconds S]

@@ -109,6 +109,7 @@ def run_shard(spec: ShardSpec, seed: int, seconds: float, merged: list[bytes]) -
                 coverage_every=spec.coverage_every,
                 minimise_findings=False,
                 fresh_helper=False,  # the shards have every CPU already
+                features_helper=False,
             ),
         )
         fz.run()

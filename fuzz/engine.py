@@ -19,6 +19,7 @@ from fbaconf.scenes import bifs, bt
 from . import cmutator
 from .choosers import RandomChooser
 from .corpus import STRESS_BYTES, scene_seeds
+from .features_ahead import FeaturesAhead
 from .findings import Finding, minimise_against, write_finding
 from .fresh import FreshStreams, helper_worthwhile, input_rng
 from .inputs import Entry, InputKind, gen_valid
@@ -122,6 +123,7 @@ class FuzzConfig:
     valid_pool: int = 24  # fresh valid streams made up front
     fresh_valid_share: float = 0.04  # share of inputs that are a fresh valid stream
     fresh_helper: bool = True  # encode them ahead in a helper process (when a CPU is free: fuzz.fresh)
+    features_helper: bool = True  # measure coverage ahead in a helper process (likewise: fuzz.features_ahead)
     prefer_short: float = 0.5
     run_seeds_first: int = 64
     coverage_every: int = 1  # measure syntax-model coverage on every n-th input
@@ -216,6 +218,8 @@ class Fuzzer:
         # the helper lives as long as a run (make_input outside one makes its streams itself)
         self.fresh = FreshStreams(self.seed, self._fresh_wanted, helper=False)
         self.fresh_helper = c.fresh_helper and helper_worthwhile(self.jobs, self.max_execs)
+        self.features = FeaturesAhead(helper=False)
+        self.features_helper = c.features_helper and helper_worthwhile(self.jobs, self.max_execs)
 
     # ---------------------------------------------------------------- generation
     def make_input(self, index: int, corpus_size: int | None = None) -> Entry:
@@ -289,6 +293,7 @@ class Fuzzer:
         st.cpu_started = time.process_time()
         deadline = st.started + self.seconds
         self.fresh.helper = self.fresh_helper
+        self.features.helper = self.features_helper
         try:
             if self.jobs == 1:
                 self._run_pipelined(deadline)
@@ -296,6 +301,7 @@ class Fuzzer:
                 self._run_batches(deadline)
         finally:
             self.fresh.close()
+            self.features.close()
             close = getattr(self.target, "close", None)
             if close is not None:
                 close()
@@ -322,6 +328,8 @@ class Fuzzer:
         while True:
             while len(queue) < depth and self._more(index, deadline):
                 inp = self.make_input(index)
+                if self._measured_unparsed(index, inp):
+                    self.features.ask(index, inp.data)  # parsed by the helper while the decoder runs
                 queue.append((index, inp, start(inp)))
                 index += 1
             if not queue:
@@ -351,6 +359,16 @@ class Fuzzer:
                 index += n
                 self.progress.update(self.stats)
 
+    def _measured_unparsed(self, index: int, inp: Entry) -> bool:
+        """Whether input ``index`` will have its coverage measured by a parse of its own (unless
+        the oracle parses it first: :meth:`_record`)."""
+        return (
+            inp.kind == InputKind.STREAM
+            and inp.model is None
+            and index % self.coverage_every == 0
+            and not isinstance(self.target, SelfTarget)
+        )
+
     def _record(self, index: int, inp: Entry, out: ExecResult, deadline: float) -> None:
         st = self.stats
         st.execs += 1
@@ -364,9 +382,13 @@ class Fuzzer:
                 or (inp.kind == InputKind.STREAM and parsed(inp.data))
             )
         )  # the oracle's parse: free
-        if measure and inp.kind == InputKind.STREAM:
-            # coverage of the syntax model by what we sent the decoder
-            feats = inp.model.features if inp.model is not None else features_of(inp.data)
+        if measure and inp.kind == InputKind.STREAM:  # coverage of the syntax model by what we sent the decoder
+            if inp.model is not None:
+                feats = inp.model.features
+            elif parsed(inp.data):
+                feats = features_of(inp.data)
+            else:
+                feats = self.features.take(index, inp.data)
         elif measure and inp.kind == InputKind.SCENE:
             feats = _scene_feats_of(inp)
         if measure:

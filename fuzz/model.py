@@ -169,10 +169,10 @@ _PARSES_KEEP = 8
 _PARSES_LOCK = threading.Lock()
 
 
-def reference_parse(data: bytes):
+def reference_parse(data: bytes, keep: bool = True):
     """(planes, frames, error rule, end code, end offset) of ``data`` by the reference decoder
     (the planes decoded before an error survive it; frames None on an error). The last few
-    parses are kept: the coverage features and the oracle of one input share one parse."""
+    parses are kept (``keep``): the coverage features and the oracle of one input share one parse."""
     with _PARSES_LOCK:
         hit = _PARSES.get(data)
         if hit is not None:
@@ -189,6 +189,8 @@ def reference_parse(data: bytes):
     except Exception:  # noqa: BLE001 - the decoder's own wrapper turns these into rule "internal"
         rule = "internal"
     out = (tuple(d.planes), frames, rule, end_code, end_offset)
+    if not keep:
+        return out
     with _PARSES_LOCK:
         _PARSES[data] = out
         while len(_PARSES) > _PARSES_KEEP:
@@ -202,9 +204,9 @@ def parsed(data: bytes) -> bool:
         return data in _PARSES
 
 
-def _parse(data: bytes):
+def _parse(data: bytes, keep: bool = True):
     """(planes, error rule, end code, end offset) of ``data`` by the reference decoder."""
-    planes, _frames, rule, end_code, end_offset = reference_parse(data)
+    planes, _frames, rule, end_code, end_offset = reference_parse(data, keep)
     return list(planes), rule, end_code, end_offset
 
 
@@ -223,8 +225,10 @@ def stream_model(data: bytes) -> StreamModel:
 
 
 def features_of(data: bytes) -> set[str]:
-    """The syntax-model features of ``data`` alone (no header walk: what coverage needs)."""
-    planes, rule, end_code, _end = _parse(data)
+    """The syntax-model features of ``data`` alone (no header walk: what coverage needs). A parse
+    made for them is not kept: which parses are at hand (:func:`parsed`) then does not depend on
+    whether the coverage helper or the loop made it (fuzz/features_ahead.py)."""
+    planes, rule, end_code, _end = _parse(data, keep=False)
     return stream_features(planes, end_code, rule, nbytes=len(data))
 
 

@@ -66,6 +66,7 @@ class ExecResult:
 PIPELINE_DEPTH = 8  # case folders per worker of a fork server or persistent decoder
 
 # what a case folder keeps between inputs: its input folder as it is, its output folders emptied
+# (the layout a run's case folder has, whether or not the decoder's command names them)
 _CASE_TREE: Tree = {"in": None, "out": {"images": {}, "faces": {}}, "tmp": {}}
 
 

@@ -11,11 +11,13 @@ docs/fuzzing.md.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import random
 import shutil
 import subprocess
 import textwrap
+import time
 import tomllib
 from pathlib import Path
 
@@ -29,18 +31,19 @@ from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.cli import main
 from fbaconf.conformance.suite import Case
 from fbaconf.errors import BitstreamError, FbaconfInputError
-from fbaconf.fuzz import strategies
+from fbaconf.fuzz import model, strategies
 from fbaconf.fuzz.atheris_entry import fuzz_one_input
 from fbaconf.fuzz.corpus import default_seeds, short_prefixes
 from fbaconf.fuzz.engine import FuzzConfig, Fuzzer
+from fbaconf.fuzz.features_ahead import FeaturesAhead
 from fbaconf.fuzz.findings import replay, write_summary
-from fbaconf.fuzz.inputs import Entry
+from fbaconf.fuzz.inputs import Entry, InputKind
 from fbaconf.fuzz.minimise import minimise
-from fbaconf.fuzz.model import stream_model
+from fbaconf.fuzz.model import features_of, stream_model
 from fbaconf.fuzz.mutators import FIELD_MUTATORS, m_skip_chain, m_zero_frame_rate, mutate_stream
 from fbaconf.fuzz.promote import REGRESSION_SUITE, promote
 from fbaconf.fuzz.selftarget import SelfTarget
-from fbaconf.fuzz.targets import DecoderTarget, stack_hash
+from fbaconf.fuzz.targets import DecoderTarget, ExecResult, stack_hash
 from fbaconf.harness.adapters import load_manifest, resolve
 from fbaconf.harness.compare import compare_faps
 from fbaconf.harness.results import Outcome
@@ -261,6 +264,69 @@ def test_the_fresh_stream_helper_lives_as_long_as_the_run(seeds):
     for i in range(fz.stats.execs, fz.stats.execs + 200):
         fz.make_input(i)
     assert fz.fresh.proc is None
+
+
+class _Accepts:
+    """A decoder target that accepts every input after half a millisecond (the loop measures the
+    coverage of what it sends, unlike --self's)."""
+
+    name = "accepts"
+
+    def execute(self, inp):
+        time.sleep(0.0005)
+        return ExecResult(None)
+
+
+def test_coverage_from_the_helper_is_the_loops_own(seeds):
+    """The coverage of the inputs the loop parses for it alone is measured ahead by a helper
+    process: the same features input for input, so the same corpus and run with or without it
+    (and the helper is gone once the run ends)."""
+    runs = {}
+    for helper in (True, False):
+        # both runs start alike: no seed's model and no reference parse at hand from earlier tests
+        model._PARSES.clear()
+        fresh_seeds = [dataclasses.replace(e, model=None) for e in seeds]
+        config = FuzzConfig(seed=5, max_execs=1600, progress=False, valid_pool=2, coverage_every=4)
+        fz = Fuzzer(_Accepts(), fresh_seeds, config)
+        fz.features_helper = helper  # whatever this machine's CPUs: the helper is what is tested
+        taken = fz.features.take
+        pids: list[int] = []
+
+        def watching(index, data, taken=taken, fz=fz, pids=pids):
+            if fz.features.proc is not None and not pids:
+                pids.append(fz.features.proc.pid)
+            return taken(index, data)
+
+        fz.features.take = watching
+        fz.run()
+        runs[helper] = (fz.stats.features, fz.stats.measured, [e.data for e in fz.corpus[InputKind.STREAM]])
+        if helper:
+            assert pids and fz.features.from_helper > 50, "the helper measured nothing: the test would prove nothing"
+            assert not Path(f"/proc/{pids[0]}").exists()
+        else:
+            assert fz.features.from_helper == 0
+    assert runs[True] == runs[False]
+
+
+def test_a_dead_coverage_helper_leaves_the_loop_to_parse(seeds):
+    """Killed mid-run, the helper is let go and the loop parses the inputs itself: the same
+    features as a parse here gives."""
+    fa = FeaturesAhead(helper=True)
+    data = [e.data for e in seeds if len(e.data) < 4096][:40]
+    try:
+        for i, d in enumerate(data[:20]):
+            fa.ask(i, d)
+        assert fa.proc is not None, "the helper did not start"
+        got = [fa.take(i, d) for i, d in enumerate(data[:20])]
+        fa.proc.kill()
+        fa.proc.wait()
+        for i, d in enumerate(data[20:], start=20):
+            fa.ask(i, d)
+            got.append(fa.take(i, d))
+        assert fa.proc is None
+    finally:
+        fa.close()
+    assert got == [features_of(d) for d in data]
 
 
 # ------------------------------------------------------------------ planted-bug decoders
