@@ -104,8 +104,9 @@ class Cgroups:
             except OSError:
                 _rmdir(d)
 
-    def launcher_args(self) -> list[str]:
-        return [x for _k, d in self.dirs for x in ("--cgroup", str(d))]
+    def folders(self) -> list[Path]:
+        """The case's cgroup folders (a launcher joins each)."""
+        return [d for _k, d in self.dirs]
 
     def kill_all(self) -> None:
         for _kind, d in self.dirs:

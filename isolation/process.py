@@ -187,6 +187,13 @@ def tail_from(fd: int, start: int, end: int | None = None) -> str:
 # The shell waits for the harness's go (a line on stdin) once it has been moved into the
 # case's cgroups, then execs the launcher with stdin from /dev/null.
 _HOLD = 'read -r _ || exit 126; exec "$@" </dev/null'
+# A long-lived server's stdin is its protocol's pipe, so nothing can hold it: the shell moves
+# itself into the cgroups (its first argument: how many folders follow), then execs the launcher.
+_JOIN = (
+    'n=$1; shift; while [ "$n" -gt 0 ]; do '
+    'echo $$ 2>/dev/null > "$1/cgroup.procs" || { echo "fbaconf-limit: cannot join cgroup $1" >&2; exit 127; }; '
+    'shift; n=$((n - 1)); done; exec "$@"'
+)
 
 
 def _rlimit_arg(which: int, value: int) -> str:
@@ -200,10 +207,13 @@ def _rlimit_arg(which: int, value: int) -> str:
     return f"{min(value, hard)}:{hard}"
 
 
-def launch_argv(as_bytes: int, fsize: int, cpu: int, cgroups: list[Path], inner: list[str]) -> tuple[list[str], bool]:
+def launch_argv(
+    as_bytes: int, fsize: int, cpu: int, cgroups: list[Path], inner: list[str], *, join: bool = False
+) -> tuple[list[str], bool]:
     """The launcher command that applies the limits (and ``RLIMIT_NOFILE``) and execs
     ``inner``, and whether it waits for the harness to move it into ``cgroups`` (then write a
-    line to its stdin)."""
+    line to its stdin). ``join``: it moves itself into them instead and never reads its stdin
+    (a server's, which its protocol owns)."""
     import resource  # noqa: PLC0415 (POSIX only)
 
     # FBACONF_LAUNCHER=python: always the Python launcher (benchmarks/bench_run.py compares the two)
@@ -233,6 +243,8 @@ def launch_argv(as_bytes: int, fsize: int, cpu: int, cgroups: list[Path], inner:
         if v > 0
     ]
     argv = [prlimit, *lim, "--core=0:0", "--", *inner]
+    if cgroups and join:
+        return ["/bin/sh", "-c", _JOIN, "fbaconf-launch", str(len(cgroups)), *map(str, cgroups), *argv], False
     if cgroups:
         return ["/bin/sh", "-c", _HOLD, "fbaconf-launch", *argv], True
     return argv, False
@@ -276,18 +288,7 @@ def launch_server(  # noqa: PLR0913 - what starts a server, as sandbox.run takes
     inputs). Raises OSError."""
     if cg is None:
         cg = Cgroups(processes=limits.processes, memory_mb=limits.memory_mb if limits.memory_kind != "none" else 0)
-    full = [
-        os.path.realpath(sys.executable),
-        "-I",
-        "-S",
-        str(LIMIT_LAUNCHER),
-        str(as_bytes),
-        str(fsize),
-        "0",
-        *cg.launcher_args(),
-        "--",
-        *inner,
-    ]
+    full, _held = launch_argv(as_bytes, fsize, 0, cg.folders(), inner, join=True)
     try:
         proc = subprocess.Popen(
             full,

@@ -32,13 +32,14 @@ Limits per invocation:
   no core dumps; no inotify or fanotify instances and no new namespaces (:mod:`.seccomp`: a
   decoder cannot take the host user's).
 
-The limits are applied by a launcher, so nothing runs between fork and exec in this
-(threaded) process: util-linux's ``prlimit`` (about 1.5 ms), which sets the rlimits and execs
-bubblewrap (or the program); with cgroups, ``/bin/sh`` holds the launch until the harness
-has moved it into the case's cgroups, so everything the decoder starts is counted. Without
-``prlimit``, a Python launcher (``launcher.py``, about 13 ms) joins the cgroups and sets the
-rlimits itself. stdout and stderr go to files outside the decoder's view; only
-their tails are kept, read without following links or blocking.
+The limits are applied by a launcher, so nothing runs between fork and exec in this (threaded)
+process: util-linux's ``prlimit`` (about 1.5 ms), which sets the rlimits and execs bubblewrap
+(or the program); with cgroups, ``/bin/sh`` holds the launch until the harness has moved it
+into the case's cgroups, so everything the decoder starts is counted; a long-lived server's (a
+fork server, a persistent decoder: its stdin is its protocol's) moves itself into them before
+it execs ``prlimit``. Without ``prlimit``, a Python launcher (``launcher.py``, about 13 ms)
+joins the cgroups and sets the rlimits itself. stdout and stderr go to files outside the
+decoder's view; only their tails are kept, read without following links or blocking.
 
 Set-up failures are the harness's own knowledge, never read from the decoder's output: the
 program is checked before the start (:mod:`.preflight`: found, a regular executable file,

@@ -1,5 +1,5 @@
-"""The per-case launcher (isolation/sandbox.py): prlimit applies the limits; with cgroups, a
-shell holds the launch until the harness has moved it into them."""
+"""The launcher (isolation/sandbox.py): prlimit applies the limits; with cgroups, a shell holds a
+case's launch until the harness has moved it into them, and a server's shell joins them itself."""
 
 from __future__ import annotations
 
@@ -82,3 +82,33 @@ def test_a_lower_hard_limit_caps_the_value():
         ["prlimit", "--cpu=20:20", "--", sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout.split()
     assert out == ["20", "20"], out
+
+
+@needs_prlimit
+def test_a_server_launch_joins_its_cgroups_itself_and_keeps_its_stdin(tmp_path: Path):
+    """A long-lived server (fork server, persistent decoder) gets its input on stdin, so no
+    shell can hold it for the harness's go: the launcher moves itself into every cgroup, sets the
+    limits and execs the program, whose stdin is still the harness's pipe."""
+    cgs = [tmp_path / "cg1", tmp_path / "cg2"]
+    for cg in cgs:
+        cg.mkdir()
+        (cg / "cgroup.procs").write_text("")
+    program = ["/bin/sh", "-c", "read -r line; echo $$ $(ulimit -v) $line"]
+    argv, held = sandbox.launch_argv(512 * 2**20, 0, 0, cgs, program, join=True)
+    assert not held
+    proc = subprocess.Popen(argv, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, start_new_session=True)
+    out, _ = proc.communicate("request\n", timeout=10)
+    pid, limit, line = out.split()
+    assert proc.returncode == 0 and line == "request" and limit == str(512 * 1024)
+    assert pid == str(proc.pid)  # exec chain: the process that joined is the program
+    assert [(cg / "cgroup.procs").read_text().strip() for cg in cgs] == [pid, pid]
+
+
+@needs_prlimit
+def test_a_server_launch_that_cannot_join_a_cgroup_stops_before_the_program(tmp_path: Path):
+    marker = tmp_path / "started"
+    gone = tmp_path / "no-such-cgroup"
+    argv, _ = sandbox.launch_argv(0, 0, 0, [gone], ["/bin/sh", "-c", f"touch {marker}"], join=True)
+    r = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=10)
+    assert r.returncode == 127 and r.stderr.strip() == f"fbaconf-limit: cannot join cgroup {gone}"
+    assert not marker.exists()
