@@ -12,12 +12,6 @@ from .choosers import RandomChooser
 from .inputs import Entry, InputKind, gen_valid
 from .scenes import gen_scene
 
-# A stream over this many bytes is thousands of frames (the suites' stress streams): each input made
-# from one costs a decoder seconds under ASan and fbaconf's judge (a reference decode for the oracle
-# and the coverage) hundreds of times a typical seed. Such seeds are run as they are, kept out of
-# the export's default seeds (stress/) and out of the parents fbaconf's own loop mutates.
-STRESS_BYTES = 8192
-
 
 def suite_files(suffix: str, kind: InputKind, root: Path | None = None, max_bytes: int | None = None) -> list[Entry]:
     """The built suites' ``*/*.<suffix>`` files (up to ``max_bytes`` each) as seeds of ``kind``;

@@ -18,11 +18,11 @@ from fbaconf.scenes import bifs, bt
 
 from . import cmutator
 from .choosers import RandomChooser
-from .corpus import STRESS_BYTES, scene_seeds
+from .corpus import scene_seeds
 from .features_ahead import FeaturesAhead
 from .findings import Finding, minimise_against, write_finding
 from .fresh import FreshStreams, helper_worthwhile, input_rng
-from .inputs import Entry, InputKind, gen_valid
+from .inputs import STRESS_BYTES, Entry, InputKind, gen_valid
 from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
 from .mutators import BYTE_MUTATORS, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features

@@ -28,8 +28,8 @@ import shutil
 from pathlib import Path
 
 from .choosers import RandomChooser
-from .corpus import STRESS_BYTES, conformance_seeds, short_prefixes
-from .inputs import Entry, gen_valid
+from .corpus import conformance_seeds, short_prefixes
+from .inputs import STRESS_BYTES, Entry, gen_valid
 from .model import DICTIONARY, features_of
 
 MUTATOR_C = Path(__file__).with_name("fba_mutator.c")  # the structure-aware mutator, in C

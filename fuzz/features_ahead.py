@@ -14,14 +14,9 @@ import collections
 import sys
 import time
 
-from .helper import Helper, record, serve
+from .helper import STUCK_S, Helper, record, serve
 from .model import features_of
 
-# how long the loop waits for the input the helper is parsing before it parses it itself: about
-# one parse of an input that long (the suites' streams: 0.2-1.5 ms up to 1 KB, up to 8 ms a KB,
-# 220-240 ms for the two of 24 and 36 KB), past which doing it here is no slower
-WAIT_S = 0.002
-WAIT_S_PER_KB = 0.008
 SEP = b"\n"
 
 
@@ -54,9 +49,9 @@ class FeaturesAhead:
             self.queue.popleft()  # asked, not wanted after all (the oracle's parse gave them)
         if self._helper.alive and index not in self.ready:
             self._drain(0.0)
-            end = time.monotonic() + max(WAIT_S, WAIT_S_PER_KB * len(data) / 1024)
+            end = time.monotonic() + STUCK_S
             while self._helper.alive and index not in self.ready and self.queue and self.queue[0] == index:
-                if time.monotonic() >= end:  # the one it is parsing, late
+                if time.monotonic() >= end:  # the one it is parsing: stuck
                     break
                 self._drain(end - time.monotonic())
         feats = self.ready.pop(index, None)

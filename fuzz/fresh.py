@@ -22,14 +22,11 @@ from collections.abc import Callable
 from fbaconf.harness.sysinfo import usable_cpus
 
 from .choosers import RandomChooser
-from .helper import Helper, record, serve
+from .helper import STUCK_S, Helper, record, serve
 from .inputs import Entry, gen_valid
 
 # how many inputs ahead the helper is asked: at a 4 % share about ten streams, 30-60 ms of encoding
 AHEAD = 256
-# how long the loop waits for the stream the helper is making before it makes it itself: about one
-# stream's encoding, past which making it here is no slower
-WAIT_S = 0.008
 # a helper costs a process start (~0.5 s of CPU importing the encoder, while the first streams are
 # made in the loop anyway): a run of fewer inputs (some 60 fresh streams) makes its own
 MIN_EXECS = 1500
@@ -79,9 +76,9 @@ class FreshStreams:
         if self._helper.alive:
             self._ask(index)
             self._drain(0.0)
-            end = time.monotonic() + WAIT_S
+            end = time.monotonic() + STUCK_S
             while self._helper.alive and index not in self.ready and self.queue and self.queue[0] == index:
-                if time.monotonic() >= end:  # the one it is making, late
+                if time.monotonic() >= end:  # the one it is making: stuck
                     break
                 self._drain(end - time.monotonic())
         e = self.ready.pop(index, None)

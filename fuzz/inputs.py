@@ -19,6 +19,13 @@ from .model import StreamModel, stream_model
 
 RATES = (25.0, 30.0, 15.0, 12.5, 10.0, 60.0, 7.5, 24.0, 30000 / 1001, 50.0)
 
+# A stream over this many bytes is thousands of frames (the suites' stress streams): each input made
+# from one costs a decoder seconds under ASan and fbaconf's judge (a reference decode for the oracle
+# and the coverage) hundreds of times a typical seed. Such seeds are run as they are, kept out of
+# the export's default seeds (stress/), out of the parents fbaconf's own loop mutates and out of
+# the partners it splices and crosses them with.
+STRESS_BYTES = 8192
+
 
 class InputKind(StrEnum):
     """What an input is: a face-object stream, a BT scene (text), a binary BIFS scene, or

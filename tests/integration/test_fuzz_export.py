@@ -14,7 +14,8 @@ import pytest
 
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.errors import FbaconfInputError
-from fbaconf.fuzz.export import MAX_SEEDS, STRESS_BYTES, _features, export
+from fbaconf.fuzz.export import MAX_SEEDS, _features, export
+from fbaconf.fuzz.inputs import STRESS_BYTES
 from fbaconf.profiles.checker import check_stream
 
 
