@@ -220,7 +220,7 @@ def _empty_at(fd: int, keep: Tree) -> None:
                 continue
             try:
                 child = _open_dir(fd, name)
-            except (FileNotFoundError, NotADirectoryError, OSError):  # swapped meanwhile
+            except OSError:  # swapped meanwhile (a link, a file, gone)
                 _remove_at(fd, name)
                 seen.discard(name)
                 continue
@@ -231,9 +231,14 @@ def _empty_at(fd: int, keep: Tree) -> None:
         else:
             _remove_at(fd, name)
     for name, sub in keep.items():
-        if name not in seen and sub is not None:
-            _remove_at(fd, name)  # what took its place since the scan
+        if name not in seen and sub is not None:  # missing, or something else in its place
+            _remove_at(fd, name)
             os.mkdir(name, 0o755, dir_fd=fd)
+            child = _open_dir(fd, name)
+            try:
+                _empty_at(child, sub)  # its own kept folders made too
+            finally:
+                os.close(child)
 
 
 def _is_dir(e: os.DirEntry[str]) -> bool:

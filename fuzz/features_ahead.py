@@ -1,12 +1,13 @@
 """The syntax-model coverage of inputs, measured ahead of the fuzzing loop by a helper process.
 
-The coverage of an input that the oracle did not decode costs a reference parse (about a
-millisecond in Python, two fifths of the persistent loop's own time at one input in eight). An
+The coverage of an input that the oracle did not decode costs a reference parse (0.2-1.5 ms in
+Python: a fifth of a persistent run's time at one input in eight, py-spy). An
 input's features are a pure function of its bytes, known once the input is made: the loop asks
 the helper (``python -m fbaconf.fuzz.features_ahead``, :mod:`.helper`) then, the decoder runs the
 input and the inputs queued before it meanwhile, and the answer is usually there when the input is
-recorded. A late, dead or absent helper leaves the loop to parse the input itself, the same
-features: coverage, the corpus and so the run are the same with or without it."""
+recorded. A dead, stuck or absent helper, or one behind on inputs asked before, leaves the loop to
+parse the input itself, the same features: coverage, the corpus and so the run are the same with
+or without it."""
 
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ loop's time while the second CPU waited on a decoder that needs microseconds. A 
 process (``python -m fbaconf.fuzz.fresh SEED``, :mod:`.helper`: input numbers in, pickled entries
 out) encodes them there; the stream it hands back is the one the loop would have made from the
 same generator state, so a run replays input for input with or without it, and whatever goes wrong
-with the helper (no process, a crash, late) leaves the loop to make the stream itself."""
+with the helper (no process, a crash, stuck, behind) leaves the loop to make the stream itself."""
 
 from __future__ import annotations
 
