@@ -39,7 +39,7 @@ def _build() -> ctypes.CDLL | None:
     so = folder / "fba_mutator.so"
     try:
         r = subprocess.run(
-            [cc, "-O3", "-shared", "-fPIC", "-o", str(so), str(SOURCE)],
+            [cc, "-O2", "-shared", "-fPIC", "-o", str(so), str(SOURCE)],
             stdin=subprocess.DEVNULL,
             capture_output=True,
             timeout=120,
