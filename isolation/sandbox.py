@@ -212,11 +212,15 @@ def _bwrap_argv(view: View, workdir: Path) -> list[str]:
 
 
 def default_view(argv: list[str], workdir: Path) -> View:
-    """The program's folder read-only, the working folder writable (its ``in/`` read-only)."""
+    """The program's folder read-only, the working folder writable (its ``in/`` read-only); for
+    the running Python interpreter, its whole installation (an interpreter linked to a shared
+    libpython finds it in the installation's ``lib/``, not beside itself)."""
     ro = []
     prog = argv[0] if "/" in argv[0] else shutil.which(argv[0])
     if prog:
         ro += [Path(prog).parent, Path(prog).resolve().parent]
+        if Path(prog).resolve() == Path(sys.executable).resolve():
+            ro.append(Path(sys.base_prefix).resolve())
     return View(read_only=ro, writable=[Path(workdir)], read_only_inside=[Path(workdir) / "in"])
 
 
