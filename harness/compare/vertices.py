@@ -134,8 +134,8 @@ def compare_vertices(
     metrics = {
         "frames_compared": float(F),
         "vertices": float(N),
-        "max_error": float(fmax.max(initial=0.0)),
-        "rms_error": float(frms.max(initial=0.0)),
+        "max_error": float(np.max(fmax, initial=0.0)),
+        "rms_error": float(np.max(frms, initial=0.0)),
         "frames_over_max": float(over_max.sum()),
         "frames_over_rms": float(over_rms.sum()),
         "max_tol": float(max_tol),

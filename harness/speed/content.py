@@ -173,17 +173,17 @@ class Run:
 
     def expected(self, ks: Iterable[int] | np.ndarray) -> FapFrames:
         """Frames ``ks`` of the reference decoding of the stream (decoding only their blocks)."""
-        ks = np.asarray(ks, dtype=np.int64)
-        if len(ks) and (ks.min() < 0 or ks.max() >= self.n):
-            raise ValueError(f"frames {ks.tolist()} outside the run's {self.n}")
-        rows = [self._block(int(k) // BLOCK_FRAMES).select(np.array([int(k) % BLOCK_FRAMES])) for k in ks]
+        idx = np.asarray(ks, dtype=np.int64)
+        if len(idx) and (np.min(idx) < 0 or np.max(idx) >= self.n):
+            raise ValueError(f"frames {idx.tolist()} outside the run's {self.n}")
+        rows = [self._block(int(k) // BLOCK_FRAMES).select(np.array([int(k) % BLOCK_FRAMES])) for k in idx]
         first = self._block(0)
         return FapFrames(
-            values=np.concatenate([x.values for x in rows]).reshape(len(ks), -1),
-            status=np.concatenate([x.status for x in rows]).reshape(len(ks), -1),
-            high=np.concatenate([x.high for x in rows]).reshape(len(ks), -1),
-            frame_number=ks,
-            time_ms=ks * (1000.0 / first.frame_rate),
+            values=np.concatenate([x.values for x in rows]).reshape(len(idx), -1),
+            status=np.concatenate([x.status for x in rows]).reshape(len(idx), -1),
+            high=np.concatenate([x.high for x in rows]).reshape(len(idx), -1),
+            frame_number=idx,
+            time_ms=idx * (1000.0 / first.frame_rate),
             frame_rate=first.frame_rate,
             is_intra=np.concatenate([x.is_intra for x in rows]) if rows else np.zeros(0, bool),
         )
