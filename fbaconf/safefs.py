@@ -83,11 +83,7 @@ def _scan(fd: int, remove: bool, sizes: list[int]) -> list[str]:
     subdirs = []
     with os.scandir(fd) as it:
         for e in it:
-            try:
-                is_dir = e.is_dir(follow_symlinks=False)
-            except OSError:
-                is_dir = False
-            if is_dir:
+            if _is_dir(e):
                 subdirs.append(e.name)
             elif remove:
                 try:

@@ -24,7 +24,7 @@ from .findings import Finding, minimise_against, write_finding
 from .fresh import FreshStreams, helper_worthwhile, input_rng
 from .inputs import STRESS_BYTES, Entry, InputKind, gen_valid
 from .model import SCENE_FEATURES, STREAM_FEATURES, features_of, parsed
-from .mutators import BYTE_MUTATORS, mutate_stream
+from .mutators import BYTE_MUTATORS, draw, mutate_stream
 from .scenes import gen_scene, mutate_scene, scene_features
 from .selftarget import SelfTarget
 from .targets import HANG_CONFIRM_FACTOR, ExecResult, FuzzSetupError, Run, Verdict
@@ -273,17 +273,18 @@ class Fuzzer:
         )
 
     def _parent(self, rng: random.Random, corpus: list[Entry]) -> Entry:
-        """The corpus entry to mutate: the shorter of two with ``prefer_short``, and a stream of
-        thousands of frames (over STRESS_BYTES: it was run as a seed) only when four draws in a
-        row are such streams — an input made from one costs the judge hundreds of times another
-        (two of the suites' streams took a third of the persistent loop's time)."""
-        for _ in range(4):
+        """The corpus entry to mutate: the shorter of two with ``prefer_short`` (a tournament),
+        drawn as :func:`mutators.draw` draws (stress streams last)."""
+
+        def tournament(rng: random.Random, corpus: list[Entry]) -> Entry:
             e = corpus[rng.randrange(len(corpus))]
-            if rng.random() < self.prefer_short:  # tournament: the shorter of two entries
+            if rng.random() < self.prefer_short:
                 e2 = corpus[rng.randrange(len(corpus))]
                 e = e if len(e.data) <= len(e2.data) else e2
-            if len(e.data) <= STRESS_BYTES:
-                break
+            return e
+
+        e = draw(rng, corpus, tournament)
+        assert e is not None  # noqa: S101 - the corpus is never empty here
         return e
 
     # ---------------------------------------------------------------- loop

@@ -12,17 +12,15 @@ with the helper (no process, a crash, stuck, behind) leaves the loop to make the
 
 from __future__ import annotations
 
-import collections
 import pickle
 import random
 import sys
-import time
 from collections.abc import Callable
 
 from fbaconf.harness.sysinfo import usable_cpus
 
 from .choosers import RandomChooser
-from .helper import STUCK_S, Helper, record, serve
+from .helper import Ahead, serve
 from .inputs import Entry, gen_valid
 
 # how many inputs ahead the helper is asked: at a 4 % share about ten streams, 30-60 ms of encoding
@@ -50,79 +48,36 @@ def helper_worthwhile(jobs: int, max_execs: int | None) -> bool:
     return jobs == 1 and usable_cpus() >= 2 and (max_execs is None or max_execs >= MIN_EXECS)
 
 
-class FreshStreams:
+class FreshStreams(Ahead):
     """Input ``index``'s fresh valid stream (:meth:`take`): the helper's when it made it in time,
     else made here. ``wanted(i)`` says whether input ``i`` will be one. The helper (``helper``)
     starts at the first :meth:`take` and stops at :meth:`close`."""
 
     def __init__(self, seed: int, wanted: Callable[[int], bool], helper: bool) -> None:
+        super().__init__("fbaconf.fuzz.fresh", [str(seed)], helper)
         self.seed = seed
         self.wanted = wanted
-        self.helper = helper
-        self._helper = Helper("fbaconf.fuzz.fresh", [str(seed)])
-        self.queue: collections.deque[int] = collections.deque()  # asked, not answered yet, in order
-        self.ready: dict[int, Entry] = {}  # answered, not taken yet
         self.planned = 0  # inputs below this one were looked at
-        self.taken_below = 0  # the loop is past every input below this one
-
-    @property
-    def proc(self):
-        """The helper's process while it runs, else None."""
-        return self._helper.proc
 
     def take(self, index: int) -> Entry:
-        if self.helper and not self._helper.alive and not self._helper.start():
-            self.helper = False
-        if self._helper.alive:
+        if self._running():
             self._ask(index)
-            self._drain(0.0)
-            end = time.monotonic() + STUCK_S
-            while self._helper.alive and index not in self.ready and self.queue and self.queue[0] == index:
-                if time.monotonic() >= end:  # the one it is making: stuck
-                    break
-                self._drain(end - time.monotonic())
-        e = self.ready.pop(index, None)
-        self.taken_below = max(self.taken_below, index + 1)
-        for k in [k for k in self.ready if k < self.taken_below]:  # never taken: the loop moved on
-            del self.ready[k]
+        e = self._take(index)
         return e if e is not None else fresh_valid(self.seed, index)
 
-    def close(self) -> None:
-        """Stop the helper; inputs made later (a finding regenerated) are made here."""
-        self.helper = False
-        self._stop()
-
-    # ---------------------------------------------------------------- the helper
     def _ask(self, index: int) -> None:
+        """Ask for the fresh streams up to :data:`AHEAD` inputs past ``index``."""
         self.planned = max(self.planned, index)
         want = []
         while self.planned <= index + AHEAD:
             if self.wanted(self.planned):
                 want.append(self.planned)
             self.planned += 1
-        if not want:
-            return
-        if not self._helper.send(b"".join(record(k) for k in want)):
-            self.close()
-            return
-        self.queue.extend(want)
+        if want:
+            self._send(want, [b""] * len(want))
 
-    def _drain(self, timeout: float) -> None:
-        """Read what the helper wrote, waiting up to ``timeout`` s for something."""
-        got = self._helper.drain(timeout)
-        if not self._helper.alive:
-            self.close()
-            return
-        for k, blob in got:
-            while self.queue and self.queue[0] <= k:
-                self.queue.popleft()
-            if k >= self.taken_below:  # else made here already
-                self.ready[k] = pickle.loads(blob)  # noqa: S301 - our own helper's output
-
-    def _stop(self) -> None:
-        self._helper.stop()
-        self.queue.clear()
-        self.ready.clear()
+    def _decode(self, payload: bytes) -> Entry:
+        return pickle.loads(payload)  # noqa: S301 - our own helper's output
 
 
 def main(argv: list[str]) -> int:

@@ -12,13 +12,16 @@ decoder under test and the loop come first."""
 
 from __future__ import annotations
 
+import collections
 import fcntl
 import os
 import select
 import struct
 import subprocess
 import sys
+import time
 from collections.abc import Callable
+from typing import Any
 
 HEAD = struct.Struct("<qQ")
 # How long the loop waits for the request the helper is working on before it does that work
@@ -109,6 +112,77 @@ class Helper:
                 pass
         proc.kill()  # nothing of its own to keep: what it is making is wanted no more
         proc.wait()
+
+
+class Ahead:
+    """A helper's answers to requests numbered in the order they are asked: sent
+    (:meth:`_send`), read into ``ready`` as they come (:meth:`_drain`, each through
+    :meth:`_decode`) and taken by number (:meth:`_take`), waiting for the one the helper is
+    working on unless it is stuck. Whatever fails stops the helper; the caller does the work."""
+
+    def __init__(self, module: str, args: list[str], helper: bool) -> None:
+        self.helper = helper  # start it when first needed
+        self._helper = Helper(module, args)
+        self.queue: collections.deque[int] = collections.deque()  # asked, not answered yet, in order
+        self.ready: dict[int, Any] = {}  # answered, not taken yet
+
+    @property
+    def proc(self) -> subprocess.Popen[bytes] | None:
+        """The helper's process while it runs, else None."""
+        return self._helper.proc
+
+    def _running(self) -> bool:
+        """Whether the helper runs, started now if it is wanted and not yet."""
+        if self.helper and not self._helper.alive and not self._helper.start():
+            self.helper = False
+        return self._helper.alive
+
+    def _send(self, numbers: list[int], data: list[bytes]) -> None:
+        if self._helper.send(b"".join(record(k, d) for k, d in zip(numbers, data, strict=True))):
+            self.queue.extend(numbers)
+        else:
+            self.close()
+
+    def _take(self, index: int) -> Any:
+        """Request ``index``'s answer, or None (not asked, behind, dead, stuck); requests before it
+        are wanted no more."""
+        while self.queue and self.queue[0] < index:
+            self.queue.popleft()
+        if self._helper.alive and index not in self.ready:
+            self._drain(0.0)
+            end = time.monotonic() + STUCK_S
+            while self._helper.alive and index not in self.ready and self.queue and self.queue[0] == index:
+                if time.monotonic() >= end:  # the one it is working on: stuck
+                    break
+                self._drain(end - time.monotonic())
+        got = self.ready.pop(index, None)
+        for k in [k for k in self.ready if k < index]:
+            del self.ready[k]
+        while self.queue and self.queue[0] <= index:
+            self.queue.popleft()  # answered later, if at all: done here by then
+        return got
+
+    def _drain(self, timeout: float) -> None:
+        """Read what the helper wrote, waiting up to ``timeout`` s for something."""
+        got = self._helper.drain(timeout)
+        if not self._helper.alive:
+            self.close()
+            return
+        for k, payload in got:
+            if self.queue and k >= self.queue[0]:  # else taken (done here) already
+                self.ready[k] = self._decode(payload)
+            while self.queue and self.queue[0] <= k:
+                self.queue.popleft()
+
+    def _decode(self, payload: bytes) -> Any:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Stop the helper; what is asked later is done by the caller."""
+        self.helper = False
+        self._helper.stop()
+        self.queue.clear()
+        self.ready.clear()
 
 
 def serve(answer: Callable[[int, bytes], bytes]) -> int:

@@ -17,14 +17,15 @@ def _pick(rng: random.Random, seq):
     return seq[rng.randrange(len(seq))] if seq else None
 
 
-def _partner(rng: random.Random, corpus: list[Entry]) -> Entry | None:
-    """The second stream of a splice or a crossover, drawn as the loop draws a parent: a stream of
-    thousands of frames (over STRESS_BYTES: it was run as a seed) only when four draws in a row
-    are such streams. Its tail made an input of 14-20 KB that cost the oracle hundreds of
-    milliseconds, and its model (a splice's) a third of a second to build."""
+def draw(rng: random.Random, corpus: list[Entry], pick: Callable = _pick) -> Entry | None:
+    """A corpus entry drawn with ``pick`` (one uniformly by default), a stream of thousands of
+    frames (over STRESS_BYTES: it was run as a seed) only when four draws in a row are such
+    streams: an input made from one, or spliced or crossed with one, costs the oracle hundreds of
+    times another (14-20 KB of a stress stream's planes), and a splice its model (a third of a
+    second to build). The loop's parents and the second streams of splices and crossovers."""
     e = None
     for _ in range(4):
-        e = _pick(rng, corpus)
+        e = pick(rng, corpus)
         if e is None or len(e.data) <= STRESS_BYTES:
             break
     return e
@@ -174,7 +175,7 @@ def m_truncate_plane(rng, e: Entry, corpus) -> bytes | None:
 
 def m_splice(rng, e: Entry, corpus) -> bytes | None:
     """The first planes of this stream followed by planes of another (state from the wrong stream)."""
-    other = _partner(rng, corpus)
+    other = draw(rng, corpus)
     if other is None or other.kind != InputKind.STREAM:
         return None
     a, b = e.get_model(), other.get_model()
@@ -300,7 +301,7 @@ def mutate_stream(
     if rng.random() < field_share:
         lib = cmutator.library() if native else None
         if lib is not None and rng.random() < 2 / 3:
-            other = _partner(rng, corpus) if rng.random() < 0.1 else None
+            other = draw(rng, corpus) if rng.random() < 0.1 else None
             if other is not None and other.kind == InputKind.STREAM and other is not e:
                 data = cmutator.cross(lib, e.data, other.data, rng.getrandbits(32))
                 names.append("c-cross")
