@@ -27,7 +27,7 @@ from fbaconf.bitstreams.decoder import DecodeResult, decode
 from fbaconf.bitstreams.encoder import encode
 from fbaconf.bitstreams.encoder_options import EncoderOptions
 from fbaconf.bitstreams.frames import FapFrames
-from fbaconf.bitstreams.syntax import CODING_DCT
+from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER
 
 from . import edits
 
@@ -56,11 +56,19 @@ def as_coded(orig: DecodeResult, fr: FapFrames) -> EncoderOptions:
         plane_start_codes="none",
         start_codes_before=frozenset(n for n, p in zip(numbers, rows) if p is not None and p.start_code),
         time_codes=any(p.time_code is not None for p in planes),
-        ranges="auto" if any(p.new_lists for p in planes) else "persist",
+        ranges=_ranges(planes),
         group_types=np.asarray(types, dtype=np.int64),
         gender=int(of.gender),
         end_code=orig.end_code is not None,
     )
+
+
+def _ranges(planes) -> str:
+    """The encoder's range mode a stream was coded in: every intra plane of the arithmetic mode
+    sending all four lists is "auto" (tight lists each time); lists only where a value needed one
+    (or a quantiser changed) is "persist"."""
+    intra = [p for p in planes if p.is_intra and p.coding_type != CODING_DCT]
+    return "auto" if intra and all(len(p.new_lists) == len(LIST_ORDER) for p in intra) else "persist"
 
 
 def _defaults(orig: DecodeResult, fr: FapFrames) -> EncoderOptions:

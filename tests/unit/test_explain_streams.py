@@ -10,7 +10,9 @@ from hypothesis import given, settings, strategies as st
 
 from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import encode
+from fbaconf.bitstreams.encoder_options import EncoderOptions
 from fbaconf.bitstreams.frames import FREE, FapFrames
+from fbaconf.bitstreams.synth import synthetic_sequence
 from fbaconf.explain import edits, streams
 
 from lib.codec import sequences
@@ -61,3 +63,22 @@ def test_a_dropped_fap_is_the_only_change(seq, pick):
     got = decode(variant).frames
     assert (got.status[:, fap - 1] == FREE).all()
     _same_frames(original, got, but=(fap,))
+
+
+def test_a_stream_coded_with_lists_only_where_needed_is_coded_again_so():
+    """The encoder's "persist" range mode sends a list only where a value needs one: here FAP 19
+    at 1,500 in the first plane needs a new i_max list, and no later intra plane sends any. Read
+    as the "auto" mode (all four lists in every intra plane) because some plane had a list, the
+    stream came back longer, with other bits (and, once, a start code the original did not
+    have). Coded again as it was coded, it is the same stream, byte for byte; and so is one coded
+    with all four lists in every intra plane."""
+    for ranges, value in (("persist", 1500), ("auto", 0)):
+        frames = synthetic_sequence(6, 25.0, visemes=False, expressions=False, faps=[3, 19, 48], seed=4)
+        frames.values[0, 18] = value
+        data = encode(frames, EncoderOptions(ranges=ranges, intra_period=1)).data
+        lists = [sorted(p.new_lists) for p in decode(data).planes]
+        if ranges == "persist":
+            assert lists == [["i_max"]] + [[]] * 5  # the case this test is about
+        else:
+            assert all(len(x) == 4 for x in lists)
+        assert streams.stream_variant(data, edits.nothing, streams.as_coded) == data, ranges
