@@ -27,7 +27,7 @@ from fbaconf.bitstreams.decoder import DecodeResult, decode
 from fbaconf.bitstreams.encoder import encode
 from fbaconf.bitstreams.encoder_options import EncoderOptions
 from fbaconf.bitstreams.frames import FapFrames
-from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER
+from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER, PlaneInfo
 
 from . import edits
 
@@ -63,7 +63,7 @@ def as_coded(orig: DecodeResult, fr: FapFrames) -> EncoderOptions:
     )
 
 
-def _ranges(planes) -> str:
+def _ranges(planes: list[PlaneInfo]) -> str:
     """The encoder's range mode a stream was coded in: every intra plane of the arithmetic mode
     sending all four lists is "auto" (tight lists each time); lists only where a value needed one
     (or a quantiser changed) is "persist"."""
