@@ -34,7 +34,9 @@ from fbaconf.harness.results import CaseResult, Outcome, RunRecord, StageResult
 from fbaconf.harness.selection import claim_covers
 
 CLAIM = "predictable@2"
-# mutant -> the coverage points (fnmatch patterns) that name the rule it breaks
+# mutant -> the coverage points (fnmatch patterns) that name the rule it breaks; a point the model
+# gains later that names the same rule joins its mutants' rows (mask.keep-or-free: where D3's types
+# 01 and 10 decode differently; lists.min-below-zero: where a min bound's sign matters)
 EXPECTED: dict[str, tuple[str, ...]] = {
     "time-code-ignored": ("timecode.*",),
     "time-code-minutes-as-seconds": ("timecode.*",),
@@ -67,18 +69,18 @@ EXPECTED: dict[str, tuple[str, ...]] = {
     "ind-syn-step-q0-uses-qp": ("fap_quant.0",),
     # decisions are rules too: the checker's diagnostic point for the decision the mutant breaks
     "default-rate-30": ("rate.none", "diag.FAP-DECISION-004"),  # D6: 25 Hz when no rate is signalled
-    "mask-type-2-as-1": ("mask.type-2", "diag.FAP-DECISION-006"),  # D3: mask type 10 frees
+    "mask-type-2-as-1": ("mask.type-2", "diag.FAP-DECISION-006", "mask.keep-or-free"),  # D3: mask type 10 frees
     "ind-syn-mask-type-10-is-all": ("mask.type-2", "diag.FAP-DECISION-006"),
     # written before their first measurement (the ones above were measured once before the two
     # decision diagnostics were added to their rows)
     "ind-syn-frame-rate-offset-before-seconds": ("rate.offset",),
     "ind-syn-skip-chain-last-chunk-only": ("skip.chain",),
     "ind-syn-skip-chain-stops-at-14": ("skip.chain",),
-    "ind-syn-mask-01-10-swapped": ("mask.type-1", "mask.type-2", "diag.FAP-DECISION-006"),
+    "ind-syn-mask-01-10-swapped": ("mask.type-1", "mask.type-2", "diag.FAP-DECISION-006", "mask.keep-or-free"),
     "ind-syn-mask-00-free": ("mask.type-0", "status.retained"),
     "ind-syn-mask-11-last-fap-missing": ("mask.type-3",),
     "ind-syn-list-order-min-first": ("lists.*",),
-    "ind-syn-list-min-positive": ("lists.i_min", "lists.p_min"),
+    "ind-syn-list-min-positive": ("lists.i_min", "lists.p_min", "lists.min-below-zero"),
     "ind-syn-intra-uses-p-list": ("lists.*",),
     "ind-syn-p-uses-i-list": ("lists.*",),
     "ind-syn-step-ignores-qp": ("fap_quant.*",),

@@ -127,6 +127,8 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
     seen_p = False
     pred_count: dict[int, int] = {}  # predicted symbols per FAP model since the segment's intra plane
     quants, prev_coded, prev_rate = set(), None, None
+    ever_set = np.zeros(tables.NUM_FAPS, dtype=bool)  # FAPs coded by an intra plane so far
+    qp = tables.quant_steps()
     any_rate = False
     for k, p in enumerate(planes):
         hits.add("plane.start-code" if p.start_code else "plane.no-start-code")
@@ -158,6 +160,9 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
             if prev_coded is not None and not np.array_equal(prev_coded, p.coded):
                 hits.add("mask.change")
             prev_coded = p.coded
+            if p.coded is not None:
+                hits |= _keep_or_free(p.group_types, p.coded, ever_set)
+                ever_set |= np.asarray(p.coded, dtype=bool)
             if p.gender:
                 hits.add("plane.gender-1")
             if p.frame_rate is not None:
@@ -197,6 +202,8 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
                             hits.add("lists.value-0")
                         if v == 31:
                             hits.add("lists.value-31")
+                        if li % 2 and v:
+                            hits.add("lists.min-below-zero")
                         bounds[fap - 1, li] = v * RANGE_DELTA if li % 2 == 0 else -v * RANGE_DELTA
         else:
             hits.add("plane.predicted")
@@ -220,6 +227,8 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
         if p.is_intra:
             pred_count = {}
         for f, s in p.symbols.items():
+            if s and q and qp[f - 1] > 1:
+                hits.add("fap_quant.qp-step")
             if not p.is_intra:
                 pred_count[f] = pred_count.get(f, 0) + 1
                 lo, hi = alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q)
@@ -227,8 +236,11 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
                 # MAX_FREQUENCY before an update (notes §3.3): the update after this many halves it
                 if pred_count[f] + (hi - lo + 1) > MAX_FREQUENCY:
                     hits.add("arith.model-rescale")
+            i_ab = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)
+            if i_ab != alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q):
+                hits.add("lists.i-not-p" if p.is_intra else "lists.p-not-i")
             if p.is_intra:
-                lo, hi = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)
+                lo, hi = i_ab
                 if s == lo:
                     hits.add("symbol.intra-min")
                 if s == hi:
@@ -257,6 +269,16 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
     hits |= frames_points(frames)
     hits |= coder_points(data)
     return hits
+
+
+def _keep_or_free(types, coded, ever_set) -> set[str]:
+    """``mask.keep-or-free``: an intra plane whose group of mask type 01 or 10 leaves out a FAP an
+    earlier intra plane coded (D3: 01 keeps it, 10 frees it; never set, both leave it FREE)."""
+    if len(types) != tables.NUM_GROUPS:
+        return set()
+    group_type = np.asarray(types)[tables.group_of_fap() - 1]
+    left = ~np.asarray(coded, dtype=bool) & ever_set & ((group_type == 1) | (group_type == 2))
+    return {"mask.keep-or-free"} if left.any() else set()
 
 
 def stream_points_through(data: bytes, row: int) -> set[str] | None:

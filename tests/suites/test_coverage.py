@@ -7,9 +7,13 @@ import json
 import pickle
 import shutil
 
+import numpy as np
 import pytest
 
+from fbaconf.bitstreams import tables
+from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
+from fbaconf.bitstreams.frames import FREE, RETAINED, SET, FapFrames
 from fbaconf.cli import main
 from fbaconf.conformance import coverage, coverage_table
 from fbaconf.conformance.suite import load_suites
@@ -47,6 +51,72 @@ def test_stream_extractor_reads_the_content_not_labels():
     assert "fap_quant.0" not in hits and "dct.segment" not in hits and "fap.6" not in hits
     hits = coverage.stream_points(_stream(fap_quant=0, coding="dct"))
     assert {"dct.segment", "dct.segment-short", "dct.highlevel"} <= hits
+
+
+def _frames(values: list[list[int]], status: list[list[int]]) -> FapFrames:
+    """Frames of FAPs 3 and 4 (open_jaw, lower_t_midlip: one group) as given, no high-level FAPs."""
+    fr = FapFrames.empty(len(values))
+    fr.values[:, 2:4] = values
+    fr.status[:, 2:4] = status
+    return fr
+
+
+def _group_types(n: int, later: int) -> np.ndarray:
+    """No group coded (00) but FAPs 3 and 4's, coded with a mask (01) in the first two frames and
+    of type ``later`` after."""
+    t = np.zeros((n, tables.NUM_GROUPS), dtype=np.int64)
+    g = int(tables.group_of_fap()[2]) - 1
+    t[:2, g], t[2:, g] = 1, later
+    return t
+
+
+@pytest.mark.parametrize(
+    ("later", "status_later", "set_before", "hit"),
+    [
+        (1, [SET, RETAINED], True, True),  # 01 leaves out FAP 4, set at frame 0: it keeps its value
+        (2, [SET, FREE], True, True),  # 10 leaves it out: FREE — the other answer, so the types differ here
+        (1, [SET, FREE], False, False),  # never set: FREE under 01 and 10 alike (D3)
+        (0, [RETAINED, RETAINED], True, False),  # 00 leaves out the whole group: held, not one of the two
+    ],
+)
+def test_keep_or_free_is_where_mask_types_01_and_10_decode_differently(later, status_later, set_before, hit):
+    first = [SET, SET if set_before else FREE]
+    fr = _frames([[10, 20]] * 4, [first] * 2 + [status_later] * 2)
+    data = encode(fr, EncoderOptions(intra_at=frozenset({0, 2}), group_types=_group_types(4, later))).data
+    assert decode(data).planes[2].group_types[int(tables.group_of_fap()[2]) - 1] == later
+    assert ("mask.keep-or-free" in coverage.stream_points(data)) is hit
+
+
+def test_list_points_read_the_ranges_a_decoder_needs():
+    # FAPs 3 and 4 rising 0, 10, .. 60 (fap_quant 1, tight lists): values and differences both in
+    # 0..60, so each FAP's I and P lists are min 0, max 1 (bounds 0 and 60, notes §1.4): one
+    # alphabet, no min below zero
+    fr = _frames([[10 * k, 10 * k] for k in range(7)], [[SET, SET]] * 7)
+    hits = coverage.stream_points(encode(fr, EncoderOptions(fap_quant=1)).data)
+    assert {"lists.i_min", "lists.p_min"} <= hits
+    assert not {"lists.min-below-zero", "lists.i-not-p", "lists.p-not-i"} & hits
+    # falling instead: differences down to -10 need P min 1 (bound -60), values stay >= 0 (I min 0)
+    fr = _frames([[60 - 10 * k, 10 * k] for k in range(7)], [[SET, SET]] * 7)
+    hits = coverage.stream_points(encode(fr, EncoderOptions(fap_quant=1)).data)
+    assert {"lists.min-below-zero", "lists.i-not-p", "lists.p-not-i"} <= hits
+
+
+@pytest.mark.parametrize(
+    ("fap", "value", "quant", "hit"),
+    [
+        (3, 40, 1, True),  # open_jaw: QP 4 (the FAP table), so a nonzero symbol s decodes to 4 s
+        (14, 40, 1, False),  # thrust_jaw: QP 1, the step is fap_quant whether the QP is read or not
+        (3, 0, 1, False),  # every symbol 0: 0 at any step
+        (3, 40, 0, False),  # fap_quant 0: step 1, no QP (notes §3.4)
+    ],
+)
+def test_qp_step_is_where_a_low_level_step_is_more_than_fap_quant(fap, value, quant, hit):
+    fr = FapFrames.empty(3)
+    fr.values[:, fap - 1] = value
+    fr.status[:, fap - 1] = SET
+    hits = coverage.stream_points(encode(fr, EncoderOptions(fap_quant=quant)).data)
+    assert f"fap.{fap}" in hits  # coded, 0 or not
+    assert ("fap_quant.qp-step" in hits) is hit
 
 
 @pytest.fixture(scope="module")
