@@ -36,7 +36,8 @@ from fbaconf.harness.selection import claim_covers
 CLAIM = "predictable@2"
 # mutant -> the coverage points (fnmatch patterns) that name the rule it breaks; a point the model
 # gains later that names the same rule joins its mutants' rows (mask.keep-or-free: where D3's types
-# 01 and 10 decode differently; lists.min-below-zero: where a min bound's sign matters)
+# 01 and 10 decode differently; lists.min-below-zero: where a min bound's sign matters;
+# facedef.transform.<field>.driven: where that field moves the model)
 EXPECTED: dict[str, tuple[str, ...]] = {
     "time-code-ignored": ("timecode.*",),
     "time-code-minutes-as-seconds": ("timecode.*",),
@@ -62,8 +63,8 @@ EXPECTED: dict[str, tuple[str, ...]] = {
     "fit-denominator-ignored": ("fit.denominator",),
     "fit-impulse-ignored": ("fit.impulse",),
     "fit-topological-order": ("fit.chain", "fit.derived"),
-    "transform-axis-sign": ("facedef.transform.rotation",),
-    "transform-scale-absolute": ("facedef.transform.scale",),
+    "transform-axis-sign": ("facedef.transform.rotation", "facedef.transform.rotation.driven"),
+    "transform-scale-absolute": ("facedef.transform.scale", "facedef.transform.scale.driven"),
     "calibration-ignores-subset": ("calibration.subset",),
     "left-right-fill-missing": ("lrfill.*",),
     "ind-syn-step-q0-uses-qp": ("fap_quant.0",),

@@ -105,6 +105,10 @@ def scene_points(scene_path: Path | None, frames) -> set[str]:  # noqa: C901
             kids = {f for nd in (model.fit.nodes[c] for c in model.fit.order) for f in nd}
             if any(((status[:, f - 1] == DERIVED) & (frames.status[:, f - 1] == FREE)).any() for f in kids):
                 hits.add("fit.derived")
+        for tt in model.transform_tables:
+            held = status[:, tt.fap - 1] != FREE
+            if (values[held, tt.fap - 1] != 0).any():
+                hits.add(f"facedef.transform.{tt.field}.driven")
         for t in model.mesh_tables:
             if t.fap <= 2 or t.borders.size <= 2:
                 continue

@@ -6,6 +6,7 @@ import copy
 import json
 import pickle
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +16,7 @@ from fbaconf.bitstreams.decoder import decode
 from fbaconf.bitstreams.encoder import EncoderOptions, encode
 from fbaconf.bitstreams.frames import FREE, RETAINED, SET, FapFrames
 from fbaconf.cli import main
-from fbaconf.conformance import coverage, coverage_table
+from fbaconf.conformance import coverage, coverage_scene, coverage_table
 from fbaconf.conformance.suite import load_suites
 from fbaconf.generators.content import make_content
 
@@ -117,6 +118,31 @@ def test_qp_step_is_where_a_low_level_step_is_more_than_fap_quant(fap, value, qu
     hits = coverage.stream_points(encode(fr, EncoderOptions(fap_quant=quant)).data)
     assert f"fap.{fap}" in hits  # coded, 0 or not
     assert ("fap_quant.qp-step" in hits) is hit
+
+
+GRID = Path(__file__).resolve().parents[2] / "conformance" / "suites" / "predictable-l1-core" / "grid-transforms.bt"
+
+
+@pytest.mark.parametrize(
+    ("fap", "value", "status", "driven"),
+    [
+        # the scene's FaceDefTables (its BT text): FAPs 48 and 50 rotate (fieldId 1), 6 scales (2),
+        # 14 translates (3) the node Inner
+        (48, 100, SET, {"rotation"}),
+        (6, 100, SET, {"scale"}),
+        (14, -100, SET, {"translation"}),
+        (48, 0, SET, set()),  # set, but at 0: no angle, nothing moves
+        (3, 100, SET, set()),  # a FaceDefMesh's FAP, no transform
+        (48, 100, FREE, set()),  # a FREE FAP's value is no one's
+    ],
+)
+def test_a_transform_is_driven_where_its_fap_moves_the_model(fap, value, status, driven):
+    fr = FapFrames.empty(2)
+    fr.values[1, fap - 1] = value
+    fr.status[1, fap - 1] = status
+    hits = coverage_scene.scene_points(GRID, fr)
+    assert {"facedef.transform.rotation", "facedef.transform.scale", "facedef.transform.translation"} <= hits
+    assert {h.split(".")[2] for h in hits if h.endswith(".driven")} == driven
 
 
 @pytest.fixture(scope="module")
