@@ -26,7 +26,7 @@ from fbaconf.bitstreams import decoder as dec, tables
 from fbaconf.bitstreams.arith import MAX_FREQUENCY, ZERO_RUN_LIMIT
 from fbaconf.bitstreams.faptext import read_fap_file, read_fap_text
 from fbaconf.bitstreams.frames import FREE, RETAINED, SET
-from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER, alphabet
+from fbaconf.bitstreams.syntax import CODING_DCT, LIST_ORDER, MASK_INTERPOLATE, MASK_RETAIN, alphabet
 from fbaconf.bitstreams.tables import RANGE_DELTA
 from fbaconf.errors import BitstreamError, FbaconfInputError
 from fbaconf.profiles.checker import ARITH_BLOCKS, analyse, lookahead_stuffing
@@ -277,7 +277,7 @@ def _keep_or_free(types, coded, ever_set) -> set[str]:
     if len(types) != tables.NUM_GROUPS:
         return set()
     group_type = np.asarray(types)[tables.group_of_fap() - 1]
-    left = ~np.asarray(coded, dtype=bool) & ever_set & ((group_type == 1) | (group_type == 2))
+    left = ~np.asarray(coded, dtype=bool) & ever_set & np.isin(group_type, (MASK_RETAIN, MASK_INTERPOLATE))
     return {"mask.keep-or-free"} if left.any() else set()
 
 
