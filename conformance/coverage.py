@@ -129,6 +129,7 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
     quants, prev_coded, prev_rate = set(), None, None
     ever_set = np.zeros(tables.NUM_FAPS, dtype=bool)  # FAPs coded by an intra plane so far
     qp = tables.quant_steps()
+    group_of = tables.group_of_fap()
     any_rate = False
     for k, p in enumerate(planes):
         hits.add("plane.start-code" if p.start_code else "plane.no-start-code")
@@ -161,7 +162,7 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
                 hits.add("mask.change")
             prev_coded = p.coded
             if p.coded is not None:
-                hits |= _keep_or_free(p.group_types, p.coded, ever_set)
+                hits |= _keep_or_free(p.group_types, p.coded, ever_set, group_of)
                 ever_set |= np.asarray(p.coded, dtype=bool)
             if p.gender:
                 hits.add("plane.gender-1")
@@ -229,15 +230,9 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
         for f, s in p.symbols.items():
             if s and q and qp[f - 1] > 1:
                 hits.add("fap_quant.qp-step")
-            if not p.is_intra:
-                pred_count[f] = pred_count.get(f, 0) + 1
-                lo, hi = alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q)
-                # an adaptive model starts at one count per symbol and halves at a total of
-                # MAX_FREQUENCY before an update (notes §3.3): the update after this many halves it
-                if pred_count[f] + (hi - lo + 1) > MAX_FREQUENCY:
-                    hits.add("arith.model-rescale")
             i_ab = alphabet(int(bounds[f - 1, 1]), int(bounds[f - 1, 0]), q)
-            if i_ab != alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q):
+            p_ab = alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q)
+            if i_ab != p_ab:
                 hits.add("lists.i-not-p" if p.is_intra else "lists.p-not-i")
             if p.is_intra:
                 lo, hi = i_ab
@@ -246,7 +241,12 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
                 if s == hi:
                     hits.add("symbol.intra-max")
             else:
-                lo, hi = alphabet(int(bounds[f - 1, 3]), int(bounds[f - 1, 2]), q)
+                lo, hi = p_ab
+                pred_count[f] = pred_count.get(f, 0) + 1
+                # an adaptive model starts at one count per symbol and halves at a total of
+                # MAX_FREQUENCY before an update (notes §3.3): the update after this many halves it
+                if pred_count[f] + (hi - lo + 1) > MAX_FREQUENCY:
+                    hits.add("arith.model-rescale")
                 if s == lo:
                     hits.add("symbol.predicted-min")
                 if s == hi:
@@ -271,12 +271,13 @@ def stream_points(data: bytes) -> set[str]:  # noqa: C901
     return hits
 
 
-def _keep_or_free(types, coded, ever_set) -> set[str]:
+def _keep_or_free(types, coded, ever_set, group_of) -> set[str]:
     """``mask.keep-or-free``: an intra plane whose group of mask type 01 or 10 leaves out a FAP an
-    earlier intra plane coded (D3: 01 keeps it, 10 frees it; never set, both leave it FREE)."""
+    earlier intra plane coded (D3: 01 keeps it, 10 frees it; never set, both leave it FREE).
+    ``group_of``: each FAP's group (1-based), as :func:`tables.group_of_fap` gives it."""
     if len(types) != tables.NUM_GROUPS:
         return set()
-    group_type = np.asarray(types)[tables.group_of_fap() - 1]
+    group_type = np.asarray(types)[group_of - 1]
     left = ~np.asarray(coded, dtype=bool) & ever_set & np.isin(group_type, (MASK_RETAIN, MASK_INTERPOLATE))
     return {"mask.keep-or-free"} if left.any() else set()
 
